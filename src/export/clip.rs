@@ -1,0 +1,214 @@
+//! The blendshape form of a Hermite trajectory, shared by every blendshape writer.
+//!
+//! With base pose `b = x_0`, a *pose target* `P_k = x_k - b` per key and a *velocity target*
+//! `V_k = v_k` per key, the trajectory is exactly
+//!
+//! ```text
+//! x(t) = b + Σ_k w_Pk(t) P_k + Σ_k w_Vk(t) V_k
+//! ```
+//!
+//! where `w_Pk` is the cubic Hermite spline through the key times with value 1 at key `k`, 0 at
+//! the others and zero slopes, and `w_Vk` has value 0 at every key and slope 1 at key `k` only
+//! (slope in 1/second, so `V_k` stays a velocity). On each interval the position weights sum
+//! to `h00 + h01 = 1`, which is why the base can be dropped from the sum. These are precisely
+//! glTF's CUBICSPLINE curves (value, in-tangent, out-tangent per key), so glTF reproduces the
+//! trajectory exactly; USD samples the same curves once per frame.
+//!
+//! Targets whose offsets are all zero (a key equal to the base, a velocity fixed to zero) are
+//! dropped; in a cyclic clip the last key aliases the first, so its velocity curve gets slope
+//! 1 at both ends and it has no pose target of its own.
+
+use crate::mesh::Point;
+use crate::spacetime::trajectory::Trajectory;
+
+/// One blendshape: a named set of vertex offsets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target {
+    /// A valid USD prim name and glTF target name (`pose_3`, `velocity_0`).
+    pub name: String,
+    /// The vertices this target moves, increasing. Vertices not listed have zero offset.
+    pub indices: Vec<u32>,
+    /// Offsets of those vertices, in the file's precision.
+    pub offsets: Vec<[f32; 3]>,
+}
+
+/// A weight curve as cubic Hermite keys on the clip's key times. Tangents are slopes in
+/// weight per second.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightCurve {
+    pub values: Vec<f32>,
+    pub in_tangents: Vec<f32>,
+    pub out_tangents: Vec<f32>,
+}
+
+/// A blendshape animation: base points, targets, and one weight curve per target.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlendShapeClip {
+    pub base: Vec<[f32; 3]>,
+    pub targets: Vec<Target>,
+    /// Key times in seconds (strictly increasing).
+    pub times: Vec<f64>,
+    /// `curves[j]` drives `targets[j]`.
+    pub curves: Vec<WeightCurve>,
+}
+
+fn f32x3(p: Point) -> [f32; 3] {
+    [p[0] as f32, p[1] as f32, p[2] as f32]
+}
+
+/// The nonzero entries of `offsets` (after rounding to f32).
+fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<Target> {
+    let (mut indices, mut values) = (Vec::new(), Vec::new());
+    for (i, o) in offsets.enumerate() {
+        let o = f32x3(o);
+        if o != [0.0; 3] {
+            indices.push(i as u32);
+            values.push(o);
+        }
+    }
+    (!indices.is_empty()).then_some(Target { name, indices, offsets: values })
+}
+
+impl BlendShapeClip {
+    /// The blendshape form of `trajectory`. `cyclic` says the last key aliases the first.
+    pub fn from_trajectory(trajectory: &Trajectory, cyclic: bool) -> Self {
+        let n_keys = trajectory.key_count();
+        let base_f64 = &trajectory.positions[0];
+        let base: Vec<[f32; 3]> = base_f64.iter().map(|&p| f32x3(p)).collect();
+        // Offsets are taken against the f32 base, so base + offset rounds back to the key.
+        let base_rounded: Vec<Point> = base.iter().map(|b| [b[0] as f64, b[1] as f64, b[2] as f64]).collect();
+        // Keys that own their own unknowns: in a cyclic clip the last key is the first.
+        let owner = |k: usize| if cyclic && k == n_keys - 1 { 0 } else { k };
+
+        let mut targets = Vec::new();
+        let mut curves = Vec::new();
+        let zeros = || vec![0.0f32; n_keys];
+        for k in 1..n_keys {
+            if owner(k) != k {
+                continue;
+            }
+            let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| crate::mesh::sub(*x, *b));
+            if let Some(t) = sparse_target(format!("pose_{k}"), offsets) {
+                let mut values = zeros();
+                values[k] = 1.0;
+                targets.push(t);
+                curves.push(WeightCurve { values, in_tangents: zeros(), out_tangents: zeros() });
+            }
+        }
+        for k in 0..n_keys {
+            if owner(k) != k {
+                continue;
+            }
+            if let Some(t) = sparse_target(format!("velocity_{k}"), trajectory.velocities[k].iter().copied()) {
+                let (mut in_t, mut out_t) = (zeros(), zeros());
+                for key in (0..n_keys).filter(|&key| owner(key) == k) {
+                    in_t[key] = 1.0;
+                    out_t[key] = 1.0;
+                }
+                targets.push(t);
+                curves.push(WeightCurve { values: zeros(), in_tangents: in_t, out_tangents: out_t });
+            }
+        }
+        BlendShapeClip { base, targets, times: trajectory.times.clone(), curves }
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.base.len()
+    }
+
+    /// Every target's weight at time `t` (clamped to the key range), by cubic Hermite
+    /// interpolation of the curves, as glTF defines CUBICSPLINE.
+    pub fn weights_at(&self, t: f64) -> Vec<f64> {
+        let n = self.times.len();
+        let t = t.clamp(self.times[0], self.times[n - 1]);
+        let i = self.times[..n - 1].partition_point(|&s| s <= t).saturating_sub(1);
+        let len = self.times[i + 1] - self.times[i];
+        let s = (t - self.times[i]) / len;
+        let (s2, s3) = (s * s, s * s * s);
+        let (h00, h10, h01, h11) = (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, -2.0 * s3 + 3.0 * s2, s3 - s2);
+        self.curves
+            .iter()
+            .map(|c| {
+                h00 * c.values[i] as f64
+                    + h10 * len * c.out_tangents[i] as f64
+                    + h01 * c.values[i + 1] as f64
+                    + h11 * len * c.in_tangents[i + 1] as f64
+            })
+            .collect()
+    }
+
+    /// Points for the given target weights: `base + Σ_j w_j offsets_j`.
+    pub fn points_with_weights(&self, weights: &[f64]) -> Vec<Point> {
+        let mut out: Vec<Point> = self.base.iter().map(|b| [b[0] as f64, b[1] as f64, b[2] as f64]).collect();
+        for (target, &w) in self.targets.iter().zip(weights) {
+            if w == 0.0 {
+                continue;
+            }
+            for (&i, o) in target.indices.iter().zip(&target.offsets) {
+                let p = &mut out[i as usize];
+                for d in 0..3 {
+                    p[d] += w * o[d] as f64;
+                }
+            }
+        }
+        out
+    }
+
+    /// Points at time `t` with exact (unsampled) weights.
+    pub fn points_at(&self, t: f64) -> Vec<Point> {
+        self.points_with_weights(&self.weights_at(t))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wavy(cyclic: bool) -> Trajectory {
+        let times = vec![0.0, 0.4, 1.0, 1.5];
+        let n = 5;
+        let pose = |k: usize| -> Vec<Point> {
+            (0..n).map(|v| [v as f64 + 0.1 * k as f64, (k * v) as f64 * 0.05, if v == 0 { 0.0 } else { 0.3 * k as f64 }]).collect()
+        };
+        let vel = |k: usize| -> Vec<Point> { (0..n).map(|v| [0.2 * v as f64 - k as f64 * 0.1, 0.0, if v < 2 { 0.0 } else { 0.7 }]).collect() };
+        let mut positions: Vec<_> = (0..4).map(pose).collect();
+        let mut velocities: Vec<_> = (0..4).map(vel).collect();
+        if cyclic {
+            positions[3] = positions[0].clone();
+            velocities[3] = velocities[0].clone();
+        }
+        Trajectory { times, positions, velocities }
+    }
+
+    fn max_error(tr: &Trajectory, clip: &BlendShapeClip) -> f64 {
+        let mut worst: f64 = 0.0;
+        for k in 0..=150 {
+            let t = 1.5 * k as f64 / 150.0;
+            let (a, b) = (tr.evaluate(t), clip.points_at(t));
+            for (p, q) in a.iter().zip(&b) {
+                worst = worst.max(crate::mesh::norm(crate::mesh::sub(*p, *q)));
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn clip_reproduces_the_trajectory() {
+        for cyclic in [false, true] {
+            let tr = wavy(cyclic);
+            let clip = BlendShapeClip::from_trajectory(&tr, cyclic);
+            assert!(max_error(&tr, &clip) < 1e-5, "cyclic={cyclic}: {}", max_error(&tr, &clip));
+        }
+    }
+
+    #[test]
+    fn zero_targets_are_dropped_and_sparse_ones_are_sparse() {
+        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
+        let clip = BlendShapeClip::from_trajectory(&tr, true);
+        // Key 2 aliases key 0 (cyclic), velocities are zero: only pose_1 remains, moving vertex 1.
+        assert_eq!(clip.targets.len(), 1);
+        assert_eq!(clip.targets[0].name, "pose_1");
+        assert_eq!(clip.targets[0].indices, vec![1]);
+        assert!(max_error(&tr, &clip) < 1e-6);
+    }
+}

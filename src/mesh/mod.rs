@@ -1,0 +1,146 @@
+//! Mesh types and their file formats.
+//!
+//! - [`TriMesh`]: a triangle surface (OBJ keyframes, the exported surface).
+//! - [`TetMesh`]: a tetrahedral body (MEDIT `.mesh`, TetGen `.node`/`.ele`), every tet with
+//!   positive signed volume once loaded.
+//!
+//! Readers keep the vertex order of the file: per-vertex masks in scene files index it.
+
+pub mod medit;
+pub mod obj;
+pub mod surface;
+pub mod tetgen_io;
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// A point or vector in 3D.
+pub type Point = [f64; 3];
+
+/// A triangle surface. Triangles index `positions`; vertices no triangle uses are allowed
+/// (they are kept so vertex indices match the file they came from).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct TriMesh {
+    pub positions: Vec<Point>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// A tetrahedral mesh. Invariant once built by a reader: every tet has positive signed volume
+/// `det[b-a, c-a, d-a] / 6 > 0`, and every index is in range.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct TetMesh {
+    pub positions: Vec<Point>,
+    pub tets: Vec<[u32; 4]>,
+}
+
+/// What a keyframe file holds: a surface to tetrahedralize, or a ready tet mesh.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MeshFile {
+    Surface(TriMesh),
+    Volume(TetMesh),
+}
+
+impl MeshFile {
+    pub fn positions(&self) -> &[Point] {
+        match self {
+            MeshFile::Surface(m) => &m.positions,
+            MeshFile::Volume(m) => &m.positions,
+        }
+    }
+}
+
+/// Read a keyframe mesh, choosing the format by extension: `.obj` (surface), `.mesh` (MEDIT
+/// tets), `.node` or `.ele` (TetGen pair, the other file beside it).
+pub fn read(path: &Path) -> Result<MeshFile> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("obj") => obj::read(path).map(MeshFile::Surface),
+        Some("mesh") => medit::read(path).map(MeshFile::Volume),
+        Some("node") | Some("ele") => tetgen_io::read(path).map(MeshFile::Volume),
+        _ => Err(Error::in_file(
+            path,
+            "unknown mesh format",
+            "use .obj for surfaces, .mesh (MEDIT) or .node/.ele (TetGen) for tet meshes",
+        )),
+    }
+}
+
+/// Axis-aligned bounds of a point set; `None` when empty.
+pub fn bounds(points: &[Point]) -> Option<(Point, Point)> {
+    let first = *points.first()?;
+    Some(points.iter().fold((first, first), |(mut lo, mut hi), p| {
+        for d in 0..3 {
+            lo[d] = lo[d].min(p[d]);
+            hi[d] = hi[d].max(p[d]);
+        }
+        (lo, hi)
+    }))
+}
+
+/// Length of the bounding-box diagonal (0 for an empty set): the scale errors are reported in.
+pub fn bbox_diagonal(points: &[Point]) -> f64 {
+    bounds(points).map_or(0.0, |(lo, hi)| norm(sub(hi, lo)))
+}
+
+#[inline]
+pub fn sub(a: Point, b: Point) -> Point {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline]
+pub fn add(a: Point, b: Point) -> Point {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[inline]
+pub fn scale(a: Point, s: f64) -> Point {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+#[inline]
+pub fn dot(a: Point, b: Point) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[inline]
+pub fn cross(a: Point, b: Point) -> Point {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[inline]
+pub fn norm(a: Point) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// Signed volume of the tet (a, b, c, d): positive when (b-a, c-a, d-a) is right-handed.
+#[inline]
+pub fn tet_signed_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {
+    dot(sub(b, a), cross(sub(c, a), sub(d, a))) / 6.0
+}
+
+impl TetMesh {
+    /// Signed volume of tet `t` at the given positions (which may be a deformed pose).
+    pub fn signed_volume_at(&self, positions: &[Point], t: usize) -> f64 {
+        let [a, b, c, d] = self.tets[t].map(|i| positions[i as usize]);
+        tet_signed_volume(a, b, c, d)
+    }
+
+    /// Total volume of the body at the given positions.
+    pub fn volume_at(&self, positions: &[Point]) -> f64 {
+        (0..self.tets.len()).map(|t| self.signed_volume_at(positions, t)).sum()
+    }
+
+    /// Swap two vertices of every tet with negative signed volume, so all are positive.
+    /// Returns how many were flipped.
+    pub fn orient_positive(&mut self) -> usize {
+        let mut flipped = 0;
+        for t in 0..self.tets.len() {
+            if self.signed_volume_at(&self.positions, t) < 0.0 {
+                self.tets[t].swap(2, 3);
+                flipped += 1;
+            }
+        }
+        flipped
+    }
+}

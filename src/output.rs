@@ -1,0 +1,154 @@
+//! Writing outputs so that a failed run leaves nothing behind.
+//!
+//! - [`write_atomic`]: one file, written under a temporary name beside it and renamed.
+//! - [`Staging`]: several files for one output folder, written to a hidden staging folder and
+//!   moved into place only by [`Staging::commit`]; dropping it uncommitted deletes everything.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::error::{Error, Result};
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+fn unique_suffix() -> String {
+    format!("{}-{}", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed))
+}
+
+/// Write `bytes` to `path` atomically: readers see the old file or the whole new one.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::in_file(dir, "output folder does not exist", "create the folder first, or choose another output path"));
+    }
+    let name = path.file_name().ok_or_else(|| Error::in_file(path, "is not a file path", "give a file name"))?;
+    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), unique_suffix()));
+    let result = std::fs::write(&tmp, bytes)
+        .map_err(|e| Error::io(&tmp, &e, "write a temporary output file"))
+        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, &e, "move the finished file into place")));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Files for one output folder, kept out of sight until the whole run has succeeded.
+#[derive(Debug)]
+pub struct Staging {
+    target: PathBuf,
+    dir: PathBuf,
+    files: Vec<String>,
+    committed: bool,
+}
+
+impl Staging {
+    /// Start staging files for `target` (which need not exist yet). The staging folder is a
+    /// hidden sibling of `target`, so the final renames stay on one file system.
+    pub fn new(target: &Path) -> Result<Staging> {
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        if !parent.is_dir() {
+            return Err(Error::in_file(&parent, "folder does not exist", "create it, or choose an --out folder inside an existing one"));
+        }
+        let stem = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+        let dir = parent.join(format!(".{stem}.staging-{}", unique_suffix()));
+        std::fs::create_dir(&dir).map_err(|e| Error::io(&dir, &e, "create a staging folder"))?;
+        Ok(Staging { target: target.to_path_buf(), dir, files: Vec::new(), committed: false })
+    }
+
+    /// Where a staged file lives until commit (for external tools that write it themselves).
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    /// The final path of a file once committed.
+    pub fn final_path(&self, name: &str) -> PathBuf {
+        self.target.join(name)
+    }
+
+    /// Write a file into the staging folder.
+    pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+        let p = self.path(name);
+        std::fs::write(&p, bytes).map_err(|e| Error::io(&p, &e, "write an output file"))?;
+        self.record(name);
+        Ok(())
+    }
+
+    /// Record a file that an external tool wrote at [`Staging::path`].
+    pub fn record(&mut self, name: &str) {
+        if !self.files.iter().any(|f| f == name) {
+            self.files.push(name.to_string());
+        }
+    }
+
+    /// Size of a staged file.
+    pub fn size(&self, name: &str) -> Result<u64> {
+        let p = self.path(name);
+        std::fs::metadata(&p).map(|m| m.len()).map_err(|e| Error::io(&p, &e, "measure an output file"))
+    }
+
+    /// Move every staged file into the target folder (created if missing).
+    pub fn commit(mut self) -> Result<()> {
+        std::fs::create_dir_all(&self.target).map_err(|e| Error::io(&self.target, &e, "create the output folder"))?;
+        for name in &self.files {
+            let (from, to) = (self.dir.join(name), self.target.join(name));
+            std::fs::rename(&from, &to).map_err(|e| Error::io(&to, &e, "move the finished file into place"))?;
+        }
+        self.committed = true;
+        let _ = std::fs::remove_dir_all(&self.dir);
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("blendsim-output-{name}-{}", unique_suffix()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temporaries() {
+        let d = scratch("atomic");
+        let f = d.join("a.txt");
+        write_atomic(&f, b"one").unwrap();
+        write_atomic(&f, b"two").unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"two");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn uncommitted_staging_leaves_nothing() {
+        let d = scratch("staging");
+        let target = d.join("out");
+        {
+            let mut s = Staging::new(&target).unwrap();
+            s.write("x.usda", b"#usda 1.0").unwrap();
+        }
+        assert!(!target.exists());
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+        let mut s = Staging::new(&target).unwrap();
+        s.write("x.usda", b"#usda 1.0").unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read(target.join("x.usda")).unwrap(), b"#usda 1.0");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+}

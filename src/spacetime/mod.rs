@@ -1,0 +1,3 @@
+//! BlendSim's spacetime projective dynamics on Hermite trajectories.
+
+pub mod trajectory;

@@ -1,0 +1,266 @@
+//! The plain data that flows between stages. Each subcommand reads one of these files and
+//! writes the next; `bake` passes them in memory. Specified in `formats/stages.md`.
+//!
+//! ```text
+//! import -> Keyframes -> tetrahedralize -> Body -> solve -> Solution -> embed -> Animation
+//!        -> export (files + Outputs) -> report
+//! ```
+//!
+//! Files are JSON with a header naming the stage, so passing the wrong file to a subcommand
+//! is a clear error. Numbers are written with shortest round-trip formatting: a chain of
+//! subcommands gives the same bytes as `bake`.
+
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::mesh::{Point, TetMesh, TriMesh};
+use crate::scene::{Format, Method, Scene};
+use crate::spacetime::trajectory::Trajectory;
+
+/// A sorted set of vertex indices.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct VertexSet(Vec<u32>);
+
+impl VertexSet {
+    pub fn from_mask(mask: &[bool]) -> Self {
+        VertexSet(mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| i as u32).collect())
+    }
+
+    pub fn all(n: usize) -> Self {
+        VertexSet((0..n as u32).collect())
+    }
+
+    pub fn to_mask(&self, n: usize) -> Vec<bool> {
+        let mut m = vec![false; n];
+        for &i in &self.0 {
+            m[i as usize] = true;
+        }
+        m
+    }
+
+    pub fn contains(&self, i: u32) -> bool {
+        self.0.binary_search(&i).is_ok()
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn indices(&self) -> &[u32] {
+        &self.0
+    }
+}
+
+/// The keyframes' shape before tetrahedralization: a surface or a ready tet mesh.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum Shape {
+    Surface(TriMesh),
+    Volume(TetMesh),
+}
+
+/// Output of `import`: keyframe poses on one topology, with their constraints.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Keyframes {
+    pub scene: Scene,
+    /// The elastic rest shape. Every pose has its vertex count.
+    pub rest: Shape,
+    pub times: Vec<f64>,
+    /// `poses[key][vertex]`, as read (after any procedural deformation).
+    pub poses: Vec<Vec<Point>>,
+    /// Per key, vertices whose position is prescribed.
+    pub fixed: Vec<VertexSet>,
+    /// Per key, vertices whose velocity is prescribed (to zero).
+    pub fixed_velocity: Vec<VertexSet>,
+    pub cyclic: bool,
+    /// A separate surface to embed and export, in the rest pose (`[embed] surface`).
+    pub display: Option<TriMesh>,
+}
+
+/// Keyframe data per tet node: what the solver constrains and starts from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct KeyPoses {
+    pub times: Vec<f64>,
+    /// `positions[key][node]`: the input poses (interior nodes from a quasi-static fit).
+    pub positions: Vec<Vec<Point>>,
+    pub fixed: Vec<VertexSet>,
+    pub fixed_velocity: Vec<VertexSet>,
+    pub cyclic: bool,
+}
+
+/// Output of `tetrahedralize`: the simulation body, its keyframes, and the surface to export.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Body {
+    pub scene: Scene,
+    /// Rest pose, every tet positively oriented.
+    pub mesh: TetMesh,
+    pub keys: KeyPoses,
+    /// The surface that is exported, in the rest pose, outward oriented, with no unused
+    /// vertices. It is embedded in `mesh`.
+    pub surface: TriMesh,
+}
+
+/// What the solver did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SolverLog {
+    pub method: Method,
+    pub iterations: usize,
+    /// W after each iteration, starting with the initial guess (the hermite baseline).
+    pub energy: Vec<f64>,
+    /// Wall-clock seconds for the whole solve.
+    pub seconds: f64,
+    /// Seconds spent assembling and factorizing before the first iteration.
+    pub precompute_seconds: f64,
+    pub converged: bool,
+    /// Why the iteration stopped, in words.
+    pub stop_reason: String,
+}
+
+/// Output of `solve`: the body and its optimized node trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Solution {
+    pub body: Body,
+    pub trajectory: Trajectory,
+    pub log: SolverLog,
+}
+
+/// Sizes of the problem, for the report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Counts {
+    pub vertices: usize,
+    pub faces: usize,
+    pub tet_nodes: usize,
+    pub tets: usize,
+    pub keyframes: usize,
+}
+
+/// Output of `embed`: the exported surface and its exact trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Animation {
+    pub scene: Scene,
+    pub counts: Counts,
+    /// The surface in the rest pose.
+    pub mesh: TriMesh,
+    /// The surface's trajectory: the node trajectory carried by the embedding.
+    pub trajectory: Trajectory,
+    /// The input keyframe poses carried by the same embedding, `[key][vertex]`.
+    pub input_keys: Vec<Vec<Point>>,
+    pub log: SolverLog,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutputKind {
+    Blendshape,
+    FullFrame,
+}
+
+/// One file written by `export`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputFile {
+    /// File name inside the output folder.
+    pub path: String,
+    pub kind: OutputKind,
+    pub format: Format,
+    pub bytes: u64,
+}
+
+/// Output of `export` (beside the files): what was written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Outputs {
+    pub files: Vec<OutputFile>,
+}
+
+/// Names the stage a file holds, so a wrong file passed to a subcommand is caught at once.
+pub trait StageData: Serialize + DeserializeOwned {
+    /// The stage name in the file header.
+    const STAGE: &'static str;
+    /// The subcommand that writes it.
+    const WRITER: &'static str;
+}
+
+impl StageData for Keyframes {
+    const STAGE: &'static str = "keyframes";
+    const WRITER: &'static str = "blendsim import";
+}
+impl StageData for Body {
+    const STAGE: &'static str = "body";
+    const WRITER: &'static str = "blendsim tetrahedralize";
+}
+impl StageData for Solution {
+    const STAGE: &'static str = "solution";
+    const WRITER: &'static str = "blendsim solve";
+}
+impl StageData for Animation {
+    const STAGE: &'static str = "animation";
+    const WRITER: &'static str = "blendsim embed";
+}
+impl StageData for Outputs {
+    const STAGE: &'static str = "outputs";
+    const WRITER: &'static str = "blendsim export";
+}
+
+/// Stage file format version; bumped when a stage type changes incompatibly.
+pub const FORMAT_VERSION: u32 = 1;
+
+#[derive(Serialize)]
+struct HeaderOut<'a, T> {
+    blendsim: u32,
+    stage: &'a str,
+    data: &'a T,
+}
+
+#[derive(Deserialize)]
+struct HeaderIn {
+    blendsim: Option<u32>,
+    stage: Option<String>,
+}
+
+#[derive(Deserialize)]
+struct BodyIn<T> {
+    data: T,
+}
+
+/// Serialize a stage to JSON bytes (with its header).
+pub fn to_json<T: StageData>(value: &T) -> Vec<u8> {
+    let mut bytes = serde_json::to_vec(&HeaderOut { blendsim: FORMAT_VERSION, stage: T::STAGE, data: value })
+        .expect("stage data serializes");
+    bytes.push(b'\n');
+    bytes
+}
+
+/// Write a stage file atomically.
+pub fn write<T: StageData>(path: &Path, value: &T) -> Result<()> {
+    crate::output::write_atomic(path, &to_json(value))
+}
+
+/// Read a stage file, checking that it holds the expected stage.
+pub fn read<T: StageData>(path: &Path) -> Result<T> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, &format!("read the {} file", T::STAGE)))?;
+    let wrong = |what: String| {
+        Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER))
+    };
+    let header: HeaderIn = serde_json::from_slice(&bytes).map_err(|e| wrong(format!("is not a blendsim stage file ({e})")))?;
+    match (header.blendsim, header.stage.as_deref()) {
+        (Some(FORMAT_VERSION), Some(s)) if s == T::STAGE => {}
+        (Some(v), _) if v != FORMAT_VERSION => {
+            return Err(Error::in_file(
+                path,
+                format!("was written by stage format {v}, this blendsim reads format {FORMAT_VERSION}"),
+                "re-run the earlier stages with this blendsim",
+            ))
+        }
+        (_, Some(s)) => return Err(wrong(format!("holds a '{s}' stage, not '{}'", T::STAGE))),
+        _ => return Err(wrong("has no blendsim stage header".into())),
+    }
+    let body: BodyIn<T> = serde_json::from_slice(&bytes).map_err(|e| wrong(format!("has a malformed {} stage: {e}", T::STAGE)))?;
+    Ok(body.data)
+}
