@@ -119,6 +119,12 @@ pub struct SolverLog {
     pub seconds: f64,
     /// Seconds spent assembling and factorizing before the first iteration.
     pub precompute_seconds: f64,
+    /// Mean seconds per iteration (local step, residuals, global step).
+    pub iteration_seconds: f64,
+    /// Free unknowns per coordinate (keyframe positions and velocities).
+    pub unknowns: usize,
+    /// Steps halved because the full step would have increased W.
+    pub halvings: usize,
     pub converged: bool,
     /// Why the iteration stopped, in words.
     pub stop_reason: String,

@@ -1,1 +1,10 @@
-//! Projective-dynamics physics on tet meshes.
+//! Projective-dynamics physics on tet meshes: the elastic body ([`elastic::Elastic`]: lumped
+//! mass, `L`, `J`, local step), its per-element projections, and the linear algebra under
+//! them.
+
+pub mod cholesky;
+pub mod csr;
+pub mod elastic;
+pub mod mat3;
+pub mod projection;
+pub mod svd3;

@@ -1,3 +1,18 @@
 //! BlendSim's spacetime projective dynamics on Hermite trajectories.
+//!
+//! - [`trajectory`]: the cubic Hermite curves of every vertex;
+//! - [`sampling`]: sample points of the residual, and the time slots of the unknowns;
+//! - [`unknowns`]: free keyframe positions/velocities (masks eliminated, loops aliased);
+//! - [`objective`]: W, its gradient, and the local step over all samples;
+//! - [`global_step`]: the constant normal matrix, assembled and factorized once;
+//! - [`solver`]: the local/global iteration.
 
+pub mod global_step;
+pub mod objective;
+pub mod sampling;
+pub mod solver;
 pub mod trajectory;
+pub mod unknowns;
+
+#[cfg(test)]
+mod tests;

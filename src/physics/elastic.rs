@@ -1,0 +1,318 @@
+//! A tet body for projective dynamics: lumped mass, the constant matrices `L` and `J`, and the
+//! local step.
+//!
+//! Per tet `e` with rest edge matrix `Dm`, the deformation gradient is `F = Σ_a x_a g_aᵀ` where
+//! `g_a` are the rest gradients of the linear shape functions (rows of `Dm⁻¹`, and minus their
+//! sum for the first vertex). The elastic energy is
+//!
+//! ```text
+//! E(x) = Σ_e V_e/2 (k_strain |F - R(F)|² + k_volume |F - D(F)|²)
+//!      = Σ_e w_e/2 |F - P_e|² + const,   w_e = V_e (k_strain + k_volume)
+//! ```
+//!
+//! with `P_e` the blended projection of [`super::projection::project`]. Hence
+//! `∇E = L x - J p` with `L_ab = Σ_e w_e g_a·g_b` (constant) and `(J p)_a = Σ_e w_e P_e g_a`.
+
+use rayon::prelude::*;
+
+use super::csr::Csr;
+use super::mat3::{self, Mat3};
+use super::projection::{project, volume_preserving};
+use super::svd3::svd3;
+use crate::error::{Error, Result};
+use crate::mesh::{Point, TetMesh};
+use crate::scene::Material;
+
+#[derive(Debug, Clone)]
+pub struct Elastic {
+    pub tets: Vec<[u32; 4]>,
+    /// Rest shape-function gradients `g_a` per tet.
+    pub grads: Vec<[[f64; 3]; 4]>,
+    /// Rest volumes.
+    pub volumes: Vec<f64>,
+    /// Constraint weight `w_e = V_e (k_strain + k_volume)`.
+    pub weights: Vec<f64>,
+    pub k_strain: f64,
+    pub k_volume: f64,
+    /// Lumped nodal masses `m_a = Σ_e ρ V_e / 4`.
+    pub mass: Vec<f64>,
+    /// `L`, symmetric positive semidefinite, constants in its null space.
+    pub stiffness: Csr,
+    /// For each node, the (tet, local vertex) pairs it belongs to, by increasing tet:
+    /// `incidence[incidence_ptr[a]..incidence_ptr[a + 1]]`. Lets `J p` be a parallel gather.
+    incidence_ptr: Vec<usize>,
+    incidence: Vec<(u32, u8)>,
+}
+
+impl Elastic {
+    /// Build from the rest mesh. A tet with (near) zero rest volume is an error: its
+    /// gradients do not exist.
+    pub fn new(mesh: &TetMesh, material: &Material) -> Result<Elastic> {
+        let n = mesh.positions.len();
+        let diag = crate::mesh::bbox_diagonal(&mesh.positions);
+        let mut grads = Vec::with_capacity(mesh.tets.len());
+        let mut volumes = Vec::with_capacity(mesh.tets.len());
+        for (e, tet) in mesh.tets.iter().enumerate() {
+            let [x0, x1, x2, x3] = tet.map(|i| mesh.positions[i as usize]);
+            let cols = [crate::mesh::sub(x1, x0), crate::mesh::sub(x2, x0), crate::mesh::sub(x3, x0)];
+            let dm = [[cols[0][0], cols[1][0], cols[2][0]], [cols[0][1], cols[1][1], cols[2][1]], [cols[0][2], cols[1][2], cols[2][2]]];
+            let volume = mat3::det(&dm) / 6.0;
+            let inv = mat3::inverse(&dm).filter(|_| volume > 1e-12 * diag * diag * diag).ok_or_else(|| {
+                Error::general(
+                    format!("tet {e} (nodes {tet:?}) has rest volume {volume:e}: it is flat or inverted"),
+                    "remesh the body (raise [tet] quality or repair the input mesh)",
+                )
+            })?;
+            // g_k = row k of Dm⁻¹ (k = 1..3), g_0 = -(g_1 + g_2 + g_3).
+            let (g1, g2, g3) = (inv[0], inv[1], inv[2]);
+            let g0 = [-(g1[0] + g2[0] + g3[0]), -(g1[1] + g2[1] + g3[1]), -(g1[2] + g2[2] + g3[2])];
+            grads.push([g0, g1, g2, g3]);
+            volumes.push(volume);
+        }
+        let k_total = material.stiffness + material.volume;
+        let weights: Vec<f64> = volumes.iter().map(|v| v * k_total).collect();
+        let mut mass = vec![0.0; n];
+        for (tet, v) in mesh.tets.iter().zip(&volumes) {
+            for &a in tet {
+                mass[a as usize] += material.density * v / 4.0;
+            }
+        }
+        if let Some(a) = mass.iter().position(|&m| m <= 0.0) {
+            return Err(Error::general(
+                format!("node {a} belongs to no tet, so it has no mass"),
+                "remove unreferenced nodes from the tet mesh",
+            ));
+        }
+        let mut triplets = Vec::with_capacity(16 * mesh.tets.len());
+        for ((tet, g), w) in mesh.tets.iter().zip(&grads).zip(&weights) {
+            for a in 0..4 {
+                for b in 0..4 {
+                    triplets.push((tet[a], tet[b], w * crate::mesh::dot(g[a], g[b])));
+                }
+            }
+        }
+        let stiffness = Csr::from_triplets(n, triplets);
+        let mut counts = vec![0usize; n + 1];
+        for tet in &mesh.tets {
+            for &a in tet {
+                counts[a as usize + 1] += 1;
+            }
+        }
+        for a in 0..n {
+            counts[a + 1] += counts[a];
+        }
+        let mut fill = counts.clone();
+        let mut incidence = vec![(0u32, 0u8); counts[n]];
+        for (e, tet) in mesh.tets.iter().enumerate() {
+            for (local, &a) in tet.iter().enumerate() {
+                incidence[fill[a as usize]] = (e as u32, local as u8);
+                fill[a as usize] += 1;
+            }
+        }
+        Ok(Elastic {
+            tets: mesh.tets.clone(),
+            grads,
+            volumes,
+            weights,
+            k_strain: material.stiffness,
+            k_volume: material.volume,
+            mass,
+            stiffness,
+            incidence_ptr: counts,
+            incidence,
+        })
+    }
+
+    pub fn node_count(&self) -> usize {
+        self.mass.len()
+    }
+
+    pub fn tet_count(&self) -> usize {
+        self.tets.len()
+    }
+
+    /// Share of the strain constraint in the blended projection target.
+    pub fn strain_share(&self) -> f64 {
+        self.k_strain / (self.k_strain + self.k_volume)
+    }
+
+    /// Deformation gradient of tet `e` at positions `x`.
+    #[inline]
+    pub fn deformation_gradient(&self, e: usize, x: &[Point]) -> Mat3 {
+        let tet = &self.tets[e];
+        let g = &self.grads[e];
+        let mut f = [[0.0; 3]; 3];
+        for a in 0..4 {
+            let p = x[tet[a] as usize];
+            for i in 0..3 {
+                for j in 0..3 {
+                    f[i][j] += p[i] * g[a][j];
+                }
+            }
+        }
+        f
+    }
+
+    /// The local step: every tet's projection target at positions `x`, in parallel.
+    pub fn local_step(&self, x: &[Point], targets: &mut [Mat3]) {
+        let share = self.strain_share();
+        targets.par_iter_mut().enumerate().with_min_len(64).for_each(|(e, p)| {
+            *p = project(&self.deformation_gradient(e, x), share);
+        });
+    }
+
+    /// `out = J p`: per node, `Σ w_e P_e g_a` over its tets (a parallel gather, summed in tet
+    /// order, so results do not depend on the thread count).
+    pub fn apply_j(&self, targets: &[Mat3], out: &mut [Point]) {
+        out.par_iter_mut().enumerate().with_min_len(128).for_each(|(a, o)| {
+            let mut acc = [0.0; 3];
+            for &(e, local) in &self.incidence[self.incidence_ptr[a]..self.incidence_ptr[a + 1]] {
+                let (p, g, w) = (&targets[e as usize], &self.grads[e as usize][local as usize], self.weights[e as usize]);
+                for i in 0..3 {
+                    acc[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+            *o = acc;
+        });
+    }
+
+    /// `∇E = L x - J p(x)`, the negated elastic force, with fresh projections.
+    pub fn energy_gradient(&self, x: &[Point]) -> Vec<Point> {
+        let mut targets = vec![[[0.0; 3]; 3]; self.tet_count()];
+        self.local_step(x, &mut targets);
+        let (mut lx, mut jp) = (vec![[0.0; 3]; x.len()], vec![[0.0; 3]; x.len()]);
+        self.stiffness.mul_points(x, &mut lx);
+        self.apply_j(&targets, &mut jp);
+        lx.iter().zip(&jp).map(|(a, b)| crate::mesh::sub(*a, *b)).collect()
+    }
+
+    /// Elastic energy `Σ V_e/2 (k_s |F - R|² + k_v |F - D|²)`.
+    pub fn energy(&self, x: &[Point]) -> f64 {
+        (0..self.tet_count())
+            .into_par_iter()
+            .with_min_len(64)
+            .map(|e| {
+                let f = self.deformation_gradient(e, x);
+                let d = svd3(&f);
+                let r = mat3::mul_transpose(&d.u, &d.v);
+                let dv = mat3::scaled_product(&d.u, volume_preserving(d.sigma), &d.v);
+                0.5 * self.volumes[e] * (self.k_strain * mat3::distance(&f, &r).powi(2) + self.k_volume * mat3::distance(&f, &dv).powi(2))
+            })
+            .collect::<Vec<f64>>()
+            .iter()
+            .sum()
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::mesh::TetMesh;
+
+    /// A cube [0,1]³ split into `n³` cells of 6 tets each (Kuhn triangulation, positive).
+    pub(crate) fn cube_mesh(n: usize) -> TetMesh {
+        let idx = |i: usize, j: usize, k: usize| (i * (n + 1) * (n + 1) + j * (n + 1) + k) as u32;
+        let mut positions = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                for k in 0..=n {
+                    positions.push([i as f64 / n as f64, j as f64 / n as f64, k as f64 / n as f64]);
+                }
+            }
+        }
+        let mut tets = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                for k in 0..n {
+                    let c = |d: [usize; 3]| idx(i + d[0], j + d[1], k + d[2]);
+                    // The 6 monotone paths from corner 000 to 111.
+                    for perm in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+                        let mut p = [0usize; 3];
+                        let mut verts = vec![c(p)];
+                        for &axis in &perm {
+                            p[axis] = 1;
+                            verts.push(c(p));
+                        }
+                        tets.push([verts[0], verts[1], verts[2], verts[3]]);
+                    }
+                }
+            }
+        }
+        let mut m = TetMesh { positions, tets };
+        m.orient_positive();
+        m
+    }
+
+    fn material() -> Material {
+        Material { stiffness: 70.0, volume: 30.0, density: 2.0, damping: 0.0, gravity: [0.0; 3] }
+    }
+
+    fn rotate(p: Point, angle: f64) -> Point {
+        let (s, c) = angle.sin_cos();
+        [c * p[0] - s * p[2], p[1], s * p[0] + c * p[2]]
+    }
+
+    #[test]
+    fn mass_sums_to_density_times_volume() {
+        let el = Elastic::new(&cube_mesh(3), &material()).unwrap();
+        assert!((el.mass.iter().sum::<f64>() - 2.0).abs() < 1e-12);
+        assert!((el.volumes.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rigid_motion_has_no_energy_and_no_force() {
+        let mesh = cube_mesh(3);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let x: Vec<Point> = mesh.positions.iter().map(|&p| crate::mesh::add(rotate(p, 1.1), [0.3, -2.0, 5.0])).collect();
+        assert!(el.energy(&x) < 1e-20);
+        let g = el.energy_gradient(&x);
+        assert!(g.iter().all(|v| crate::mesh::norm(*v) < 1e-12), "{:?}", g.iter().map(|v| crate::mesh::norm(*v)).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn stiffness_annihilates_constants_and_is_symmetric() {
+        let el = Elastic::new(&cube_mesh(2), &material()).unwrap();
+        let n = el.node_count();
+        let mut y = vec![[0.0; 3]; n];
+        el.stiffness.mul_points(&vec![[1.0, -2.0, 3.0]; n], &mut y);
+        assert!(y.iter().all(|v| crate::mesh::norm(*v) < 1e-12));
+        for i in 0..n {
+            for (j, v) in el.stiffness.row(i) {
+                assert!((el.stiffness.get(j, i) - v).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn energy_gradient_matches_finite_differences() {
+        // ∇E = Lx - Jp(x) is exact (envelope theorem): check it against central differences.
+        let mesh = cube_mesh(2);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let x: Vec<Point> = mesh
+            .positions
+            .iter()
+            .map(|p| [p[0] * 1.2 + 0.1 * p[1], p[1] * 0.8 + 0.05 * p[2] * p[0], p[2] + 0.2 * p[0] * p[1]])
+            .collect();
+        let g = el.energy_gradient(&x);
+        let h = 1e-6;
+        let mut worst: f64 = 0.0;
+        let scale = g.iter().map(|v| crate::mesh::norm(*v)).fold(0.0, f64::max);
+        for a in (0..x.len()).step_by(3) {
+            for d in 0..3 {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[a][d] += h;
+                xm[a][d] -= h;
+                let fd = (el.energy(&xp) - el.energy(&xm)) / (2.0 * h);
+                worst = worst.max((fd - g[a][d]).abs() / scale);
+            }
+        }
+        assert!(worst < 1e-6, "relative gradient error {worst}");
+    }
+
+    #[test]
+    fn flat_tet_is_an_error() {
+        let mesh = TetMesh { positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]], tets: vec![[0, 1, 2, 3]] };
+        let e = Elastic::new(&mesh, &material()).unwrap_err().to_string();
+        assert!(e.contains("tet 0") && e.contains("flat or inverted"), "{e}");
+    }
+}

@@ -1,0 +1,210 @@
+//! The local step of projective dynamics: project a deformation gradient onto the strain
+//! (rotation) and volume (det = 1) constraint manifolds.
+//!
+//! With `F = U diag(σ) Vᵀ` (signed SVD), the closest rotation is `R = U Vᵀ`, and the closest
+//! matrix of unit determinant is `D = U diag(σ') Vᵀ` where `σ'` is the point of the surface
+//! `σ'1 σ'2 σ'3 = 1` closest to `σ`. Strain and volume constraints of one element share its
+//! gradient operator, so their sum is one quadratic with target
+//! `P = r R + (1 - r) D`, `r = k_strain / (k_strain + k_volume)`; that is what the global
+//! step sees.
+
+use super::mat3::{scaled_product, Mat3};
+use super::svd3::svd3;
+
+/// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`]:
+/// `σ1 >= σ2 >= |σ3|`, `σ3` possibly negative for an inverted element).
+///
+/// Stationarity of `½|σ' - σ|² - λ(Πσ' - 1)` gives `σ'_i (σ'_i - σ_i) = λ` for every `i`, so
+/// each `σ'_i` is a root of one quadratic in the common multiplier `λ`. On the branch
+/// `σ'_i = (σ_i + sqrt(σ_i² + 4λ)) / 2` the product grows monotonically with `λ` and the root is
+/// found by safeguarded Newton; this is the nearest point whenever the element is stretched
+/// less than twice in every direction. Beyond that (`Π σ'(λ_min) > 1`), the smallest singular
+/// value moves to the other root and the stationary point is found by bisection: a KKT
+/// point that collapses the shortest axis, as the exact projection does.
+pub fn volume_preserving(sigma: [f64; 3]) -> [f64; 3] {
+    let product = sigma[0] * sigma[1] * sigma[2];
+    if (product - 1.0).abs() <= 1e-15 {
+        return sigma;
+    }
+    let plus = |l: f64| sigma.map(|s| 0.5 * (s + (s * s + 4.0 * l).max(0.0).sqrt()));
+    let smallest = sigma[2];
+    // Domain of the + branch: σ_i² + 4λ >= 0 for all i; for an inverted element λ > 0.
+    let lambda_min = if smallest > 0.0 { -0.25 * smallest * smallest } else { 0.0 };
+    let log_product = |s: [f64; 3]| s.iter().map(|v| v.ln()).sum::<f64>();
+
+    if smallest > 0.0 && log_product(plus(lambda_min)) > 0.0 {
+        return collapse_shortest_axis(sigma);
+    }
+    // φ(λ) = Σ ln σ'_i(λ) is increasing and concave on (λ_min, ∞); bracket its root.
+    let mut lo = lambda_min;
+    let mut hi = sigma.iter().map(|s| 1.0 - s).fold(0.0f64, f64::max) + 1e-3;
+    while log_product(plus(hi)) < 0.0 {
+        hi = 2.0 * hi + 1.0;
+    }
+    let mut l = hi;
+    for _ in 0..200 {
+        let s = plus(l);
+        let phi = log_product(s);
+        if phi.abs() < 1e-15 {
+            return s;
+        }
+        if phi < 0.0 {
+            lo = l;
+        } else {
+            hi = l;
+        }
+        // φ' = Σ σ'_i' / σ'_i with σ'_i' = 1 / (2σ'_i - σ_i).
+        let dphi: f64 = (0..3).map(|i| 1.0 / ((2.0 * s[i] - sigma[i]) * s[i])).sum();
+        let newton = l - phi / dphi;
+        l = if newton > lo && newton < hi && dphi.is_finite() { newton } else { 0.5 * (lo + hi) };
+        if hi - lo <= 1e-16 * (1.0 + hi.abs()) {
+            break;
+        }
+    }
+    plus(l)
+}
+
+/// The stationary point with the smallest singular value on the small root: parametrize by
+/// `t = σ'3 ∈ (0, σ3/2]`, `λ = t (t - σ3)`, the others on the + branch, and bisect on the
+/// product.
+fn collapse_shortest_axis(sigma: [f64; 3]) -> [f64; 3] {
+    let at = |t: f64| {
+        let l = t * (t - sigma[2]);
+        let big = |s: f64| 0.5 * (s + (s * s + 4.0 * l).max(0.0).sqrt());
+        [big(sigma[0]), big(sigma[1]), t]
+    };
+    let (mut lo, mut hi) = (0.0, 0.5 * sigma[2]);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        let s = at(mid);
+        if s[0] * s[1] * s[2] < 1.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-17 * sigma[2] {
+            break;
+        }
+    }
+    at(0.5 * (lo + hi))
+}
+
+/// Projection target of one element: `r R + (1 - r) D` for deformation gradient `f` and
+/// strain share `r` in [0, 1].
+pub fn project(f: &Mat3, strain_share: f64) -> Mat3 {
+    let d = svd3(f);
+    let blend = if strain_share >= 1.0 {
+        [1.0; 3]
+    } else {
+        let s = volume_preserving(d.sigma);
+        s.map(|v| strain_share + (1.0 - strain_share) * v)
+    };
+    scaled_product(&d.u, blend, &d.v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::mat3::{det, distance, mul, mul_transpose, IDENTITY};
+    use crate::physics::svd3::tests::Rng;
+
+    fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+        (0..3).map(|i| (a[i] - b[i]).powi(2)).sum()
+    }
+
+    /// Closest point on Πσ' = 1 by searching (ln a, ln b) on ever finer grids.
+    fn brute_force(sigma: [f64; 3]) -> [f64; 3] {
+        let eval = |x: f64, y: f64| {
+            let (a, b) = (x.exp(), y.exp());
+            let p = [a, b, 1.0 / (a * b)];
+            (dist2(p, sigma), p)
+        };
+        let (mut cx, mut cy, mut half) = (0.0, 0.0, 4.0);
+        let mut best = eval(cx, cy);
+        for _ in 0..40 {
+            let n = 40;
+            let (bx, by) = (cx, cy);
+            for i in 0..=n {
+                for j in 0..=n {
+                    let x = bx - half + 2.0 * half * i as f64 / n as f64;
+                    let y = by - half + 2.0 * half * j as f64 / n as f64;
+                    let e = eval(x, y);
+                    if e.0 < best.0 {
+                        best = e;
+                        cx = x;
+                        cy = y;
+                    }
+                }
+            }
+            half *= 0.3;
+        }
+        best.1
+    }
+
+    fn sorted(mut s: [f64; 3]) -> [f64; 3] {
+        s.sort_by(|a, b| b.total_cmp(a));
+        s
+    }
+
+    #[test]
+    fn unit_volume_and_stationary() {
+        let mut rng = Rng(7);
+        for _ in 0..3000 {
+            let mut s = sorted([1.0 + 0.9 * rng.next(), 1.0 + 0.9 * rng.next(), 1.0 + 0.9 * rng.next()]);
+            if rng.next() < -0.6 {
+                s[2] = -s[2].abs() * 0.5; // inverted element
+                s = [s[0].max(s[2].abs()), s[1].max(s[2].abs()), s[2]];
+            }
+            let p = volume_preserving(s);
+            assert!((p[0] * p[1] * p[2] - 1.0).abs() < 1e-12, "{s:?} -> {p:?}");
+            assert!(p.iter().all(|&v| v > 0.0));
+            // KKT: σ'_i (σ'_i - σ_i) is the same for all i.
+            let l: Vec<f64> = (0..3).map(|i| p[i] * (p[i] - s[i])).collect();
+            assert!((l[0] - l[1]).abs() < 1e-9 && (l[1] - l[2]).abs() < 1e-9, "{s:?} -> {p:?}: {l:?}");
+        }
+    }
+
+    #[test]
+    fn nearest_point_for_moderate_stretch() {
+        let mut rng = Rng(11);
+        for _ in 0..200 {
+            let s = sorted([1.0 + 0.7 * rng.next(), 1.0 + 0.7 * rng.next(), 1.0 + 0.7 * rng.next()]);
+            let p = volume_preserving(s);
+            let b = brute_force(s);
+            assert!(dist2(p, s) <= dist2(b, s) + 1e-10, "{s:?}: ours {p:?} {} vs brute {b:?} {}", dist2(p, s), dist2(b, s));
+        }
+    }
+
+    #[test]
+    fn extreme_stretch_collapses_the_shortest_axis() {
+        let s = [3.0, 3.0, 3.0];
+        let p = volume_preserving(s);
+        assert!((p[0] * p[1] * p[2] - 1.0).abs() < 1e-12);
+        assert!(p[2] < 0.2 && p[0] > 2.5, "{p:?}");
+        assert!(dist2(p, s) < dist2([1.0; 3], s), "closer than the symmetric stationary point");
+    }
+
+    #[test]
+    fn projection_of_rotations_and_scaled_rotations() {
+        let r0 = [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]];
+        for share in [0.0, 0.3, 1.0] {
+            assert!(distance(&project(&r0, share), &r0) < 1e-12, "a rotation is its own projection");
+        }
+        // Uniform scaling by 1.1: strain target R, volume target R (σ' = 1 by symmetry).
+        let f = r0.map(|row| row.map(|v| 1.1 * v));
+        assert!(distance(&project(&f, 0.5), &r0) < 1e-12);
+    }
+
+    #[test]
+    fn volume_target_has_unit_determinant_and_strain_target_is_a_rotation() {
+        let mut rng = Rng(3);
+        for _ in 0..500 {
+            let f = rng.mat();
+            let d = project(&f, 0.0);
+            assert!((det(&d) - 1.0).abs() < 1e-9, "{}", det(&d));
+            let r = project(&f, 1.0);
+            assert!(distance(&mul_transpose(&r, &r), &IDENTITY) < 1e-12 && (det(&r) - 1.0).abs() < 1e-12);
+            let _ = mul(&r, &d);
+        }
+    }
+}

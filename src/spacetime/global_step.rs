@@ -1,0 +1,205 @@
+//! The global step: with the projections fixed, W is quadratic in the keyframe unknowns, with
+//! a Hessian that does not depend on the iteration. It is assembled and factorized once.
+//!
+//! Structure: per sample, `∂f/∂u_j = c_j M + l_j L` (see [`super::objective`]), so in the
+//! `M⁻¹` norm the Hessian block of time slots (σ, σ') is
+//!
+//! ```text
+//! Σ_s dτ (c_σ M + l_σ L) M⁻¹ (c_σ' M + l_σ' L)
+//!   = C_MM[σ,σ'] M + C_ML[σ,σ'] L + C_KK[σ,σ'] L M⁻¹ L
+//! ```
+//!
+//! with three small dense matrices over time slots and three fixed sparse matrices over
+//! nodes. The proximal regularization `(1/h²) Σ dτ Bᵀ M B` adds `C_KK / h²` to `C_MM`. The
+//! matrix restricted to the free unknowns is written straight into compressed columns in
+//! node-major order (rows come out sorted; no triplet sort), and the three coordinates are
+//! three right-hand sides of one factorization.
+//!
+//! The step itself is the minimizer of the quadratic model plus the proximal term around the
+//! current iterate `q`: `q + Δ` with `(H + P) Δ = -∇W`. At a fixed point `∇W = 0`, so the
+//! regularization never moves the fixed point; it only damps the path to it.
+
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Mat, Par};
+use rayon::prelude::*;
+
+use super::objective::Objective;
+use super::unknowns::Unknowns;
+use crate::error::{Error, Result};
+use crate::mesh::Point;
+use crate::physics::cholesky::{Cholesky, Ordering};
+
+/// Dense coefficient matrices over time slots (row-major, `slots × slots`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeCoefficients {
+    pub slots: usize,
+    pub mm: Vec<f64>,
+    pub ml: Vec<f64>,
+    pub kk: Vec<f64>,
+}
+
+impl TimeCoefficients {
+    /// Accumulate the sample coefficients; `inv_h2` is the proximal weight `1/h²` (0 = off).
+    pub fn new(objective: &Objective, inv_h2: f64) -> TimeCoefficients {
+        let n = objective.slots.count();
+        let (mut mm, mut ml, mut kk) = (vec![0.0; n * n], vec![0.0; n * n], vec![0.0; n * n]);
+        for s in &objective.samples {
+            let (c, l) = objective.coefficients(s);
+            for j in 0..4 {
+                for k in 0..4 {
+                    let at = s.slots[j] * n + s.slots[k];
+                    mm[at] += s.weight * c[j] * c[k];
+                    ml[at] += s.weight * (c[j] * l[k] + l[j] * c[k]);
+                    kk[at] += s.weight * l[j] * l[k];
+                }
+            }
+        }
+        for (m, k) in mm.iter_mut().zip(&kk) {
+            *m += inv_h2 * k;
+        }
+        TimeCoefficients { slots: n, mm, ml, kk }
+    }
+}
+
+/// What the precomputation built, for the report and the benchmark.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GlobalStats {
+    /// Free unknowns per coordinate.
+    pub unknowns: usize,
+    /// Stored entries of the lower triangle of the matrix.
+    pub matrix_nnz: usize,
+    /// Stored entries of the Cholesky factor.
+    pub factor_nnz: usize,
+    pub assemble_seconds: f64,
+    pub factor_seconds: f64,
+}
+
+pub struct GlobalStep {
+    unknowns: Unknowns,
+    cholesky: Option<Cholesky>,
+    pub stats: GlobalStats,
+}
+
+/// Lower triangle of the normal matrix restricted to the free unknowns.
+pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeCoefficients) -> SparseColMat<usize, f64> {
+    let el = objective.elastic;
+    let n = el.node_count();
+    let inv_mass: Vec<f64> = el.mass.iter().map(|m| 1.0 / m).collect();
+    let k = el.stiffness.sandwich_diagonal(&inv_mass);
+    let l = &el.stiffness;
+    let s_count = coefficients.slots;
+    let (mm, ml, kk) = (&coefficients.mm, &coefficients.ml, &coefficients.kk);
+    // Columns of node b, for every b in parallel: (column lengths, rows, values).
+    let blocks: Vec<(Vec<usize>, Vec<usize>, Vec<f64>)> = (0..n)
+        .into_par_iter()
+        .map(|b| {
+            let (mut lens, mut rows, mut vals) = (Vec::new(), Vec::new(), Vec::new());
+            let neighbours: Vec<(usize, f64, f64)> = k
+                .row(b)
+                .filter(|&(a, _)| a >= b)
+                .map(|(a, kab)| (a, l.get(a, b), kab))
+                .collect();
+            for s2 in 0..s_count {
+                if unknowns.get(b, s2).is_none() {
+                    continue;
+                }
+                let start = rows.len();
+                for &(a, lab, kab) in &neighbours {
+                    let mab = if a == b { el.mass[a] } else { 0.0 };
+                    for s1 in 0..s_count {
+                        if a == b && s1 < s2 {
+                            continue;
+                        }
+                        let Some(u) = unknowns.get(a, s1) else { continue };
+                        let at = s1 * s_count + s2;
+                        if !((a == b && mm[at] != 0.0) || ml[at] != 0.0 || kk[at] != 0.0) {
+                            continue;
+                        }
+                        rows.push(u);
+                        vals.push(mm[at] * mab + ml[at] * lab + kk[at] * kab);
+                    }
+                }
+                lens.push(rows.len() - start);
+            }
+            (lens, rows, vals)
+        })
+        .collect();
+    let dim = unknowns.count();
+    let mut col_ptr = Vec::with_capacity(dim + 1);
+    col_ptr.push(0usize);
+    let total: usize = blocks.iter().map(|b| b.1.len()).sum();
+    let (mut rows, mut vals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+    for (lens, r, v) in blocks {
+        for len in lens {
+            col_ptr.push(col_ptr.last().unwrap() + len);
+        }
+        rows.extend(r);
+        vals.extend(v);
+    }
+    // The checked constructor validates sortedness and bounds.
+    let symbolic = SymbolicSparseColMat::new_checked(dim, dim, col_ptr, None, rows);
+    SparseColMat::new(symbolic, vals)
+}
+
+impl GlobalStep {
+    /// Assemble and factorize. `regularization` is the proximal time scale h (0 = off).
+    pub fn new(objective: &Objective, unknowns: Unknowns, regularization: f64) -> Result<GlobalStep> {
+        let inv_h2 = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        let t0 = std::time::Instant::now();
+        let coefficients = TimeCoefficients::new(objective, inv_h2);
+        let dim = unknowns.count();
+        if dim == 0 {
+            let stats = GlobalStats { unknowns: 0, matrix_nnz: 0, factor_nnz: 0, assemble_seconds: 0.0, factor_seconds: 0.0 };
+            return Ok(GlobalStep { unknowns, cholesky: None, stats });
+        }
+        let a = assemble(objective, &unknowns, &coefficients);
+        let assemble_seconds = t0.elapsed().as_secs_f64();
+        let t1 = std::time::Instant::now();
+        let par = if dim > 8000 { Par::rayon(0) } else { Par::Seq };
+        let cholesky = Cholesky::factor(&a, &Ordering::Amd, par).map_err(|_| {
+            Error::general(
+                "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
+                "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
+            )
+        })?;
+        let stats = GlobalStats {
+            unknowns: dim,
+            matrix_nnz: a.compute_nnz(),
+            factor_nnz: cholesky.factor_nnz(),
+            assemble_seconds,
+            factor_seconds: t1.elapsed().as_secs_f64(),
+        };
+        Ok(GlobalStep { unknowns, cholesky: Some(cholesky), stats })
+    }
+
+    pub fn unknowns(&self) -> &Unknowns {
+        &self.unknowns
+    }
+
+    /// The step `Δ = -(H + P)⁻¹ ∇W` per slot (zero at fixed entries).
+    pub fn step(&self, gradient: &[Vec<Point>]) -> Vec<Vec<Point>> {
+        let u = &self.unknowns;
+        let (nodes, s_count) = (u.nodes, u.slots.count());
+        let mut delta = vec![vec![[0.0; 3]; nodes]; s_count];
+        let Some(chol) = &self.cholesky else { return delta };
+        let mut rhs = Mat::<f64>::zeros(u.count(), 3);
+        for s in 0..s_count {
+            for a in 0..nodes {
+                if let Some(i) = u.get(a, s) {
+                    for d in 0..3 {
+                        rhs[(i, d)] = -gradient[s][a][d];
+                    }
+                }
+            }
+        }
+        chol.solve_in_place(rhs.as_mut());
+        for (s, ds) in delta.iter_mut().enumerate() {
+            for (a, da) in ds.iter_mut().enumerate() {
+                if let Some(i) = u.get(a, s) {
+                    *da = [rhs[(i, 0)], rhs[(i, 1)], rhs[(i, 2)]];
+                }
+            }
+        }
+        delta
+    }
+}

@@ -1,0 +1,158 @@
+//! The spacetime objective and the local step.
+//!
+//! At sample `s` (time `t_s`, weight `dτ_s`) the residual force is
+//!
+//! ```text
+//! f_s = M (ẍ + α ẋ - g) + L x - J p_s          (D = α M, f_ext = M g)
+//! W   = Σ_s dτ_s ½ |f_s|²_{M⁻¹}
+//! ```
+//!
+//! where `x, ẋ, ẍ` are the Hermite trajectory at `t_s`, and `p_s` are the element projections
+//! at `x(t_s)` (the local step). With the projections held fixed, `f_s` is affine in the
+//! keyframe unknowns: per slot `j` of the sample's interval, `∂f_s/∂u_j = c_j M + l_j L` with
+//! `c_j = acc_j + α vel_j` and `l_j = pos_j` (the Hermite weights). So the gradient is, per
+//! time slot σ, `Σ_s dτ_s (c_σ f_s + l_σ L M⁻¹ f_s) = F^c_σ + L M⁻¹ F^l_σ`, two accumulations
+//! and one sparse product per slot instead of one per sample.
+
+use rayon::prelude::*;
+
+use super::sampling::{Sample, TimeSlots};
+use super::trajectory::Trajectory;
+use crate::mesh::Point;
+use crate::physics::elastic::Elastic;
+use crate::physics::mat3::Mat3;
+
+/// The element projections of every sample, `[sample][tet]`.
+pub type Projections = Vec<Vec<Mat3>>;
+
+/// The quantities the objective needs besides the trajectory.
+pub struct Objective<'a> {
+    pub elastic: &'a Elastic,
+    pub samples: Vec<Sample>,
+    pub slots: TimeSlots,
+    /// Rayleigh mass damping α (D = α M).
+    pub damping: f64,
+    pub gravity: Point,
+}
+
+/// W and its gradient at one trajectory.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    /// W.
+    pub value: f64,
+    /// The elastic part `Σ dτ ½ |L x - J p|²_{M⁻¹}` (zero for rigid motion).
+    pub elastic: f64,
+    /// `∂W/∂u` for every slot (fixed entries included: callers mask them), `[slot][node]`.
+    pub gradient: Vec<Vec<Point>>,
+}
+
+impl<'a> Objective<'a> {
+    /// Mass coefficient `c_j = acc_j + α vel_j` and stiffness coefficient `l_j = pos_j` of the
+    /// four unknowns of a sample.
+    #[inline]
+    pub fn coefficients(&self, s: &Sample) -> ([f64; 4], [f64; 4]) {
+        let b = &s.basis;
+        let c = [0, 1, 2, 3].map(|j| b.acc[j] + self.damping * b.vel[j]);
+        (c, b.pos)
+    }
+
+    /// The four unknown arrays of a sample's interval.
+    fn unknowns<'t>(tr: &'t Trajectory, s: &Sample) -> [&'t [Point]; 4] {
+        let i = s.interval;
+        [&tr.positions[i], &tr.velocities[i], &tr.positions[i + 1], &tr.velocities[i + 1]]
+    }
+
+    /// `Σ_j w_j u_j` over a sample's unknowns.
+    fn combine(u: &[&[Point]; 4], w: &[f64; 4], out: &mut [Point]) {
+        for (a, o) in out.iter_mut().enumerate() {
+            for d in 0..3 {
+                o[d] = w[0] * u[0][a][d] + w[1] * u[1][a][d] + w[2] * u[2][a][d] + w[3] * u[3][a][d];
+            }
+        }
+    }
+
+    /// The local step: projections of every element at every sample, in parallel over
+    /// samples and elements.
+    pub fn local_step(&self, tr: &Trajectory) -> Projections {
+        let n = self.elastic.node_count();
+        self.samples
+            .par_iter()
+            .map(|s| {
+                let mut x = vec![[0.0; 3]; n];
+                Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
+                let mut p = vec![[[0.0; 3]; 3]; self.elastic.tet_count()];
+                self.elastic.local_step(&x, &mut p);
+                p
+            })
+            .collect()
+    }
+
+    /// W, its elastic part, and its gradient with the projections held at `p`.
+    pub fn evaluate(&self, tr: &Trajectory, p: &Projections) -> Evaluation {
+        let el = self.elastic;
+        let n = el.node_count();
+        let g = self.gravity;
+        // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
+        let per_sample: Vec<(Vec<Point>, f64, f64)> = self
+            .samples
+            .par_iter()
+            .zip(p.par_iter())
+            .map(|(s, ps)| {
+                let u = Self::unknowns(tr, s);
+                let (c, l) = self.coefficients(s);
+                let (mut x, mut acc) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+                Self::combine(&u, &l, &mut x);
+                Self::combine(&u, &c, &mut acc);
+                let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+                el.stiffness.mul_points(&x, &mut lx);
+                el.apply_j(ps, &mut jp);
+                let (mut w, mut w_el) = (0.0, 0.0);
+                let mut f = vec![[0.0; 3]; n];
+                for a in 0..n {
+                    let m = el.mass[a];
+                    for d in 0..3 {
+                        let e = lx[a][d] - jp[a][d];
+                        f[a][d] = m * (acc[a][d] - g[d]) + e;
+                        w += f[a][d] * f[a][d] / m;
+                        w_el += e * e / m;
+                    }
+                }
+                (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el)
+            })
+            .collect();
+        let value = per_sample.iter().map(|r| r.1).sum();
+        let elastic = per_sample.iter().map(|r| r.2).sum();
+
+        // Gradient per slot: F^c + L M⁻¹ F^l, each slot's sums taken in sample order.
+        let gradient = (0..self.slots.count())
+            .into_par_iter()
+            .map(|slot| {
+                let (mut fc, mut fl) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+                for (s, (f, _, _)) in self.samples.iter().zip(&per_sample) {
+                    let (c, l) = self.coefficients(s);
+                    let (mut cs, mut ls) = (0.0, 0.0);
+                    for j in 0..4 {
+                        if s.slots[j] == slot {
+                            cs += c[j];
+                            ls += l[j];
+                        }
+                    }
+                    if cs == 0.0 && ls == 0.0 {
+                        continue;
+                    }
+                    let (cs, ls) = (s.weight * cs, s.weight * ls);
+                    for a in 0..n {
+                        for d in 0..3 {
+                            fc[a][d] += cs * f[a][d];
+                            fl[a][d] += ls * f[a][d] / el.mass[a];
+                        }
+                    }
+                }
+                let mut lfl = vec![[0.0; 3]; n];
+                el.stiffness.mul_points(&fl, &mut lfl);
+                fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect()
+            })
+            .collect();
+        Evaluation { value, elastic, gradient }
+    }
+}

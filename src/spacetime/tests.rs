@@ -1,0 +1,274 @@
+//! Verification of the spacetime solver: analytic cases, invariants, and derivatives.
+
+use super::global_step::{assemble, TimeCoefficients};
+use super::solver::{apply_step, objective, solve, Settings};
+use super::trajectory::Trajectory;
+use super::unknowns::Unknowns;
+use crate::mesh::{add, norm, sub, Point};
+use crate::physics::elastic::tests::cube_mesh;
+use crate::physics::elastic::Elastic;
+use crate::physics::svd3::tests::Rng;
+use crate::scene::Material;
+use crate::stage::{KeyPoses, VertexSet};
+
+fn material() -> Material {
+    Material { stiffness: 70.0, volume: 70.0, density: 1.0, damping: 0.0, gravity: [0.0; 3] }
+}
+
+fn settings() -> Settings {
+    Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3] }
+}
+
+fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<VertexSet>, cyclic: bool) -> KeyPoses {
+    let n = times.len();
+    KeyPoses { times, positions, fixed, fixed_velocity: vec![VertexSet::default(); n], cyclic }
+}
+
+fn rotate_y(p: Point, angle: f64) -> Point {
+    let (s, c) = angle.sin_cos();
+    [c * p[0] + s * p[2], p[1], -s * p[0] + c * p[2]]
+}
+
+/// A non-rigid, non-trivial trajectory on a cube: stretched, sheared and twisted keys.
+fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
+    let mut rng = Rng(42);
+    let shapes: Vec<Vec<Point>> = (0..4)
+        .map(|k| {
+            rest.iter()
+                .map(|&p| {
+                    let q = rotate_y(p, 0.4 * k as f64 * p[1]);
+                    [q[0] * (1.0 + 0.1 * k as f64), q[1] + 0.05 * k as f64 * q[0], q[2]]
+                })
+                .collect()
+        })
+        .collect();
+    let mut velocities: Vec<Vec<Point>> = (0..4).map(|_| rest.iter().map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect();
+    let mut positions = shapes;
+    if cyclic {
+        positions[3] = positions[0].clone();
+        velocities[3] = velocities[0].clone();
+    }
+    Trajectory { times: vec![0.0, 0.3, 0.8, 1.1], positions, velocities }
+}
+
+#[test]
+fn free_fall_is_an_exact_parabola() {
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let n = mesh.positions.len();
+    let g = [0.0, -9.81, 0.0];
+    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![VertexSet::all(n), VertexSet::default()], false);
+    // The proximal weight (1/h⁴) balances inertia (~36/T⁴) at h ~ T/2.5.
+    let s = Settings { gravity: g, regularization: 0.5, ..settings() };
+    let solved = solve(&el, &k, &s, &|_, _| {}).unwrap();
+    let energy = &solved.log.energy;
+    let (w0, w) = (energy[0], *energy.last().unwrap());
+    assert!(w < 1e-12 * w0, "W: {w0:e} -> {w:e} after {} iterations", solved.log.iterations);
+    let obj = objective(&el, &k, &s);
+    for sample in &obj.samples {
+        for a in solved.trajectory.acceleration(sample.time) {
+            assert!(norm(sub(a, g)) < 1e-6 * 9.81, "acceleration {a:?} at t = {}", sample.time);
+        }
+    }
+}
+
+#[test]
+fn rigid_motion_costs_no_elastic_energy() {
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let n = mesh.positions.len();
+    // The same rigid placement at every key, at rest: W = 0 and its elastic part = 0.
+    let placed: Vec<Point> = mesh.positions.iter().map(|&p| add(rotate_y(p, 2.0), [1.0, -3.0, 0.5])).collect();
+    let k = keys(vec![0.0, 0.5, 1.2], vec![placed.clone(); 3], vec![VertexSet::all(n); 3], false);
+    let tr = Trajectory::with_zero_velocities(k.times.clone(), k.positions.clone());
+    let obj = objective(&el, &k, &settings());
+    let e = obj.evaluate(&tr, &obj.local_step(&tr));
+    assert!(e.value < 1e-20 && e.elastic < 1e-20, "W = {:e}, elastic = {:e}", e.value, e.elastic);
+
+    // Moving a whole non-rigid trajectory rigidly changes neither W nor its elastic part.
+    let tr = wobbly(&mesh.positions, false);
+    let moved = Trajectory {
+        times: tr.times.clone(),
+        positions: tr.positions.iter().map(|p| p.iter().map(|&x| add(rotate_y(x, 0.7), [5.0, 1.0, -2.0])).collect()).collect(),
+        velocities: tr.velocities.iter().map(|v| v.iter().map(|&x| rotate_y(x, 0.7)).collect()).collect(),
+    };
+    let k4 = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], false);
+    let obj = objective(&el, &k4, &settings());
+    let (a, b) = (obj.evaluate(&tr, &obj.local_step(&tr)), obj.evaluate(&moved, &obj.local_step(&moved)));
+    assert!(a.elastic > 1e-3, "the wobbly trajectory is elastic: {}", a.elastic);
+    assert!((a.elastic - b.elastic).abs() < 1e-10 * a.elastic && (a.value - b.value).abs() < 1e-10 * a.value);
+}
+
+/// W with frozen projections along `delta` (one entry or a direction), by central differences.
+fn directional_fd(obj: &super::objective::Objective, tr: &Trajectory, p: &super::objective::Projections, delta: &[Vec<Point>], h: f64) -> f64 {
+    let (mut plus, mut minus) = (tr.clone(), tr.clone());
+    apply_step(&mut plus, &obj.slots, delta, h);
+    apply_step(&mut minus, &obj.slots, delta, -h);
+    (obj.evaluate(&plus, p).value - obj.evaluate(&minus, p).value) / (2.0 * h)
+}
+
+#[test]
+fn gradient_matches_finite_differences() {
+    for cyclic in [false, true] {
+        let mesh = cube_mesh(2);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let tr = wobbly(&mesh.positions, cyclic);
+        let k = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], cyclic);
+        let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], ..settings() };
+        let obj = objective(&el, &k, &s);
+        let p = obj.local_step(&tr);
+        let e = obj.evaluate(&tr, &p);
+        let slots = obj.slots.count();
+        let n = mesh.positions.len();
+        let scale = e.gradient.iter().flatten().map(|v| norm(*v)).fold(0.0, f64::max);
+        let mut worst: f64 = 0.0;
+        for s in 0..slots {
+            for a in (0..n).step_by(5) {
+                for d in 0..3 {
+                    let mut delta = vec![vec![[0.0; 3]; n]; slots];
+                    delta[s][a][d] = 1.0;
+                    let fd = directional_fd(&obj, &tr, &p, &delta, 1e-5);
+                    worst = worst.max((fd - e.gradient[s][a][d]).abs() / scale);
+                }
+            }
+        }
+        assert!(worst < 1e-6, "cyclic={cyclic}: relative gradient error {worst:e}");
+    }
+}
+
+#[test]
+fn normal_matrix_is_the_hessian_of_w() {
+    // H d == (∇W(q + h d) - ∇W(q - h d)) / 2h with projections frozen (W is quadratic then).
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let n = mesh.positions.len();
+    let tr = wobbly(&mesh.positions, true);
+    let mut fixed = vec![VertexSet::default(); 4];
+    fixed[1] = VertexSet::from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
+    let k = keys(tr.times.clone(), tr.positions.clone(), fixed, true);
+    let s = Settings { damping: 0.4, ..settings() };
+    let obj = objective(&el, &k, &s);
+    let unknowns = Unknowns::new(&k, n);
+    let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 0.0));
+    let p = obj.local_step(&tr);
+    let mut rng = Rng(5);
+    let slots = obj.slots.count();
+    let mut dir = vec![vec![[0.0; 3]; n]; slots];
+    let mut dvec = vec![[0.0; 3]; unknowns.count()];
+    for s in 0..slots {
+        for v in 0..n {
+            if let Some(i) = unknowns.get(v, s) {
+                dir[s][v] = [rng.next(), rng.next(), rng.next()];
+                dvec[i] = dir[s][v];
+            }
+        }
+    }
+    // y = A d using the stored lower triangle.
+    let mut y = vec![[0.0; 3]; unknowns.count()];
+    let (cp, ri, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    for j in 0..unknowns.count() {
+        for k in cp[j]..cp[j + 1] {
+            let (i, v) = (ri[k], vals[k]);
+            for d in 0..3 {
+                y[i][d] += v * dvec[j][d];
+                if i != j {
+                    y[j][d] += v * dvec[i][d];
+                }
+            }
+        }
+    }
+    let h = 1e-4;
+    let (mut plus, mut minus) = (tr.clone(), tr.clone());
+    apply_step(&mut plus, &obj.slots, &dir, h);
+    apply_step(&mut minus, &obj.slots, &dir, -h);
+    let (gp, gm) = (obj.evaluate(&plus, &p).gradient, obj.evaluate(&minus, &p).gradient);
+    let scale = y.iter().map(|v| norm(*v)).fold(0.0, f64::max);
+    for s in 0..slots {
+        for v in 0..n {
+            if let Some(i) = unknowns.get(v, s) {
+                for d in 0..3 {
+                    let fd = (gp[s][v][d] - gm[s][v][d]) / (2.0 * h);
+                    assert!((fd - y[i][d]).abs() < 1e-7 * scale, "slot {s} node {v}: {fd} vs {}", y[i][d]);
+                }
+            }
+        }
+    }
+}
+
+/// A small scene with a free middle key: top and bottom held at every key.
+fn bending_scene(cyclic: bool) -> (Elastic, KeyPoses) {
+    bending_scene_with(cyclic, 0.3, &material())
+}
+
+fn bending_scene_with(cyclic: bool, amplitude: f64, material: &Material) -> (Elastic, KeyPoses) {
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, material).unwrap();
+    let ends = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] == 0.0 || p[1] == 1.0).collect::<Vec<_>>());
+    let bent: Vec<Point> = mesh.positions.iter().map(|&p| [p[0] + amplitude * (std::f64::consts::PI * p[1]).sin(), p[1], p[2]]).collect();
+    let poses = vec![mesh.positions.clone(), bent, mesh.positions.clone()];
+    (el, keys(vec![0.0, 0.4, 0.8], poses, vec![ends; 3], cyclic))
+}
+
+#[test]
+fn masks_are_respected_and_loops_close() {
+    let (el, k) = bending_scene(true);
+    let solved = solve(&el, &k, &Settings { tolerance: 1e-3, ..settings() }, &|_, _| {}).unwrap();
+    let tr = &solved.trajectory;
+    for key in 0..3 {
+        for &a in k.fixed[key].indices() {
+            assert_eq!(tr.positions[key][a as usize], k.positions[key][a as usize], "fixed position moved");
+        }
+    }
+    assert_eq!(tr.positions[0], tr.positions[2]);
+    assert_eq!(tr.velocities[0], tr.velocities[2]);
+    let w = &solved.log.energy;
+    assert!(w.last().unwrap() < &(0.5 * w[0]), "{w:?}");
+}
+
+#[test]
+fn regularization_does_not_move_the_fixed_point() {
+    // With negligible stiffness the projections do not matter, W is quadratic with a unique
+    // minimizer, and the regularized iteration must reach the same point for any h.
+    let soft = Material { stiffness: 1e-9, volume: 1e-9, ..material() };
+    let (el, mut k) = bending_scene_with(false, 0.3, &soft);
+    let n = el.node_count();
+    k.fixed = vec![VertexSet::all(n), k.fixed[1].clone(), VertexSet::all(n)];
+    let s = Settings { gravity: [0.0, -9.81, 0.0], tolerance: 1e-15, max_iterations: 3000, ..settings() };
+    let solve_with = |h: f64| solve(&el, &k, &Settings { regularization: h, ..s.clone() }, &|_, _| {}).unwrap();
+    let (a, b, c) = (solve_with(0.0), solve_with(0.15), solve_with(0.5));
+    // Without regularization one step solves the quadratic; the next only confirms it.
+    let w = &a.log.energy;
+    assert!(w.len() <= 3 && (w[1] - w[w.len() - 1]).abs() <= 1e-12 * w[0], "{w:?}");
+    assert!(b.log.iterations > 5, "a strong proximal term takes many small steps: {}", b.log.iterations);
+    for other in [&b, &c] {
+        let mut worst: f64 = 0.0;
+        for key in 0..3 {
+            for (p, q) in a.trajectory.positions[key].iter().zip(&other.trajectory.positions[key]) {
+                worst = worst.max(norm(sub(*p, *q)));
+            }
+            for (p, q) in a.trajectory.velocities[key].iter().zip(&other.trajectory.velocities[key]) {
+                worst = worst.max(norm(sub(*p, *q)));
+            }
+        }
+        assert!(worst < 1e-5, "fixed points differ by {worst:e} ({} iterations)", other.log.iterations);
+    }
+}
+
+#[test]
+fn w_never_increases_and_stops_where_the_step_stops_helping() {
+    let (el, k) = bending_scene(false);
+    let solved = solve(&el, &k, &Settings { tolerance: 1e-14, max_iterations: 200, ..settings() }, &|_, _| {}).unwrap();
+    let w = &solved.log.energy;
+    assert!(w.windows(2).all(|p| p[1] <= p[0]), "{w:?}");
+    assert!(w.last().unwrap() < &(1e-4 * w[0]), "{} -> {}", w[0], w.last().unwrap());
+    assert!(solved.log.iterations < 200, "stopped by the safeguard, not the iteration cap: {}", solved.log.stop_reason);
+}
+
+#[test]
+fn singular_system_is_a_clear_error() {
+    let mesh = cube_mesh(1);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(); 2], vec![VertexSet::default(); 2], false);
+    let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("singular") && e.contains("regularization"), "{e}");
+}

@@ -1,0 +1,64 @@
+//! Which keyframe positions and velocities are unknowns, and where they sit in the global
+//! vector. Masked (fixed) values are eliminated, not penalized: they keep the value they have
+//! in the trajectory and are never written.
+//!
+//! Layout is node-major (all free slots of node 0, then node 1, ...), so a node's unknowns are
+//! contiguous and the three coordinates share one index (they are three right-hand sides of
+//! one system).
+
+use super::sampling::TimeSlots;
+use crate::stage::KeyPoses;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unknowns {
+    pub slots: TimeSlots,
+    pub nodes: usize,
+    /// `index[node * slot_count + slot]`, `u32::MAX` when fixed.
+    index: Vec<u32>,
+    count: usize,
+}
+
+const FIXED: u32 = u32::MAX;
+
+impl Unknowns {
+    /// Free unknowns of `keys`: a slot is fixed for a node if any key sharing that slot fixes
+    /// it (a loop's last key adds its masks to the first key's).
+    pub fn new(keys: &KeyPoses, nodes: usize) -> Unknowns {
+        let slots = TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic };
+        let s_count = slots.count();
+        let mut fixed = vec![false; nodes * s_count];
+        for k in 0..slots.keys {
+            for &a in keys.fixed[k].indices() {
+                fixed[a as usize * s_count + slots.position(k)] = true;
+            }
+            for &a in keys.fixed_velocity[k].indices() {
+                fixed[a as usize * s_count + slots.velocity(k)] = true;
+            }
+        }
+        let mut count = 0usize;
+        let index = fixed
+            .iter()
+            .map(|&f| {
+                if f {
+                    FIXED
+                } else {
+                    count += 1;
+                    (count - 1) as u32
+                }
+            })
+            .collect();
+        Unknowns { slots, nodes, index, count }
+    }
+
+    /// Number of free unknowns (per coordinate).
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    /// Global index of slot `s` of `node`, if free.
+    #[inline]
+    pub fn get(&self, node: usize, s: usize) -> Option<usize> {
+        let i = self.index[node * self.slots.count() + s];
+        (i != FIXED).then_some(i as usize)
+    }
+}
