@@ -5,6 +5,7 @@
 pub mod cholesky;
 pub mod csr;
 pub mod elastic;
+pub mod equilibrium;
 pub mod mat3;
 pub mod projection;
 pub mod svd3;
