@@ -1,4 +1,4 @@
-//! Wavefront OBJ surfaces (helper-owned: see the contract below).
+//! Wavefront OBJ surfaces.
 //!
 //! Contract: `parse` reads `v` and `f` lines of the *first object* (stop at the second `o`
 //! line that follows faces; `g` lines do not split), keeps every `v` in file order (unused
@@ -6,24 +6,268 @@
 //! `f a/b/c`, `a//c`, `a/b` forms and negative (relative) indices, ignores `vt`, `vn`, `usemtl`,
 //! `mtllib`, `s`, `l`, `p` and comments. Errors name the line and say how to fix it.
 //! `tobj` is not used: it renumbers vertices in first-use order and drops unused ones.
+//!
+//! Extra columns after `v x y z` (a `w` weight or per-vertex colours) are ignored. Face
+//! indices must refer to vertices defined above the face, as every exporter writes them:
+//! that is what makes a relative index well defined.
 
+use std::fmt::Write as _;
 use std::path::Path;
 
-use super::TriMesh;
-use crate::error::Result;
+use super::{Point, TriMesh};
+use crate::error::{Error, Result};
 
+/// Read an OBJ surface; errors name the file and the line.
+///
+/// Bytes that are not UTF-8 (Latin-1 comments or group names from older exporters) are
+/// replaced, not refused: only the ASCII keywords and numbers matter.
 pub fn read(path: &Path) -> Result<TriMesh> {
-    let _ = path;
-    todo!("mesh::obj::read")
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the OBJ surface"))?;
+    parse(&String::from_utf8_lossy(&bytes)).map_err(|e| e.with_path(path))
 }
 
+/// Parse OBJ text (see the module contract). Errors carry no path; their problem starts with
+/// `line N:` when a line is at fault.
 pub fn parse(text: &str) -> Result<TriMesh> {
-    let _ = text;
-    todo!("mesh::obj::parse")
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut mesh = TriMesh::default();
+    for (number, line) in text.lines().enumerate() {
+        let line_no = number + 1;
+        let content = line.split('#').next().unwrap_or("");
+        let mut tokens = content.split_whitespace();
+        match tokens.next() {
+            Some("v") => mesh.positions.push(parse_vertex(tokens, line_no)?),
+            Some("f") => {
+                let corners =
+                    tokens.map(|t| parse_corner(t, mesh.positions.len(), line_no)).collect::<Result<Vec<u32>>>()?;
+                if corners.len() < 3 {
+                    return Err(Error::general(
+                        format!("line {line_no}: face has {} vertices, needs at least 3", corners.len()),
+                        "remove the line, or export edges as `l` lines and polygons as `f` lines",
+                    ));
+                }
+                mesh.triangles.extend((1..corners.len() - 1).map(|k| [corners[0], corners[k], corners[k + 1]]));
+            }
+            Some("o") if !mesh.triangles.is_empty() => break,
+            _ => {}
+        }
+    }
+    if mesh.triangles.is_empty() {
+        return Err(Error::general(
+            format!("has no faces ({} vertices, no `f` lines in the first object)", mesh.positions.len()),
+            "export the mesh with its faces; point clouds and curves cannot be simulated",
+        ));
+    }
+    Ok(mesh)
+}
+
+fn parse_vertex<'a>(tokens: impl Iterator<Item = &'a str>, line_no: usize) -> Result<Point> {
+    let mut p = [0.0; 3];
+    let mut count = 0;
+    for token in tokens.take(3) {
+        let value: f64 = token.parse().map_err(|_| {
+            Error::general(
+                format!("line {line_no}: vertex coordinate `{token}` is not a number"),
+                "write vertices as `v x y z` with decimal numbers, e.g. `v 0.5 1 -2e-3`",
+            )
+        })?;
+        if !value.is_finite() {
+            return Err(Error::general(
+                format!("line {line_no}: vertex coordinate `{token}` is not finite"),
+                "fix or delete the vertex in your modeling tool and re-export",
+            ));
+        }
+        p[count] = value;
+        count += 1;
+    }
+    if count < 3 {
+        return Err(Error::general(
+            format!("line {line_no}: vertex has {count} coordinates, needs 3"),
+            "write vertices as `v x y z`",
+        ));
+    }
+    Ok(p)
+}
+
+/// The 0-based vertex of one `f` corner (`v`, `v/t`, `v//n` or `v/t/n`), given how many
+/// vertices are defined above it.
+fn parse_corner(token: &str, defined: usize, line_no: usize) -> Result<u32> {
+    let vertex = token.split('/').next().unwrap_or("");
+    let index: i64 = vertex.parse().map_err(|_| {
+        Error::general(
+            format!("line {line_no}: face corner `{token}` does not start with an integer vertex index"),
+            "write faces as `f 1 2 3` (or `f 1/1/1 2/2/2 3/3/3`) with 1-based vertex numbers",
+        )
+    })?;
+    let resolved = match index {
+        0 => {
+            return Err(Error::general(
+                format!("line {line_no}: face refers to vertex 0, but OBJ vertex numbers start at 1"),
+                "re-export the mesh; the exporter wrote 0-based indices",
+            ))
+        }
+        i if i > 0 => i - 1,
+        i => defined as i64 + i,
+    };
+    match u32::try_from(resolved) {
+        Ok(i) if (i as usize) < defined => Ok(i),
+        _ => Err(Error::general(
+            format!("line {line_no}: face refers to vertex {index}, but only {defined} vertices are defined above it"),
+            "re-export the mesh; the file is truncated or its faces come from another mesh",
+        )),
+    }
 }
 
 /// OBJ text for a surface (`v` lines with shortest round-trip floats, 1-based `f` lines).
 pub fn write(mesh: &TriMesh) -> String {
-    let _ = mesh;
-    todo!("mesh::obj::write")
+    let mut out = String::new();
+    for [x, y, z] in &mesh.positions {
+        writeln!(out, "v {x} {y} {z}").expect("writing to a String cannot fail");
+    }
+    for [a, b, c] in &mesh.triangles {
+        writeln!(out, "f {} {} {}", a + 1, b + 1, c + 1).expect("writing to a String cannot fail");
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::medit::tests::paper_asset;
+
+    fn parse_err(text: &str) -> String {
+        let e = parse(text).expect_err("malformed OBJ must not parse");
+        let s = e.with_path("k.obj").to_string();
+        assert!(s.starts_with("k.obj: ") && s.contains(" (fix: ") && !s.contains('\n'), "{s}");
+        s
+    }
+
+    #[test]
+    fn fans_negative_indices_and_corner_forms() {
+        let text = "# quad and pentagon\nmtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n\
+                    usemtl red\ns off\nf 1/1/1 2/1/1 3/1/1 4/1/1\nv 2 0 0 1.0 0.5 0.5\nf -1//1 -4/1 -3 -2 1 # comment\n\
+                    l 1 2\np 3\n";
+        let mesh = parse(text).unwrap();
+        assert_eq!(mesh.positions.len(), 5);
+        assert_eq!(mesh.positions[4], [2.0, 0.0, 0.0]);
+        assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3], [4, 1, 2], [4, 2, 3], [4, 3, 0]]);
+    }
+
+    #[test]
+    fn unused_vertices_are_kept_in_file_order() {
+        let mesh = parse("v 9 9 9\nv 0 0 0\nv 7 7 7\nv 1 0 0\nv 0 1 0\nf 2 4 5\nv 8 8 8\n").unwrap();
+        assert_eq!(mesh.positions.len(), 6);
+        assert_eq!(mesh.positions[0], [9.0; 3]);
+        assert_eq!(mesh.positions[5], [8.0; 3]);
+        assert_eq!(mesh.triangles, vec![[1, 3, 4]]);
+    }
+
+    #[test]
+    fn second_object_after_faces_ends_the_mesh_but_groups_do_not() {
+        let text = "o A\nv 0 0 0\nv 1 0 0\nv 0 1 0\ng top\nf 1 2 3\ng bottom\nv 0 0 1\nf 1 3 4\n\
+                    o B\nv 5 5 5\nv 6 5 5\nv 5 6 5\nf 5 6 7\n";
+        let mesh = parse(text).unwrap();
+        assert_eq!(mesh.positions.len(), 4);
+        assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+    }
+
+    #[test]
+    fn malformed_lines_name_the_line_and_a_fix() {
+        let cases = [
+            ("v 0 0 0\nv 1 x 0\n", "line 2: vertex coordinate `x` is not a number"),
+            ("v 0 0\n", "line 1: vertex has 2 coordinates, needs 3"),
+            ("v 0 0 0\nv nan 0 0\n", "line 2: vertex coordinate `nan` is not finite"),
+            ("v 0 0 0\nv 1 0 0\nv inf 0 0\n", "line 3: vertex coordinate `inf` is not finite"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "line 4: face refers to vertex 0"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "line 4: face refers to vertex 4, but only 3 vertices"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n", "line 4: face refers to vertex -4, but only 3 vertices"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2\n", "line 5: face has 2 vertices, needs at least 3"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 b 3\n", "line 4: face corner `b` does not start with an integer"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 /2 3\n", "line 4: face corner `/2`"),
+            ("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", "line 1: face refers to vertex 1, but only 0 vertices"),
+            ("v 0 0 0\nv 1 0 0\nl 1 2\n", "has no faces (2 vertices"),
+            ("", "has no faces (0 vertices"),
+        ];
+        for (text, expected) in cases {
+            let s = parse_err(text);
+            assert!(s.contains(expected), "{text:?}: got {s}");
+        }
+    }
+
+    #[test]
+    fn crlf_and_byte_order_mark_are_accepted() {
+        let mesh = parse("\u{feff}v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n").unwrap();
+        assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    }
+
+    #[test]
+    fn write_then_parse_is_exact_and_write_is_stable() {
+        let mesh = TriMesh {
+            positions: vec![
+                [0.1 + 0.2, -0.0, 1e-300],
+                [1e300, 5e-324, -1.0 / 3.0],
+                [f64::MAX, 2.0, 0.5],
+                [7.0, 8.0, 9.0],
+            ],
+            triangles: vec![[0, 1, 2], [2, 1, 0]],
+        };
+        let text = write(&mesh);
+        let back = parse(&text).unwrap();
+        assert_eq!(back.triangles, mesh.triangles);
+        for (a, b) in back.positions.iter().zip(&mesh.positions) {
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+        assert_eq!(write(&back), text);
+        assert!(text.starts_with("v 0.30000000000000004 -0 0.000"), "{text}");
+        assert!(text.ends_with("f 1 2 3\nf 3 2 1\n"), "{text}");
+    }
+
+    #[test]
+    fn read_attaches_the_path_and_tolerates_latin1_comments() {
+        let missing = Path::new("/nonexistent/blendsim/k0.obj");
+        let s = read(missing).unwrap_err().to_string();
+        assert!(
+            s.starts_with("/nonexistent/blendsim/k0.obj: cannot read the OBJ surface") && s.contains("(fix: "),
+            "{s}"
+        );
+        let path = std::env::temp_dir().join(format!("blendsim-obj-test-{}.obj", std::process::id()));
+        std::fs::write(&path, b"# mod\xe8le\ng caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n").unwrap();
+        let s = read(&path).unwrap_err().to_string();
+        std::fs::remove_file(&path).unwrap();
+        let expected =
+            "line 7: face has 2 vertices, needs at least 3 (fix: remove the line, or export edges as `l` lines";
+        assert_eq!(
+            s.split_once(": ").map(|(file, rest)| (file, rest.starts_with(expected))),
+            Some((path.to_str().unwrap(), true)),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn paper_rectangular_prism_keeps_its_unused_interior_vertices() {
+        let Some(path) = paper_asset("stretch3d/rectangular_prism.obj") else { return };
+        let mesh = read(&path).unwrap();
+        assert_eq!(mesh.positions.len(), 594);
+        assert_eq!(mesh.triangles.len(), 680);
+        let mut used = vec![false; 594];
+        mesh.triangles.iter().flatten().for_each(|&i| used[i as usize] = true);
+        assert_eq!(used.iter().filter(|u| !**u).count(), 252);
+        assert_eq!(mesh.positions[0], [-0.8, 0.0, -0.5]);
+    }
+
+    #[test]
+    fn paper_spot_with_uvs_and_blender_sphere() {
+        if let Some(path) = paper_asset("spot/spot.obj") {
+            let mesh = read(&path).unwrap();
+            assert_eq!((mesh.positions.len(), mesh.triangles.len()), (2930, 5856));
+        }
+        if let Some(path) = paper_asset("ball/unit_sphere.obj") {
+            let mesh = read(&path).unwrap();
+            assert_eq!((mesh.positions.len(), mesh.triangles.len()), (192, 380));
+            assert!(
+                mesh.positions.iter().all(|p| (crate::mesh::norm(*p) - 0.5).abs() < 1e-5),
+                "a sphere of radius 0.5"
+            );
+        }
+    }
 }
