@@ -27,3 +27,25 @@ impl Binding {
         todo!()
     }
 }
+
+/// The `embed` stage: carry the body's exported surface on the solved node trajectory. The
+/// input keyframes are carried by the same binding, so reports compare like with like.
+pub fn embed(solution: &crate::stage::Solution) -> crate::error::Result<crate::stage::Animation> {
+    let body = &solution.body;
+    let binding = Binding::compute(&body.mesh, &body.surface.positions);
+    let carry = |nodes: &[Point]| binding.apply(&body.mesh, nodes);
+    Ok(crate::stage::Animation {
+        scene: body.scene.clone(),
+        counts: crate::stage::Counts {
+            vertices: body.surface.positions.len(),
+            faces: body.surface.triangles.len(),
+            tet_nodes: body.mesh.positions.len(),
+            tets: body.mesh.tets.len(),
+            keyframes: body.keys.times.len(),
+        },
+        mesh: body.surface.clone(),
+        trajectory: solution.trajectory.map_linear(carry),
+        input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
+        log: solution.log.clone(),
+    })
+}

@@ -1,1 +1,258 @@
-//! TODO
+//! The `import` stage: read the scene's keyframe meshes, check they share one topology,
+//! apply procedural deformations, orient the rest shape, and resolve the per-key vertex
+//! selections into sets.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::mesh::{self, surface, MeshFile, Point, TetMesh, TriMesh};
+use crate::scene::{Rest, SceneFile, Selection};
+use crate::stage::{Keyframes, Shape, VertexSet};
+
+/// Meshes read once per path (scenes often repeat the rest mesh).
+#[derive(Default)]
+struct MeshCache(HashMap<PathBuf, MeshFile>);
+
+impl MeshCache {
+    fn get(&mut self, path: &Path) -> Result<&MeshFile> {
+        if !self.0.contains_key(path) {
+            let m = mesh::read(path)?;
+            self.0.insert(path.to_path_buf(), m);
+        }
+        Ok(&self.0[path])
+    }
+}
+
+/// Topology of a keyframe file, compared between keys. Tets are compared as vertex sets,
+/// since readers may reorder a tet's vertices to orient it.
+#[derive(PartialEq)]
+enum Topology {
+    Surface(Vec<[u32; 3]>),
+    Volume(Vec<[u32; 4]>),
+}
+
+impl Topology {
+    fn of(m: &MeshFile) -> Topology {
+        match m {
+            MeshFile::Surface(s) => Topology::Surface(s.triangles.clone()),
+            MeshFile::Volume(v) => Topology::Volume(
+                v.tets
+                    .iter()
+                    .map(|t| {
+                        let mut s = *t;
+                        s.sort_unstable();
+                        s
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    fn describe(&self) -> (&'static str, usize, &'static str) {
+        match self {
+            Topology::Surface(t) => ("surface", t.len(), "triangles"),
+            Topology::Volume(t) => ("tet mesh", t.len(), "tets"),
+        }
+    }
+}
+
+/// Check that `other` (from `other_path`) has the topology of `first` (from `first_path`).
+fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &MeshFile, &Topology)) -> Result<()> {
+    let (fp, fm, ft) = first;
+    let (op, om, ot) = other;
+    let fix = "every keyframe must be the same mesh with moved vertices: export it from the same object without remeshing";
+    let (f_kind, f_count, f_what) = ft.describe();
+    let (o_kind, o_count, o_what) = ot.describe();
+    if f_kind != o_kind {
+        return Err(Error::in_file(op, format!("is a {o_kind} but {} is a {f_kind}", fp.display()), "give every keyframe the same kind of file"));
+    }
+    if fm.positions().len() != om.positions().len() {
+        return Err(Error::in_file(
+            op,
+            format!("has {} vertices but {} has {}", om.positions().len(), fp.display(), fm.positions().len()),
+            fix,
+        ));
+    }
+    if f_count != o_count {
+        return Err(Error::in_file(op, format!("has {o_count} {o_what} but {} has {f_count} {f_what}", fp.display()), fix));
+    }
+    if ft != ot {
+        return Err(Error::in_file(op, format!("has the same counts as {} but its {o_what} connect different vertices", fp.display()), fix));
+    }
+    Ok(())
+}
+
+/// Vertices selected by `selection`, over `rest` positions.
+pub fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
+    let n = rest.len();
+    Ok(match selection {
+        Selection::All => vec![true; n],
+        Selection::None => vec![false; n],
+        Selection::File { file, invert } => {
+            let path = scene.resolve(file);
+            let mut mask = read_selection_file(&path, n)?;
+            if *invert {
+                mask.iter_mut().for_each(|m| *m = !*m);
+            }
+            mask
+        }
+        Selection::Slab { axis, min, max, invert } => rest
+            .iter()
+            .map(|p| {
+                let c = p[axis.index()];
+                let inside = min.is_none_or(|lo| c >= lo) && max.is_none_or(|hi| c <= hi);
+                inside != *invert
+            })
+            .collect(),
+        Selection::Union(items) => {
+            let mut mask = vec![false; n];
+            for item in items {
+                for (m, s) in mask.iter_mut().zip(resolve_selection(item, scene, rest)?) {
+                    *m |= s;
+                }
+            }
+            mask
+        }
+    })
+}
+
+/// A `.dmat` column of 0/1 flags (libigl ASCII: `cols rows` then values), or a text file of
+/// 0-based vertex indices, one per line (`#` starts a comment).
+fn read_selection_file(path: &Path, n: usize) -> Result<Vec<bool>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the vertex selection"))?;
+    let is_dmat = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dmat"));
+    let mut mask = vec![false; n];
+    if is_dmat {
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+        let header = lines.next().map(|(_, l)| l.split_whitespace().map(str::parse::<usize>).collect::<Vec<_>>());
+        match header.as_deref() {
+            Some([Ok(1), Ok(rows)]) if *rows == n => {}
+            Some([Ok(cols), Ok(rows)]) => {
+                return Err(Error::in_file(
+                    path,
+                    format!("is a {rows}x{cols} matrix but the mesh has {n} vertices"),
+                    format!("give one 0/1 value per vertex: a header \"1 {n}\" and {n} values"),
+                ))
+            }
+            _ => return Err(Error::in_file(path, "has no \"cols rows\" header", "write libigl's ASCII .dmat: \"1 N\", then one value per line")),
+        }
+        let values: Vec<(usize, &str)> = lines.map(|(i, l)| (i, l.trim())).collect();
+        if values.len() != n {
+            return Err(Error::in_file(path, format!("has {} values for {n} vertices", values.len()), "give one value per vertex"));
+        }
+        for (v, (line, value)) in values.iter().enumerate() {
+            let x: f64 = value.parse().map_err(|_| {
+                Error::in_file(path, format!("line {}: {value:?} is not a number", line + 1), "write 0 or 1 per vertex")
+            })?;
+            mask[v] = x != 0.0;
+        }
+    } else {
+        for (i, line) in text.lines().enumerate() {
+            let content = line.split('#').next().unwrap_or("").trim();
+            if content.is_empty() {
+                continue;
+            }
+            let index: usize = content.parse().map_err(|_| {
+                Error::in_file(path, format!("line {}: {content:?} is not a vertex index", i + 1), "write one 0-based vertex index per line")
+            })?;
+            if index >= n {
+                return Err(Error::in_file(
+                    path,
+                    format!("line {}: vertex {index} does not exist (the mesh has {n} vertices, indexed from 0)", i + 1),
+                    "use indices of the keyframe mesh this scene reads",
+                ));
+            }
+            mask[index] = true;
+        }
+    }
+    Ok(mask)
+}
+
+/// Read and check the keyframes of a scene.
+pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
+    let scene = &scene_file.scene;
+    let keys = &scene.keyframes;
+    let mut cache = MeshCache::default();
+    let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
+    let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
+    let first = cache.get(&paths[0])?.clone();
+    let first_topology = Topology::of(&first);
+    for (k, key) in keys.meshes.iter().enumerate() {
+        let m = cache.get(&paths[k])?;
+        if k > 0 {
+            check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
+        }
+        let positions = match key.twist() {
+            Some(t) => crate::procedural::twist(m.positions(), t),
+            None => m.positions().to_vec(),
+        };
+        poses.push(positions);
+    }
+    let rest_positions = match &keys.rest {
+        Rest::Key(r) => poses[*r].clone(),
+        Rest::Mesh(p) => {
+            let path = scene_file.resolve(p);
+            let m = cache.get(&path)?;
+            check_same_topology((&paths[0], &first, &first_topology), (&path, m, &Topology::of(m)))?;
+            m.positions().to_vec()
+        }
+    };
+    let n = rest_positions.len();
+    let rest = match first {
+        MeshFile::Surface(s) => {
+            let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles };
+            surface::orient_outward(&mut rest);
+            Shape::Surface(rest)
+        }
+        MeshFile::Volume(v) => {
+            let mut rest = TetMesh { positions: rest_positions, tets: v.tets };
+            rest.orient_positive();
+            Shape::Volume(rest)
+        }
+    };
+    let rest_points = match &rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
+        (0..poses.len())
+            .map(|k| {
+                let sel = list.as_ref().map_or(&default, |l| &l[k]);
+                resolve_selection(sel, scene_file, rest_points).map(|m| VertexSet::from_mask(&m))
+            })
+            .collect()
+    };
+    let fixed = masks(&keys.fixed, Selection::All)?;
+    let fixed_velocity = masks(&keys.fixed_velocity, Selection::None)?;
+    if keys.cyclic {
+        let last = poses.len() - 1;
+        let gap = poses[0].iter().zip(&poses[last]).map(|(a, b)| mesh::norm(mesh::sub(*a, *b))).fold(0.0, f64::max);
+        if gap > 1e-9 * mesh::bbox_diagonal(rest_points).max(f64::MIN_POSITIVE) {
+            return Err(Error::in_file(
+                &paths[last],
+                format!("cyclic = true, but the last keyframe differs from the first ({}) by up to {gap:.4e}", paths[0].display()),
+                "repeat the first keyframe's mesh as the last key of a loop",
+            ));
+        }
+    }
+    debug_assert!(poses.iter().all(|p| p.len() == n));
+    let display = match &scene.embed.surface {
+        Some(p) => {
+            let mut s = crate::mesh::obj::read(&scene_file.resolve(p))?;
+            surface::orient_outward(&mut s);
+            Some(s)
+        }
+        None => None,
+    };
+    Ok(Keyframes {
+        scene: scene.clone(),
+        rest,
+        times: keys.times.clone(),
+        poses,
+        fixed,
+        fixed_velocity,
+        cyclic: keys.cyclic,
+        display,
+    })
+}

@@ -1,1 +1,51 @@
-//! TODO
+//! Progress on stderr: a line per stage and a bar for long loops, shown only when stderr is a
+//! terminal and `--quiet` is not given, so pipelines and logs stay clean.
+
+use std::io::IsTerminal;
+use std::time::Duration;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+#[derive(Debug, Clone)]
+pub struct Progress {
+    visible: bool,
+}
+
+impl Progress {
+    /// Visible when stderr is a terminal and not `quiet`.
+    pub fn new(quiet: bool) -> Progress {
+        Progress { visible: !quiet && std::io::stderr().is_terminal() }
+    }
+
+    /// Never drawn (library use, tests).
+    pub fn hidden() -> Progress {
+        Progress { visible: false }
+    }
+
+    fn target(&self) -> ProgressDrawTarget {
+        if self.visible {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        }
+    }
+
+    /// A spinner naming a stage; call `finish` on it (or drop it) when the stage is done.
+    pub fn stage(&self, message: impl Into<String>) -> ProgressBar {
+        let bar = ProgressBar::with_draw_target(None, self.target());
+        bar.set_style(ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template"));
+        bar.set_message(message.into());
+        bar.enable_steady_tick(Duration::from_millis(120));
+        bar
+    }
+
+    /// A bar over `len` steps.
+    pub fn bar(&self, len: u64, message: impl Into<String>) -> ProgressBar {
+        let bar = ProgressBar::with_draw_target(Some(len), self.target());
+        bar.set_style(
+            ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed}").expect("valid template").progress_chars("=> "),
+        );
+        bar.set_message(message.into());
+        bar
+    }
+}

@@ -1,0 +1,162 @@
+//! Table 1 of the BlendSim paper on this machine: precompute (assembly + factorization) and
+//! per-iteration time (local step + residuals + global step) of the spacetime solver, per
+//! scene, beside the paper's figures (20-thread i7-14700KF). Medians of repeated runs.
+//!
+//! `cargo bench --bench solver` (or `make bench`). `-- --curves` also prints W per iteration
+//! for a sweep of the regularization time scale h.
+
+use std::path::Path;
+use std::time::Instant;
+
+use blendsim::physics::elastic::Elastic;
+use blendsim::progress::Progress;
+use blendsim::scene::{Axis, SceneFile, Twist};
+use blendsim::spacetime::global_step::GlobalStep;
+use blendsim::spacetime::solver::{self, apply_step, initial_trajectory, Settings};
+use blendsim::spacetime::unknowns::Unknowns;
+use blendsim::stage::{Body, KeyPoses, VertexSet};
+use blendsim::{import, procedural, tetgen, tetrahedralize};
+
+struct Paper {
+    verts: usize,
+    tets: usize,
+    keys: usize,
+    samples: usize,
+    precompute: f64,
+    iteration: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn scene_body(path: &str) -> Body {
+    let scene = SceneFile::load(Path::new(env!("CARGO_MANIFEST_DIR")).join(path).as_path()).expect("scene loads");
+    let keys = import::import(&scene).expect("import");
+    tetrahedralize::tetrahedralize(&keys, &Progress::hidden()).expect("tetrahedralize")
+}
+
+/// ARMADILLO-size: a closed surface (icosphere) tetrahedralized to ~2.6k nodes / ~10k tets,
+/// five keys (rest, twisted +60°, rest, twisted -60°, rest), its bottom cap held.
+fn armadillo_size() -> Body {
+    let surface = procedural::icosphere(3);
+    let opts = tetgen::TetgenOptions { quality: 1.414, max_volume: 0.0009, timeout: 120.0 };
+    let mesh = tetgen::tetrahedralize(&surface, &opts, Path::new("icosphere")).expect("tetgen");
+    let twisted = |deg: f64| procedural::twist(&mesh.positions, &Twist { axis: Axis::Y, degrees: deg, axial_scale: 1.0 });
+    let positions = vec![mesh.positions.clone(), twisted(60.0), mesh.positions.clone(), twisted(-60.0), mesh.positions.clone()];
+    let cap = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] < -0.9).collect::<Vec<_>>());
+    let mut scene = blendsim::scene::Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
+    scene.solver.samples = 10;
+    scene.material.damping = 0.1;
+    let keys = KeyPoses {
+        times: vec![0.0, 0.6, 1.2, 1.8, 2.4],
+        positions,
+        fixed: vec![cap; 5],
+        fixed_velocity: vec![VertexSet::default(); 5],
+        cyclic: false,
+    };
+    let surface = blendsim::mesh::TriMesh { positions: surface.positions, triangles: surface.triangles };
+    Body { scene, mesh, keys, surface }
+}
+
+struct Measured {
+    precompute: f64,
+    assemble: f64,
+    factor: f64,
+    iteration: f64,
+    local: f64,
+    global: f64,
+    unknowns: usize,
+    matrix_nnz: usize,
+    factor_nnz: usize,
+}
+
+fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
+    let settings = Settings::from_scene(&body.scene);
+    let mut pre = Vec::new();
+    let mut last = None;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        let elastic = Elastic::new(&body.mesh, &body.scene.material).unwrap();
+        let objective = solver::objective(&elastic, &body.keys, &settings);
+        let global = GlobalStep::new(&objective, Unknowns::new(&body.keys, elastic.node_count()), settings.regularization).unwrap();
+        pre.push(t.elapsed().as_secs_f64());
+        last = Some((elastic, global));
+    }
+    let (elastic, global) = last.unwrap();
+    let objective = solver::objective(&elastic, &body.keys, &settings);
+    let mut tr = initial_trajectory(&body.keys);
+    let (mut it, mut loc, mut glo) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..iterations {
+        let t = Instant::now();
+        let p = objective.local_step(&tr);
+        let t_local = t.elapsed().as_secs_f64();
+        let e = objective.evaluate(&tr, &p);
+        let t1 = Instant::now();
+        let d = global.step(&e.gradient);
+        glo.push(t1.elapsed().as_secs_f64());
+        apply_step(&mut tr, &objective.slots, &d, 1.0);
+        loc.push(t_local);
+        it.push(t.elapsed().as_secs_f64());
+    }
+    let s = global.stats;
+    Measured {
+        precompute: median(pre),
+        assemble: s.assemble_seconds,
+        factor: s.factor_seconds,
+        iteration: median(it),
+        local: median(loc),
+        global: median(glo),
+        unknowns: s.unknowns,
+        matrix_nnz: s.matrix_nnz,
+        factor_nnz: s.factor_nnz,
+    }
+}
+
+fn load() -> String {
+    std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
+}
+
+fn main() {
+    let curves = std::env::args().any(|a| a == "--curves");
+    let cases: Vec<(&str, Box<dyn Fn() -> Body>, Paper)> = vec![
+        ("STRETCH", Box::new(|| scene_body("fixtures/paper/stretch.toml")), Paper { verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 }),
+        ("TWIST", Box::new(|| scene_body("fixtures/paper/twist.toml")), Paper { verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 }),
+        ("DINO", Box::new(|| scene_body("fixtures/paper/dino.toml")), Paper { verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 }),
+        ("ARMADILLO-size", Box::new(armadillo_size), Paper { verts: 2598, tets: 10024, keys: 5, samples: 40, precompute: 3.073, iteration: 0.100 }),
+    ];
+    println!("machine: {} threads, load average {}", rayon::current_num_threads(), load());
+    println!();
+    println!("| scene | nodes | tets | keys | samples | unknowns/coord | nnz(A) | nnz(L) | precompute s (paper) | iteration s (paper) | local s | global s | assemble s | factor s |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for (name, make, paper) in &cases {
+        let body = make();
+        let samples = body.scene.solver.samples * (body.keys.times.len() - 1);
+        let big = body.mesh.tets.len() > 5000;
+        let m = measure(&body, if big { 3 } else { 5 }, if big { 5 } else { 9 });
+        println!(
+            "| {name} | {} ({}) | {} ({}) | {} ({}) | {samples} ({}) | {} | {:.2}M | {:.2}M | {:.3} ({:.3}) | {:.4} ({:.3}) | {:.4} | {:.4} | {:.3} | {:.3} |",
+            body.mesh.positions.len(), paper.verts, body.mesh.tets.len(), paper.tets, body.keys.times.len(), paper.keys, paper.samples,
+            m.unknowns, m.matrix_nnz as f64 / 1e6, m.factor_nnz as f64 / 1e6, m.precompute, paper.precompute, m.iteration, paper.iteration,
+            m.local, m.global, m.assemble, m.factor
+        );
+        if curves {
+            for h in [0.0, 0.05, 0.1, 0.2, 0.4] {
+                let mut b = body.clone();
+                b.scene.solver.regularization = h;
+                b.scene.solver.tolerance = 1e-4;
+                b.scene.solver.max_iterations = 60;
+                match blendsim::solve::solve(&b, &Progress::hidden()) {
+                    Ok(s) => {
+                        let w: Vec<String> = s.log.energy.iter().map(|w| format!("{w:.3e}")).collect();
+                        println!("  h={h}: {} iterations, {} halvings, {}: {}", s.log.iterations, s.log.halvings, s.log.stop_reason, w.join(" "));
+                    }
+                    Err(e) => println!("  h={h}: {e}"),
+                }
+            }
+        }
+    }
+    println!();
+    println!("load average after: {}", load());
+}

@@ -1,0 +1,21 @@
+use std::path::PathBuf;
+
+use blendsim::progress::Progress;
+use blendsim::stage::{self, Solution};
+use blendsim::{embed, Result};
+
+/// Carry the exported surface on the solved tet trajectory (barycentric embedding) and write
+/// the animation stage file. The embedding is linear, so the trajectory stays exact.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The solution stage file from `blendsim solve`.
+    solution: PathBuf,
+    /// Where to write the animation stage file (JSON).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+    let solution: Solution = stage::read(&args.solution)?;
+    stage::write(&args.output, &embed::embed(&solution)?)
+}

@@ -1,0 +1,31 @@
+use std::path::PathBuf;
+
+use blendsim::output::Staging;
+use blendsim::progress::Progress;
+use blendsim::stage::{self, Animation};
+use blendsim::{export, Result};
+
+/// Write the animation as blendshape files (and full-frame files for comparison) in the
+/// scene's formats, plus NAME.outputs.json listing them, into --out.
+///
+/// Blendshape: NAME.usda / NAME.usdc (UsdSkel BlendShapes and weights), NAME.glb (morph
+/// targets with CUBICSPLINE weights). Full-frame: NAME.full.EXT. `usdc` needs usd-core
+/// (`pip install usd-core`). Nothing is written unless every file succeeds.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The animation stage file from `blendsim embed`.
+    animation: PathBuf,
+    /// Output folder (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+pub fn run(args: Args, progress: &Progress) -> Result<()> {
+    let animation: Animation = stage::read(&args.animation)?;
+    let mut staging = Staging::new(&args.out)?;
+    let bar = progress.stage("export");
+    let outputs = export::export(&animation, &mut staging)?;
+    staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;
+    bar.finish_and_clear();
+    staging.commit()
+}

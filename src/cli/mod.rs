@@ -1,0 +1,73 @@
+//! Command-line definitions: one file per subcommand, nothing else.
+//!
+//! Exit codes: 0 success; 1 bad input or a failed stage (the message names the file, the
+//! problem and the fix); 2 usage errors (from clap).
+
+mod bake;
+mod embed;
+mod export;
+mod import;
+mod report;
+mod solve;
+mod tetrahedralize;
+
+use std::process::ExitCode;
+
+use blendsim::progress::Progress;
+use clap::{Parser, Subcommand};
+
+/// Turn keyframe meshes into compact, physically plausible blendshape animation for USD and
+/// glTF (BlendSim: spacetime projective dynamics on cubic Hermite trajectories), and report how
+/// much smaller and how faithful it is than the full-frame version.
+///
+/// The stages chain through files, so a Makefile can cache them:
+///
+///   blendsim import SCENE.toml -o keys.json
+///   blendsim tetrahedralize keys.json -o body.json
+///   blendsim solve body.json -o solution.json
+///   blendsim embed solution.json -o animation.json
+///   blendsim export animation.json --out DIR
+///   blendsim report animation.json --outputs DIR/NAME.outputs.json --out DIR
+///
+/// `blendsim bake SCENE.toml --out DIR` runs them all in one process.
+#[derive(Parser)]
+#[command(name = "blendsim", version, about, long_about, verbatim_doc_comment, propagate_version = true)]
+struct Cli {
+    /// No progress output on stderr.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    Import(import::Args),
+    Tetrahedralize(tetrahedralize::Args),
+    Solve(solve::Args),
+    Embed(embed::Args),
+    Export(export::Args),
+    Report(report::Args),
+    Bake(bake::Args),
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let progress = Progress::new(cli.quiet);
+    let result = match cli.command {
+        Command::Import(a) => import::run(a, &progress),
+        Command::Tetrahedralize(a) => tetrahedralize::run(a, &progress),
+        Command::Solve(a) => solve::run(a, &progress),
+        Command::Embed(a) => embed::run(a, &progress),
+        Command::Export(a) => export::run(a, &progress),
+        Command::Report(a) => report::run(a, &progress),
+        Command::Bake(a) => bake::run(a, &progress, cli.quiet),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,31 @@
+use std::path::PathBuf;
+
+use blendsim::output::Staging;
+use blendsim::progress::Progress;
+use blendsim::stage::{self, Animation, Outputs};
+use blendsim::{report, Result};
+
+/// Write report.json and report.md into --out: sizes of the blendshape and full-frame files
+/// side by side, fidelity against the full-frame evaluation, keyframe deviation, volume, and
+/// the solver's history (see formats/report.md).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The animation stage file from `blendsim embed`.
+    animation: PathBuf,
+    /// The NAME.outputs.json written by `blendsim export`.
+    #[arg(long)]
+    outputs: PathBuf,
+    /// Output folder for report.json and report.md.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+    let animation: Animation = stage::read(&args.animation)?;
+    let outputs: Outputs = stage::read(&args.outputs)?;
+    let r = report::report(&animation, &outputs);
+    let mut staging = Staging::new(&args.out)?;
+    staging.write("report.json", &r.to_json())?;
+    staging.write("report.md", r.to_markdown().as_bytes())?;
+    staging.commit()
+}

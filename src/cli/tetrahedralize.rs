@@ -1,0 +1,23 @@
+use std::path::PathBuf;
+
+use blendsim::progress::Progress;
+use blendsim::stage::{self, Keyframes};
+use blendsim::{tetrahedralize, Result};
+
+/// Turn keyframes into a simulation body (tet mesh and per-node keyframe poses).
+///
+/// Surface keyframes are tetrahedralized by TetGen (`apt-get install tetgen`); the interior
+/// nodes get a quasi-static pose per key. Tet-mesh keyframes pass through.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The keyframes stage file from `blendsim import`.
+    keyframes: PathBuf,
+    /// Where to write the body stage file (JSON).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn run(args: Args, progress: &Progress) -> Result<()> {
+    let keys: Keyframes = stage::read(&args.keyframes)?;
+    stage::write(&args.output, &tetrahedralize::tetrahedralize(&keys, progress)?)
+}
