@@ -1,0 +1,181 @@
+#!/usr/bin/env node
+// Check a .glb written by blendsim with the Khronos glTF validator and three.js, independently
+// of blendsim.
+//
+// usage: node gltf_check.mjs FILE.glb EXPECTED.json
+//
+// 1. gltf-validator validateBytes: zero errors AND zero warnings (a wrong animation channel
+//    path is only a warning), every issue printed otherwise.
+// 2. three.js GLTFLoader.parse (plain Node, no DOM) + AnimationMixer: for each EXPECTED time,
+//    mixer.setTime(t), then the morphed positions on the CPU from the geometry's
+//    morphAttributes and the mesh's morphTargetInfluences (glTF targets are relative), in the
+//    mesh's local space (scene units). The largest distance to the EXPECTED points divided by
+//    their bounding-box diagonal must be <= tolerance.
+// 3. The node's world matrix must map scene units to glTF's y-up meters: scale by
+//    meters_per_unit, and rotate -90 degrees about X when up_axis is "z" (when EXPECTED says).
+//
+// EXPECTED.json is described in README.md. Prints issues to stderr and a one-line JSON summary
+// to stdout; exit code 0 when everything passes, 1 otherwise.
+
+import { readFileSync } from 'node:fs';
+import { createRequire } from 'node:module';
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+
+const require = createRequire(import.meta.url);
+const validator = require('gltf-validator');
+
+const SEVERITY = ['error', 'warning', 'info', 'hint'];
+
+async function validate(bytes, summary) {
+  const report = await validator.validateBytes(bytes, { maxIssues: 0, writeTimestamp: false });
+  const i = report.issues;
+  summary.validator = {
+    version: report.validatorVersion,
+    errors: i.numErrors,
+    warnings: i.numWarnings,
+    infos: i.numInfos,
+    hints: i.numHints,
+    info_codes: [...new Set(i.messages.filter((m) => m.severity >= 2).map((m) => m.code))],
+  };
+  for (const m of i.messages.filter((m) => m.severity <= 1)) {
+    summary.issues.push(`validator ${SEVERITY[m.severity]} ${m.code} at ${m.pointer ?? m.offset}: ${m.message}`);
+  }
+}
+
+function parse(bytes) {
+  const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
+  return new Promise((resolve, reject) => new GLTFLoader().parse(buffer, '', resolve, reject));
+}
+
+/** The kind of animation the file holds, from its JSON. */
+function kindOf(json) {
+  const samplers = (json.animations ?? []).flatMap((a) => a.samplers);
+  if (samplers.length === 0) return 'static';
+  const interpolations = new Set(samplers.map((s) => s.interpolation ?? 'LINEAR'));
+  if (interpolations.size !== 1) return [...interpolations].join('+');
+  return { CUBICSPLINE: 'blendshape', LINEAR: 'full-frame' }[[...interpolations][0]] ?? [...interpolations][0];
+}
+
+/** Local positions of a morphed mesh at its current influences. */
+function morphedPositions(mesh) {
+  const g = mesh.geometry;
+  const base = g.attributes.position;
+  const morphs = g.morphAttributes.position ?? [];
+  const influences = mesh.morphTargetInfluences ?? [];
+  const out = [];
+  for (let v = 0; v < base.count; v++) {
+    const p = [base.getX(v), base.getY(v), base.getZ(v)];
+    morphs.forEach((m, j) => {
+      const w = influences[j];
+      if (w === 0) return;
+      p[0] += w * (g.morphTargetsRelative ? m.getX(v) : m.getX(v) - base.getX(v));
+      p[1] += w * (g.morphTargetsRelative ? m.getY(v) : m.getY(v) - base.getY(v));
+      p[2] += w * (g.morphTargetsRelative ? m.getZ(v) : m.getZ(v) - base.getZ(v));
+    });
+    out.push(p);
+  }
+  return out;
+}
+
+function diagonal(frames) {
+  const lo = [Infinity, Infinity, Infinity];
+  const hi = [-Infinity, -Infinity, -Infinity];
+  for (const f of frames) for (const p of f) for (let d = 0; d < 3; d++) {
+    lo[d] = Math.min(lo[d], p[d]);
+    hi[d] = Math.max(hi[d], p[d]);
+  }
+  return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+}
+
+function maxDistance(a, b) {
+  let worst = 0;
+  for (let i = 0; i < a.length; i++) worst = Math.max(worst, Math.hypot(a[i][0] - b[i][0], a[i][1] - b[i][1], a[i][2] - b[i][2]));
+  return worst;
+}
+
+/** The world matrix a scene with this up axis and unit must get in glTF. */
+function expectedWorld(expected) {
+  const m = new THREE.Matrix4().makeScale(...Array(3).fill(expected.meters_per_unit ?? 1));
+  if ((expected.up_axis ?? 'y') === 'z') m.multiply(new THREE.Matrix4().makeRotationX(-Math.PI / 2));
+  return m;
+}
+
+async function main() {
+  const [file, expectedPath] = process.argv.slice(2);
+  if (!file || !expectedPath) {
+    console.error('usage: node gltf_check.mjs FILE.glb EXPECTED.json');
+    return 2;
+  }
+  const bytes = new Uint8Array(readFileSync(file));
+  const expected = JSON.parse(readFileSync(expectedPath, 'utf8'));
+  const tolerance = expected.tolerance ?? 1e-5;
+  const summary = { file, issues: [] };
+  await validate(bytes, summary);
+
+  const gltf = await parse(bytes);
+  const meshes = [];
+  gltf.scene.traverse((o) => o.isMesh && meshes.push(o));
+  if (meshes.length !== 1) {
+    summary.issues.push(`expected one mesh, three.js found ${meshes.length}`);
+    return finish(summary);
+  }
+  const mesh = meshes[0];
+  summary.kind = kindOf(gltf.parser.json);
+  if (expected.kind && summary.kind !== expected.kind && !(summary.kind === 'static' && expected.kind === 'blendshape')) {
+    summary.issues.push(`animates as ${summary.kind}, expected ${expected.kind}`);
+  }
+  summary.vertices = mesh.geometry.attributes.position.count;
+  summary.targets = (mesh.geometry.morphAttributes.position ?? []).length;
+
+  gltf.scene.updateMatrixWorld(true);
+  if (expected.up_axis || expected.meters_per_unit) {
+    const want = expectedWorld(expected).elements;
+    const got = mesh.matrixWorld.elements;
+    const off = Math.max(...got.map((x, i) => Math.abs(x - want[i])));
+    if (off > 1e-6) summary.issues.push(`node world matrix ${got.map((x) => +x.toFixed(6))} does not map scene units to y-up meters (expected ${want.map((x) => +x.toFixed(6))})`);
+  }
+
+  const mixer = new THREE.AnimationMixer(gltf.scene);
+  const actions = gltf.animations.map((clip) => {
+    const action = mixer.clipAction(clip);
+    // Hold the last pose at the end instead of wrapping to the start.
+    action.setLoop(THREE.LoopOnce);
+    action.clampWhenFinished = true;
+    return action.play();
+  });
+  const scale = Math.max(diagonal(expected.points), 1e-30);
+  let worst = 0;
+  let worstTime = null;
+  expected.times.forEach((t, i) => {
+    actions.forEach((a) => a.reset());
+    mixer.setTime(t);
+    const got = morphedPositions(mesh);
+    const want = expected.points[i];
+    if (got.length !== want.length) {
+      summary.issues.push(`time ${t}: ${got.length} points, expected ${want.length}`);
+      return;
+    }
+    const error = maxDistance(got, want) / scale;
+    if (error > worst) [worst, worstTime] = [error, t];
+  });
+  Object.assign(summary, { times: expected.times.length, max_error: worst, worst_time: worstTime });
+  if (worst > tolerance) summary.issues.push(`max error ${worst.toPrecision(3)} (relative to the bbox diagonal) at ${worstTime} s exceeds ${tolerance}`);
+  return finish(summary);
+}
+
+function finish(summary) {
+  summary.ok = summary.issues.length === 0;
+  for (const issue of summary.issues) console.error(`${summary.file}: ${issue}`);
+  console.log(JSON.stringify(summary));
+  return summary.ok ? 0 : 1;
+}
+
+main().then(
+  (code) => process.exit(code),
+  (e) => {
+    console.error(e?.stack ?? String(e));
+    console.log(JSON.stringify({ ok: false, issues: [String(e)] }));
+    process.exit(1);
+  },
+);

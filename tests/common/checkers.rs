@@ -1,0 +1,151 @@
+//! Run the independent checkers in `tests/checkers/` from Rust tests.
+//!
+//! Each helper writes the expected points to a JSON file (format in
+//! `tests/checkers/README.md`), runs the checker, and panics with the checker's whole output
+//! when it fails. Missing tools are a failure naming `make test-deps`, never a skip: a test
+//! that silently passes without its checker proves nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use blendsim::mesh::Point;
+use serde::Serialize;
+use serde_json::Value;
+
+/// What a checker compares a file with. `times` (seconds) drive glTF animations, `timecodes`
+/// (frames) drive USD stages; both have one entry per pose in `points`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Expected {
+    pub times: Vec<f64>,
+    pub timecodes: Vec<f64>,
+    pub points: Vec<Vec<Point>>,
+    /// Largest allowed point distance, relative to the expected points' bounding-box diagonal.
+    pub tolerance: f64,
+    /// "blendshape" or "full-frame": how the file must animate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+    /// Frames per second, checked against the USD stage metadata.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// "y" or "z": the scene's up axis (USD `upAxis`; glTF node rotation).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub up_axis: Option<String>,
+    /// USD `metersPerUnit`; glTF node scale.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub meters_per_unit: Option<f64>,
+}
+
+impl Expected {
+    /// Points at the given times, with frame numbers `t * fps` and the default tolerance 1e-5.
+    pub fn at(times: &[f64], fps: f64, points: impl Fn(f64) -> Vec<Point>) -> Expected {
+        Expected {
+            times: times.to_vec(),
+            timecodes: times.iter().map(|t| (t * fps * 1e9).round() / 1e9).collect(),
+            points: times.iter().map(|&t| points(t)).collect(),
+            tolerance: 1e-5,
+            kind: None,
+            fps: None,
+            up_axis: None,
+            meters_per_unit: None,
+        }
+    }
+}
+
+fn checkers_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers")
+}
+
+fn python() -> String {
+    std::env::var("BLENDSIM_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+fn require_pxr() {
+    let python = python();
+    match Command::new(&python).args(["-c", "import pxr.UsdValidation, pxr.UsdSkel"]).output() {
+        Ok(o) if o.status.success() => {}
+        Ok(o) => panic!(
+            "usd-core is not importable by {python} ({}): run `make test-deps`",
+            String::from_utf8_lossy(&o.stderr).trim().lines().last().unwrap_or("")
+        ),
+        Err(e) => panic!("cannot run {python} ({e}): run `make test-deps`"),
+    }
+}
+
+fn require_node_modules(packages: &[&str]) {
+    if let Err(e) = Command::new("node").arg("--version").output() {
+        panic!("cannot run node ({e}): install Node.js 20, then run `make test-deps`");
+    }
+    for p in packages {
+        let manifest = checkers_dir().join("node_modules").join(p).join("package.json");
+        assert!(manifest.is_file(), "{} is missing: run `make test-deps` (npm ci in tests/checkers)", manifest.display());
+    }
+}
+
+/// The expected points as a JSON file beside `file`.
+fn write_expected(file: &Path, expected: &Expected) -> PathBuf {
+    let path = file.with_extension(format!("{}.expected.json", file.extension().unwrap().to_string_lossy()));
+    std::fs::write(&path, serde_json::to_vec(expected).unwrap()).unwrap();
+    path
+}
+
+/// The checker's one-line JSON summary, or everything it printed when it failed.
+fn summary(what: &str, output: Output) -> Result<Value, String> {
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        return Err(format!("{what} failed ({}):\n--- stdout\n{stdout}--- stderr\n{stderr}", output.status));
+    }
+    let last = stdout.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    serde_json::from_str(last).map_err(|e| format!("{what}: summary is not JSON ({e}):\n{stdout}\n{stderr}"))
+}
+
+/// `usd_check.py`: usd-core validation with every registered validator, then UsdSkel (or
+/// `points`) evaluation at `expected.timecodes`. With `usdc`, also converts to usdc and
+/// checks that the reopened file evaluates the same.
+pub fn check_usd(file: &Path, expected: &Expected, usdc: bool) -> Value {
+    try_check_usd(file, expected, usdc).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// [`check_usd`] returning the checker's failure instead of panicking (missing tools still
+/// panic).
+pub fn try_check_usd(file: &Path, expected: &Expected, usdc: bool) -> Result<Value, String> {
+    require_pxr();
+    let json = write_expected(file, expected);
+    let mut cmd = Command::new(python());
+    cmd.arg(checkers_dir().join("usd_check.py")).arg(file).arg(&json);
+    if usdc {
+        cmd.arg("--usdc");
+    }
+    let output = cmd.output().expect("run usd_check.py");
+    summary(&format!("usd_check.py {}", file.display()), output)
+}
+
+/// `gltf_check.mjs`: the Khronos validator (no errors, no warnings), then three.js's
+/// GLTFLoader and AnimationMixer evaluated at `expected.times`.
+pub fn check_glb(file: &Path, expected: &Expected) -> Value {
+    try_check_glb(file, expected).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// [`check_glb`] returning the checker's failure instead of panicking (missing tools still
+/// panic).
+pub fn try_check_glb(file: &Path, expected: &Expected) -> Result<Value, String> {
+    require_node_modules(&["gltf-validator", "three"]);
+    let json = write_expected(file, expected);
+    let output = Command::new("node").arg(checkers_dir().join("gltf_check.mjs")).arg(file).arg(&json).output().expect("run gltf_check.mjs");
+    summary(&format!("gltf_check.mjs {}", file.display()), output)
+}
+
+/// `render_check.mjs`: three.js in headless Chromium renders the file at two animation times
+/// (`times`, or the start and middle of the animation), writes both PNGs to `out_dir`, and
+/// checks that the mesh is visible and moves.
+pub fn render_glb(file: &Path, out_dir: &Path, times: Option<[f64; 2]>) -> Value {
+    require_node_modules(&["three", "playwright-core"]);
+    assert!(Path::new("/usr/bin/chromium").is_file(), "/usr/bin/chromium is missing: run `make test-deps` (apt-get install chromium)");
+    let mut cmd = Command::new("node");
+    cmd.arg(checkers_dir().join("render_check.mjs")).arg(file).arg(out_dir);
+    if let Some([a, b]) = times {
+        cmd.arg(format!("--times={a},{b}"));
+    }
+    let output = cmd.output().expect("run render_check.mjs");
+    summary(&format!("render_check.mjs {}", file.display()), output).unwrap_or_else(|e| panic!("{e}"))
+}
