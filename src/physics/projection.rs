@@ -30,21 +30,25 @@ pub fn volume_preserving(sigma: [f64; 3]) -> [f64; 3] {
     let smallest = sigma[2];
     // Domain of the + branch: σ_i² + 4λ >= 0 for all i; for an inverted element λ > 0.
     let lambda_min = if smallest > 0.0 { -0.25 * smallest * smallest } else { 0.0 };
-    let log_product = |s: [f64; 3]| s.iter().map(|v| v.ln()).sum::<f64>();
+    let product = |s: [f64; 3]| s[0] * s[1] * s[2];
 
-    if smallest > 0.0 && log_product(plus(lambda_min)) > 0.0 {
+    if smallest > 0.0 && product(plus(lambda_min)) > 1.0 {
         return collapse_shortest_axis(sigma);
     }
-    // φ(λ) = Σ ln σ'_i(λ) is increasing and concave on (λ_min, ∞); bracket its root.
+    // φ(λ) = Π σ'_i(λ) - 1 increases on (λ_min, ∞): bracket its root and run Newton from the
+    // linearization σ'_i ≈ σ_i + λ/σ_i, falling back to bisection outside the bracket.
     let mut lo = lambda_min;
     let mut hi = sigma.iter().map(|s| 1.0 - s).fold(0.0f64, f64::max) + 1e-3;
-    while log_product(plus(hi)) < 0.0 {
+    while product(plus(hi)) < 1.0 {
         hi = 2.0 * hi + 1.0;
     }
-    let mut l = hi;
-    for _ in 0..200 {
+    let p0 = product(sigma);
+    let linear = (1.0 / p0 - 1.0) / sigma.iter().map(|s| 1.0 / (s * s)).sum::<f64>();
+    let mut l = if smallest > 0.0 && linear > lo && linear < hi { linear } else { 0.5 * (lo + hi) };
+    for _ in 0..100 {
         let s = plus(l);
-        let phi = log_product(s);
+        let p = product(s);
+        let phi = p - 1.0;
         if phi.abs() < 1e-15 {
             return s;
         }
@@ -53,8 +57,8 @@ pub fn volume_preserving(sigma: [f64; 3]) -> [f64; 3] {
         } else {
             hi = l;
         }
-        // φ' = Σ σ'_i' / σ'_i with σ'_i' = 1 / (2σ'_i - σ_i).
-        let dphi: f64 = (0..3).map(|i| 1.0 / ((2.0 * s[i] - sigma[i]) * s[i])).sum();
+        // φ' = Π σ'_i · Σ σ'_i' / σ'_i with σ'_i' = 1 / (2σ'_i - σ_i).
+        let dphi = p * (0..3).map(|i| 1.0 / ((2.0 * s[i] - sigma[i]) * s[i])).sum::<f64>();
         let newton = l - phi / dphi;
         l = if newton > lo && newton < hi && dphi.is_finite() { newton } else { 0.5 * (lo + hi) };
         if hi - lo <= 1e-16 * (1.0 + hi.abs()) {
@@ -206,5 +210,33 @@ mod tests {
             assert!(distance(&mul_transpose(&r, &r), &IDENTITY) < 1e-12 && (det(&r) - 1.0).abs() < 1e-12);
             let _ = mul(&r, &d);
         }
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    #[test]
+    #[ignore]
+    fn time_projection_parts() {
+        use crate::physics::svd3::{svd3, tests::Rng};
+        let mut rng = Rng(1);
+        let fs: Vec<_> = (0..200_000).map(|_| {
+            let m = rng.mat();
+            let mut f = crate::physics::mat3::IDENTITY;
+            for i in 0..3 { for j in 0..3 { f[i][j] += 0.2 * m[i][j]; } }
+            f
+        }).collect();
+        let t = std::time::Instant::now();
+        let mut acc = 0.0;
+        for f in &fs { acc += svd3(f).sigma[0]; }
+        let svd = t.elapsed().as_secs_f64() / fs.len() as f64;
+        let sig: Vec<_> = fs.iter().map(|f| svd3(f).sigma).collect();
+        let t = std::time::Instant::now();
+        for s in &sig { acc += super::volume_preserving(*s)[0]; }
+        let vol = t.elapsed().as_secs_f64() / fs.len() as f64;
+        let t = std::time::Instant::now();
+        for f in &fs { acc += super::project(f, 0.5)[0][0]; }
+        let proj = t.elapsed().as_secs_f64() / fs.len() as f64;
+        eprintln!("svd {:.0} ns, volume {:.0} ns, project {:.0} ns ({acc})", svd * 1e9, vol * 1e9, proj * 1e9);
     }
 }

@@ -57,45 +57,46 @@ fn any_orthogonal(a: [f64; 3]) -> [f64; 3] {
 }
 
 /// Eigen-decomposition of a symmetric matrix by cyclic Jacobi rotations: returns the
-/// eigenvalues and the eigenvectors as columns of a rotation matrix.
-fn symmetric_eigen(mut s: Mat3) -> ([f64; 3], Mat3) {
+/// eigenvalues and the eigenvectors as columns of a rotation matrix. Only the six distinct
+/// entries are updated; sweeps stop once the off-diagonal part is negligible relative to the
+/// diagonal (typically 2 to 4 sweeps).
+fn symmetric_eigen(s: Mat3) -> ([f64; 3], Mat3) {
     let mut v = super::mat3::IDENTITY;
-    let scale = s[0][0].abs() + s[1][1].abs() + s[2][2].abs();
-    for _sweep in 0..16 {
-        let off = s[0][1] * s[0][1] + s[0][2] * s[0][2] + s[1][2] * s[1][2];
-        if off <= (1e-17 * scale) * (1e-17 * scale) || off == 0.0 {
+    // d: diagonal; o: off-diagonal entries (0,1), (0,2), (1,2).
+    let mut d = [s[0][0], s[1][1], s[2][2]];
+    let mut o = [s[0][1], s[0][2], s[1][2]];
+    for _sweep in 0..12 {
+        let off = o[0] * o[0] + o[1] * o[1] + o[2] * o[2];
+        let scale = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        if off <= 1e-30 * scale || off == 0.0 {
             break;
         }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            let apq = s[p][q];
+        // Planes (p, q) with their off-diagonal slot, and the slots (r, p) and (r, q) of the
+        // third index r.
+        for (p, q, pq, rp, rq) in [(0, 1, 0, 1, 2), (0, 2, 1, 0, 2), (1, 2, 2, 0, 1)] {
+            let apq = o[pq];
             if apq == 0.0 {
                 continue;
             }
-            // Rotation that zeroes s[p][q] (Golub & Van Loan, sym.schur2).
-            let theta = (s[q][q] - s[p][p]) / (2.0 * apq);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
+            // Rotation that zeroes (p, q) (Golub & Van Loan, sym.schur2).
+            let theta = (d[q] - d[p]) / (2.0 * apq);
+            let t = if theta == 0.0 { 1.0 } else { theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt()) };
             let c = 1.0 / (t * t + 1.0).sqrt();
             let sn = t * c;
-            // s <- Jᵀ s J with J the rotation in the (p, q) plane.
-            for k in 0..3 {
-                let (skp, skq) = (s[k][p], s[k][q]);
-                s[k][p] = c * skp - sn * skq;
-                s[k][q] = sn * skp + c * skq;
-            }
-            for k in 0..3 {
-                let (spk, sqk) = (s[p][k], s[q][k]);
-                s[p][k] = c * spk - sn * sqk;
-                s[q][k] = sn * spk + c * sqk;
-            }
-            for k in 0..3 {
-                let (vkp, vkq) = (v[k][p], v[k][q]);
-                v[k][p] = c * vkp - sn * vkq;
-                v[k][q] = sn * vkp + c * vkq;
+            d[p] -= t * apq;
+            d[q] += t * apq;
+            o[pq] = 0.0;
+            let (arp, arq) = (o[rp], o[rq]);
+            o[rp] = c * arp - sn * arq;
+            o[rq] = sn * arp + c * arq;
+            for row in v.iter_mut() {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - sn * vq;
+                row[q] = sn * vp + c * vq;
             }
         }
     }
-    ([s[0][0], s[1][1], s[2][2]], v)
+    (d, v)
 }
 
 /// Signed SVD of `f` (see the module documentation).
