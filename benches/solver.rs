@@ -90,7 +90,7 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
     let (mut it, mut loc, mut glo) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..iterations {
         let t = Instant::now();
-        let p = objective.local_step(&tr);
+        let p = objective.local_step(&tr, false);
         let t_local = t.elapsed().as_secs_f64();
         let e = objective.evaluate(&tr, &p);
         let t1 = Instant::now();

@@ -45,19 +45,22 @@ pub struct Staging {
 }
 
 impl Staging {
-    /// Start staging files for `target` (which need not exist yet). The staging folder is a
-    /// hidden sibling of `target`, so the final renames stay on one file system.
+    /// Start staging files for `target`, which need not exist yet (nor its parents: they are
+    /// created at commit). The staging folder is hidden in the nearest existing ancestor, so
+    /// the final renames stay on one file system and a failed run creates nothing.
     pub fn new(target: &Path) -> Result<Staging> {
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        if !parent.is_dir() {
-            return Err(Error::in_file(&parent, "folder does not exist", "create it, or choose an --out folder inside an existing one"));
+        if target.exists() && !target.is_dir() {
+            return Err(Error::in_file(target, "exists and is not a folder", "choose a folder for --out"));
         }
-        let stem = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-        let dir = parent.join(format!(".{stem}.staging-{}", unique_suffix()));
-        std::fs::create_dir(&dir).map_err(|e| Error::io(&dir, &e, "create a staging folder"))?;
+        let mut anchor = if target.as_os_str().is_empty() { PathBuf::from(".") } else { target.to_path_buf() };
+        while !anchor.is_dir() {
+            anchor = match anchor.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+        }
+        let dir = anchor.join(format!(".blendsim-staging-{}", unique_suffix()));
+        std::fs::create_dir(&dir).map_err(|e| Error::io(&anchor, &e, "create a staging folder for the outputs"))?;
         Ok(Staging { target: target.to_path_buf(), dir, files: Vec::new(), committed: false })
     }
 
@@ -131,6 +134,23 @@ mod tests {
         write_atomic(&f, b"two").unwrap();
         assert_eq!(std::fs::read(&f).unwrap(), b"two");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn missing_parents_are_created_only_on_commit() {
+        let d = scratch("parents");
+        let target = d.join("a/b/out");
+        {
+            let mut s = Staging::new(&target).unwrap();
+            s.write("x.glb", b"glTF").unwrap();
+        }
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0, "a failed run creates nothing");
+        let mut s = Staging::new(&target).unwrap();
+        s.write("x.glb", b"glTF").unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read(target.join("x.glb")).unwrap(), b"glTF");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no staging folder left");
         std::fs::remove_dir_all(&d).unwrap();
     }
 

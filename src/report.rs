@@ -22,11 +22,16 @@ pub struct Deviation {
     pub samples: usize,
 }
 
-/// Enclosed volume over the frames, as a ratio to the rest volume.
+/// Enclosed volume over the frames of one animation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VolumeRange {
+    /// Smallest and largest volume, as ratios to the rest volume.
     pub min: f64,
     pub max: f64,
+    /// In-between volume loss: the largest `1 - V(t) / V̄(t)` over frames, where `V̄` blends
+    /// the input keyframes' volumes linearly in time. Zero when no in-between loses volume
+    /// relative to the keys it joins (a key that is itself compressed does not count).
+    pub in_between_loss: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -98,9 +103,17 @@ fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal: f6
     }
 }
 
-fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64) -> VolumeRange {
-    let ratios: Vec<f64> = frames.iter().map(|&(_, t)| surface::enclosed_volume(&tr.evaluate(t), triangles) / rest).collect();
-    VolumeRange { min: ratios.iter().copied().fold(f64::INFINITY, f64::min), max: ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max) }
+fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, key_volumes: &[f64]) -> VolumeRange {
+    let volumes: Vec<(f64, f64)> = frames.iter().map(|&(_, t)| (t, surface::enclosed_volume(&tr.evaluate(t), triangles))).collect();
+    let blend = |t: f64| {
+        let (i, theta) = tr.locate(t);
+        (1.0 - theta) * key_volumes[i] + theta * key_volumes[i + 1]
+    };
+    VolumeRange {
+        min: volumes.iter().map(|v| v.1 / rest).fold(f64::INFINITY, f64::min),
+        max: volumes.iter().map(|v| v.1 / rest).fold(f64::NEG_INFINITY, f64::max),
+        in_between_loss: volumes.iter().map(|&(t, v)| 1.0 - v / blend(t)).fold(0.0, f64::max),
+    }
 }
 
 /// The report of an animation and the files exported from it.
@@ -120,10 +133,11 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
     let volume = (closed && rest_volume > 0.0).then(|| {
         let hermite = Trajectory::with_zero_velocities(tr.times.clone(), animation.input_keys.clone());
+        let key_volumes: Vec<f64> = animation.input_keys.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
         Volume {
             rest: rest_volume,
-            animation: volume_range(tr, &frames, triangles, rest_volume),
-            hermite: volume_range(&hermite, &frames, triangles, rest_volume),
+            animation: volume_range(tr, &frames, triangles, rest_volume, &key_volumes),
+            hermite: volume_range(&hermite, &frames, triangles, rest_volume, &key_volumes),
         }
     });
     let mut ratios = BTreeMap::new();
@@ -217,11 +231,13 @@ impl Report {
             push(
                 &mut s,
                 format!(
-                    "| volume | {:.1}% to {:.1}% of rest (hermite baseline: {:.1}% to {:.1}%) |",
+                    "| volume | {:.1}% to {:.1}% of rest, in-between loss {:.1}% (hermite baseline: {:.1}% to {:.1}%, loss {:.1}%) |",
                     100.0 * v.animation.min,
                     100.0 * v.animation.max,
+                    100.0 * v.animation.in_between_loss,
                     100.0 * v.hermite.min,
-                    100.0 * v.hermite.max
+                    100.0 * v.hermite.max,
+                    100.0 * v.hermite.in_between_loss
                 ),
             );
         }

@@ -22,7 +22,7 @@ pub fn solve(body: &Body, progress: &Progress) -> Result<Solution> {
             let start = Instant::now();
             let trajectory = initial_trajectory(&body.keys);
             let objective = solver::objective(&elastic, &body.keys, &settings);
-            let w = objective.evaluate(&trajectory, &objective.local_step(&trajectory)).value;
+            let w = objective.evaluate(&trajectory, &objective.local_step(&trajectory, false)).value;
             let log = SolverLog {
                 method: Method::Hermite,
                 iterations: 0,

@@ -31,11 +31,12 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     if let Some(m) = args.method {
         scene.scene.solver.method = m.into();
     }
+    // Check the output location before the work, not after.
+    let mut staging = Staging::new(&args.out)?;
     let keys = import::import(&scene)?;
     let body = tetrahedralize::tetrahedralize(&keys, progress)?;
     let solution = solve::solve(&body, progress)?;
     let animation = embed::embed(&solution)?;
-    let mut staging = Staging::new(&args.out)?;
     let outputs = export::export(&animation, &mut staging)?;
     let r = report::report(&animation, &outputs);
     staging.write("report.json", &r.to_json())?;

@@ -1,4 +1,4 @@
-//! Barycentric binding of surface points to a tet mesh (helper-owned).
+//! Barycentric binding of surface points to a tet mesh.
 //!
 //! Contract: each point gets a tet and four barycentric weights summing to 1. Points inside
 //! the mesh use the tet containing them; points outside use the closest tet and the

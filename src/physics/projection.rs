@@ -106,6 +106,87 @@ pub fn project(f: &Mat3, strain_share: f64) -> Mat3 {
     scaled_product(&d.u, blend, &d.v)
 }
 
+/// The derivative of [`project`] at one `F`, for products `dP = DP(F)[dF]`.
+///
+/// `P(F) = U diag(p(σ)) Vᵀ` is an isotropic function of `F`, so in the singular frame
+/// (`dF̃ = Uᵀ dF V`) its derivative is
+///
+/// ```text
+/// dP̃_ii = Σ_j ∂p_i/∂σ_j dF̃_jj
+/// dP̃_ij = ½ (dF̃_ij + dF̃_ji) (p_i - p_j)/(σ_i - σ_j) + ½ (dF̃_ij - dF̃_ji) (p_i + p_j)/(σ_i + σ_j)
+/// ```
+///
+/// With `p = r + (1 - r) σ'` and the volume projection's stationarity `σ'_i(σ'_i - σ_i) = λ`,
+/// `(σ'_i - σ'_j)/(σ_i - σ_j) = σ'_j / (σ'_i + σ'_j - σ_i)` exactly, so the symmetric factor has
+/// no cancellation when singular values coincide (the rest pose); `∂σ'/∂σ` follows from
+/// differentiating the same conditions.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ProjectionJacobian {
+    u: Mat3,
+    v: Mat3,
+    /// `∂p_i/∂σ_j`.
+    diag: Mat3,
+    /// Symmetric and antisymmetric factors for the pairs (0,1), (0,2), (1,2).
+    sym: [f64; 3],
+    anti: [f64; 3],
+}
+
+const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+
+impl ProjectionJacobian {
+    /// `dP` for a change `df` of the deformation gradient.
+    pub fn apply(&self, df: &Mat3) -> Mat3 {
+        use super::mat3::{mul, transpose};
+        let t = mul(&mul(&transpose(&self.u), df), &self.v);
+        let mut dp = [[0.0; 3]; 3];
+        for i in 0..3 {
+            dp[i][i] = self.diag[i][0] * t[0][0] + self.diag[i][1] * t[1][1] + self.diag[i][2] * t[2][2];
+        }
+        for (k, &(i, j)) in PAIRS.iter().enumerate() {
+            let (sym, anti) = (0.5 * (t[i][j] + t[j][i]), 0.5 * (t[i][j] - t[j][i]));
+            dp[i][j] = self.sym[k] * sym + self.anti[k] * anti;
+            dp[j][i] = self.sym[k] * sym - self.anti[k] * anti;
+        }
+        mul(&mul(&self.u, &dp), &transpose(&self.v))
+    }
+}
+
+/// [`project`] and its derivative at `f`.
+pub fn project_with_jacobian(f: &Mat3, strain_share: f64) -> (Mat3, ProjectionJacobian) {
+    let d = svd3(f);
+    let r = strain_share;
+    let sigma = d.sigma;
+    let mut diag = [[0.0; 3]; 3];
+    let mut sym = [0.0; 3];
+    let p = if r >= 1.0 {
+        [1.0; 3]
+    } else {
+        let s = volume_preserving(sigma);
+        // ∂σ'_i/∂σ_j = (σ'_i δ_ij - (1/a_j) / Σ_k 1/(a_k σ'_k)) / a_i, a_i = 2σ'_i - σ_i.
+        let a = [0, 1, 2].map(|i| 2.0 * s[i] - sigma[i]);
+        let c = 1.0 / (0..3).map(|k| 1.0 / (a[k] * s[k])).sum::<f64>();
+        for i in 0..3 {
+            for j in 0..3 {
+                let ds = ((if i == j { s[i] } else { 0.0 }) - c / a[j]) / a[i];
+                diag[i][j] = (1.0 - r) * ds;
+            }
+        }
+        for (k, &(i, j)) in PAIRS.iter().enumerate() {
+            sym[k] = (1.0 - r) * s[j] / (s[i] + s[j] - sigma[i]);
+        }
+        s.map(|v| r + (1.0 - r) * v)
+    };
+    let mut anti = [0.0; 3];
+    for (k, &(i, j)) in PAIRS.iter().enumerate() {
+        let den = sigma[i] + sigma[j];
+        // σ_i + σ_j = 0 only for an inverted element with |σ3| = σ2: the rotation is not
+        // differentiable there; a bounded factor keeps the product finite.
+        let den = if den.abs() < 1e-12 { 1e-12f64.copysign(den) } else { den };
+        anti[k] = (p[i] + p[j]) / den;
+    }
+    (scaled_product(&d.u, p, &d.v), ProjectionJacobian { u: d.u, v: d.v, diag, sym, anti })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,6 +281,48 @@ mod tests {
     }
 
     #[test]
+    fn jacobian_matches_finite_differences() {
+        let mut rng = Rng(17);
+        let mut worst: f64 = 0.0;
+        for case in 0..400 {
+            let m = rng.mat();
+            let mut f = IDENTITY;
+            for i in 0..3 {
+                for j in 0..3 {
+                    f[i][j] += 0.4 * m[i][j];
+                }
+            }
+            if case % 7 == 0 {
+                f = IDENTITY; // coincident singular values
+            }
+            let df = rng.mat();
+            for share in [0.0, 0.5, 1.0] {
+                let (p, jac) = project_with_jacobian(&f, share);
+                assert!(distance(&p, &project(&f, share)) < 1e-14);
+                let h = 1e-6;
+                let step = |s: f64| -> Mat3 {
+                    let mut g = f;
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            g[i][j] += s * df[i][j];
+                        }
+                    }
+                    g
+                };
+                let (pp, pm) = (project(&step(h), share), project(&step(-h), share));
+                let analytic = jac.apply(&df);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let fd = (pp[i][j] - pm[i][j]) / (2.0 * h);
+                        worst = worst.max((fd - analytic[i][j]).abs());
+                    }
+                }
+            }
+        }
+        assert!(worst < 1e-7, "largest difference {worst:e}");
+    }
+
+    #[test]
     fn volume_target_has_unit_determinant_and_strain_target_is_a_rotation() {
         let mut rng = Rng(3);
         for _ in 0..500 {
@@ -210,33 +333,5 @@ mod tests {
             assert!(distance(&mul_transpose(&r, &r), &IDENTITY) < 1e-12 && (det(&r) - 1.0).abs() < 1e-12);
             let _ = mul(&r, &d);
         }
-    }
-}
-
-#[cfg(test)]
-mod timing {
-    #[test]
-    #[ignore]
-    fn time_projection_parts() {
-        use crate::physics::svd3::{svd3, tests::Rng};
-        let mut rng = Rng(1);
-        let fs: Vec<_> = (0..200_000).map(|_| {
-            let m = rng.mat();
-            let mut f = crate::physics::mat3::IDENTITY;
-            for i in 0..3 { for j in 0..3 { f[i][j] += 0.2 * m[i][j]; } }
-            f
-        }).collect();
-        let t = std::time::Instant::now();
-        let mut acc = 0.0;
-        for f in &fs { acc += svd3(f).sigma[0]; }
-        let svd = t.elapsed().as_secs_f64() / fs.len() as f64;
-        let sig: Vec<_> = fs.iter().map(|f| svd3(f).sigma).collect();
-        let t = std::time::Instant::now();
-        for s in &sig { acc += super::volume_preserving(*s)[0]; }
-        let vol = t.elapsed().as_secs_f64() / fs.len() as f64;
-        let t = std::time::Instant::now();
-        for f in &fs { acc += super::project(f, 0.5)[0][0]; }
-        let proj = t.elapsed().as_secs_f64() / fs.len() as f64;
-        eprintln!("svd {:.0} ns, volume {:.0} ns, project {:.0} ns ({acc})", svd * 1e9, vol * 1e9, proj * 1e9);
     }
 }

@@ -176,30 +176,49 @@ impl GlobalStep {
         &self.unknowns
     }
 
+    /// The free entries of a per-slot array, in unknown order.
+    pub fn gather(&self, per_slot: &[Vec<Point>]) -> Vec<Point> {
+        let u = &self.unknowns;
+        let mut out = vec![[0.0; 3]; u.count()];
+        for (s, values) in per_slot.iter().enumerate() {
+            for (a, v) in values.iter().enumerate() {
+                if let Some(i) = u.get(a, s) {
+                    out[i] = *v;
+                }
+            }
+        }
+        out
+    }
+
+    /// A per-slot array from free entries (zero at fixed entries).
+    pub fn scatter(&self, free: &[Point]) -> Vec<Vec<Point>> {
+        let u = &self.unknowns;
+        let mut out = vec![vec![[0.0; 3]; u.nodes]; u.slots.count()];
+        for (s, values) in out.iter_mut().enumerate() {
+            for (a, v) in values.iter_mut().enumerate() {
+                if let Some(i) = u.get(a, s) {
+                    *v = free[i];
+                }
+            }
+        }
+        out
+    }
+
+    /// `x <- (H + P)⁻¹ x` on free entries, the three coordinates as three right-hand sides.
+    pub fn apply_inverse(&self, x: &mut [Point]) {
+        let Some(chol) = &self.cholesky else { return };
+        let mut rhs = Mat::<f64>::from_fn(x.len(), 3, |i, d| x[i][d]);
+        chol.solve_in_place(rhs.as_mut());
+        for (i, v) in x.iter_mut().enumerate() {
+            *v = [rhs[(i, 0)], rhs[(i, 1)], rhs[(i, 2)]];
+        }
+    }
+
     /// The step `Δ = -(H + P)⁻¹ ∇W` per slot (zero at fixed entries).
     pub fn step(&self, gradient: &[Vec<Point>]) -> Vec<Vec<Point>> {
-        let u = &self.unknowns;
-        let (nodes, s_count) = (u.nodes, u.slots.count());
-        let mut delta = vec![vec![[0.0; 3]; nodes]; s_count];
-        let Some(chol) = &self.cholesky else { return delta };
-        let mut rhs = Mat::<f64>::zeros(u.count(), 3);
-        for s in 0..s_count {
-            for a in 0..nodes {
-                if let Some(i) = u.get(a, s) {
-                    for d in 0..3 {
-                        rhs[(i, d)] = -gradient[s][a][d];
-                    }
-                }
-            }
-        }
-        chol.solve_in_place(rhs.as_mut());
-        for (s, ds) in delta.iter_mut().enumerate() {
-            for (a, da) in ds.iter_mut().enumerate() {
-                if let Some(i) = u.get(a, s) {
-                    *da = [rhs[(i, 0)], rhs[(i, 1)], rhs[(i, 2)]];
-                }
-            }
-        }
-        delta
+        let mut g = self.gather(gradient);
+        self.apply_inverse(&mut g);
+        g.iter_mut().for_each(|v| *v = crate::mesh::scale(*v, -1.0));
+        self.scatter(&g)
     }
 }

@@ -9,6 +9,7 @@
 
 pub mod global_step;
 pub mod objective;
+pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;
 pub mod trajectory;

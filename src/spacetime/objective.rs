@@ -12,7 +12,13 @@
 //! keyframe unknowns: per slot `j` of the sample's interval, `∂f_s/∂u_j = c_j M + l_j L` with
 //! `c_j = acc_j + α vel_j` and `l_j = pos_j` (the Hermite weights). So the gradient is, per
 //! time slot σ, `Σ_s dτ_s (c_σ f_s + l_σ L M⁻¹ f_s) = F^c_σ + L M⁻¹ F^l_σ`, two accumulations
-//! and one sparse product per slot instead of one per sample.
+//! and one sparse product per slot instead of one per sample. This is the gradient of the
+//! global step's quadratic model.
+//!
+//! The exact gradient of W also differentiates the projections: the stiffness seen by the
+//! residual is `∇²E(x) = L - J DP dF`, not `L`, so it subtracts
+//! `Σ_s dτ_s l_σ J DP_s[dF(M⁻¹ f_s)]` per slot (computed when the local step kept the
+//! projection Jacobians).
 
 use rayon::prelude::*;
 
@@ -21,9 +27,15 @@ use super::trajectory::Trajectory;
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
 use crate::physics::mat3::Mat3;
+use crate::physics::projection::ProjectionJacobian;
 
-/// The element projections of every sample, `[sample][tet]`.
-pub type Projections = Vec<Vec<Mat3>>;
+/// The local step: element projections of every sample (`[sample][tet]`), and optionally
+/// their Jacobians (for the exact gradient).
+#[derive(Debug, Clone)]
+pub struct Projections {
+    pub targets: Vec<Vec<Mat3>>,
+    pub jacobians: Option<Vec<Vec<ProjectionJacobian>>>,
+}
 
 /// The quantities the objective needs besides the trajectory.
 pub struct Objective<'a> {
@@ -42,8 +54,11 @@ pub struct Evaluation {
     pub value: f64,
     /// The elastic part `Σ dτ ½ |L x - J p|²_{M⁻¹}` (zero for rigid motion).
     pub elastic: f64,
-    /// `∂W/∂u` for every slot (fixed entries included: callers mask them), `[slot][node]`.
+    /// `∂W/∂u` with the projections held fixed (the global step's model), for every slot
+    /// (fixed entries included: callers mask them), `[slot][node]`.
     pub gradient: Vec<Vec<Point>>,
+    /// The exact `∂W/∂u`, when the projections came with their Jacobians.
+    pub exact_gradient: Option<Vec<Vec<Point>>>,
 }
 
 impl<'a> Objective<'a> {
@@ -72,19 +87,29 @@ impl<'a> Objective<'a> {
     }
 
     /// The local step: projections of every element at every sample, in parallel over
-    /// samples and elements.
-    pub fn local_step(&self, tr: &Trajectory) -> Projections {
+    /// samples and elements; with their Jacobians when `with_jacobians`.
+    pub fn local_step(&self, tr: &Trajectory, with_jacobians: bool) -> Projections {
         let n = self.elastic.node_count();
-        self.samples
+        let e_count = self.elastic.tet_count();
+        let per_sample: Vec<(Vec<Mat3>, Option<Vec<ProjectionJacobian>>)> = self
+            .samples
             .par_iter()
             .map(|s| {
                 let mut x = vec![[0.0; 3]; n];
                 Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
-                let mut p = vec![[[0.0; 3]; 3]; self.elastic.tet_count()];
-                self.elastic.local_step(&x, &mut p);
-                p
+                let mut p = vec![[[0.0; 3]; 3]; e_count];
+                if with_jacobians {
+                    let mut j = vec![ProjectionJacobian::default(); e_count];
+                    self.elastic.local_step_with_jacobians(&x, &mut p, &mut j);
+                    (p, Some(j))
+                } else {
+                    self.elastic.local_step(&x, &mut p);
+                    (p, None)
+                }
             })
-            .collect()
+            .collect();
+        let jacobians = with_jacobians.then(|| per_sample.iter().map(|(_, j)| j.clone().expect("computed")).collect());
+        Projections { targets: per_sample.into_iter().map(|(p, _)| p).collect(), jacobians }
     }
 
     /// W, its elastic part, and its gradient with the projections held at `p`.
@@ -93,11 +118,12 @@ impl<'a> Objective<'a> {
         let n = el.node_count();
         let g = self.gravity;
         // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
-        let per_sample: Vec<(Vec<Point>, f64, f64)> = self
+        let per_sample: Vec<(Vec<Point>, f64, f64, Option<Vec<Point>>)> = self
             .samples
             .par_iter()
-            .zip(p.par_iter())
-            .map(|(s, ps)| {
+            .enumerate()
+            .map(|(k, s)| {
+                let ps = &p.targets[k];
                 let u = Self::unknowns(tr, s);
                 let (c, l) = self.coefficients(s);
                 let (mut x, mut acc) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
@@ -117,7 +143,15 @@ impl<'a> Objective<'a> {
                         w_el += e * e / m;
                     }
                 }
-                (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el)
+                // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
+                let correction = p.jacobians.as_ref().map(|jac| {
+                    let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
+                    let dp: Vec<Mat3> = jac[k].iter().enumerate().map(|(e, j)| j.apply(&el.deformation_gradient(e, &u))).collect();
+                    let mut z = vec![[0.0; 3]; n];
+                    el.apply_j(&dp, &mut z);
+                    z
+                });
+                (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el, correction)
             })
             .collect();
         let value = per_sample.iter().map(|r| r.1).sum();
@@ -128,7 +162,7 @@ impl<'a> Objective<'a> {
             .into_par_iter()
             .map(|slot| {
                 let (mut fc, mut fl) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                for (s, (f, _, _)) in self.samples.iter().zip(&per_sample) {
+                for (s, (f, _, _, _)) in self.samples.iter().zip(&per_sample) {
                     let (c, l) = self.coefficients(s);
                     let (mut cs, mut ls) = (0.0, 0.0);
                     for j in 0..4 {
@@ -150,9 +184,30 @@ impl<'a> Objective<'a> {
                 }
                 let mut lfl = vec![[0.0; 3]; n];
                 el.stiffness.mul_points(&fl, &mut lfl);
-                fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect()
+                fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect::<Vec<Point>>()
             })
-            .collect();
-        Evaluation { value, elastic, gradient }
+            .collect::<Vec<_>>();
+        let exact_gradient = p.jacobians.as_ref().map(|_| {
+            (0..self.slots.count())
+                .into_par_iter()
+                .map(|slot| {
+                    let mut g = gradient[slot].clone();
+                    for (s, (_, _, _, z)) in self.samples.iter().zip(&per_sample) {
+                        let l: f64 = (0..4).filter(|&j| s.slots[j] == slot).map(|j| s.basis.pos[j]).sum();
+                        if l == 0.0 {
+                            continue;
+                        }
+                        let z = z.as_ref().expect("computed with the Jacobians");
+                        for (ga, za) in g.iter_mut().zip(z) {
+                            for d in 0..3 {
+                                ga[d] -= s.weight * l * za[d];
+                            }
+                        }
+                    }
+                    g
+                })
+                .collect()
+        });
+        Evaluation { value, elastic, gradient, exact_gradient }
     }
 }

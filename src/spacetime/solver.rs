@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use super::global_step::{GlobalStats, GlobalStep};
 use super::objective::{Evaluation, Objective};
+use super::quasi_newton::Lbfgs;
 use super::sampling::{samples, TimeSlots};
 use super::trajectory::Trajectory;
 use super::unknowns::Unknowns;
@@ -88,27 +89,56 @@ pub fn apply_step(tr: &mut Trajectory, slots: &TimeSlots, delta: &[Vec<Point>], 
     }
 }
 
-/// Halvings of a step that would increase W before the iteration stops.
+
+/// Halvings of a step that would increase W before it is given up.
 const MAX_HALVINGS: usize = 8;
+
+/// Curvature pairs kept by the quasi-Newton phase.
+const LBFGS_MEMORY: usize = 8;
+
+/// How a phase of the iteration ended.
+#[derive(Debug, Clone, PartialEq)]
+enum PhaseEnd {
+    /// W changed by less than `tolerance × W₀` in one iteration.
+    Settled(f64),
+    /// No step along the phase's direction decreased W.
+    Stalled,
+    /// The iteration budget ran out.
+    OutOfIterations,
+}
+
+/// The current iterate and the history of W.
+struct Iterate {
+    tr: Trajectory,
+    eval: Evaluation,
+    energy: Vec<f64>,
+    halvings: usize,
+}
 
 /// Optimize keyframe positions and velocities. `on_iteration(k, W)` reports progress.
 ///
-/// Each iteration takes the local/global step of the paper. That step is exact for the
-/// quadratic model with frozen projections, but not a descent direction of W everywhere (its
-/// stiffness is `L`, not `∇²E`), and near its fixed point it can turn W back up. So a step
-/// that would increase W is halved until W decreases (the trial's local step is the next
-/// iteration's, so an accepted step costs nothing extra); if none does, the iteration stops
-/// there. W therefore never increases, and fixed points are untouched.
+/// Two phases share one factorized matrix:
+///
+/// 1. The paper's local/global step: the minimizer of the quadratic model of W with frozen
+///    projections (plus the proximal term). It is fast far from the solution but it is not a
+///    descent direction of W everywhere (its stiffness is `L`, not `∇²E`), and near its fixed
+///    point it turns W back up.
+/// 2. Once that step settles or stops decreasing W: L-BFGS on the exact W (whose gradient
+///    differentiates the projections), with the same matrix as initial inverse Hessian.
+///
+/// In both, a step that would increase W is halved until W decreases (the trial's local step
+/// is the next iteration's, so an accepted step costs nothing extra). W never increases, and
+/// the regularization never moves a fixed point. The solve stops when phase 2 settles or
+/// stalls, or after `max_iterations` in all.
 pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iteration: &dyn Fn(usize, f64)) -> Result<Solved> {
     let start = Instant::now();
-    let mut tr = initial_trajectory(keys);
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
     let global = GlobalStep::new(&objective, unknowns, settings.regularization)?;
     let precompute_seconds = start.elapsed().as_secs_f64();
 
-    let evaluate = |tr: &Trajectory, iteration: usize| -> Result<Evaluation> {
-        let eval = objective.evaluate(tr, &objective.local_step(tr));
+    let evaluate = |tr: &Trajectory, iteration: usize, exact: bool| -> Result<Evaluation> {
+        let eval = objective.evaluate(tr, &objective.local_step(tr, exact));
         if !eval.value.is_finite() {
             return Err(Error::general(
                 format!("the spacetime energy W became {} at iteration {iteration}", eval.value),
@@ -118,71 +148,132 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
         Ok(eval)
     };
     let t_iterations = Instant::now();
-    let mut eval = evaluate(&tr, 0)?;
+    let tr = initial_trajectory(keys);
+    let eval = evaluate(&tr, 0, false)?;
     on_iteration(0, eval.value);
-    let mut energy = vec![eval.value];
-    let mut halvings = 0usize;
     let w0 = eval.value;
-    let (converged, stop_reason) = loop {
-        let w = *energy.last().expect("energy has the initial value");
-        if global.unknowns().count() == 0 {
-            break (true, "nothing to optimize: every keyframe position and velocity is fixed".to_string());
-        }
-        if w0 == 0.0 {
-            break (true, "W is zero: the keyframes are already physically exact".to_string());
-        }
-        if energy.len() >= 2 {
-            let change = (energy[energy.len() - 2] - w).abs() / w0;
-            if change < settings.tolerance {
-                break (true, format!("W changed by {change:.3e} of its initial value, below the tolerance {}", settings.tolerance));
-            }
-        }
-        if energy.len() > settings.max_iterations {
-            break (false, format!("stopped after max_iterations = {} before W settled", settings.max_iterations));
-        }
-        let delta = global.step(&eval.gradient);
+    let mut it = Iterate { tr, eval, energy: vec![w0], halvings: 0 };
+
+    let settled = |energy: &[f64], since: usize| -> Option<f64> {
+        let k = energy.len();
+        (k >= since + 2).then(|| (energy[k - 2] - energy[k - 1]).abs() / w0).filter(|c| *c < settings.tolerance)
+    };
+    // Take `delta` (per slot) from the current iterate, halving until W decreases.
+    let line_search = |it: &mut Iterate, delta: &[Vec<Point>], exact: bool| -> Result<bool> {
+        let w = *it.energy.last().expect("initial value");
         let mut scale = 1.0;
-        let accepted = loop {
-            let mut trial = tr.clone();
-            apply_step(&mut trial, &objective.slots, &delta, scale);
-            let trial_eval = evaluate(&trial, energy.len())?;
+        for halving in 0..=MAX_HALVINGS {
+            let mut trial = it.tr.clone();
+            apply_step(&mut trial, &objective.slots, delta, scale);
+            let trial_eval = evaluate(&trial, it.energy.len(), exact)?;
             if trial_eval.value <= w {
-                break Some((trial, trial_eval));
-            }
-            if halvings_exhausted(scale) {
-                break None;
+                it.halvings += halving;
+                it.tr = trial;
+                it.eval = trial_eval;
+                on_iteration(it.energy.len(), it.eval.value);
+                it.energy.push(it.eval.value);
+                return Ok(true);
             }
             scale *= 0.5;
-            halvings += 1;
-        };
-        let Some((next, next_eval)) = accepted else {
-            break (
-                false,
-                format!("the local/global step no longer decreases W (tried down to 1/{} of it)", 1usize << MAX_HALVINGS),
-            );
-        };
-        tr = next;
-        eval = next_eval;
-        on_iteration(energy.len(), eval.value);
-        energy.push(eval.value);
+        }
+        it.halvings += MAX_HALVINGS;
+        Ok(false)
     };
-    let iterations = energy.len() - 1;
+    let budget_left = |it: &Iterate| it.energy.len() <= settings.max_iterations;
+
+    let (converged, stop_reason) = if global.unknowns().count() == 0 {
+        (true, "nothing to optimize: every keyframe position and velocity is fixed".to_string())
+    } else if w0 == 0.0 {
+        (true, "W is zero: the keyframes are already physically exact".to_string())
+    } else {
+        // Phase 1: the local/global step.
+        let phase1 = loop {
+            if let Some(change) = settled(&it.energy, 0) {
+                break PhaseEnd::Settled(change);
+            }
+            if !budget_left(&it) {
+                break PhaseEnd::OutOfIterations;
+            }
+            let delta = global.step(&it.eval.gradient);
+            if !line_search(&mut it, &delta, false)? {
+                break PhaseEnd::Stalled;
+            }
+        };
+        let local_global_iterations = it.energy.len() - 1;
+        // Phase 2: L-BFGS on the exact W.
+        let phase2 = if phase1 == PhaseEnd::OutOfIterations {
+            PhaseEnd::OutOfIterations
+        } else {
+            it.eval = evaluate(&it.tr, it.energy.len(), true)?;
+            let since = it.energy.len() - 1;
+            let mut lbfgs = Lbfgs::new(LBFGS_MEMORY);
+            loop {
+                if let Some(change) = settled(&it.energy, since) {
+                    break PhaseEnd::Settled(change);
+                }
+                if !budget_left(&it) {
+                    break PhaseEnd::OutOfIterations;
+                }
+                let g = global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
+                let q = global.gather(&slot_values(&it.tr, &objective.slots));
+                let d = lbfgs.direction(&g, |x| global.apply_inverse(x));
+                let mut accepted = line_search(&mut it, &global.scatter(&d), true)?;
+                if !accepted && !lbfgs.is_empty() {
+                    // Restart from the preconditioned gradient.
+                    lbfgs.clear();
+                    let d = lbfgs.direction(&g, |x| global.apply_inverse(x));
+                    accepted = line_search(&mut it, &global.scatter(&d), true)?;
+                }
+                if !accepted {
+                    break PhaseEnd::Stalled;
+                }
+                let g_new = global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
+                let q_new = global.gather(&slot_values(&it.tr, &objective.slots));
+                lbfgs.push(difference(&q_new, &q), difference(&g_new, &g));
+            }
+        };
+        let phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
+        match phase2 {
+            PhaseEnd::Settled(change) => {
+                (true, format!("W changed by {change:.3e} of its initial value, below the tolerance {} ({phases})", settings.tolerance))
+            }
+            PhaseEnd::Stalled => (true, format!("W is stationary: no step along its quasi-Newton direction decreases it ({phases})")),
+            PhaseEnd::OutOfIterations => {
+                (false, format!("stopped after max_iterations = {} before W settled ({phases})", settings.max_iterations))
+            }
+        }
+    };
+    let iterations = it.energy.len() - 1;
     let iteration_time = t_iterations.elapsed().as_secs_f64();
     let log = SolverLog {
         method: Method::Spacetime,
         iterations,
-        energy,
+        energy: it.energy,
         seconds: start.elapsed().as_secs_f64(),
         precompute_seconds,
-        iteration_seconds: if iterations > 0 { iteration_time / (iterations + 1) as f64 } else { 0.0 },
+        iteration_seconds: iteration_time / (iterations + 1) as f64,
         unknowns: global.stats.unknowns,
-        halvings,
+        halvings: it.halvings,
         converged,
         stop_reason,
     };
-    Ok(Solved { trajectory: tr, log, stats: global.stats })
+    Ok(Solved { trajectory: it.tr, log, stats: global.stats })
 }
 
-fn halvings_exhausted(scale: f64) -> bool {
-    scale <= 0.5f64.powi(MAX_HALVINGS as i32)
+/// The trajectory's values per slot (the owner key's positions or velocities).
+fn slot_values(tr: &Trajectory, slots: &TimeSlots) -> Vec<Vec<Point>> {
+    (0..slots.count())
+        .map(|s| {
+            let k = s / 2;
+            if s % 2 == 0 {
+                tr.positions[k].clone()
+            } else {
+                tr.velocities[k].clone()
+            }
+        })
+        .collect()
+}
+
+fn difference(a: &[Point], b: &[Point]) -> Vec<Point> {
+    a.iter().zip(b).map(|(x, y)| crate::mesh::sub(*x, *y)).collect()
 }

@@ -82,7 +82,7 @@ fn rigid_motion_costs_no_elastic_energy() {
     let k = keys(vec![0.0, 0.5, 1.2], vec![placed.clone(); 3], vec![VertexSet::all(n); 3], false);
     let tr = Trajectory::with_zero_velocities(k.times.clone(), k.positions.clone());
     let obj = objective(&el, &k, &settings());
-    let e = obj.evaluate(&tr, &obj.local_step(&tr));
+    let e = obj.evaluate(&tr, &obj.local_step(&tr, false));
     assert!(e.value < 1e-20 && e.elastic < 1e-20, "W = {:e}, elastic = {:e}", e.value, e.elastic);
 
     // Moving a whole non-rigid trajectory rigidly changes neither W nor its elastic part.
@@ -94,7 +94,7 @@ fn rigid_motion_costs_no_elastic_energy() {
     };
     let k4 = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], false);
     let obj = objective(&el, &k4, &settings());
-    let (a, b) = (obj.evaluate(&tr, &obj.local_step(&tr)), obj.evaluate(&moved, &obj.local_step(&moved)));
+    let (a, b) = (obj.evaluate(&tr, &obj.local_step(&tr, false)), obj.evaluate(&moved, &obj.local_step(&moved, false)));
     assert!(a.elastic > 1e-3, "the wobbly trajectory is elastic: {}", a.elastic);
     assert!((a.elastic - b.elastic).abs() < 1e-10 * a.elastic && (a.value - b.value).abs() < 1e-10 * a.value);
 }
@@ -116,7 +116,7 @@ fn gradient_matches_finite_differences() {
         let k = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], cyclic);
         let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], ..settings() };
         let obj = objective(&el, &k, &s);
-        let p = obj.local_step(&tr);
+        let p = obj.local_step(&tr, false);
         let e = obj.evaluate(&tr, &p);
         let slots = obj.slots.count();
         let n = mesh.positions.len();
@@ -137,6 +137,41 @@ fn gradient_matches_finite_differences() {
 }
 
 #[test]
+fn exact_gradient_matches_finite_differences_of_w() {
+    // W with fresh projections at every evaluation, by central differences.
+    for cyclic in [false, true] {
+        let mesh = cube_mesh(2);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let tr = wobbly(&mesh.positions, cyclic);
+        let k = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], cyclic);
+        let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], ..settings() };
+        let obj = objective(&el, &k, &s);
+        let e = obj.evaluate(&tr, &obj.local_step(&tr, true));
+        let g = e.exact_gradient.expect("requested");
+        let w = |t: &Trajectory| obj.evaluate(t, &obj.local_step(t, false)).value;
+        let slots = obj.slots.count();
+        let n = mesh.positions.len();
+        let scale = g.iter().flatten().map(|v| norm(*v)).fold(0.0, f64::max);
+        let mut worst: f64 = 0.0;
+        for s in 0..slots {
+            for a in (0..n).step_by(4) {
+                for d in 0..3 {
+                    let mut delta = vec![vec![[0.0; 3]; n]; slots];
+                    delta[s][a][d] = 1.0;
+                    let h = 1e-5;
+                    let (mut plus, mut minus) = (tr.clone(), tr.clone());
+                    apply_step(&mut plus, &obj.slots, &delta, h);
+                    apply_step(&mut minus, &obj.slots, &delta, -h);
+                    let fd = (w(&plus) - w(&minus)) / (2.0 * h);
+                    worst = worst.max((fd - g[s][a][d]).abs() / scale);
+                }
+            }
+        }
+        assert!(worst < 1e-6, "cyclic={cyclic}: relative exact-gradient error {worst:e}");
+    }
+}
+
+#[test]
 fn normal_matrix_is_the_hessian_of_w() {
     // H d == (∇W(q + h d) - ∇W(q - h d)) / 2h with projections frozen (W is quadratic then).
     let mesh = cube_mesh(2);
@@ -150,7 +185,7 @@ fn normal_matrix_is_the_hessian_of_w() {
     let obj = objective(&el, &k, &s);
     let unknowns = Unknowns::new(&k, n);
     let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 0.0));
-    let p = obj.local_step(&tr);
+    let p = obj.local_step(&tr, false);
     let mut rng = Rng(5);
     let slots = obj.slots.count();
     let mut dir = vec![vec![[0.0; 3]; n]; slots];
@@ -236,9 +271,9 @@ fn regularization_does_not_move_the_fixed_point() {
     let s = Settings { gravity: [0.0, -9.81, 0.0], tolerance: 1e-15, max_iterations: 3000, ..settings() };
     let solve_with = |h: f64| solve(&el, &k, &Settings { regularization: h, ..s.clone() }, &|_, _| {}).unwrap();
     let (a, b, c) = (solve_with(0.0), solve_with(0.15), solve_with(0.5));
-    // Without regularization one step solves the quadratic; the next only confirms it.
+    // Without regularization one step solves the quadratic; later ones only confirm it.
     let w = &a.log.energy;
-    assert!(w.len() <= 3 && (w[1] - w[w.len() - 1]).abs() <= 1e-12 * w[0], "{w:?}");
+    assert!(w.len() <= 5 && w[1..].iter().all(|v| (v - w[1]).abs() <= 1e-12 * w[0]), "{w:?}");
     assert!(b.log.iterations > 5, "a strong proximal term takes many small steps: {}", b.log.iterations);
     for other in [&b, &c] {
         let mut worst: f64 = 0.0;
@@ -255,13 +290,14 @@ fn regularization_does_not_move_the_fixed_point() {
 }
 
 #[test]
-fn w_never_increases_and_stops_where_the_step_stops_helping() {
+fn w_never_increases_and_goes_past_the_local_global_stall() {
+    // On this scene the paper's step stops decreasing W near 3e-5 W₀ (measured); the exact
+    // gradient phase continues below it.
     let (el, k) = bending_scene(false);
     let solved = solve(&el, &k, &Settings { tolerance: 1e-14, max_iterations: 200, ..settings() }, &|_, _| {}).unwrap();
     let w = &solved.log.energy;
     assert!(w.windows(2).all(|p| p[1] <= p[0]), "{w:?}");
-    assert!(w.last().unwrap() < &(1e-4 * w[0]), "{} -> {}", w[0], w.last().unwrap());
-    assert!(solved.log.iterations < 200, "stopped by the safeguard, not the iteration cap: {}", solved.log.stop_reason);
+    assert!(w.last().unwrap() < &(1e-6 * w[0]), "{} -> {}", w[0], w.last().unwrap());
 }
 
 #[test]
