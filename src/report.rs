@@ -29,8 +29,9 @@ pub struct VolumeRange {
     pub min: f64,
     pub max: f64,
     /// In-between volume loss: the largest `1 - V(t) / V̄(t)` over frames, where `V̄` blends
-    /// the input keyframes' volumes linearly in time. Zero when no in-between loses volume
-    /// relative to the keys it joins (a key that is itself compressed does not count).
+    /// this animation's own keyframe volumes linearly in time. It measures what the
+    /// interpolation loses between keys, whatever volume the keys themselves have; zero when
+    /// no in-between dips below its keys.
     pub in_between_loss: f64,
 }
 
@@ -103,8 +104,9 @@ fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal: f6
     }
 }
 
-fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, key_volumes: &[f64]) -> VolumeRange {
+fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64) -> VolumeRange {
     let volumes: Vec<(f64, f64)> = frames.iter().map(|&(_, t)| (t, surface::enclosed_volume(&tr.evaluate(t), triangles))).collect();
+    let key_volumes: Vec<f64> = tr.positions.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
     let blend = |t: f64| {
         let (i, theta) = tr.locate(t);
         (1.0 - theta) * key_volumes[i] + theta * key_volumes[i + 1]
@@ -133,11 +135,10 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
     let volume = (closed && rest_volume > 0.0).then(|| {
         let hermite = Trajectory::with_zero_velocities(tr.times.clone(), animation.input_keys.clone());
-        let key_volumes: Vec<f64> = animation.input_keys.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
         Volume {
             rest: rest_volume,
-            animation: volume_range(tr, &frames, triangles, rest_volume, &key_volumes),
-            hermite: volume_range(&hermite, &frames, triangles, rest_volume, &key_volumes),
+            animation: volume_range(tr, &frames, triangles, rest_volume),
+            hermite: volume_range(&hermite, &frames, triangles, rest_volume),
         }
     });
     let mut ratios = BTreeMap::new();

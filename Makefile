@@ -1,0 +1,89 @@
+# blendsim: the two commands are `make demo` and `make test`. Every target installs what it
+# needs (idempotently, saying what it does) on a fresh Debian machine.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+
+CARGO ?= cargo
+PYTHON ?= python3
+BIN := target/release/blendsim
+CHECKERS := tests/checkers
+# apt-get needs root; use sudo when not already root.
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+USD_CORE := usd-core==26.11
+
+# `make batch SCENES=folder`: bake every *.toml of a folder (works with -j).
+SCENES ?= fixtures/paper
+BATCH_OUT ?= build/batch
+
+.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium bench batch clean
+
+help:
+	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
+	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers)"
+	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
+	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
+	@echo "make test-deps / build / clean"
+
+build:
+	@echo "==> building blendsim (release)"
+	$(CARGO) build --release --locked
+
+deps-tetgen:
+	@if command -v tetgen >/dev/null 2>&1; then \
+		echo "==> tetgen: already installed"; \
+	else \
+		echo "==> installing tetgen (apt-get)"; \
+		$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq tetgen; \
+	fi
+
+deps-usd:
+	@if $(PYTHON) -c 'import pxr' >/dev/null 2>&1; then \
+		echo "==> usd-core (python pxr): already installed"; \
+	else \
+		echo "==> installing $(USD_CORE) (pip)"; \
+		$(PYTHON) -m pip install --quiet --disable-pip-version-check $(USD_CORE); \
+	fi
+
+deps-chromium:
+	@if [ -x /usr/bin/chromium ]; then \
+		echo "==> chromium: already installed"; \
+	else \
+		echo "==> installing chromium (apt-get)"; \
+		$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; \
+	fi
+
+# The npm checkers (gltf-validator, three, playwright-core), pinned by package-lock.json;
+# reinstalled only when the lock file changes.
+deps-npm: $(CHECKERS)/node_modules/.installed
+$(CHECKERS)/node_modules/.installed: $(CHECKERS)/package.json $(CHECKERS)/package-lock.json
+	@echo "==> installing the glTF checkers (npm ci in $(CHECKERS))"
+	cd $(CHECKERS) && npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
+
+test-deps: deps-tetgen deps-usd deps-npm deps-chromium
+
+demo: build deps-tetgen deps-usd
+	@echo "==> baking fixtures/demo/twist.toml into build/demo"
+	$(BIN) bake fixtures/demo/twist.toml --out build/demo
+	@echo
+	@cat build/demo/report.md
+
+test: test-deps
+	@echo "==> running the test suite (release build)"
+	$(CARGO) test --release --locked
+
+bench: build deps-tetgen
+	@echo "==> solver benchmark (medians; mind the load average printed with it)"
+	$(CARGO) bench --locked --bench solver
+
+SCENE_NAMES := $(basename $(notdir $(wildcard $(SCENES)/*.toml)))
+batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
+	@for n in $(SCENE_NAMES); do echo "$(BATCH_OUT)/$$n/report.md"; done
+
+$(BATCH_OUT)/%/report.json: $(SCENES)/%.toml | build deps-tetgen
+	$(BIN) bake $< --out $(@D) --quiet
+
+clean:
+	rm -rf build
