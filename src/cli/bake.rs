@@ -8,7 +8,7 @@ use blendsim::{embed, export, import, report, solve, tetrahedralize, Result};
 
 use super::solve::MethodArg;
 
-/// Run the whole chain on a scene: import, tetrahedralize, solve, embed, export, report.
+/// Bake a scene: import, tetrahedralize, solve, embed, export and report in one process.
 ///
 /// Writes NAME.usda / NAME.glb (and the other formats of [export]), their full-frame
 /// versions NAME.full.EXT, report.json and report.md into --out. Nothing is written unless

@@ -4,8 +4,10 @@ use blendsim::progress::Progress;
 use blendsim::stage::{self, Solution};
 use blendsim::{embed, Result};
 
-/// Carry the exported surface on the solved tet trajectory (barycentric embedding) and write
-/// the animation stage file. The embedding is linear, so the trajectory stays exact.
+/// Carry the exported surface on the solved tet trajectory and write the animation stage file.
+///
+/// The surface is bound to the rest tet mesh by barycentric coordinates (the closest tet for
+/// points outside it). The binding is linear, so the Hermite trajectory stays exact.
 #[derive(clap::Args)]
 pub struct Args {
     /// The solution stage file from `blendsim solve`.

@@ -5,9 +5,9 @@ use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation};
 use blendsim::{export, Result};
 
-/// Write the animation as blendshape files (and full-frame files for comparison) in the
-/// scene's formats, plus NAME.outputs.json listing them, into --out.
+/// Write the blendshape and full-frame animation files into --out.
 ///
+/// Formats are the scene's [export] formats; NAME.outputs.json lists what was written.
 /// Blendshape: NAME.usda / NAME.usdc (UsdSkel BlendShapes and weights), NAME.glb (morph
 /// targets with CUBICSPLINE weights). Full-frame: NAME.full.EXT. `usdc` needs usd-core
 /// (`pip install usd-core`). Nothing is written unless every file succeeds.

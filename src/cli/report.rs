@@ -5,9 +5,10 @@ use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation, Outputs};
 use blendsim::{report, Result};
 
-/// Write report.json and report.md into --out: sizes of the blendshape and full-frame files
-/// side by side, fidelity against the full-frame evaluation, keyframe deviation, volume, and
-/// the solver's history (see formats/report.md).
+/// Write report.json and report.md into --out.
+///
+/// Sizes of the blendshape and full-frame files side by side, fidelity against the full-frame
+/// evaluation, keyframe deviation, volume, and the solver's history (see formats/report.md).
 #[derive(clap::Args)]
 pub struct Args {
     /// The animation stage file from `blendsim embed`.
