@@ -42,7 +42,9 @@ pub fn det(a: &Mat3) -> f64 {
 pub fn inverse(a: &Mat3) -> Option<Mat3> {
     let d = det(a);
     let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    if !(d.abs() > 1e-14 * scale * scale * scale) {
+    // Written so that a NaN determinant also counts as singular.
+    let invertible = d.abs() > 1e-14 * scale * scale * scale;
+    if !invertible {
         return None;
     }
     let c = |i: usize, j: usize| {
@@ -50,14 +52,8 @@ pub fn inverse(a: &Mat3) -> Option<Mat3> {
         let (j1, j2) = ((j + 1) % 3, (j + 2) % 3);
         a[i1][j1] * a[i2][j2] - a[i1][j2] * a[i2][j1]
     };
-    // Inverse = adjugate / det; adjugate is the transposed cofactor matrix.
-    let mut inv = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            inv[j][i] = c(i, j) / d;
-        }
-    }
-    Some(inv)
+    // Inverse = adjugate / det; the adjugate is the transposed cofactor matrix.
+    Some(std::array::from_fn(|row| std::array::from_fn(|col| c(col, row) / d)))
 }
 
 /// `a * diag(s) * bᵀ`.

@@ -36,7 +36,9 @@ impl Lbfgs {
     /// curvature are skipped so the implied Hessian stays positive definite.
     pub fn push(&mut self, s: Vec<Point>, y: Vec<Point>) {
         let sy = dot(&s, &y);
-        if !(sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt()) {
+        // Written so that NaN curvature is also skipped.
+        let positive_curvature = sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt();
+        if !positive_curvature {
             return;
         }
         if self.pairs.len() == self.memory {

@@ -190,11 +190,11 @@ fn normal_matrix_is_the_hessian_of_w() {
     let slots = obj.slots.count();
     let mut dir = vec![vec![[0.0; 3]; n]; slots];
     let mut dvec = vec![[0.0; 3]; unknowns.count()];
-    for s in 0..slots {
-        for v in 0..n {
+    for (s, dir_s) in dir.iter_mut().enumerate() {
+        for (v, d) in dir_s.iter_mut().enumerate() {
             if let Some(i) = unknowns.get(v, s) {
-                dir[s][v] = [rng.next(), rng.next(), rng.next()];
-                dvec[i] = dir[s][v];
+                *d = [rng.next(), rng.next(), rng.next()];
+                dvec[i] = *d;
             }
         }
     }
