@@ -8,9 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::export::clip::BlendShapeClip;
 use crate::mesh::{bbox_diagonal, norm, sub, surface, Point};
-use crate::scene::{Format, Method};
+use crate::scene::Format;
 use crate::spacetime::trajectory::Trajectory;
-use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
+use crate::stage::{Animation, OutputFile, OutputKind, Outputs, SolverLog};
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -46,21 +46,6 @@ pub struct Volume {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SolverSummary {
-    pub method: Method,
-    pub iterations: usize,
-    /// W per iteration, from the hermite baseline.
-    pub energy: Vec<f64>,
-    pub seconds: f64,
-    pub precompute_seconds: f64,
-    pub iteration_seconds: f64,
-    pub unknowns: usize,
-    pub halvings: usize,
-    pub converged: bool,
-    pub stop_reason: String,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     pub scene: String,
     pub vertices: usize,
@@ -71,7 +56,7 @@ pub struct Report {
     pub duration_s: f64,
     pub fps: f64,
     pub frames: usize,
-    pub solver: SolverSummary,
+    pub solver: SolverLog,
     pub outputs: Vec<OutputFile>,
     /// Per format: full-frame bytes / blendshape bytes.
     pub ratios: BTreeMap<Format, f64>,
@@ -148,7 +133,6 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
             ratios.insert(format, full as f64 / blend as f64);
         }
     }
-    let log = &animation.log;
     Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -159,18 +143,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
         duration_s: tr.duration(),
         fps: scene.fps,
         frames: frames.len(),
-        solver: SolverSummary {
-            method: log.method,
-            iterations: log.iterations,
-            energy: log.energy.clone(),
-            seconds: log.seconds,
-            precompute_seconds: log.precompute_seconds,
-            iteration_seconds: log.iteration_seconds,
-            unknowns: log.unknowns,
-            halvings: log.halvings,
-            converged: log.converged,
-            stop_reason: log.stop_reason.clone(),
-        },
+        solver: animation.log.clone(),
         outputs: outputs.files.clone(),
         ratios,
         error,
