@@ -2,7 +2,10 @@
 //! independent checkers (`checkers`). Each test file uses only part of it.
 #![allow(dead_code)]
 
+pub mod assets;
 pub mod checkers;
+pub mod cli;
+pub mod verify;
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -96,6 +99,9 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             energy: Vec::new(),
             seconds: 0.0,
             precompute_seconds: 0.0,
+            iteration_seconds: 0.0,
+            unknowns: 0,
+            halvings: 0,
             converged: true,
             stop_reason: "synthetic test animation".into(),
         },
