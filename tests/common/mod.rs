@@ -2,7 +2,10 @@
 //! independent checkers (`checkers`). Each test file uses only part of it.
 #![allow(dead_code)]
 
+pub mod assets;
 pub mod checkers;
+pub mod cli;
+pub mod verify;
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
