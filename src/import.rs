@@ -189,13 +189,13 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         };
         poses.push(positions);
     }
-    let rest_positions = match &keys.rest {
-        Rest::Key(r) => poses[*r].clone(),
+    let (rest_positions, rest_source) = match &keys.rest {
+        Rest::Key(r) => (poses[*r].clone(), paths[*r].clone()),
         Rest::Mesh(p) => {
             let path = scene_file.resolve(p);
             let m = cache.get(&path)?;
             check_same_topology((&paths[0], &first, &first_topology), (&path, m, &Topology::of(m)))?;
-            m.positions().to_vec()
+            (m.positions().to_vec(), path)
         }
     };
     let n = rest_positions.len();
@@ -247,6 +247,7 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     };
     Ok(Keyframes {
         scene: scene.clone(),
+        rest_source: rest_source.display().to_string(),
         rest,
         times: keys.times.clone(),
         poses,

@@ -372,14 +372,52 @@ impl Default for Rest {
 /// - `{ axis = "y", min = A, max = B, invert = false }`: vertices whose rest-pose coordinate
 ///   on `axis` lies in `[min, max]` (either bound may be omitted);
 /// - a list of the above: their union.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(untagged)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Selection {
     All,
     None,
     File { file: String, invert: bool },
     Slab { axis: Axis, min: Option<f64>, max: Option<f64>, invert: bool },
     Union(Vec<Selection>),
+}
+
+/// Written back in the scene syntax, so a stage file's scene reads like the scene file.
+impl Serialize for Selection {
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        match self {
+            Selection::All => ser.serialize_str("all"),
+            Selection::None => ser.serialize_str("none"),
+            Selection::File { file, invert: false } => ser.serialize_str(file),
+            Selection::File { file, invert: true } => {
+                let mut m = ser.serialize_map(Some(2))?;
+                m.serialize_entry("file", file)?;
+                m.serialize_entry("invert", &true)?;
+                m.end()
+            }
+            Selection::Slab { axis, min, max, invert } => {
+                let mut m = ser.serialize_map(None)?;
+                m.serialize_entry("axis", axis)?;
+                if let Some(lo) = min {
+                    m.serialize_entry("min", lo)?;
+                }
+                if let Some(hi) = max {
+                    m.serialize_entry("max", hi)?;
+                }
+                if *invert {
+                    m.serialize_entry("invert", &true)?;
+                }
+                m.end()
+            }
+            Selection::Union(items) => {
+                let mut seq = ser.serialize_seq(Some(items.len()))?;
+                for item in items {
+                    seq.serialize_element(item)?;
+                }
+                seq.end()
+            }
+        }
+    }
 }
 
 // --- Deserialization of the string-or-table entries, with precise messages. ---
@@ -688,6 +726,21 @@ rest = "rest.mesh"
             ])
         );
         assert_eq!(fixed[2], Selection::File { file: "tail.dmat".into(), invert: true });
+    }
+
+    #[test]
+    fn selections_round_trip_through_json() {
+        let text = r#"
+name = "t"
+[keyframes]
+meshes = ["a.mesh", "a.mesh", "a.mesh", "a.mesh", "a.mesh"]
+times = [0.0, 0.5, 1.0, 1.5, 2.0]
+fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ axis = "y", max = 0.01 }, { axis = "x", min = -1.0, max = 1.0, invert = true }]]
+"#;
+        let s = Scene::parse(text).unwrap();
+        let json = serde_json::to_string(&s).unwrap();
+        let back: Scene = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, s, "{json}");
     }
 
     #[test]

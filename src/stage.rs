@@ -71,6 +71,8 @@ pub enum Shape {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Keyframes {
     pub scene: Scene,
+    /// The file the rest shape came from, as a path from where `import` ran (for messages).
+    pub rest_source: String,
     /// The elastic rest shape. Every pose has its vertex count.
     pub rest: Shape,
     pub times: Vec<f64>,

@@ -13,7 +13,6 @@ use crate::mesh::{surface, Point, TetMesh, TriMesh};
 use crate::physics::elastic::Elastic;
 use crate::physics::equilibrium::Equilibrium;
 use crate::progress::Progress;
-use crate::scene::Rest;
 use crate::stage::{Body, KeyPoses, Keyframes, Shape};
 use crate::tetgen::{self, TetgenOptions};
 
@@ -38,13 +37,9 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
             Ok(Body { scene: scene.clone(), mesh: mesh.clone(), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary) })
         }
         Shape::Surface(rest) => {
-            let source = match &scene.keyframes.rest {
-                Rest::Key(r) => scene.keyframes.meshes[*r].path().to_string(),
-                Rest::Mesh(p) => p.clone(),
-            };
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.stage("tetrahedralize: TetGen");
-            let mesh: TetMesh = tetgen::tetrahedralize(rest, &options, std::path::Path::new(&source))?;
+            let mesh: TetMesh = tetgen::tetrahedralize(rest, &options, std::path::Path::new(&keys.rest_source))?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();

@@ -203,7 +203,6 @@ fn no_tetgen_on_path() {
 /// TetGen's errors name the surface only as the scene file spells it (`k0.obj`), not as a
 /// path from where blendsim runs (`in/k0.obj`), unlike every other input error.
 #[test]
-#[ignore = "bug: src/tetrahedralize.rs passes the scene's unresolved mesh path to tetgen::tetrahedralize as `source`, so TetGen errors say `k0.obj:` instead of `in/k0.obj:`"]
 fn tetgen_errors_name_the_surface_from_the_working_folder() {
     let cases = [
         ("hole-path", obj::write(&holed()), vec![]),

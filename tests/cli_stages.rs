@@ -152,7 +152,6 @@ fn chained_stages_give_the_bytes_of_bake_and_bakes_are_deterministic() {
 /// not round-trip f64 (see the bug note), so W, the errors and the volumes differ in their
 /// last digits.
 #[test]
-#[ignore = "bug: serde_json is built without `float_roundtrip` (Cargo.toml), so reading a stage file changes f64s by an ulp; the chain's report.json differs from bake's (src/stage.rs promises the same bytes)"]
 fn chained_report_equals_bake_report_exactly() {
     let dir = TempDir::new("stages-report-exact");
     let scene = demo_scene();
@@ -165,7 +164,6 @@ fn chained_report_equals_bake_report_exactly() {
 /// A stage file read back and written again is the same file: `solve` copies the body it
 /// read into its solution, so body.json's numbers must survive the round trip.
 #[test]
-#[ignore = "bug: serde_json is built without `float_roundtrip` (Cargo.toml): stage files do not round-trip f64, e.g. 1.1666666666666665 is read back as 1.1666666666666663"]
 fn stage_files_round_trip_exactly() {
     let dir = TempDir::new("stages-round-trip");
     let c = chain(&dir.path, &demo_scene(), None);
@@ -241,7 +239,6 @@ fn hermite_method_through_the_chain_and_bake() {
 /// A scene that spells out `"all"` and `"none"` selections (as DINO does) goes through the
 /// chain of subcommands like any other.
 #[test]
-#[ignore = "bug: src/scene.rs `Selection` derives Serialize with #[serde(untagged)], so `All`/`None` are written as null into the stage files, and its Deserialize rejects null: `tetrahedralize keys.json` exits 1"]
 fn explicit_all_and_none_selections_survive_the_stage_files() {
     let dir = TempDir::new("stages-selections");
     let cube = blendsim::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]);
