@@ -2,8 +2,9 @@
 //!
 //! Starts from the keyframes joined with zero velocities (the hermite baseline). Each
 //! iteration evaluates W at the current trajectory with fresh projections, stops if W has
-//! settled (change below `tolerance × W₀`), and otherwise takes one global step. W is recorded
-//! per iteration; NaN or sustained growth is an error, never a silent result.
+//! settled (change below `tolerance × W₀`), and otherwise takes one step (see [`solve`]). W is
+//! recorded per iteration. It cannot grow: a step that would raise it is halved, and the solve
+//! stops where no step lowers it. A NaN is an error naming the iteration, never a result.
 
 use std::time::Instant;
 
@@ -88,7 +89,6 @@ pub fn apply_step(tr: &mut Trajectory, slots: &TimeSlots, delta: &[Vec<Point>], 
         }
     }
 }
-
 
 /// Halvings of a step that would increase W before it is given up.
 const MAX_HALVINGS: usize = 8;
