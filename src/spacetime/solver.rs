@@ -134,6 +134,12 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
     let start = Instant::now();
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
+    if settings.regularization == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
+        return Err(Error::general(
+            "the spacetime system is singular: no keyframe position is held and regularization = 0, so moving the whole animation costs nothing",
+            "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
+        ));
+    }
     let global = GlobalStep::new(&objective, unknowns, settings.regularization)?;
     let precompute_seconds = start.elapsed().as_secs_f64();
 

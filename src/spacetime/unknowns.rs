@@ -55,6 +55,14 @@ impl Unknowns {
         self.count
     }
 
+    /// Whether any keyframe position is held. Without one, translating the whole animation
+    /// (and, with free velocities, a uniform drift `c t`) leaves W unchanged: the problem has a
+    /// null space that only regularization removes.
+    pub fn any_position_fixed(&self) -> bool {
+        let s_count = self.slots.count();
+        (0..self.nodes).any(|a| (0..s_count).step_by(2).any(|s| self.get(a, s).is_none()))
+    }
+
     /// Global index of slot `s` of `node`, if free.
     #[inline]
     pub fn get(&self, node: usize, s: usize) -> Option<usize> {
