@@ -26,6 +26,8 @@ use crate::scene::Material;
 #[derive(Debug, Clone)]
 pub struct Elastic {
     pub tets: Vec<[u32; 4]>,
+    /// Rest positions of the nodes (used to order the global solves geometrically).
+    pub rest: Vec<Point>,
     /// Rest shape-function gradients `g_a` per tet.
     pub grads: Vec<[[f64; 3]; 4]>,
     /// Rest volumes.
@@ -111,6 +113,7 @@ impl Elastic {
         }
         Ok(Elastic {
             tets: mesh.tets.clone(),
+            rest: mesh.positions.clone(),
             grads,
             volumes,
             weights,
