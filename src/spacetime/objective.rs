@@ -108,8 +108,9 @@ impl<'a> Objective<'a> {
                 }
             })
             .collect();
-        let jacobians = with_jacobians.then(|| per_sample.iter().map(|(_, j)| j.clone().expect("computed")).collect());
-        Projections { targets: per_sample.into_iter().map(|(p, _)| p).collect(), jacobians }
+        let (targets, jacobians): (Vec<_>, Vec<_>) = per_sample.into_iter().unzip();
+        let jacobians = with_jacobians.then(|| jacobians.into_iter().map(|j| j.expect("computed")).collect());
+        Projections { targets, jacobians }
     }
 
     /// W, its elastic part, and its gradient with the projections held at `p`.
