@@ -28,6 +28,8 @@ pub struct Cholesky {
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
     par: Par,
+    /// How [`Cholesky::solve_rows3`] splits a supernodal factor between two threads.
+    plan: Option<SplitPlan>,
 }
 
 impl Cholesky {
@@ -49,7 +51,11 @@ impl Cholesky {
         };
         let symbolic = factorize_symbolic_cholesky(lower.symbolic(), Side::Lower, ord, CholeskySymbolicParams::default())
             .expect("symbolic Cholesky of a well-formed matrix");
-        let mut chol = Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par };
+        let plan = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(sym) => SplitPlan::new(sym),
+            SymbolicCholeskyRaw::Simplicial(_) => None,
+        };
+        let mut chol = Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par, plan };
         chol.refactor(lower)?;
         Ok(chol)
     }
@@ -96,7 +102,7 @@ impl Cholesky {
                         y[d * n + i] = x[src][d];
                     }
                 }
-                SupernodalSolve { sym, values: &self.values }.solve(&mut y);
+                SupernodalSolve { sym, values: &self.values, plan: self.plan.as_ref() }.solve(&mut y);
                 for i in 0..n {
                     let dst = fwd.map_or(i, |f| f[i]);
                     for d in 0..3 {
@@ -132,12 +138,101 @@ impl Cholesky {
 /// memory traffic is the factor, once per sweep. Reductions use [`LANES`] explicit partial sums
 /// combined in a fixed order, so the result does not depend on the SIMD width: the AVX2 build of
 /// the same code (chosen at run time) gives the same bytes as the baseline one.
+///
+/// Two threads: a [`SplitPlan`] cuts the elimination tree below its top chain into two groups of
+/// independent subtrees, swept concurrently (`rayon::join`); contributions to the top rows are
+/// collected per group and added in a fixed order, so the bytes do not depend on the thread
+/// count.
 struct SupernodalSolve<'a> {
     sym: &'a SymbolicSupernodalCholesky<usize>,
     values: &'a [f64],
+    plan: Option<&'a SplitPlan>,
 }
 
 const LANES: usize = 4;
+
+/// Two groups of whole subtrees of the supernodal elimination tree, and the supernodes above
+/// them (the top chain). Supernodes are numbered in postorder, so each group and the top are
+/// contiguous ranges of supernodes and of rows: group A, then group B, then the top.
+#[derive(Debug, Clone, PartialEq)]
+struct SplitPlan {
+    /// Supernode ranges `a = 0..b_first`, `b = b_first..top_first`, `top = top_first..`.
+    b_first: usize,
+    top_first: usize,
+    /// First rows of group B and of the top.
+    b_row: usize,
+    top_row: usize,
+}
+
+impl SplitPlan {
+    /// The split, if the tree allows a useful one: the top chain (supernodes with one child,
+    /// from the root) ends at a supernode with at least two children, whose subtrees are dealt
+    /// to the two groups so that their entries balance best.
+    fn new(sym: &SymbolicSupernodalCholesky<usize>) -> Option<SplitPlan> {
+        let ns = sym.n_supernodes();
+        let n = sym.nrows();
+        if ns < 2 {
+            return None;
+        }
+        let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
+        let mut owner = vec![0usize; n];
+        for s in 0..ns {
+            owner[begin[s]..end[s]].fill(s);
+        }
+        let parent: Vec<Option<usize>> = (0..ns).map(|s| sym.supernode(s).pattern().first().map(|&row| owner[row])).collect();
+        let cp = sym.col_ptr_for_val();
+        // Entries and first descendant of every subtree; postorder means the subtree of s is
+        // exactly first[s]..=s.
+        let mut work: Vec<usize> = (0..ns).map(|s| cp[s + 1] - cp[s]).collect();
+        let mut first: Vec<usize> = (0..ns).collect();
+        let mut size = vec![1usize; ns];
+        for s in 0..ns {
+            if let Some(p) = parent[s] {
+                if p <= s {
+                    return None;
+                }
+                work[p] += work[s];
+                first[p] = first[p].min(first[s]);
+                size[p] += size[s];
+            }
+        }
+        if (0..ns).any(|s| s + 1 - first[s] != size[s]) {
+            return None;
+        }
+        let mut children = vec![Vec::new(); ns];
+        let mut roots = Vec::new();
+        for s in 0..ns {
+            match parent[s] {
+                Some(p) => children[p].push(s),
+                None => roots.push(s),
+            }
+        }
+        // Walk down the top chain.
+        let mut below = roots;
+        while below.len() == 1 {
+            below = std::mem::take(&mut children[below[0]]);
+        }
+        if below.len() < 2 {
+            return None;
+        }
+        // `below` are consecutive subtrees in postorder; split them where the entries balance.
+        let total: usize = below.iter().map(|&c| work[c]).sum();
+        let mut acc = 0;
+        let mut best = (usize::MAX, 1);
+        for (m, &c) in below.iter().enumerate().take(below.len() - 1) {
+            acc += work[c];
+            let imbalance = acc.abs_diff(total - acc);
+            if imbalance < best.0 {
+                best = (imbalance, m + 1);
+            }
+        }
+        let (last_a, last) = (below[best.1 - 1], below[below.len() - 1]);
+        if first[below[0]] != 0 {
+            return None;
+        }
+        Some(SplitPlan { b_first: last_a + 1, top_first: last + 1, b_row: end[last_a], top_row: end[last] })
+    }
+}
 
 impl SupernodalSolve<'_> {
     /// `y` holds the three permuted right-hand sides one after the other.
@@ -160,20 +255,69 @@ impl SupernodalSolve<'_> {
     #[inline(always)]
     fn solve_generic(&self, y: &mut [f64]) {
         let sym = self.sym;
-        let n = sym.nrows();
+        let (n, ns) = (sym.nrows(), sym.n_supernodes());
         let (y0, rest) = y.split_at_mut(n);
         let (y1, y2) = rest.split_at_mut(n);
         let mut y = [y0, y1, y2];
-        // Work space for the tallest supernode: its rows, three coordinates.
+        let Some(plan) = self.plan else {
+            let mut tmp = self.work_space(0..ns);
+            for s in 0..ns {
+                self.forward(s, &mut y, 0, &mut [&mut [], &mut [], &mut []], n, &mut tmp);
+            }
+            for s in (0..ns).rev() {
+                self.backward(s, &mut y, 0, [&[], &[], &[]], n, &mut tmp);
+            }
+            return;
+        };
+        let (a, b, top) = (0..plan.b_first, plan.b_first..plan.top_first, plan.top_first..ns);
+        let (b_row, top_row) = (plan.b_row, plan.top_row);
+        // Forward: the two groups, each collecting what it sends to the top rows; then the top.
+        let n_top = n - top_row;
+        {
+            let (mut ya, mut yb, mut yt) = split_rows(&mut y, b_row, top_row);
+            let group = |range: std::ops::Range<usize>, own: &mut [&mut [f64]; 3], own_row: usize| {
+                let mut spill = vec![0.0; 3 * n_top];
+                let (s0, r) = spill.split_at_mut(n_top);
+                let (s1, s2) = r.split_at_mut(n_top);
+                let mut spill_rows = [s0, s1, s2];
+                let mut tmp = self.work_space(range.clone());
+                for s in range {
+                    self.forward(s, own, own_row, &mut spill_rows, top_row, &mut tmp);
+                }
+                spill
+            };
+            let (spill_a, spill_b) = rayon::join(|| group(a.clone(), &mut ya, 0), || group(b.clone(), &mut yb, b_row));
+            for d in 0..3 {
+                for (i, v) in yt[d].iter_mut().enumerate() {
+                    *v = (*v + spill_a[d * n_top + i]) + spill_b[d * n_top + i];
+                }
+            }
+            let mut tmp = self.work_space(top.clone());
+            for s in top.clone() {
+                self.forward(s, &mut yt, top_row, &mut [&mut [], &mut [], &mut []], n, &mut tmp);
+            }
+        }
+        // Backward: the top, then the two groups reading the solved top rows.
+        let (mut ya, mut yb, mut yt) = split_rows(&mut y, b_row, top_row);
+        let mut tmp = self.work_space(top.clone());
+        for s in top.rev() {
+            self.backward(s, &mut yt, top_row, [&[], &[], &[]], n, &mut tmp);
+        }
+        let yt = [&*yt[0], &*yt[1], &*yt[2]];
+        let group = |range: std::ops::Range<usize>, own: &mut [&mut [f64]; 3], own_row: usize| {
+            let mut tmp = self.work_space(range.clone());
+            for s in range.rev() {
+                self.backward(s, own, own_row, yt, top_row, &mut tmp);
+            }
+        };
+        rayon::join(|| group(a, &mut ya, 0), || group(b, &mut yb, b_row));
+    }
+
+    /// Work space for the tallest supernode of `range`: its rows, three coordinates.
+    fn work_space(&self, range: std::ops::Range<usize>) -> Vec<f64> {
+        let sym = self.sym;
         let height = |s: usize| sym.supernode_end()[s] - sym.supernode_begin()[s] + sym.supernode(s).pattern().len();
-        let mut tmp = vec![0.0; 3 * (0..sym.n_supernodes()).map(height).max().unwrap_or(0)];
-        let ns = sym.n_supernodes();
-        for s in 0..ns {
-            self.forward(s, &mut y, &mut tmp);
-        }
-        for s in (0..ns).rev() {
-            self.backward(s, &mut y, &mut tmp);
-        }
+        vec![0.0; 3 * range.map(height).max().unwrap_or(0)]
     }
 
     /// Supernode `s`: its first column, width, pattern and values.
@@ -188,8 +332,12 @@ impl SupernodalSolve<'_> {
     }
 
     #[inline(always)]
-    fn forward(&self, s: usize, y: &mut [&mut [f64]; 3], tmp: &mut [f64]) {
+    /// Forward sweep of supernode `s`. Its own rows (and pattern rows below `spill_row`) live
+    /// in `own` from row `own_row`; pattern rows from `spill_row` on receive their updates in
+    /// `spill` (from row `spill_row`).
+    fn forward(&self, s: usize, own: &mut [&mut [f64]; 3], own_row: usize, spill: &mut [&mut [f64]; 3], spill_row: usize, tmp: &mut [f64]) {
         let (start, w, pattern, blk) = self.block(s);
+        let start = start - own_row;
         let r = pattern.len();
         let ld = w + r;
         // Work on the whole column height at once: u = (y of the block's rows, then zeros for
@@ -198,7 +346,7 @@ impl SupernodalSolve<'_> {
         let (u1, u2) = rest.split_at_mut(ld);
         let mut u = [u0, u1, u2];
         for d in 0..3 {
-            u[d][..w].copy_from_slice(&y[d][start..start + w]);
+            u[d][..w].copy_from_slice(&own[d][start..start + w]);
             u[d][w..].fill(0.0);
         }
         // Four columns at a time: solve their 4x4 triangle, then subtract their contribution
@@ -234,27 +382,38 @@ impl SupernodalSolve<'_> {
             }
             k += q;
         }
+        let split = pattern.partition_point(|&p| p < spill_row);
         for d in 0..3 {
-            y[d][start..start + w].copy_from_slice(&u[d][..w]);
-            for (i, &p) in pattern.iter().enumerate() {
-                y[d][p] += u[d][w + i];
+            own[d][start..start + w].copy_from_slice(&u[d][..w]);
+            for (&p, v) in pattern[..split].iter().zip(&u[d][w..w + split]) {
+                own[d][p - own_row] += v;
+            }
+            for (&p, v) in pattern[split..].iter().zip(&u[d][w + split..]) {
+                spill[d][p - spill_row] += v;
             }
         }
     }
 
     #[inline(always)]
-    fn backward(&self, s: usize, y: &mut [&mut [f64]; 3], tmp: &mut [f64]) {
+    /// Backward sweep of supernode `s`: its rows live in `own` from row `own_row`, solved
+    /// pattern rows below `above_row` too, and those from `above_row` on in `above`.
+    fn backward(&self, s: usize, own: &mut [&mut [f64]; 3], own_row: usize, above: [&[f64]; 3], above_row: usize, tmp: &mut [f64]) {
         let (start, w, pattern, blk) = self.block(s);
+        let start = start - own_row;
         let r = pattern.len();
         let ld = w + r;
         // u = (y of the block's rows, then the already solved pattern rows).
         let (u0, rest) = tmp[..3 * ld].split_at_mut(ld);
         let (u1, u2) = rest.split_at_mut(ld);
         let u = [u0, u1, u2];
+        let split = pattern.partition_point(|&p| p < above_row);
         for d in 0..3 {
-            u[d][..w].copy_from_slice(&y[d][start..start + w]);
-            for (i, &p) in pattern.iter().enumerate() {
-                u[d][w + i] = y[d][p];
+            u[d][..w].copy_from_slice(&own[d][start..start + w]);
+            for (&p, v) in pattern[..split].iter().zip(&mut u[d][w..w + split]) {
+                *v = own[d][p - own_row];
+            }
+            for (&p, v) in pattern[split..].iter().zip(&mut u[d][w + split..]) {
+                *v = above[d][p - above_row];
             }
         }
         // Columns in pairs from the last: x_k = (u_k - Σ_{i>k} L_ik x_i) / L_kk, the sums over
@@ -282,9 +441,22 @@ impl SupernodalSolve<'_> {
             }
         }
         for d in 0..3 {
-            y[d][start..start + w].copy_from_slice(&u[d][..w]);
+            own[d][start..start + w].copy_from_slice(&u[d][..w]);
         }
     }
+}
+
+/// The rows of three columns cut at `b_row` and `top_row`: (group A, group B, top).
+type Rows3<'a> = [&'a mut [f64]; 3];
+fn split_rows<'a>(y: &'a mut Rows3<'_>, b_row: usize, top_row: usize) -> (Rows3<'a>, Rows3<'a>, Rows3<'a>) {
+    let [y0, y1, y2] = y;
+    let (a0, r0) = y0.split_at_mut(b_row);
+    let (b0, t0) = r0.split_at_mut(top_row - b_row);
+    let (a1, r1) = y1.split_at_mut(b_row);
+    let (b1, t1) = r1.split_at_mut(top_row - b_row);
+    let (a2, r2) = y2.split_at_mut(b_row);
+    let (b2, t2) = r2.split_at_mut(top_row - b_row);
+    ([a0, a1, a2], [b0, b1, b2], [t0, t1, t2])
 }
 
 /// `u_d[from..] -= Σ_j c_j a_j,d` for four columns `c_j` (each `u_d.len() - from` long).
@@ -486,8 +658,13 @@ mod tests {
         let chol = Cholesky::factor(&a, &Ordering::Custom(perm), Par::Seq).unwrap();
         assert!(matches!(chol.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_)), "the test needs a supernodal factor");
         let b: Vec<[f64; 3]> = (0..n).map(|i| [(i as f64 * 0.3).sin(), (i as f64 * 0.7).cos(), 1.0 + (i % 5) as f64]).collect();
+        assert!(chol.plan.is_some(), "the nested-dissection tree splits in two");
         let mut x = b.clone();
         chol.solve_rows3(&mut x);
+        // The same bytes on one thread.
+        let mut one = b.clone();
+        rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| chol.solve_rows3(&mut one));
+        assert_eq!(x, one);
         let mut reference = faer::Mat::<f64>::from_fn(n, 3, |i, d| b[i][d]);
         chol.solve_in_place(reference.as_mut());
         for i in 0..n {

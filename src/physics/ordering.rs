@@ -456,6 +456,62 @@ pub struct Cost {
     pub entries: f64,
 }
 
+/// The same elimination in postorder of its elimination tree: every subtree becomes a
+/// contiguous range ending at its root, which lets a solve deal whole subtrees to threads. The
+/// fill is unchanged (a postorder is an equivalent order); children are visited in their order
+/// in `order`, so an order that already is a postorder comes back unchanged.
+pub fn postorder(graph: &Graph, order: &[u32]) -> Vec<u32> {
+    let n = graph.node_count();
+    let mut position = vec![0u32; n];
+    for (k, &v) in order.iter().enumerate() {
+        position[v as usize] = k as u32;
+    }
+    // Elimination tree (Liu): for each column k, the roots of the subtrees holding its earlier
+    // neighbours hang below k; `ancestor` compresses paths.
+    let none = u32::MAX;
+    let (mut parent, mut ancestor) = (vec![none; n], vec![none; n]);
+    for k in 0..n {
+        for &u in graph.neighbours(order[k] as usize) {
+            let mut i = position[u as usize];
+            if i as usize >= k {
+                continue;
+            }
+            while ancestor[i as usize] != none && ancestor[i as usize] != k as u32 {
+                let next = ancestor[i as usize];
+                ancestor[i as usize] = k as u32;
+                i = next;
+            }
+            if ancestor[i as usize] == none {
+                ancestor[i as usize] = k as u32;
+                parent[i as usize] = k as u32;
+            }
+        }
+    }
+    let mut children: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut roots = Vec::new();
+    for k in 0..n {
+        match parent[k] {
+            p if p == none => roots.push(k as u32),
+            p => children[p as usize].push(k as u32),
+        }
+    }
+    let mut out = Vec::with_capacity(n);
+    let mut stack: Vec<(u32, usize)> = Vec::new();
+    for &r in &roots {
+        stack.push((r, 0));
+        while let Some(&mut (k, ref mut next)) = stack.last_mut() {
+            if let Some(&c) = children[k as usize].get(*next) {
+                *next += 1;
+                stack.push((c, 0));
+            } else {
+                out.push(order[k as usize]);
+                stack.pop();
+            }
+        }
+    }
+    out
+}
+
 /// Expand a node order to unknowns: node `v` owns unknowns `block_start[v]..block_start[v + 1]`,
 /// which stay together in their original order. Returns `perm[k]` = the unknown eliminated
 /// k-th.

@@ -28,7 +28,7 @@ use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::cholesky::{Cholesky, Ordering};
-use crate::physics::ordering::{expand, minimum_degree, nested_dissection, predicted_cost, Cost, Graph};
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, Graph};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -191,7 +191,7 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
     } else {
         (degree, "minimum degree (nodes)", cost_md)
     };
-    FillReducingOrder { perm: expand(&order, &block_start), name, cost }
+    FillReducingOrder { perm: expand(&postorder(&graph, &order), &block_start), name, cost }
 }
 
 impl GlobalStep {
