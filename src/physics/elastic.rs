@@ -222,6 +222,29 @@ impl Elastic {
         });
     }
 
+    /// [`Elastic::apply_j`] on the calling thread, as a scatter in tet order: it streams the
+    /// targets and gradients instead of gathering them per node, for callers that are already
+    /// parallel (one sample each). Every node sums its tets in increasing order starting from
+    /// zero, as the gather does, so the bytes are the same.
+    pub fn apply_j_sequential(&self, targets: &[Mat3], out: &mut [Point]) {
+        self.apply_j_sequential_with(|e| targets[e], out);
+    }
+
+    /// [`Elastic::apply_j_sequential`] with the target of tet `e` computed by `target(e)`, once
+    /// per tet in increasing order.
+    pub fn apply_j_sequential_with(&self, mut target: impl FnMut(usize) -> Mat3, out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        for (e, ((tet, g), &w)) in self.tets.iter().zip(&self.grads).zip(&self.weights).enumerate() {
+            let p = &target(e);
+            for (&a, g) in tet.iter().zip(g) {
+                let o = &mut out[a as usize];
+                for i in 0..3 {
+                    o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+        }
+    }
+
     /// `∇E = L x - J p(x)`, the negated elastic force, with fresh projections.
     pub fn energy_gradient(&self, x: &[Point]) -> Vec<Point> {
         let mut targets = vec![[[0.0; 3]; 3]; self.tet_count()];
@@ -372,6 +395,23 @@ pub(crate) mod tests {
             assert_eq!(targets[e], crate::physics::projection::project(&f, el.strain_share()), "tet {e}");
             assert_eq!((with_jacobians[e], jac[e]), project_with_jacobian(&f, el.strain_share()), "tet {e}");
         }
+    }
+
+    #[test]
+    fn sequential_products_give_the_bytes_of_the_parallel_ones() {
+        let mesh = cube_mesh(3);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let x: Vec<Point> = mesh.positions.iter().map(|p| [p[0] * 1.1 + 0.3 * p[2], p[1] - 0.2 * p[0] * p[2], p[2] * 0.9]).collect();
+        let mut targets = vec![[[0.0; 3]; 3]; el.tet_count()];
+        el.local_step(&x, &mut targets);
+        let n = x.len();
+        let (mut a, mut b) = (vec![[0.0; 3]; n], vec![[1.0; 3]; n]);
+        el.apply_j(&targets, &mut a);
+        el.apply_j_sequential(&targets, &mut b);
+        assert_eq!(a, b);
+        el.stiffness.mul_points(&x, &mut a);
+        el.stiffness.mul_points_sequential(&x, &mut b);
+        assert_eq!(a, b);
     }
 
     #[test]

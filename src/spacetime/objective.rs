@@ -131,8 +131,9 @@ impl<'a> Objective<'a> {
                 Self::combine(&u, &l, &mut x);
                 Self::combine(&u, &c, &mut acc);
                 let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                el.stiffness.mul_points(&x, &mut lx);
-                el.apply_j(ps, &mut jp);
+                // Samples run in parallel: the products run on this thread (same bytes).
+                el.stiffness.mul_points_sequential(&x, &mut lx);
+                el.apply_j_sequential(ps, &mut jp);
                 let (mut w, mut w_el) = (0.0, 0.0);
                 let mut f = vec![[0.0; 3]; n];
                 for a in 0..n {
@@ -147,9 +148,8 @@ impl<'a> Objective<'a> {
                 // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
                 let correction = p.jacobians.as_ref().map(|jac| {
                     let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
-                    let dp: Vec<Mat3> = jac[k].iter().enumerate().map(|(e, j)| j.apply(&el.deformation_gradient(e, &u))).collect();
                     let mut z = vec![[0.0; 3]; n];
-                    el.apply_j(&dp, &mut z);
+                    el.apply_j_sequential_with(|e| jac[k][e].apply(&el.deformation_gradient(e, &u)), &mut z);
                     z
                 });
                 (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el, correction)
@@ -184,7 +184,7 @@ impl<'a> Objective<'a> {
                     }
                 }
                 let mut lfl = vec![[0.0; 3]; n];
-                el.stiffness.mul_points(&fl, &mut lfl);
+                el.stiffness.mul_points_sequential(&fl, &mut lfl);
                 fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect::<Vec<Point>>()
             })
             .collect::<Vec<_>>();
