@@ -190,6 +190,32 @@ impl Elastic {
         });
     }
 
+    /// [`Elastic::local_step`] on the calling thread, into a new vector (for callers that are
+    /// already parallel, e.g. over samples): no zero-filled buffer, no nested tasks.
+    pub fn local_step_sequential(&self, x: &[Point]) -> Vec<Mat3> {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        let mut targets = Vec::with_capacity(count);
+        for first in (0..count).step_by(BATCH) {
+            let p = project_batch(&self.deformation_gradients(first, x), share);
+            targets.extend_from_slice(&p[..BATCH.min(count - first)]);
+        }
+        targets
+    }
+
+    /// [`Elastic::local_step_with_jacobians`] on the calling thread, into new vectors.
+    pub fn local_step_with_jacobians_sequential(&self, x: &[Point]) -> (Vec<Mat3>, Vec<ProjectionJacobian>) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
+        for first in (0..count).step_by(BATCH) {
+            let pj = project_with_jacobian_batch(&self.deformation_gradients(first, x), share);
+            for (p, j) in pj.into_iter().take(BATCH.min(count - first)) {
+                targets.push(p);
+                jacobians.push(j);
+            }
+        }
+        (targets, jacobians)
+    }
+
     /// `out = ∇²E(x) u = L u - J DP[dF(u)]`, the exact Hessian of the elastic energy applied to
     /// `u`, from the projection Jacobians at `x`.
     pub fn hessian_apply(&self, jacobians: &[ProjectionJacobian], u: &[Point], out: &mut [Point]) {
@@ -390,6 +416,8 @@ pub(crate) mod tests {
         el.local_step(&x, &mut targets);
         let mut with_jacobians = vec![[[0.0; 3]; 3]; el.tet_count()];
         el.local_step_with_jacobians(&x, &mut with_jacobians, &mut jac);
+        assert_eq!(el.local_step_sequential(&x), targets);
+        assert_eq!(el.local_step_with_jacobians_sequential(&x), (with_jacobians.clone(), jac.clone()));
         for e in 0..el.tet_count() {
             let f = el.deformation_gradient(e, &x);
             assert_eq!(targets[e], crate::physics::projection::project(&f, el.strain_share()), "tet {e}");

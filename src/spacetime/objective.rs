@@ -90,21 +90,18 @@ impl<'a> Objective<'a> {
     /// samples and elements; with their Jacobians when `with_jacobians`.
     pub fn local_step(&self, tr: &Trajectory, with_jacobians: bool) -> Projections {
         let n = self.elastic.node_count();
-        let e_count = self.elastic.tet_count();
         let per_sample: Vec<(Vec<Mat3>, Option<Vec<ProjectionJacobian>>)> = self
             .samples
             .par_iter()
             .map(|s| {
                 let mut x = vec![[0.0; 3]; n];
                 Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
-                let mut p = vec![[[0.0; 3]; 3]; e_count];
+                // Samples run in parallel; each projects its tets on this thread.
                 if with_jacobians {
-                    let mut j = vec![ProjectionJacobian::default(); e_count];
-                    self.elastic.local_step_with_jacobians(&x, &mut p, &mut j);
+                    let (p, j) = self.elastic.local_step_with_jacobians_sequential(&x);
                     (p, Some(j))
                 } else {
-                    self.elastic.local_step(&x, &mut p);
-                    (p, None)
+                    (self.elastic.local_step_sequential(&x), None)
                 }
             })
             .collect();
