@@ -86,8 +86,10 @@ impl Cholesky {
     }
 
     /// Solve `A x = b` in place for three right-hand sides stored per row (`x[i][d]`), the
-    /// shape of the spacetime unknowns. A supernodal factor is swept by [`SupernodalSolve`]
-    /// (streams each column of `L` once per sweep); a simplicial one goes through faer.
+    /// shape of the spacetime unknowns. A supernodal factor is swept by our own code: each
+    /// column of `L` is streamed once per sweep for all three coordinates, and independent
+    /// subtrees go to two threads (same bytes on any thread count). A simplicial factor (small
+    /// systems) goes through faer.
     pub fn solve_rows3(&self, x: &mut [[f64; 3]]) {
         let n = self.dimension();
         assert_eq!(x.len(), n);

@@ -401,7 +401,8 @@ fn lower_pattern(graph: &Graph, order: Option<&[u32]>) -> SymbolicSparseColMat<u
 }
 
 /// The cost of factorizing a matrix whose node `v` carries `weights[v]` unknowns (kept together)
-/// in node order `order`: the multiply-adds `Σ_j c_j²` and the stored entries `Σ_j c_j` over the
+/// in node order `order`: the floating-point operations `Σ_j c_j²` (multiplies and adds of the
+/// column updates; `n³/3` for a dense matrix) and the stored entries `Σ_j c_j` over the
 /// factor's columns `j` with `c_j` entries each, from the symbolic factorization of the node
 /// graph. Two orders of one matrix compare in milliseconds, without touching the matrix.
 pub fn predicted_cost(graph: &Graph, order: &[u32], weights: &[usize]) -> Cost {
@@ -438,11 +439,11 @@ pub fn predicted_cost(graph: &Graph, order: &[u32], weights: &[usize]) -> Cost {
             }
         }
     }
-    let mut cost = Cost { multiply_adds: 0.0, entries: 0.0 };
+    let mut cost = Cost { flops: 0.0, entries: 0.0 };
     for k in 0..n {
         for j in 0..weights[order[k] as usize] {
             let c = (w(k) - j as f64) + below[k];
-            cost.multiply_adds += c * c;
+            cost.flops += c * c;
             cost.entries += c;
         }
     }
@@ -452,7 +453,7 @@ pub fn predicted_cost(graph: &Graph, order: &[u32], weights: &[usize]) -> Cost {
 /// Predicted factorization cost (see [`predicted_cost`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cost {
-    pub multiply_adds: f64,
+    pub flops: f64,
     pub entries: f64,
 }
 

@@ -15,6 +15,13 @@
 //! node-major order (rows come out sorted; no triplet sort), and the three coordinates are
 //! three right-hand sides of one factorization.
 //!
+//! Cost: `L M⁻¹ L` couples nodes two rings apart, so the factor fills in heavily (50M entries
+//! for 25k unknowns on a 2.6k-node body). Every node's free slots stay together: the
+//! fill-reducing order is found on the node graph ([`fill_reducing_order`]), the numeric
+//! factorization is faer's supernodal one (parallel above 5 G predicted flops), and the
+//! solves sweep the factor once per direction for all three coordinates, on two threads
+//! ([`Cholesky::solve_rows3`]).
+//!
 //! The step itself is the minimizer of the quadratic model plus the proximal term around the
 //! current iterate `q`: `q + Δ` with `(H + P) Δ = -∇W`. At a fixed point `∇W = 0`, so the
 //! regularization never moves the fixed point; it only damps the path to it.
@@ -145,8 +152,8 @@ pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeC
     SparseColMat::new(symbolic, vals)
 }
 
-/// Predicted multiply-adds above which the numeric factorization runs in parallel.
-const PARALLEL_FACTOR_MULTIPLY_ADDS: f64 = 5e9;
+/// Predicted flops above which the numeric factorization runs in parallel.
+const PARALLEL_FACTOR_FLOPS: f64 = 5e9;
 
 /// A fill-reducing order of the unknowns and how it was found.
 pub struct FillReducingOrder {
@@ -161,11 +168,12 @@ pub struct FillReducingOrder {
 /// (node-major layout) and stay together, so ordering the 2-ring graph of the nodes (a few
 /// thousand vertices) orders the matrix (tens of thousands of rows).
 ///
-/// Two candidates, and the one with fewer predicted multiply-adds wins: geometric nested
-/// dissection (best on large 3D bodies: 85 G vs 101 G multiply-adds for minimum degree on the
-/// 2.6k-node benchmark body, whose matrix faer's AMD orders to 127 G) and minimum degree
-/// (better on small or thin bodies: 0.37 G vs 0.98 G on DINO). Both and their predictions take
-/// about 60 ms on the 2.6k-node body.
+/// Two candidates, and the one with fewer predicted flops wins: geometric nested dissection
+/// (best on large 3D bodies: 85 G vs 101 G flops for minimum degree on the 2.6k-node benchmark
+/// body, whose matrix faer's AMD orders to 127 G) and minimum degree (better on small or thin
+/// bodies: 0.37 G vs 0.98 G on DINO). Both and their predictions take about 60 ms on the
+/// 2.6k-node body. The winner is put in postorder of its elimination tree (same fill), which
+/// lets the solve give whole subtrees to two threads.
 pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
@@ -186,7 +194,7 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
     let dissection = nested_dissection(&graph, rest);
     let degree = minimum_degree(&graph);
     let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
-    let (order, name, cost) = if cost_nd.multiply_adds <= cost_md.multiply_adds {
+    let (order, name, cost) = if cost_nd.flops <= cost_md.flops {
         (dissection, "nested dissection (nodes)", cost_nd)
     } else {
         (degree, "minimum degree (nodes)", cost_md)
@@ -211,8 +219,8 @@ impl GlobalStep {
         let t1 = std::time::Instant::now();
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
         // faer's parallel supernodal factorization pays off only for large fronts (measured on
-        // 2 cores: 1.4 s instead of 2.3 s at 85 G multiply-adds; small systems slow down).
-        let par = if order.cost.multiply_adds > PARALLEL_FACTOR_MULTIPLY_ADDS { Par::rayon(0) } else { Par::Seq };
+        // 2 cores: 1.4 s instead of 2.3 s at 85 G flops; small systems slow down).
+        let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
         let cholesky = Cholesky::factor(&a, &Ordering::Custom(order.perm), par).map_err(|_| {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
