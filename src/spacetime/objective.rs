@@ -89,19 +89,32 @@ impl<'a> Objective<'a> {
     /// The local step: projections of every element at every sample, in parallel over
     /// samples and elements; with their Jacobians when `with_jacobians`.
     pub fn local_step(&self, tr: &Trajectory, with_jacobians: bool) -> Projections {
-        let n = self.elastic.node_count();
+        let (el, n) = (self.elastic, self.elastic.node_count());
+        // Samples run in parallel, each projecting its tets on its thread; with too few samples
+        // to keep the threads busy, the tets of each sample are split instead (same bytes).
+        let split_tets = self.samples.len() < 4 * rayon::current_num_threads();
         let per_sample: Vec<(Vec<Mat3>, Option<Vec<ProjectionJacobian>>)> = self
             .samples
             .par_iter()
             .map(|s| {
                 let mut x = vec![[0.0; 3]; n];
                 Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
-                // Samples run in parallel; each projects its tets on this thread.
-                if with_jacobians {
-                    let (p, j) = self.elastic.local_step_with_jacobians_sequential(&x);
-                    (p, Some(j))
-                } else {
-                    (self.elastic.local_step_sequential(&x), None)
+                match (with_jacobians, split_tets) {
+                    (false, false) => (el.local_step_sequential(&x), None),
+                    (true, false) => {
+                        let (p, j) = el.local_step_with_jacobians_sequential(&x);
+                        (p, Some(j))
+                    }
+                    (false, true) => {
+                        let mut p = vec![[[0.0; 3]; 3]; el.tet_count()];
+                        el.local_step(&x, &mut p);
+                        (p, None)
+                    }
+                    (true, true) => {
+                        let (mut p, mut j) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![ProjectionJacobian::default(); el.tet_count()]);
+                        el.local_step_with_jacobians(&x, &mut p, &mut j);
+                        (p, Some(j))
+                    }
                 }
             })
             .collect();
