@@ -18,7 +18,7 @@
 //! Cost: `L M⁻¹ L` couples nodes two rings apart, so the factor fills in heavily (50M entries
 //! for 25k unknowns on a 2.6k-node body). Every node's free slots stay together: the
 //! fill-reducing order is found on the node graph ([`fill_reducing_order`]), the numeric
-//! factorization is faer's supernodal one (parallel above 5 G predicted flops), and the
+//! factorization is faer's supernodal one (parallel above 1 G predicted flops), and the
 //! solves sweep the factor once per direction for all three coordinates, on two threads
 //! ([`Cholesky::solve_rows3`]).
 //!
@@ -152,8 +152,10 @@ pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeC
     SparseColMat::new(symbolic, vals)
 }
 
-/// Predicted flops above which the numeric factorization runs in parallel.
-const PARALLEL_FACTOR_FLOPS: f64 = 5e9;
+/// Predicted flops above which the numeric factorization runs in parallel (measured on 2
+/// cores: 0.37 G flops, DINO: 24-40 ms sequential, 31-55 ms parallel; 2.6 G, TWIST: 101-134 ms
+/// vs 77-106 ms; 85 G, ARMADILLO-size: 2.3 s vs 1.4 s).
+const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
 
 /// A fill-reducing order of the unknowns and how it was found.
 pub struct FillReducingOrder {
@@ -218,8 +220,7 @@ impl GlobalStep {
         let assemble_seconds = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
-        // faer's parallel supernodal factorization pays off only for large fronts (measured on
-        // 2 cores: 1.4 s instead of 2.3 s at 85 G flops; small systems slow down).
+        // faer's parallel supernodal factorization pays off only for large fronts.
         let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
         let cholesky = Cholesky::factor(&a, &Ordering::Custom(order.perm), par).map_err(|_| {
             Error::general(
