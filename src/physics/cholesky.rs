@@ -1,5 +1,7 @@
 //! Sparse Cholesky factorization (faer) with the symbolic analysis kept for refactorization:
-//! the spacetime matrix changes values, never pattern, when keyframe times move.
+//! the spacetime matrix changes values, never pattern, when keyframe times move. Solves with
+//! the three coordinates of the spacetime unknowns have their own supernodal sweeps
+//! ([`Cholesky::solve_rows3`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;

@@ -1,4 +1,5 @@
-//! Fill-reducing ordering by geometric nested dissection of the node graph.
+//! Fill-reducing orderings of the node graph: geometric nested dissection, minimum degree, their
+//! predicted cost, and postordering.
 //!
 //! The spacetime normal matrix has one block of unknowns per mesh node (its free time slots,
 //! contiguous in the unknown order), and two nodes are coupled when they are within two rings
@@ -13,6 +14,11 @@
 //! principal axes of the part, each at a few balanced positions) and the separator that is
 //! smallest for its balance wins. Everything is deterministic: ties break by candidate order and
 //! node index.
+//!
+//! [`predicted_cost`] compares orders in milliseconds from a symbolic factorization of the node
+//! graph with node weights (slots per node); [`postorder`] renumbers an order along its
+//! elimination tree so that subtrees are contiguous; [`expand`] turns a node order into an
+//! order of the unknowns.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::amd;
@@ -110,10 +116,13 @@ struct Work<'a> {
     order: Vec<u32>,
 }
 
-/// A vertex separator of a part: its nodes and the sizes of what is left on each side.
+/// A vertex separator of a part.
 struct Split {
+    /// Its nodes, in increasing order.
     separator: Vec<u32>,
+    /// Its size, penalized by imbalance (lower is better).
     score: f64,
+    /// Per node of the part (in the part's order): 0 or 1 for the two sides, 2 in the separator.
     side: Vec<u8>,
 }
 
@@ -208,34 +217,23 @@ fn best_split(work: &mut Work, nodes: &[u32]) -> Option<Split> {
                 work.side[v as usize] = (k >= cut) as u8;
             }
             let separator = vertex_cover(work, nodes, stamp);
-            let sep = separator.len() as f64;
-            // Sizes left on each side once the separator is removed.
+            // Sizes left on each side once the separator (side 2 from now on) is removed.
             let mut sizes = [0usize; 2];
             for &v in nodes {
                 sizes[work.side[v as usize] as usize] += 1;
             }
             for &v in &separator {
                 sizes[work.side[v as usize] as usize] -= 1;
+                work.side[v as usize] = 2;
             }
             if sizes[0] == 0 || sizes[1] == 0 {
                 continue;
             }
             let m = (sizes[0] + sizes[1]) as f64;
             // The separator size, penalized by imbalance (equal to it at a perfect split).
-            let score = sep * m * m / (4.0 * sizes[0] as f64 * sizes[1] as f64);
+            let score = separator.len() as f64 * m * m / (4.0 * sizes[0] as f64 * sizes[1] as f64);
             if best.as_ref().is_none_or(|b| score < b.score) {
-                let mut side: Vec<u8> = nodes.iter().map(|&v| work.side[v as usize]).collect();
-                for &v in &separator {
-                    // Mark separator nodes: find them by a second membership pass below.
-                    work.local[v as usize] = u32::MAX - 1;
-                }
-                for (s, &v) in side.iter_mut().zip(nodes) {
-                    if work.local[v as usize] == u32::MAX - 1 {
-                        *s = 2;
-                        work.local[v as usize] = u32::MAX;
-                    }
-                }
-                best = Some(Split { separator, score, side });
+                best = Some(Split { separator, score, side: nodes.iter().map(|&v| work.side[v as usize]).collect() });
             }
         }
     }
@@ -576,6 +574,39 @@ mod tests {
         assert!(plane.is_some(), "the top separator is the middle plane");
         // Deterministic.
         assert_eq!(order, nested_dissection(&g, &coords));
+    }
+
+    #[test]
+    fn cost_of_a_clique_is_that_of_a_dense_factorization() {
+        // K5 with weights 1: columns of 5, 4, ..., 1 entries.
+        let lists: Vec<Vec<u32>> = (0..5u32).map(|v| (0..5u32).filter(|&u| u != v).collect()).collect();
+        let mut xadj = vec![0];
+        let mut adj = Vec::new();
+        for l in lists {
+            adj.extend(l);
+            xadj.push(adj.len());
+        }
+        let g = Graph { xadj, adj };
+        let c = predicted_cost(&g, &[0, 1, 2, 3, 4], &[1; 5]);
+        assert_eq!((c.flops, c.entries), (55.0, 15.0));
+        // One node of 3 unknowns and two of 1: the same dense 5x5 factor.
+        let g2 = Graph { xadj: vec![0, 2, 4, 6], adj: vec![1, 2, 0, 2, 0, 1] };
+        let c2 = predicted_cost(&g2, &[2, 0, 1], &[3, 1, 1]);
+        assert_eq!((c2.flops, c2.entries), (55.0, 15.0));
+    }
+
+    #[test]
+    fn postorder_keeps_the_fill_and_is_idempotent() {
+        let (g, coords) = grid(7);
+        let weights = vec![2; g.node_count()];
+        for order in [nested_dissection(&g, &coords), minimum_degree(&g), (0..g.node_count() as u32).collect()] {
+            let post = postorder(&g, &order);
+            let mut sorted = post.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (0..g.node_count() as u32).collect::<Vec<_>>());
+            assert_eq!(predicted_cost(&g, &post, &weights), predicted_cost(&g, &order, &weights));
+            assert_eq!(postorder(&g, &post), post);
+        }
     }
 
     #[test]
