@@ -71,6 +71,20 @@ impl Csr {
         });
     }
 
+    /// [`Csr::mul_points`] on the calling thread (the same sums), for callers that are
+    /// already parallel.
+    pub fn mul_points_sequential(&self, x: &[Point], out: &mut [Point]) {
+        for (i, o) in out.iter_mut().enumerate() {
+            let mut acc = [0.0; 3];
+            for (j, v) in self.row(i) {
+                acc[0] += v * x[j][0];
+                acc[1] += v * x[j][1];
+                acc[2] += v * x[j][2];
+            }
+            *o = acc;
+        }
+    }
+
     /// `self * diag(d) * self` for a symmetric `self` (its pattern is the 2-ring of the graph).
     pub fn sandwich_diagonal(&self, d: &[f64]) -> Csr {
         let n = self.n;

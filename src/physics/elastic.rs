@@ -17,8 +17,10 @@ use rayon::prelude::*;
 
 use super::csr::Csr;
 use super::mat3::{self, Mat3};
-use super::projection::{project, project_with_jacobian, volume_preserving, ProjectionJacobian};
-use super::svd3::svd3;
+#[cfg(doc)]
+use super::projection::project;
+use super::projection::{project_batch, project_with_jacobian_batch, volume_preserving, ProjectionJacobian};
+use super::svd3::{svd3, BATCH};
 use crate::error::{Error, Result};
 use crate::mesh::{Point, TetMesh};
 use crate::scene::Material;
@@ -26,6 +28,8 @@ use crate::scene::Material;
 #[derive(Debug, Clone)]
 pub struct Elastic {
     pub tets: Vec<[u32; 4]>,
+    /// Rest positions of the nodes (used to order the global solves geometrically).
+    pub rest: Vec<Point>,
     /// Rest shape-function gradients `g_a` per tet.
     pub grads: Vec<[[f64; 3]; 4]>,
     /// Rest volumes.
@@ -111,6 +115,7 @@ impl Elastic {
         }
         Ok(Elastic {
             tets: mesh.tets.clone(),
+            rest: mesh.positions.clone(),
             grads,
             volumes,
             weights,
@@ -153,20 +158,62 @@ impl Elastic {
         f
     }
 
-    /// The local step: every tet's projection target at positions `x`, in parallel.
+    /// Deformation gradients of the [`BATCH`] tets from `first` (the identity past the last
+    /// tet: those lanes are computed and dropped).
+    #[inline]
+    fn deformation_gradients(&self, first: usize, x: &[Point]) -> [Mat3; BATCH] {
+        let mut f = [mat3::IDENTITY; BATCH];
+        for (l, fl) in f.iter_mut().enumerate().take(self.tets.len().saturating_sub(first)) {
+            *fl = self.deformation_gradient(first + l, x);
+        }
+        f
+    }
+
+    /// The local step: every tet's projection target at positions `x`, in parallel, [`BATCH`]
+    /// tets per call of the vectorized projection (bit-identical to [`project`] per tet).
     pub fn local_step(&self, x: &[Point], targets: &mut [Mat3]) {
         let share = self.strain_share();
-        targets.par_iter_mut().enumerate().with_min_len(64).for_each(|(e, p)| {
-            *p = project(&self.deformation_gradient(e, x), share);
+        targets.par_chunks_mut(BATCH).enumerate().with_min_len(4).for_each(|(c, out)| {
+            let p = project_batch(&self.deformation_gradients(c * BATCH, x), share);
+            out.copy_from_slice(&p[..out.len()]);
         });
     }
 
     /// The local step with the derivative of every projection (for exact Hessian products).
     pub fn local_step_with_jacobians(&self, x: &[Point], targets: &mut [Mat3], jacobians: &mut [ProjectionJacobian]) {
         let share = self.strain_share();
-        targets.par_iter_mut().zip(jacobians.par_iter_mut()).enumerate().with_min_len(64).for_each(|(e, (p, j))| {
-            (*p, *j) = project_with_jacobian(&self.deformation_gradient(e, x), share);
+        targets.par_chunks_mut(BATCH).zip(jacobians.par_chunks_mut(BATCH)).enumerate().with_min_len(4).for_each(|(c, (out, jac))| {
+            let pj = project_with_jacobian_batch(&self.deformation_gradients(c * BATCH, x), share);
+            for (l, (p, j)) in pj.into_iter().take(out.len()).enumerate() {
+                (out[l], jac[l]) = (p, j);
+            }
         });
+    }
+
+    /// [`Elastic::local_step`] on the calling thread, into a new vector (for callers that are
+    /// already parallel, e.g. over samples): no zero-filled buffer, no nested tasks.
+    pub fn local_step_sequential(&self, x: &[Point]) -> Vec<Mat3> {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        let mut targets = Vec::with_capacity(count);
+        for first in (0..count).step_by(BATCH) {
+            let p = project_batch(&self.deformation_gradients(first, x), share);
+            targets.extend_from_slice(&p[..BATCH.min(count - first)]);
+        }
+        targets
+    }
+
+    /// [`Elastic::local_step_with_jacobians`] on the calling thread, into new vectors.
+    pub fn local_step_with_jacobians_sequential(&self, x: &[Point]) -> (Vec<Mat3>, Vec<ProjectionJacobian>) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
+        for first in (0..count).step_by(BATCH) {
+            let pj = project_with_jacobian_batch(&self.deformation_gradients(first, x), share);
+            for (p, j) in pj.into_iter().take(BATCH.min(count - first)) {
+                targets.push(p);
+                jacobians.push(j);
+            }
+        }
+        (targets, jacobians)
     }
 
     /// `out = ∇²E(x) u = L u - J DP[dF(u)]`, the exact Hessian of the elastic energy applied to
@@ -201,6 +248,29 @@ impl Elastic {
         });
     }
 
+    /// [`Elastic::apply_j`] on the calling thread, as a scatter in tet order: it streams the
+    /// targets and gradients instead of gathering them per node, for callers that are already
+    /// parallel (one sample each). Every node sums its tets in increasing order starting from
+    /// zero, as the gather does, so the bytes are the same.
+    pub fn apply_j_sequential(&self, targets: &[Mat3], out: &mut [Point]) {
+        self.apply_j_sequential_with(|e| targets[e], out);
+    }
+
+    /// [`Elastic::apply_j_sequential`] with the target of tet `e` computed by `target(e)`, once
+    /// per tet in increasing order.
+    pub fn apply_j_sequential_with(&self, mut target: impl FnMut(usize) -> Mat3, out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        for (e, ((tet, g), &w)) in self.tets.iter().zip(&self.grads).zip(&self.weights).enumerate() {
+            let p = &target(e);
+            for (&a, g) in tet.iter().zip(g) {
+                let o = &mut out[a as usize];
+                for i in 0..3 {
+                    o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+        }
+    }
+
     /// `∇E = L x - J p(x)`, the negated elastic force, with fresh projections.
     pub fn energy_gradient(&self, x: &[Point]) -> Vec<Point> {
         let mut targets = vec![[[0.0; 3]; 3]; self.tet_count()];
@@ -232,6 +302,7 @@ impl Elastic {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::physics::projection::project_with_jacobian;
     use crate::mesh::TetMesh;
 
     /// A cube [0,1]³ split into `n³` cells of 6 tets each (Kuhn triangulation, positive).
@@ -332,6 +403,43 @@ pub(crate) mod tests {
             }
         }
         assert!(worst < 1e-6, "relative gradient error {worst}");
+    }
+
+    #[test]
+    fn batched_local_step_matches_the_projection_of_every_tet() {
+        // 3³ cells x 6 = 162 tets: not a multiple of the batch, so the last batch is padded.
+        let mesh = cube_mesh(3);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        assert_ne!(el.tet_count() % BATCH, 0);
+        let x: Vec<Point> = mesh.positions.iter().map(|p| [p[0] * 1.3 - 0.4 * p[2] * p[1], -p[1] + 0.2 * p[0], p[2] * 0.6 + 0.5 * p[0] * p[0]]).collect();
+        let (mut targets, mut jac) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![ProjectionJacobian::default(); el.tet_count()]);
+        el.local_step(&x, &mut targets);
+        let mut with_jacobians = vec![[[0.0; 3]; 3]; el.tet_count()];
+        el.local_step_with_jacobians(&x, &mut with_jacobians, &mut jac);
+        assert_eq!(el.local_step_sequential(&x), targets);
+        assert_eq!(el.local_step_with_jacobians_sequential(&x), (with_jacobians.clone(), jac.clone()));
+        for e in 0..el.tet_count() {
+            let f = el.deformation_gradient(e, &x);
+            assert_eq!(targets[e], crate::physics::projection::project(&f, el.strain_share()), "tet {e}");
+            assert_eq!((with_jacobians[e], jac[e]), project_with_jacobian(&f, el.strain_share()), "tet {e}");
+        }
+    }
+
+    #[test]
+    fn sequential_products_give_the_bytes_of_the_parallel_ones() {
+        let mesh = cube_mesh(3);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let x: Vec<Point> = mesh.positions.iter().map(|p| [p[0] * 1.1 + 0.3 * p[2], p[1] - 0.2 * p[0] * p[2], p[2] * 0.9]).collect();
+        let mut targets = vec![[[0.0; 3]; 3]; el.tet_count()];
+        el.local_step(&x, &mut targets);
+        let n = x.len();
+        let (mut a, mut b) = (vec![[0.0; 3]; n], vec![[1.0; 3]; n]);
+        el.apply_j(&targets, &mut a);
+        el.apply_j_sequential(&targets, &mut b);
+        assert_eq!(a, b);
+        el.stiffness.mul_points(&x, &mut a);
+        el.stiffness.mul_points_sequential(&x, &mut b);
+        assert_eq!(a, b);
     }
 
     #[test]

@@ -7,5 +7,6 @@ pub mod csr;
 pub mod elastic;
 pub mod equilibrium;
 pub mod mat3;
+pub mod ordering;
 pub mod projection;
 pub mod svd3;

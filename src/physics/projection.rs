@@ -8,10 +8,12 @@
 //! `P = r R + (1 - r) D`, `r = k_strain / (k_strain + k_volume)`; that is what the global
 //! step sees.
 
-use super::mat3::{scaled_product, Mat3};
-use super::svd3::svd3;
+use super::mat3::Mat3;
+#[cfg(doc)]
+use super::mat3::scaled_product;
+use super::svd3::{lane, svd_lanes, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
 
-/// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`]:
+/// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`](super::svd3::svd3):
 /// `σ1 >= σ2 >= |σ3|`, `σ3` possibly negative for an inverted element).
 ///
 /// Stationarity of `½|σ' - σ|² - λ(Πσ' - 1)` gives `σ'_i (σ'_i - σ_i) = λ` for every `i`, so
@@ -22,50 +24,96 @@ use super::svd3::svd3;
 /// value moves to the other root and the stationary point is found by bisection: a KKT
 /// point that collapses the shortest axis, as the exact projection does.
 pub fn volume_preserving(sigma: [f64; 3]) -> [f64; 3] {
-    let product = sigma[0] * sigma[1] * sigma[2];
-    if (product - 1.0).abs() <= 1e-15 {
-        return sigma;
-    }
-    let plus = |l: f64| sigma.map(|s| 0.5 * (s + (s * s + 4.0 * l).max(0.0).sqrt()));
-    let smallest = sigma[2];
-    // Domain of the + branch: σ_i² + 4λ >= 0 for all i; for an inverted element λ > 0.
-    let lambda_min = if smallest > 0.0 { -0.25 * smallest * smallest } else { 0.0 };
-    let product = |s: [f64; 3]| s[0] * s[1] * s[2];
-
-    if smallest > 0.0 && product(plus(lambda_min)) > 1.0 {
+    let (s, collapse) = volume_lanes::<1>(sigma.map(|v| Lanes([v])));
+    if collapse.0[0] {
         return collapse_shortest_axis(sigma);
     }
+    s.map(|v| v.0[0])
+}
+
+#[inline(always)]
+fn product3<const N: usize>(s: &[Lanes<N>; 3]) -> Lanes<N> {
+    s[0] * s[1] * s[2]
+}
+
+/// `σ'_i(λ) = (σ_i + sqrt(σ_i² + 4λ)) / 2`, the branch of the stationarity condition that
+/// grows with λ (the radicand clamped at 0).
+#[inline(always)]
+fn plus_branch<const N: usize>(sigma: &[Lanes<N>; 3], l: Lanes<N>) -> [Lanes<N>; 3] {
+    let (zero, half, four) = (Lanes::splat(0.0), Lanes::splat(0.5), Lanes::splat(4.0));
+    let mut out = *sigma;
+    for s in out.iter_mut() {
+        *s = half * (*s + (*s * *s + four * l).max(zero).sqrt());
+    }
+    out
+}
+
+/// [`volume_preserving`] on lanes: every branch a per-lane select, the iterations running until
+/// the slowest lane is done with finished lanes frozen, so each lane gets exactly the scalar
+/// result. Lanes that need [`collapse_shortest_axis`] (an element stretched more than twice in
+/// every direction) are flagged instead of solved.
+#[inline(always)]
+fn volume_lanes<const N: usize>(sigma: [Lanes<N>; 3]) -> ([Lanes<N>; 3], Mask<N>) {
+    let (zero, one, half) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(0.5));
+    // Already on the surface.
+    let mut done = (product3(&sigma) - one).abs().le(Lanes::splat(1e-15));
+    let mut result = sigma;
+    let smallest = sigma[2];
+    let positive = smallest.gt(zero);
+    // Domain of the + branch: σ_i² + 4λ >= 0 for all i; for an inverted element λ > 0.
+    let lambda_min = Lanes::select(positive, Lanes::splat(-0.25) * smallest * smallest, zero);
+    let collapse = !done & positive & product3(&plus_branch(&sigma, lambda_min)).gt(one);
+    done = done | collapse;
     // φ(λ) = Π σ'_i(λ) - 1 increases on (λ_min, ∞): bracket its root and run Newton from the
     // linearization σ'_i ≈ σ_i + λ/σ_i, falling back to bisection outside the bracket.
     let mut lo = lambda_min;
-    let mut hi = sigma.iter().map(|s| 1.0 - s).fold(0.0f64, f64::max) + 1e-3;
-    while product(plus(hi)) < 1.0 {
-        hi = 2.0 * hi + 1.0;
-    }
-    let p0 = product(sigma);
-    let linear = (1.0 / p0 - 1.0) / sigma.iter().map(|s| 1.0 / (s * s)).sum::<f64>();
-    let mut l = if smallest > 0.0 && linear > lo && linear < hi { linear } else { 0.5 * (lo + hi) };
-    for _ in 0..100 {
-        let s = plus(l);
-        let p = product(s);
-        let phi = p - 1.0;
-        if phi.abs() < 1e-15 {
-            return s;
-        }
-        if phi < 0.0 {
-            lo = l;
-        } else {
-            hi = l;
-        }
-        // φ' = Π σ'_i · Σ σ'_i' / σ'_i with σ'_i' = 1 / (2σ'_i - σ_i).
-        let dphi = p * (0..3).map(|i| 1.0 / ((2.0 * s[i] - sigma[i]) * s[i])).sum::<f64>();
-        let newton = l - phi / dphi;
-        l = if newton > lo && newton < hi && dphi.is_finite() { newton } else { 0.5 * (lo + hi) };
-        if hi - lo <= 1e-16 * (1.0 + hi.abs()) {
+    let mut hi = zero.max(one - sigma[0]).max(one - sigma[1]).max(one - sigma[2]) + Lanes::splat(1e-3);
+    loop {
+        let grow = !done & product3(&plus_branch(&sigma, hi)).lt(one);
+        if !grow.any() {
             break;
         }
+        hi = Lanes::select(grow, Lanes::splat(2.0) * hi + one, hi);
     }
-    plus(l)
+    let p0 = product3(&sigma);
+    let linear = (one / p0 - one) / (one / (sigma[0] * sigma[0]) + one / (sigma[1] * sigma[1]) + one / (sigma[2] * sigma[2]));
+    let mut l = Lanes::select(positive & linear.gt(lo) & linear.lt(hi), linear, half * (lo + hi));
+    let mut active = !done;
+    for _ in 0..100 {
+        if !active.any() {
+            break;
+        }
+        let s = plus_branch(&sigma, l);
+        let p = product3(&s);
+        let phi = p - one;
+        let converged = active & phi.abs().lt(Lanes::splat(1e-15));
+        for i in 0..3 {
+            result[i] = Lanes::select(converged, s[i], result[i]);
+        }
+        active = active & !converged;
+        let below = phi.lt(zero);
+        lo = Lanes::select(active & below, l, lo);
+        hi = Lanes::select(active & !below, l, hi);
+        // φ' = Π σ'_i · Σ σ'_i' / σ'_i with σ'_i' = 1 / (2σ'_i - σ_i).
+        let two = Lanes::splat(2.0);
+        let (t0, t1, t2) = (one / ((two * s[0] - sigma[0]) * s[0]), one / ((two * s[1] - sigma[1]) * s[1]), one / ((two * s[2] - sigma[2]) * s[2]));
+        let dphi = p * (t0 + t1 + t2);
+        let newton = l - phi / dphi;
+        let inside = newton.gt(lo) & newton.lt(hi) & dphi.abs().lt(Lanes::splat(f64::INFINITY));
+        l = Lanes::select(active, Lanes::select(inside, newton, half * (lo + hi)), l);
+        let closed = active & (hi - lo).le(Lanes::splat(1e-16) * (one + hi.abs()));
+        let end = plus_branch(&sigma, l);
+        for i in 0..3 {
+            result[i] = Lanes::select(closed, end[i], result[i]);
+        }
+        active = active & !closed;
+    }
+    // Out of iterations: the last iterate.
+    let end = plus_branch(&sigma, l);
+    for i in 0..3 {
+        result[i] = Lanes::select(active, end[i], result[i]);
+    }
+    (result, collapse)
 }
 
 /// The stationary point with the smallest singular value on the small root: parametrize by
@@ -96,14 +144,59 @@ fn collapse_shortest_axis(sigma: [f64; 3]) -> [f64; 3] {
 /// Projection target of one element: `r R + (1 - r) D` for deformation gradient `f` and
 /// strain share `r` in [0, 1].
 pub fn project(f: &Mat3, strain_share: f64) -> Mat3 {
-    let d = svd3(f);
+    let p = project_lanes::<1>(&to_lanes(&[*f]), strain_share);
+    lane(&p, 0)
+}
+
+/// [`project`] of [`BATCH`] elements at once (bit-identical to it, element by element).
+pub fn project_batch(f: &[Mat3; BATCH], strain_share: f64) -> [Mat3; BATCH] {
+    let p = dispatch_project(&to_lanes(f), strain_share);
+    std::array::from_fn(|l| lane(&p, l))
+}
+
+with_widest_simd!(dispatch_project, fn(f: &M3<BATCH>, strain_share: f64) -> M3<BATCH> { project_lanes(f, strain_share) });
+
+#[inline(always)]
+fn project_lanes<const N: usize>(f: &M3<N>, strain_share: f64) -> M3<N> {
+    let (u, sigma, v) = svd_lanes(f);
     let blend = if strain_share >= 1.0 {
-        [1.0; 3]
+        [Lanes::splat(1.0); 3]
     } else {
-        let s = volume_preserving(d.sigma);
-        s.map(|v| strain_share + (1.0 - strain_share) * v)
+        let s = volume_with_fallback(sigma);
+        let (r, rest) = (Lanes::splat(strain_share), Lanes::splat(1.0 - strain_share));
+        [r + rest * s[0], r + rest * s[1], r + rest * s[2]]
     };
-    scaled_product(&d.u, blend, &d.v)
+    scaled_product_lanes(&u, blend, &v)
+}
+
+/// [`volume_preserving`] of every lane (the rare collapsed lanes one by one).
+#[inline(always)]
+fn volume_with_fallback<const N: usize>(sigma: [Lanes<N>; 3]) -> [Lanes<N>; 3] {
+    let (mut s, collapse) = volume_lanes(sigma);
+    if collapse.any() {
+        for l in 0..N {
+            if collapse.0[l] {
+                let c = collapse_shortest_axis([sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]]);
+                for i in 0..3 {
+                    s[i].0[l] = c[i];
+                }
+            }
+        }
+    }
+    s
+}
+
+/// `U diag(s) Vᵀ` with the sums of [`scaled_product`].
+#[inline(always)]
+fn scaled_product_lanes<const N: usize>(u: &M3<N>, s: [Lanes<N>; 3], v: &M3<N>) -> M3<N> {
+    let z = Lanes::splat(0.0);
+    let mut c = [[z; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            c[i][j] = u[i][0] * s[0] * v[j][0] + u[i][1] * s[1] * v[j][1] + u[i][2] * s[2] * v[j][2];
+        }
+    }
+    c
 }
 
 /// The derivative of [`project`] at one `F`, for products `dP = DP(F)[dF]`.
@@ -153,38 +246,75 @@ impl ProjectionJacobian {
 
 /// [`project`] and its derivative at `f`.
 pub fn project_with_jacobian(f: &Mat3, strain_share: f64) -> (Mat3, ProjectionJacobian) {
-    let d = svd3(f);
+    let (p, j) = project_with_jacobian_lanes::<1>(&to_lanes(&[*f]), strain_share);
+    (lane(&p, 0), jacobian_lane(&j, 0))
+}
+
+/// [`project_with_jacobian`] of [`BATCH`] elements at once (bit-identical, element by element).
+pub fn project_with_jacobian_batch(f: &[Mat3; BATCH], strain_share: f64) -> [(Mat3, ProjectionJacobian); BATCH] {
+    let (p, j) = dispatch_project_with_jacobian(&to_lanes(f), strain_share);
+    std::array::from_fn(|l| (lane(&p, l), jacobian_lane(&j, l)))
+}
+
+with_widest_simd!(dispatch_project_with_jacobian, fn(f: &M3<BATCH>, strain_share: f64) -> (M3<BATCH>, JacobianLanes<BATCH>) {
+    project_with_jacobian_lanes(f, strain_share)
+});
+
+/// [`ProjectionJacobian`] on lanes.
+struct JacobianLanes<const N: usize> {
+    u: M3<N>,
+    v: M3<N>,
+    diag: M3<N>,
+    sym: [Lanes<N>; 3],
+    anti: [Lanes<N>; 3],
+}
+
+fn jacobian_lane<const N: usize>(j: &JacobianLanes<N>, l: usize) -> ProjectionJacobian {
+    ProjectionJacobian {
+        u: lane(&j.u, l),
+        v: lane(&j.v, l),
+        diag: lane(&j.diag, l),
+        sym: j.sym.map(|x| x.0[l]),
+        anti: j.anti.map(|x| x.0[l]),
+    }
+}
+
+#[inline(always)]
+fn project_with_jacobian_lanes<const N: usize>(f: &M3<N>, strain_share: f64) -> (M3<N>, JacobianLanes<N>) {
+    let (u, sigma, v) = svd_lanes(f);
     let r = strain_share;
-    let sigma = d.sigma;
-    let mut diag = [[0.0; 3]; 3];
-    let mut sym = [0.0; 3];
+    let (zero, one, two) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(2.0));
+    let mut diag = [[zero; 3]; 3];
+    let mut sym = [zero; 3];
     let p = if r >= 1.0 {
-        [1.0; 3]
+        [one; 3]
     } else {
-        let s = volume_preserving(sigma);
+        let s = volume_with_fallback(sigma);
+        let rest = Lanes::splat(1.0 - r);
         // ∂σ'_i/∂σ_j = (σ'_i δ_ij - (1/a_j) / Σ_k 1/(a_k σ'_k)) / a_i, a_i = 2σ'_i - σ_i.
-        let a = [0, 1, 2].map(|i| 2.0 * s[i] - sigma[i]);
-        let c = 1.0 / (0..3).map(|k| 1.0 / (a[k] * s[k])).sum::<f64>();
+        let a = [two * s[0] - sigma[0], two * s[1] - sigma[1], two * s[2] - sigma[2]];
+        let c = one / (one / (a[0] * s[0]) + one / (a[1] * s[1]) + one / (a[2] * s[2]));
         for i in 0..3 {
             for j in 0..3 {
-                let ds = ((if i == j { s[i] } else { 0.0 }) - c / a[j]) / a[i];
-                diag[i][j] = (1.0 - r) * ds;
+                let ds = ((if i == j { s[i] } else { zero }) - c / a[j]) / a[i];
+                diag[i][j] = rest * ds;
             }
         }
         for (k, &(i, j)) in PAIRS.iter().enumerate() {
-            sym[k] = (1.0 - r) * s[j] / (s[i] + s[j] - sigma[i]);
+            sym[k] = rest * s[j] / (s[i] + s[j] - sigma[i]);
         }
-        s.map(|v| r + (1.0 - r) * v)
+        let r = Lanes::splat(r);
+        [r + rest * s[0], r + rest * s[1], r + rest * s[2]]
     };
-    let mut anti = [0.0; 3];
+    let mut anti = [zero; 3];
     for (k, &(i, j)) in PAIRS.iter().enumerate() {
         let den = sigma[i] + sigma[j];
         // σ_i + σ_j = 0 only for an inverted element with |σ3| = σ2: the rotation is not
         // differentiable there; a bounded factor keeps the product finite.
-        let den = if den.abs() < 1e-12 { 1e-12f64.copysign(den) } else { den };
+        let den = Lanes::select(den.abs().lt(Lanes::splat(1e-12)), den.tiny_with_sign(), den);
         anti[k] = (p[i] + p[j]) / den;
     }
-    (scaled_product(&d.u, p, &d.v), ProjectionJacobian { u: d.u, v: d.v, diag, sym, anti })
+    (scaled_product_lanes(&u, p, &v), JacobianLanes { u, v, diag, sym, anti })
 }
 
 #[cfg(test)]
@@ -257,6 +387,36 @@ mod tests {
             let p = volume_preserving(s);
             let b = brute_force(s);
             assert!(dist2(p, s) <= dist2(b, s) + 1e-10, "{s:?}: ours {p:?} {} vs brute {b:?} {}", dist2(p, s), dist2(b, s));
+        }
+    }
+
+    #[test]
+    fn batches_give_the_bytes_of_single_projections() {
+        // Mild, strong (some collapse the shortest axis), inverted and degenerate gradients in
+        // mixed batches: every lane must equal the one-element path.
+        let mut rng = Rng(23);
+        let mut cases: Vec<Mat3> = (0..30 * BATCH)
+            .map(|k| {
+                let m = rng.mat();
+                let scale = [0.05, 0.5, 1.5, 3.0][k % 4];
+                let mut f: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 } + scale * m[i][j]));
+                if k % 5 == 0 {
+                    f = f.map(|row| row.map(|v| 2.5 * v)); // stretched more than twice
+                }
+                f
+            })
+            .collect();
+        cases.extend([[[0.0; 3]; 3], IDENTITY, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]], [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]]]);
+        cases.resize(cases.len().div_ceil(BATCH) * BATCH, IDENTITY);
+        for share in [0.0, 0.4, 1.0] {
+            for chunk in cases.chunks_exact(BATCH) {
+                let batch: [Mat3; BATCH] = chunk.try_into().unwrap();
+                let (p, pj) = (project_batch(&batch, share), project_with_jacobian_batch(&batch, share));
+                for l in 0..BATCH {
+                    assert_eq!(p[l], project(&batch[l], share), "{:?}", batch[l]);
+                    assert_eq!(pj[l], project_with_jacobian(&batch[l], share), "{:?}", batch[l]);
+                }
+            }
         }
     }
 

@@ -8,8 +8,19 @@
 //! Method: cyclic Jacobi on `FᵀF` gives `V`; a Gram-Schmidt QR of `F V` gives `U` and the
 //! signed singular values (so small `σ` are read off `F` directly, not as square roots of
 //! small eigenvalues).
+//!
+//! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
+//! ~370 ns), so the local step decomposes [`BATCH`] matrices at once ([`svd3_batch`]): the same
+//! code runs on lanes (`[f64; N]` arithmetic that the compiler turns into SIMD, AVX-512 or AVX2
+//! chosen at run time), every branch a per-lane select and the Jacobi sweeps continuing until
+//! the slowest lane has converged while converged lanes stay frozen. Each lane does exactly the
+//! operations [`svd3`] does on its own (which is the same code with one lane; no fused
+//! multiply-adds are ever generated), so a matrix gets the same bytes whichever path and batch
+//! it goes through.
 
-use super::mat3::{mul, Mat3};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+use super::mat3::Mat3;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Svd3 {
@@ -18,126 +29,380 @@ pub struct Svd3 {
     pub v: Mat3,
 }
 
-/// Columns of a row-major matrix.
-#[inline]
-fn col(m: &Mat3, j: usize) -> [f64; 3] {
-    [m[0][j], m[1][j], m[2][j]]
-}
+/// Matrices per call of the batched kernels.
+pub const BATCH: usize = 16;
 
-#[inline]
-fn set_col(m: &mut Mat3, j: usize, c: [f64; 3]) {
-    for i in 0..3 {
-        m[i][j] = c[i];
+/// `N` lanes of `f64`, combined lane by lane.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Lanes<const N: usize>(pub [f64; N]);
+
+/// `N` lane conditions.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Mask<const N: usize>(pub [bool; N]);
+
+macro_rules! lane_op {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<const N: usize> $trait for Lanes<N> {
+            type Output = Lanes<N>;
+            #[inline(always)]
+            fn $method(self, b: Lanes<N>) -> Lanes<N> {
+                let mut o = self.0;
+                for l in 0..N {
+                    o[l] = self.0[l] $op b.0[l];
+                }
+                Lanes(o)
+            }
+        }
+    };
+}
+lane_op!(Add, add, +);
+lane_op!(Sub, sub, -);
+lane_op!(Mul, mul, *);
+lane_op!(Div, div, /);
+
+impl<const N: usize> Neg for Lanes<N> {
+    type Output = Lanes<N>;
+    #[inline(always)]
+    fn neg(self) -> Lanes<N> {
+        let mut o = self.0;
+        for v in o.iter_mut() {
+            *v = -*v;
+        }
+        Lanes(o)
     }
 }
 
-#[inline]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+/// A lane-wise method from a `f64` one (written out, not through a closure: closures are not
+/// reliably inlined into the SIMD-compiled callers).
+macro_rules! lane_fn {
+    ($name:ident, $f:expr) => {
+        #[inline(always)]
+        pub fn $name(self) -> Self {
+            let mut o = self.0;
+            for v in o.iter_mut() {
+                *v = $f(*v);
+            }
+            Lanes(o)
+        }
+    };
+}
+
+macro_rules! lane_cmp {
+    ($method:ident, $op:tt) => {
+        #[inline(always)]
+        pub fn $method(self, b: Lanes<N>) -> Mask<N> {
+            let mut m = [false; N];
+            for l in 0..N {
+                m[l] = self.0[l] $op b.0[l];
+            }
+            Mask(m)
+        }
+    };
+}
+
+impl<const N: usize> Lanes<N> {
+    #[inline(always)]
+    pub fn splat(x: f64) -> Self {
+        Lanes([x; N])
+    }
+
+    lane_fn!(sqrt, f64::sqrt);
+    lane_fn!(abs, f64::abs);
+    // `±1` and `±1e-12` with the sign of each lane.
+    lane_fn!(sign, |x: f64| 1f64.copysign(x));
+    lane_fn!(tiny_with_sign, |x: f64| 1e-12f64.copysign(x));
+
+    #[inline(always)]
+    pub fn max(self, b: Self) -> Self {
+        let mut o = self.0;
+        for l in 0..N {
+            o[l] = o[l].max(b.0[l]);
+        }
+        Lanes(o)
+    }
+
+    /// `self` where `m`, else `other`.
+    #[inline(always)]
+    pub fn select(m: Mask<N>, a: Self, b: Self) -> Self {
+        let mut o = b.0;
+        for l in 0..N {
+            if m.0[l] {
+                o[l] = a.0[l];
+            }
+        }
+        Lanes(o)
+    }
+
+    lane_cmp!(lt, <);
+    lane_cmp!(le, <=);
+    lane_cmp!(gt, >);
+    lane_cmp!(eq, ==);
+}
+
+impl<const N: usize> Mask<N> {
+    #[inline(always)]
+    pub fn splat(b: bool) -> Self {
+        Mask([b; N])
+    }
+
+    #[inline(always)]
+    pub fn any(self) -> bool {
+        self.0.iter().any(|&b| b)
+    }
+}
+
+impl<const N: usize> BitAnd for Mask<N> {
+    type Output = Mask<N>;
+    #[inline(always)]
+    fn bitand(self, b: Mask<N>) -> Mask<N> {
+        let mut m = self.0;
+        for l in 0..N {
+            m[l] &= b.0[l];
+        }
+        Mask(m)
+    }
+}
+
+impl<const N: usize> BitOr for Mask<N> {
+    type Output = Mask<N>;
+    #[inline(always)]
+    fn bitor(self, b: Mask<N>) -> Mask<N> {
+        let mut m = self.0;
+        for l in 0..N {
+            m[l] |= b.0[l];
+        }
+        Mask(m)
+    }
+}
+
+impl<const N: usize> Not for Mask<N> {
+    type Output = Mask<N>;
+    #[inline(always)]
+    fn not(self) -> Mask<N> {
+        let mut m = self.0;
+        for l in 0..N {
+            m[l] = !m[l];
+        }
+        Mask(m)
+    }
+}
+
+/// A 3-vector of lanes.
+pub(crate) type V3<const N: usize> = [Lanes<N>; 3];
+/// A row-major 3x3 matrix of lanes.
+pub(crate) type M3<const N: usize> = [[Lanes<N>; 3]; 3];
+
+#[inline(always)]
+fn dot<const N: usize>(a: V3<N>, b: V3<N>) -> Lanes<N> {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-#[inline]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+#[inline(always)]
+fn cross<const N: usize>(a: V3<N>, b: V3<N>) -> V3<N> {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
-/// A unit vector orthogonal to the unit vector `a`.
-fn any_orthogonal(a: [f64; 3]) -> [f64; 3] {
-    // Cross with the axis least aligned with a.
-    let axis = if a[0].abs() <= a[1].abs() && a[0].abs() <= a[2].abs() {
-        [1.0, 0.0, 0.0]
-    } else if a[1].abs() <= a[2].abs() {
-        [0.0, 1.0, 0.0]
-    } else {
-        [0.0, 0.0, 1.0]
-    };
+#[inline(always)]
+fn select3<const N: usize>(m: Mask<N>, a: V3<N>, b: V3<N>) -> V3<N> {
+    [Lanes::select(m, a[0], b[0]), Lanes::select(m, a[1], b[1]), Lanes::select(m, a[2], b[2])]
+}
+
+/// `a b` for lane matrices (the same sums as [`super::mat3::mul`]).
+#[inline(always)]
+pub(crate) fn mul_lanes<const N: usize>(a: &M3<N>, b: &M3<N>) -> M3<N> {
+    let z = Lanes::splat(0.0);
+    let mut c = [[z; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
+        }
+    }
+    c
+}
+
+#[inline(always)]
+fn det<const N: usize>(a: &M3<N>) -> Lanes<N> {
+    a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+}
+
+/// A unit vector orthogonal to the unit vector `a` (cross with the axis least aligned with a).
+#[inline(always)]
+fn any_orthogonal<const N: usize>(a: V3<N>) -> V3<N> {
+    let (x, y, z) = (a[0].abs(), a[1].abs(), a[2].abs());
+    let pick_x = x.le(y) & x.le(z);
+    let pick_y = !pick_x & y.le(z);
+    let pick_z = !pick_x & !pick_y;
+    let (one, zero) = (Lanes::splat(1.0), Lanes::splat(0.0));
+    let axis = [Lanes::select(pick_x, one, zero), Lanes::select(pick_y, one, zero), Lanes::select(pick_z, one, zero)];
     let c = cross(a, axis);
     let n = dot(c, c).sqrt();
     [c[0] / n, c[1] / n, c[2] / n]
 }
 
-/// Eigen-decomposition of a symmetric matrix by cyclic Jacobi rotations: returns the
-/// eigenvalues and the eigenvectors as columns of a rotation matrix. Only the six distinct
-/// entries are updated; sweeps stop once the off-diagonal part is negligible relative to the
-/// diagonal (typically 2 to 4 sweeps).
-fn symmetric_eigen(s: Mat3) -> ([f64; 3], Mat3) {
-    let mut v = super::mat3::IDENTITY;
-    // d: diagonal; o: off-diagonal entries (0,1), (0,2), (1,2).
-    let mut d = [s[0][0], s[1][1], s[2][2]];
-    let mut o = [s[0][1], s[0][2], s[1][2]];
+/// Jacobi planes `(p, q)` with the slot of their off-diagonal entry and the slots `(r, p)` and
+/// `(r, q)` of the third index `r` (off-diagonal slots: (0,1), (0,2), (1,2)).
+const PLANES: [(usize, usize, usize, usize, usize); 3] = [(0, 1, 0, 1, 2), (0, 2, 1, 0, 2), (1, 2, 2, 0, 1)];
+
+/// Eigen-decomposition of the symmetric lane matrices with diagonal `d` and off-diagonal `o` by
+/// cyclic Jacobi rotations: eigenvalues, and eigenvectors as the columns of a rotation. Only the
+/// six distinct entries are updated; a lane stops once its off-diagonal part is negligible
+/// relative to its diagonal (typically 2 to 4 sweeps).
+#[inline(always)]
+fn symmetric_eigen<const N: usize>(mut d: V3<N>, mut o: V3<N>) -> (V3<N>, M3<N>) {
+    let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
+    let mut v = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
+    let mut active = Mask::splat(true);
     for _sweep in 0..12 {
         let off = o[0] * o[0] + o[1] * o[1] + o[2] * o[2];
         let scale = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        if off <= 1e-30 * scale || off == 0.0 {
+        active = active & !(off.le(Lanes::splat(1e-30) * scale) | off.eq(zero));
+        if !active.any() {
             break;
         }
-        // Planes (p, q) with their off-diagonal slot, and the slots (r, p) and (r, q) of the
-        // third index r.
-        for (p, q, pq, rp, rq) in [(0, 1, 0, 1, 2), (0, 2, 1, 0, 2), (1, 2, 2, 0, 1)] {
+        for (p, q, pq, rp, rq) in PLANES {
             let apq = o[pq];
-            if apq == 0.0 {
-                continue;
-            }
+            let go = active & !apq.eq(zero);
             // Rotation that zeroes (p, q) (Golub & Van Loan, sym.schur2).
-            let theta = (d[q] - d[p]) / (2.0 * apq);
-            let t = if theta == 0.0 { 1.0 } else { theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt()) };
-            let c = 1.0 / (t * t + 1.0).sqrt();
+            let theta = (d[q] - d[p]) / (Lanes::splat(2.0) * apq);
+            let t = Lanes::select(
+                theta.eq(zero),
+                one,
+                theta.sign() / (theta.abs() + (theta * theta + one).sqrt()),
+            );
+            let c = one / (t * t + one).sqrt();
             let sn = t * c;
-            d[p] -= t * apq;
-            d[q] += t * apq;
-            o[pq] = 0.0;
+            d[p] = Lanes::select(go, d[p] - t * apq, d[p]);
+            d[q] = Lanes::select(go, d[q] + t * apq, d[q]);
+            o[pq] = Lanes::select(go, zero, o[pq]);
             let (arp, arq) = (o[rp], o[rq]);
-            o[rp] = c * arp - sn * arq;
-            o[rq] = sn * arp + c * arq;
+            o[rp] = Lanes::select(go, c * arp - sn * arq, arp);
+            o[rq] = Lanes::select(go, sn * arp + c * arq, arq);
             for row in v.iter_mut() {
                 let (vp, vq) = (row[p], row[q]);
-                row[p] = c * vp - sn * vq;
-                row[q] = sn * vp + c * vq;
+                row[p] = Lanes::select(go, c * vp - sn * vq, vp);
+                row[q] = Lanes::select(go, sn * vp + c * vq, vq);
             }
         }
     }
     (d, v)
 }
 
-/// Signed SVD of `f` (see the module documentation).
-pub fn svd3(f: &Mat3) -> Svd3 {
-    let ftf = super::mat3::mul(&super::mat3::transpose(f), f);
-    let (lambda, v0) = symmetric_eigen(ftf);
-    // Sort eigenpairs by decreasing eigenvalue.
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| lambda[b].total_cmp(&lambda[a]));
-    let mut v = [[0.0; 3]; 3];
-    for (j, &o) in order.iter().enumerate() {
-        set_col(&mut v, j, col(&v0, o));
+/// `(FᵀF)_ij`.
+#[inline(always)]
+fn gram<const N: usize>(f: &M3<N>, i: usize, j: usize) -> Lanes<N> {
+    f[0][i] * f[0][j] + f[1][i] * f[1][j] + f[2][i] * f[2][j]
+}
+
+#[inline(always)]
+fn column<const N: usize>(m: &M3<N>, j: usize) -> V3<N> {
+    [m[0][j], m[1][j], m[2][j]]
+}
+
+/// The signed SVD of lane matrices (see the module documentation).
+#[inline(always)]
+pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
+    // FᵀF: its diagonal and the off-diagonal entries (0,1), (0,2), (1,2).
+    let (d, o) = ([gram(f, 0, 0), gram(f, 1, 1), gram(f, 2, 2)], [gram(f, 0, 1), gram(f, 0, 2), gram(f, 1, 2)]);
+    let (lambda, mut v) = symmetric_eigen(d, o);
+    // Sort eigenpairs by decreasing eigenvalue: a stable bubble sort over (0,1), (1,2), (0,1).
+    let mut l = lambda;
+    for (i, j) in [(0, 1), (1, 2), (0, 1)] {
+        let swap = l[j].gt(l[i]);
+        (l[i], l[j]) = (Lanes::select(swap, l[j], l[i]), Lanes::select(swap, l[i], l[j]));
+        for row in v.iter_mut() {
+            (row[i], row[j]) = (Lanes::select(swap, row[j], row[i]), Lanes::select(swap, row[i], row[j]));
+        }
     }
-    if super::mat3::det(&v) < 0.0 {
-        let c = col(&v, 2);
-        set_col(&mut v, 2, [-c[0], -c[1], -c[2]]);
+    let flip = det(&v).lt(Lanes::splat(0.0));
+    for row in v.iter_mut() {
+        row[2] = Lanes::select(flip, -row[2], row[2]);
     }
     // QR of B = F V by Gram-Schmidt: B = U R, diag(R) = σ (the last one signed).
-    let b = mul(f, &v);
-    let (b1, b2, b3) = (col(&b, 0), col(&b, 1), col(&b, 2));
+    let b = mul_lanes(f, &v);
+    let (b1, b2, b3) = (column(&b, 0), column(&b, 1), column(&b, 2));
     let scale = dot(b1, b1).sqrt().max(dot(b2, b2).sqrt()).max(dot(b3, b3).sqrt());
-    let tiny = 1e-300_f64.max(scale * 1e-15);
+    let tiny = Lanes::splat(1e-300).max(scale * Lanes::splat(1e-15));
     let s1 = dot(b1, b1).sqrt();
-    let u1 = if s1 > tiny { [b1[0] / s1, b1[1] / s1, b1[2] / s1] } else { col(&v, 0) };
+    let u1 = select3(s1.gt(tiny), [b1[0] / s1, b1[1] / s1, b1[2] / s1], column(&v, 0));
     let r12 = dot(u1, b2);
     let w2 = [b2[0] - r12 * u1[0], b2[1] - r12 * u1[1], b2[2] - r12 * u1[2]];
     let s2 = dot(w2, w2).sqrt();
-    let u2 = if s2 > tiny { [w2[0] / s2, w2[1] / s2, w2[2] / s2] } else { any_orthogonal(u1) };
+    let full = s2.gt(tiny);
+    let u2 = select3(full, [w2[0] / s2, w2[1] / s2, w2[2] / s2], any_orthogonal(u1));
     let u3 = cross(u1, u2);
     let s3 = dot(u3, b3);
-    let mut u = [[0.0; 3]; 3];
-    set_col(&mut u, 0, u1);
-    set_col(&mut u, 1, u2);
-    set_col(&mut u, 2, u3);
-    Svd3 { u, sigma: [s1, if s2 > tiny { s2 } else { 0.0 }, s3], v }
+    let u = [[u1[0], u2[0], u3[0]], [u1[1], u2[1], u3[1]], [u1[2], u2[2], u3[2]]];
+    (u, [s1, Lanes::select(full, s2, Lanes::splat(0.0)), s3], v)
 }
+
+/// Lane matrices from `N` row-major matrices.
+#[inline(always)]
+pub(crate) fn to_lanes<const N: usize>(f: &[Mat3; N]) -> M3<N> {
+    let z = Lanes::splat(0.0);
+    let mut m = [[z; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            for l in 0..N {
+                m[i][j].0[l] = f[l][i][j];
+            }
+        }
+    }
+    m
+}
+
+/// Lane `l` of a lane matrix.
+#[inline(always)]
+pub(crate) fn lane<const N: usize>(m: &M3<N>, l: usize) -> Mat3 {
+    [[m[0][0].0[l], m[0][1].0[l], m[0][2].0[l]], [m[1][0].0[l], m[1][1].0[l], m[1][2].0[l]], [m[2][0].0[l], m[2][1].0[l], m[2][2].0[l]]]
+}
+
+/// Signed SVD of `f` (see the module documentation).
+pub fn svd3(f: &Mat3) -> Svd3 {
+    let (u, sigma, v) = svd_lanes::<1>(&to_lanes(&[*f]));
+    Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
+}
+
+/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by lane).
+pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
+    let (u, sigma, v) = dispatch_svd(&to_lanes(f));
+    std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })
+}
+
+/// Run `$body` (an expression using lane arithmetic) compiled for the widest vector extension
+/// the CPU has: the lanes become AVX-512 or AVX2 registers; the arithmetic is the same.
+macro_rules! with_widest_simd {
+    ($name:ident, fn($($arg:ident: $ty:ty),*) -> $ret:ty $body:block) => {
+        #[inline(always)]
+        fn $name($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                unsafe fn avx512($($arg: $ty),*) -> $ret $body
+                #[target_feature(enable = "avx2")]
+                unsafe fn avx2($($arg: $ty),*) -> $ret $body
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    // SAFETY: the CPU supports AVX-512F (checked).
+                    return unsafe { avx512($($arg),*) };
+                }
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU supports AVX2 (checked).
+                    return unsafe { avx2($($arg),*) };
+                }
+            }
+            $body
+        }
+    };
+}
+#[allow(unused_imports)]
+pub(crate) use with_widest_simd;
+
+with_widest_simd!(dispatch_svd, fn(f: &M3<BATCH>) -> (M3<BATCH>, V3<BATCH>, M3<BATCH>) { svd_lanes(f) });
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::physics::mat3::{det, distance, mul_transpose, scaled_product, transpose, IDENTITY};
+    use crate::physics::mat3::{det, distance, mul, mul_transpose, scaled_product, transpose, IDENTITY};
 
     /// A small deterministic generator for test matrices (xorshift).
     pub(crate) struct Rng(pub u64);
@@ -172,6 +437,28 @@ pub(crate) mod tests {
         let mut rng = Rng(0x9e3779b97f4a7c15);
         for _ in 0..2000 {
             check(&rng.mat());
+        }
+    }
+
+    #[test]
+    fn batches_give_the_bytes_of_single_decompositions() {
+        let mut rng = Rng(99);
+        let mut cases: Vec<Mat3> = (0..40 * BATCH).map(|k| {
+            let m = rng.mat();
+            // Near rotations (the common case), general, and rank-deficient matrices.
+            match k % 3 {
+                0 => std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 } + 1e-3 * m[i][j])),
+                1 => m,
+                _ => [m[0], m[0], m[2]],
+            }
+        }).collect();
+        cases.extend([[[0.0; 3]; 3], IDENTITY, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]]);
+        cases.resize(cases.len().div_ceil(BATCH) * BATCH, IDENTITY);
+        for chunk in cases.chunks_exact(BATCH) {
+            let batch: [Mat3; BATCH] = chunk.try_into().unwrap();
+            for (f, d) in batch.iter().zip(svd3_batch(&batch)) {
+                assert_eq!(d, svd3(f), "{f:?}");
+            }
         }
     }
 

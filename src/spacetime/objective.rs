@@ -89,27 +89,38 @@ impl<'a> Objective<'a> {
     /// The local step: projections of every element at every sample, in parallel over
     /// samples and elements; with their Jacobians when `with_jacobians`.
     pub fn local_step(&self, tr: &Trajectory, with_jacobians: bool) -> Projections {
-        let n = self.elastic.node_count();
-        let e_count = self.elastic.tet_count();
+        let (el, n) = (self.elastic, self.elastic.node_count());
+        // Samples run in parallel, each projecting its tets on its thread; with too few samples
+        // to keep the threads busy, the tets of each sample are split instead (same bytes).
+        let split_tets = self.samples.len() < 4 * rayon::current_num_threads();
         let per_sample: Vec<(Vec<Mat3>, Option<Vec<ProjectionJacobian>>)> = self
             .samples
             .par_iter()
             .map(|s| {
                 let mut x = vec![[0.0; 3]; n];
                 Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
-                let mut p = vec![[[0.0; 3]; 3]; e_count];
-                if with_jacobians {
-                    let mut j = vec![ProjectionJacobian::default(); e_count];
-                    self.elastic.local_step_with_jacobians(&x, &mut p, &mut j);
-                    (p, Some(j))
-                } else {
-                    self.elastic.local_step(&x, &mut p);
-                    (p, None)
+                match (with_jacobians, split_tets) {
+                    (false, false) => (el.local_step_sequential(&x), None),
+                    (true, false) => {
+                        let (p, j) = el.local_step_with_jacobians_sequential(&x);
+                        (p, Some(j))
+                    }
+                    (false, true) => {
+                        let mut p = vec![[[0.0; 3]; 3]; el.tet_count()];
+                        el.local_step(&x, &mut p);
+                        (p, None)
+                    }
+                    (true, true) => {
+                        let (mut p, mut j) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![ProjectionJacobian::default(); el.tet_count()]);
+                        el.local_step_with_jacobians(&x, &mut p, &mut j);
+                        (p, Some(j))
+                    }
                 }
             })
             .collect();
-        let jacobians = with_jacobians.then(|| per_sample.iter().map(|(_, j)| j.clone().expect("computed")).collect());
-        Projections { targets: per_sample.into_iter().map(|(p, _)| p).collect(), jacobians }
+        let (targets, jacobians): (Vec<_>, Vec<_>) = per_sample.into_iter().unzip();
+        let jacobians = with_jacobians.then(|| jacobians.into_iter().map(|j| j.expect("computed")).collect());
+        Projections { targets, jacobians }
     }
 
     /// W, its elastic part, and its gradient with the projections held at `p`.
@@ -130,8 +141,9 @@ impl<'a> Objective<'a> {
                 Self::combine(&u, &l, &mut x);
                 Self::combine(&u, &c, &mut acc);
                 let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                el.stiffness.mul_points(&x, &mut lx);
-                el.apply_j(ps, &mut jp);
+                // Samples run in parallel: the products run on this thread (same bytes).
+                el.stiffness.mul_points_sequential(&x, &mut lx);
+                el.apply_j_sequential(ps, &mut jp);
                 let (mut w, mut w_el) = (0.0, 0.0);
                 let mut f = vec![[0.0; 3]; n];
                 for a in 0..n {
@@ -146,9 +158,8 @@ impl<'a> Objective<'a> {
                 // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
                 let correction = p.jacobians.as_ref().map(|jac| {
                     let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
-                    let dp: Vec<Mat3> = jac[k].iter().enumerate().map(|(e, j)| j.apply(&el.deformation_gradient(e, &u))).collect();
                     let mut z = vec![[0.0; 3]; n];
-                    el.apply_j(&dp, &mut z);
+                    el.apply_j_sequential_with(|e| jac[k][e].apply(&el.deformation_gradient(e, &u)), &mut z);
                     z
                 });
                 (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el, correction)
@@ -183,7 +194,7 @@ impl<'a> Objective<'a> {
                     }
                 }
                 let mut lfl = vec![[0.0; 3]; n];
-                el.stiffness.mul_points(&fl, &mut lfl);
+                el.stiffness.mul_points_sequential(&fl, &mut lfl);
                 fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect::<Vec<Point>>()
             })
             .collect::<Vec<_>>();
