@@ -135,7 +135,8 @@ fn load() -> String {
 }
 
 fn main() {
-    let cases: Vec<(&str, Box<dyn Fn() -> Body>, Paper)> = vec![
+    type Case = (&'static str, Box<dyn Fn() -> Body>, Paper);
+    let cases: Vec<Case> = vec![
         ("STRETCH", Box::new(|| scene_body("fixtures/paper/stretch.toml")), Paper { verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 }),
         ("TWIST", Box::new(|| scene_body("fixtures/paper/twist.toml")), Paper { verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 }),
         ("DINO", Box::new(|| scene_body("fixtures/paper/dino.toml")), Paper { verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 }),

@@ -11,6 +11,9 @@
 //! import -> tetrahedralize -> solve -> embed -> export -> report
 //! ```
 
+// Numeric kernels index several arrays (and SIMD lanes) in lockstep on purpose.
+#![allow(clippy::needless_range_loop)]
+
 pub mod embed;
 pub mod error;
 pub mod export;

@@ -47,6 +47,10 @@ pub struct Objective<'a> {
     pub gravity: Point,
 }
 
+/// One sample's residual `f`, its weighted W and elastic W, and (with Jacobians) the
+/// correction `J DP[dF(M⁻¹ f)]` of the exact gradient.
+type SampleResidual = (Vec<Point>, f64, f64, Option<Vec<Point>>);
+
 /// W and its gradient at one trajectory.
 #[derive(Debug, Clone)]
 pub struct Evaluation {
@@ -129,7 +133,7 @@ impl<'a> Objective<'a> {
         let n = el.node_count();
         let g = self.gravity;
         // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
-        let per_sample: Vec<(Vec<Point>, f64, f64, Option<Vec<Point>>)> = self
+        let per_sample: Vec<SampleResidual> = self
             .samples
             .par_iter()
             .enumerate()
