@@ -10,12 +10,13 @@ use std::path::{Path, PathBuf};
 
 use blendsim::export::clip::BlendShapeClip;
 use blendsim::export::export;
-use blendsim::mesh::{norm, sub, Point};
+use blendsim::mesh::Point;
 use blendsim::output::Staging;
-use blendsim::scene::{Axis, Format};
+use blendsim::scene::Format;
 use blendsim::stage::{Animation, OutputKind, Outputs};
-use common::checkers::{check_glb, check_usd, render_glb, try_check_glb, try_check_usd, Expected};
-use common::{animation, box_mesh, sample_motion, scratch};
+use common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
+use blendsim::procedural::prism as box_mesh;
+use common::{animation, sample_motion, scratch};
 
 /// A twist about the box's vertical (y) axis: the angle grows with height above `from` (a
 /// fraction of the height) and with `s(t)`; `ds` is `s'(t)`. Returns the position and its
@@ -84,23 +85,6 @@ fn export_to(anim: &Animation, dir: &Path) -> Outputs {
     outputs
 }
 
-fn max_distance(a: &[Point], b: &[Point]) -> f64 {
-    a.iter().zip(b).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)
-}
-
-/// Times at which to compare a glTF animation: every key, every interval's middle and 1/3, and
-/// every 5th frame.
-fn glb_times(anim: &Animation) -> Vec<f64> {
-    let tr = &anim.trajectory;
-    let mut times: Vec<f64> = tr.times.clone();
-    for w in tr.times.windows(2) {
-        times.extend([w[0] + (w[1] - w[0]) / 3.0, (w[0] + w[1]) / 2.0]);
-    }
-    times.extend(tr.frames(anim.scene.fps).iter().step_by(5).map(|f| f.1));
-    let set: BTreeSet<u64> = times.iter().map(|t| t.to_bits()).collect();
-    set.into_iter().map(f64::from_bits).collect()
-}
-
 /// Export, then check every file with the independent checkers against our own evaluation:
 /// the blendshape clip's exact curves (glTF) or its per-frame samples (USD), the trajectory
 /// at frames for full-frame files. Returns the output folder and the outputs.
@@ -111,52 +95,7 @@ fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let on_disk: BTreeSet<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(listed, on_disk, "the folder holds exactly the listed files");
-    for f in &outputs.files {
-        assert_eq!(std::fs::metadata(dir.join(&f.path)).unwrap().len(), f.bytes, "{}", f.path);
-    }
-
-    let tr = &anim.trajectory;
-    let fps = anim.scene.fps;
-    let clip = BlendShapeClip::from_trajectory(tr, anim.scene.keyframes.cyclic);
-    let frames: Vec<f64> = tr.frames(fps).iter().map(|f| f.1).collect();
-    // Our two evaluations agree before the files are compared with either.
-    let diagonal = blendsim::mesh::bbox_diagonal(&tr.positions.concat());
-    for &t in &glb_times(anim) {
-        assert!(max_distance(&clip.points_at(t), &tr.evaluate(t)) <= 1e-6 * diagonal, "clip vs trajectory at {t}");
-    }
-
-    let export = &anim.scene.export;
-    let decorate = |mut e: Expected, kind: &str| {
-        e.kind = Some(kind.into());
-        e.fps = Some(fps);
-        e.up_axis = Some(if export.up_axis == Axis::Z { "z" } else { "y" }.into());
-        e.meters_per_unit = Some(export.meters_per_unit);
-        e
-    };
-    let usdc_requested = export.formats.contains(&Format::Usdc);
-    for f in &outputs.files {
-        let path = dir.join(&f.path);
-        let summary = match (f.kind, f.format) {
-            (OutputKind::Blendshape, Format::Glb) => {
-                check_glb(&path, &decorate(Expected::at(&glb_times(anim), fps, |t| clip.points_at(t)), "blendshape"))
-            }
-            (OutputKind::FullFrame, Format::Glb) => {
-                check_glb(&path, &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame"))
-            }
-            (OutputKind::Blendshape, _) => check_usd(
-                &path,
-                &decorate(Expected::at(&frames, fps, |t| clip.points_at(t)), "blendshape"),
-                f.format == Format::Usda && !usdc_requested,
-            ),
-            (OutputKind::FullFrame, _) => check_usd(
-                &path,
-                &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame"),
-                f.format == Format::Usda && !usdc_requested,
-            ),
-        };
-        eprintln!("{}: {} bytes: {summary}", f.path, f.bytes);
-        assert_eq!(summary["ok"], true, "{summary}");
-    }
+    common::verify::check_outputs(&dir, anim, &outputs.files);
     (dir, outputs)
 }
 

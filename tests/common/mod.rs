@@ -29,41 +29,6 @@ pub fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-/// A closed box surface `[0,size]` with `divisions` segments per axis, counter-clockwise seen
-/// from outside, every lattice vertex shared by the faces that meet there.
-pub fn box_mesh(size: [f64; 3], divisions: [usize; 3]) -> TriMesh {
-    let mut index = std::collections::HashMap::new();
-    let mut mesh = TriMesh::default();
-    let mut vertex = |mesh: &mut TriMesh, l: [usize; 3]| -> u32 {
-        *index.entry(l).or_insert_with(|| {
-            mesh.positions.push([0, 1, 2].map(|d| size[d] * l[d] as f64 / divisions[d] as f64));
-            mesh.positions.len() as u32 - 1
-        })
-    };
-    for a in 0..3 {
-        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        for side in [0, divisions[a]] {
-            for u in 0..divisions[b] {
-                for v in 0..divisions[c] {
-                    let corner = |du: usize, dv: usize| {
-                        let mut l = [0; 3];
-                        (l[a], l[b], l[c]) = (side, u + du, v + dv);
-                        l
-                    };
-                    let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)].map(|l| vertex(&mut mesh, l));
-                    // e_b x e_c = e_a: counter-clockwise in (b, c) faces +a.
-                    if side == 0 {
-                        mesh.triangles.extend([[q[0], q[2], q[1]], [q[0], q[3], q[2]]]);
-                    } else {
-                        mesh.triangles.extend([[q[0], q[1], q[2]], [q[0], q[2], q[3]]]);
-                    }
-                }
-            }
-        }
-    }
-    mesh
-}
-
 /// Keys of an analytic motion `x(p, t)` with its exact time derivative, so the trajectory has
 /// real (nonzero) velocities.
 pub fn sample_motion(rest: &[Point], times: &[f64], motion: impl Fn(Point, f64) -> (Point, Point)) -> Trajectory {
