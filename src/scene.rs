@@ -146,7 +146,7 @@ pub struct Solver {
     /// Stop when W changes by less than `tolerance` times its initial value.
     #[serde(default = "defaults::tolerance")]
     pub tolerance: f64,
-    /// Proximal regularization time scale h: adds (1/h²) Σ dτ BᵀMB (0 = off).
+    /// Proximal regularization time scale h: adds (1/h⁴) Σ dτ BᵀMB (0 = off).
     #[serde(default = "defaults::regularization")]
     pub regularization: f64,
 }

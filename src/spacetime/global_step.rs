@@ -10,7 +10,8 @@
 //! ```
 //!
 //! with three small dense matrices over time slots and three fixed sparse matrices over
-//! nodes. The proximal regularization `(1/h²) Σ dτ Bᵀ M B` adds `C_KK / h²` to `C_MM`. The
+//! nodes. The proximal regularization `(1/h⁴) Σ dτ Bᵀ M B` adds `C_KK / h⁴` to `C_MM`
+//! (in the M⁻¹ norm of W, 1/h⁴ is the weight whose units make h a time). The
 //! matrix restricted to the free unknowns is written straight into compressed columns in
 //! node-major order (rows come out sorted; no triplet sort), and the three coordinates are
 //! three right-hand sides of one factorization.
@@ -47,8 +48,8 @@ pub struct TimeCoefficients {
 }
 
 impl TimeCoefficients {
-    /// Accumulate the sample coefficients; `inv_h2` is the proximal weight `1/h²` (0 = off).
-    pub fn new(objective: &Objective, inv_h2: f64) -> TimeCoefficients {
+    /// Accumulate the sample coefficients; `proximal` is the weight `1/h⁴` (0 = off).
+    pub fn new(objective: &Objective, proximal: f64) -> TimeCoefficients {
         let n = objective.slots.count();
         let (mut mm, mut ml, mut kk) = (vec![0.0; n * n], vec![0.0; n * n], vec![0.0; n * n]);
         for s in &objective.samples {
@@ -63,7 +64,7 @@ impl TimeCoefficients {
             }
         }
         for (m, k) in mm.iter_mut().zip(&kk) {
-            *m += inv_h2 * k;
+            *m += proximal * k;
         }
         TimeCoefficients { slots: n, mm, ml, kk }
     }
@@ -207,9 +208,16 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
 impl GlobalStep {
     /// Assemble and factorize. `regularization` is the proximal time scale h (0 = off).
     pub fn new(objective: &Objective, unknowns: Unknowns, regularization: f64) -> Result<GlobalStep> {
-        let inv_h2 = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        if proximal == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
+            // Singular by construction; a factorization may still pass on roundoff pivots.
+            return Err(Error::general(
+                "the spacetime system is singular: no keyframe position is held and regularization = 0, so moving the whole animation costs nothing",
+                "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
+            ));
+        }
         let t0 = std::time::Instant::now();
-        let coefficients = TimeCoefficients::new(objective, inv_h2);
+        let coefficients = TimeCoefficients::new(objective, proximal);
         let dim = unknowns.count();
         if dim == 0 {
             let stats =

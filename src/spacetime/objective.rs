@@ -75,6 +75,14 @@ impl<'a> Objective<'a> {
         (c, b.pos)
     }
 
+    /// The mass and stiffness coefficients of time slot `slot` in sample `s` (summed over the
+    /// sample's unknowns in that slot; zero when the slot is not in its interval).
+    #[inline]
+    fn slot_coefficients(&self, s: &Sample, slot: usize) -> (f64, f64) {
+        let (c, l) = self.coefficients(s);
+        (0..4).filter(|&j| s.slots[j] == slot).fold((0.0, 0.0), |(cs, ls), j| (cs + c[j], ls + l[j]))
+    }
+
     /// The four unknown arrays of a sample's interval.
     fn unknowns<'t>(tr: &'t Trajectory, s: &Sample) -> [&'t [Point]; 4] {
         let i = s.interval;
@@ -178,14 +186,7 @@ impl<'a> Objective<'a> {
             .map(|slot| {
                 let (mut fc, mut fl) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
                 for (s, (f, _, _, _)) in self.samples.iter().zip(&per_sample) {
-                    let (c, l) = self.coefficients(s);
-                    let (mut cs, mut ls) = (0.0, 0.0);
-                    for j in 0..4 {
-                        if s.slots[j] == slot {
-                            cs += c[j];
-                            ls += l[j];
-                        }
-                    }
+                    let (cs, ls) = self.slot_coefficients(s, slot);
                     if cs == 0.0 && ls == 0.0 {
                         continue;
                     }
@@ -208,7 +209,7 @@ impl<'a> Objective<'a> {
                 .map(|slot| {
                     let mut g = gradient[slot].clone();
                     for (s, (_, _, _, z)) in self.samples.iter().zip(&per_sample) {
-                        let l: f64 = (0..4).filter(|&j| s.slots[j] == slot).map(|j| s.basis.pos[j]).sum();
+                        let (_, l) = self.slot_coefficients(s, slot);
                         if l == 0.0 {
                             continue;
                         }

@@ -134,12 +134,6 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
     let start = Instant::now();
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
-    if settings.regularization == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
-        return Err(Error::general(
-            "the spacetime system is singular: no keyframe position is held and regularization = 0, so moving the whole animation costs nothing",
-            "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
-        ));
-    }
     let global = GlobalStep::new(&objective, unknowns, settings.regularization)?;
     let precompute_seconds = start.elapsed().as_secs_f64();
 
@@ -164,8 +158,9 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
         let k = energy.len();
         (k >= since + 2).then(|| (energy[k - 2] - energy[k - 1]).abs() / w0).filter(|c| *c < settings.tolerance)
     };
-    // Take `delta` (per slot) from the current iterate, halving until W decreases.
-    let line_search = |it: &mut Iterate, delta: &[Vec<Point>], exact: bool| -> Result<bool> {
+    // Take `delta` (per slot) from the current iterate, halving until W decreases; the scale
+    // of the accepted step, if any.
+    let line_search = |it: &mut Iterate, delta: &[Vec<Point>], exact: bool| -> Result<Option<f64>> {
         let w = *it.energy.last().expect("initial value");
         let mut scale = 1.0;
         for halving in 0..=MAX_HALVINGS {
@@ -178,12 +173,12 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
                 it.eval = trial_eval;
                 on_iteration(it.energy.len(), it.eval.value);
                 it.energy.push(it.eval.value);
-                return Ok(true);
+                return Ok(Some(scale));
             }
             scale *= 0.5;
         }
         it.halvings += MAX_HALVINGS;
-        Ok(false)
+        Ok(None)
     };
     let budget_left = |it: &Iterate| it.energy.len() <= settings.max_iterations;
 
@@ -201,7 +196,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
                 break PhaseEnd::OutOfIterations;
             }
             let delta = global.step(&it.eval.gradient);
-            if !line_search(&mut it, &delta, false)? {
+            if line_search(&mut it, &delta, false)?.is_none() {
                 break PhaseEnd::Stalled;
             }
         };
@@ -213,6 +208,8 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
             it.eval = evaluate(&it.tr, it.energy.len(), true)?;
             let since = it.energy.len() - 1;
             let mut lbfgs = Lbfgs::new(LBFGS_MEMORY);
+            let exact_gradient = |it: &Iterate| global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
+            let mut g = exact_gradient(&it);
             loop {
                 if let Some(change) = settled(&it.energy, since) {
                     break PhaseEnd::Settled(change);
@@ -220,22 +217,20 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
                 if !budget_left(&it) {
                     break PhaseEnd::OutOfIterations;
                 }
-                let g = global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
-                let q = global.gather(&slot_values(&it.tr, &objective.slots));
-                let d = lbfgs.direction(&g, |x| global.apply_inverse(x));
+                let mut d = lbfgs.direction(&g, |x| global.apply_inverse(x));
                 let mut accepted = line_search(&mut it, &global.scatter(&d), true)?;
-                if !accepted && !lbfgs.is_empty() {
+                if accepted.is_none() && !lbfgs.is_empty() {
                     // Restart from the preconditioned gradient.
                     lbfgs.clear();
-                    let d = lbfgs.direction(&g, |x| global.apply_inverse(x));
+                    d = lbfgs.direction(&g, |x| global.apply_inverse(x));
                     accepted = line_search(&mut it, &global.scatter(&d), true)?;
                 }
-                if !accepted {
-                    break PhaseEnd::Stalled;
-                }
-                let g_new = global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
-                let q_new = global.gather(&slot_values(&it.tr, &objective.slots));
-                lbfgs.push(difference(&q_new, &q), difference(&g_new, &g));
+                let Some(scale) = accepted else { break PhaseEnd::Stalled };
+                // The step taken is `scale d`; the gradient change is measured.
+                let g_new = exact_gradient(&it);
+                let step = d.iter().map(|v| crate::mesh::scale(*v, scale)).collect();
+                lbfgs.push(step, difference(&g_new, &g));
+                g = g_new;
             }
         };
         let phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
@@ -264,20 +259,6 @@ pub fn solve(elastic: &Elastic, keys: &KeyPoses, settings: &Settings, on_iterati
         stop_reason,
     };
     Ok(Solved { trajectory: it.tr, log, stats: global.stats })
-}
-
-/// The trajectory's values per slot (the owner key's positions or velocities).
-fn slot_values(tr: &Trajectory, slots: &TimeSlots) -> Vec<Vec<Point>> {
-    (0..slots.count())
-        .map(|s| {
-            let k = s / 2;
-            if s % 2 == 0 {
-                tr.positions[k].clone()
-            } else {
-                tr.velocities[k].clone()
-            }
-        })
-        .collect()
 }
 
 fn difference(a: &[Point], b: &[Point]) -> Vec<Point> {
