@@ -14,6 +14,7 @@
 // Numeric kernels index several arrays (and SIMD lanes) in lockstep on purpose.
 #![allow(clippy::needless_range_loop)]
 
+pub mod cache;
 pub mod embed;
 pub mod error;
 pub mod export;
