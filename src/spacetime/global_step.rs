@@ -35,7 +35,7 @@ use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
-use crate::physics::cholesky::{Cholesky, Ordering};
+use crate::physics::cholesky::{Cholesky, FillOrdering};
 use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, Graph};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
@@ -81,14 +81,18 @@ pub struct GlobalStats {
     pub factor_nnz: usize,
     /// The fill-reducing ordering that was used (see [`fill_reducing_order`]).
     pub ordering: &'static str,
+    /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,
     /// Ordering, symbolic analysis and numeric factorization.
     pub factor_seconds: f64,
 }
 
+/// The normal matrix of the free unknowns, factorized: solves the global step.
 pub struct GlobalStep {
     unknowns: Unknowns,
+    /// None when there are no unknowns.
     cholesky: Option<Cholesky>,
+    /// What the precomputation built.
     pub stats: GlobalStats,
 }
 
@@ -230,7 +234,7 @@ impl GlobalStep {
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
         // faer's parallel supernodal factorization pays off only for large fronts.
         let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
-        let cholesky = Cholesky::factor(&a, &Ordering::Custom(order.perm), par).map_err(|_| {
+        let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
@@ -247,6 +251,7 @@ impl GlobalStep {
         Ok(GlobalStep { unknowns, cholesky: Some(cholesky), stats })
     }
 
+    /// The free unknowns and their order.
     pub fn unknowns(&self) -> &Unknowns {
         &self.unknowns
     }
