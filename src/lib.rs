@@ -6,7 +6,7 @@
 //! The method is BlendSim (Wu & Umetani, Eurographics 2025): spacetime projective dynamics on
 //! cubic Hermite trajectories. The library is a chain of stages ([`stages`]), each a function
 //! from one plain data type ([`stage`]) to the next; the `blendsim` binary is a thin CLI over
-//! it, and [`stages::bake`] runs the whole chain:
+//! it, and [`stages::bake()`] runs the whole chain:
 //!
 //! ```text
 //! scene -> import -> tetrahedralize -> solve -> embed -> export -> report

@@ -20,7 +20,7 @@
 //! here, from the data ([`is_cyclic`]), for every writer and for the report alike.
 //!
 //! The weight curves are evaluated with the trajectory's own Hermite basis and interval lookup
-//! ([`hermite_weights`], [`locate`]).
+//! (`spacetime::trajectory::hermite_weights` and `locate`).
 
 use crate::mesh::Point;
 use crate::spacetime::trajectory::{hermite_weights, locate, Trajectory};

@@ -79,7 +79,7 @@ pub struct GlobalStats {
     pub matrix_nnz: usize,
     /// Stored entries of the Cholesky factor.
     pub factor_nnz: usize,
-    /// The fill-reducing ordering that was used (see [`fill_reducing_order`]).
+    /// The fill-reducing ordering that was used (see `fill_reducing_order`).
     pub ordering: &'static str,
     /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,

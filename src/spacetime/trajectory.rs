@@ -114,7 +114,8 @@ impl Trajectory {
         self.end() - self.start()
     }
 
-    /// The interval containing `t` and the local parameter in it (see [`locate`]).
+    /// The interval containing `t` (clamped to the key range) and the local parameter in it:
+    /// at a key, the interval it starts.
     pub fn locate(&self, t: f64) -> (usize, f64) {
         locate(&self.times, t)
     }

@@ -1,6 +1,6 @@
 //! The `embed` stage: carry the body's exported surface on the solved node trajectory.
 //!
-//! The surface is bound to the rest tet mesh by barycentric coordinates ([`Binding`]: the
+//! The surface is bound to the rest tet mesh by barycentric coordinates (`embed::Binding`: the
 //! closest tet for points outside). The binding is linear, so the Hermite trajectory is carried
 //! exactly, not resampled. The input keyframes are carried by the same binding, so reports
 //! compare like with like.

@@ -1,6 +1,6 @@
 //! The `export` stage: the animation's blendshape and full-frame files.
 //!
-//! Contract: build the [`BlendShapeClip`] (blendshapes) and the [`FullFrame`] (one pose per
+//! Contract: build the [`BlendShapeClip`] (blendshapes) and the `FullFrame` (one pose per
 //! frame) from the animation, and stage, for each format in `scene.export.formats`,
 //! `NAME.EXT` (blendshapes) and, when `full_frame`, `NAME.full.EXT` (full-frame). `usdc` is
 //! converted from the staged `.usda` by usd-core. Returns the list of staged files with their

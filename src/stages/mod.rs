@@ -1,6 +1,6 @@
 //! The chain, one stage per file: each stage is one function from the stage data before it to
 //! the stage data after it (the types of [`crate::stage`], which the CLI writes between
-//! subcommands), and [`bake`] runs them all in order.
+//! subcommands), and [`bake()`] runs them all in order.
 //!
 //! ```text
 //! SceneFile -> import -> Keyframes -> tetrahedralize -> Body -> solve -> Solution
