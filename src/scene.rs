@@ -647,6 +647,15 @@ times = [0.0, 0.5]
     }
 
     #[test]
+    fn a_partial_table_takes_the_other_defaults() {
+        let s = Scene::parse(&(MINIMAL.to_string() + "[material]\nstiffness = 5.0\n[solver]\nsamples = 3\n[tet]\n")).unwrap();
+        assert_eq!(s.material, Material { stiffness: 5.0, ..Material::default() });
+        assert_eq!(s.solver, Solver { samples: 3, ..Solver::default() });
+        assert_eq!((&s.tet, &s.export), (&Tet::default(), &Export::default()));
+        assert_eq!(s.material.volume, 70.0, "the volume weight does not follow the strain weight");
+    }
+
+    #[test]
     fn the_issue_example_parses() {
         let text = r#"
 name = "twist"

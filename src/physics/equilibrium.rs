@@ -10,7 +10,8 @@
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Mat, Par};
 
-use super::cholesky::{Cholesky, FillOrdering};
+use super::cholesky::Cholesky;
+use super::ordering::FillOrdering;
 use super::elastic::Elastic;
 use super::mat3::Mat3;
 use crate::error::{Error, Result};

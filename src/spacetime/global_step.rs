@@ -35,8 +35,8 @@ use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
-use crate::physics::cholesky::{Cholesky, FillOrdering};
-use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, Graph};
+use crate::physics::cholesky::Cholesky;
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]

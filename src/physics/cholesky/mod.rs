@@ -3,8 +3,8 @@
 //! the three coordinates of the spacetime unknowns have their own supernodal sweeps
 //! ([`Cholesky::solve_rows3`]).
 //!
-//! Three concerns, three files: this one wraps faer (ordering, symbolic and numeric
-//! factorization, solves through faer); [`split`] plans how the elimination tree is shared by
+//! Three concerns, three files: this one wraps faer (symbolic analysis in a given
+//! [`FillOrdering`], numeric factorization, solves through faer); [`split`] plans how the elimination tree is shared by
 //! two threads; [`sweeps`] are the forward and backward sweeps for three right-hand sides
 //! (portable code, compiled for AVX2 when the CPU has it; same bytes either way).
 
@@ -23,19 +23,13 @@ use faer::{Conj, MatMut, Par, Side};
 use split::SplitPlan;
 use sweeps::SupernodalSolve;
 
+use super::ordering::FillOrdering;
+
 /// The matrix is not (numerically) positive definite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NotPositiveDefinite;
 
-/// A fill-reducing ordering of the rows and columns.
-#[derive(Debug, Clone)]
-pub enum FillOrdering {
-    /// faer's approximate minimum degree.
-    Amd,
-    /// `perm[i]` = original index of the i-th pivot.
-    Custom(Vec<usize>),
-}
-
+/// A sparse `L Lᵀ` factorization with its symbolic analysis (see the module documentation).
 pub struct Cholesky {
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
