@@ -25,6 +25,8 @@
 
 mod data;
 pub mod sampler;
+#[cfg(test)]
+mod tests;
 pub mod transform;
 mod write;
 
