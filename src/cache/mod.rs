@@ -12,6 +12,8 @@
 //! whatever the cache's length.
 
 mod binary;
+#[cfg(test)]
+mod fuzz;
 pub mod gltf_clip;
 pub mod mdd;
 pub mod pc2;

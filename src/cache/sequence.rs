@@ -96,6 +96,12 @@ impl SequencePattern {
         format!("{}{number:0width$}{}", self.prefix, self.suffix, width = self.width)
     }
 
+    /// The file name with `digits` in the placeholder's place (fuzzing).
+    #[cfg(test)]
+    pub(crate) fn with_digits(&self, digits: &str) -> String {
+        format!("{}{digits}{}", self.prefix, self.suffix)
+    }
+
     /// The path of frame `number`.
     pub fn path(&self, number: u64) -> PathBuf {
         self.dir.join(self.file_name(number))

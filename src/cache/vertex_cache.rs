@@ -39,6 +39,17 @@ impl CacheFormat {
         })
     }
 
+    /// The format with its article, for messages: "an OBJ sequence", "a PC2 cache", ...
+    pub fn described(self) -> &'static str {
+        match self {
+            CacheFormat::ObjSequence => "an OBJ sequence",
+            CacheFormat::Pc2 => "a PC2 cache",
+            CacheFormat::Mdd => "an MDD cache",
+            CacheFormat::Gltf => "a glTF clip",
+            CacheFormat::Usd => "a USD point cache",
+        }
+    }
+
     /// The name used in reports: `obj-sequence`, `pc2`, `mdd`, `gltf`, `usd`.
     pub fn name(self) -> &'static str {
         match self {
@@ -113,7 +124,7 @@ impl std::fmt::Debug for VertexCache {
 }
 
 fn unused(path: &Path, format: CacheFormat, field: &str, used_by: &str) -> Error {
-    Error::in_file(path, format!("`{field}` was given, but a {} cache does not use it ({used_by})", format.name()), format!("remove `{field}` from the [cache] table"))
+    Error::in_file(path, format!("`{field}` was given, but {} does not use it ({used_by})", format.described()), format!("remove `{field}` from the [cache] table"))
 }
 
 /// The rest mesh of a PC2 / MDD cache, matched against its point count.
@@ -121,7 +132,7 @@ fn rest_mesh(path: &Path, rest: Option<&Path>, points: usize, format: CacheForma
     let Some(rest) = rest else {
         return Err(Error::in_file(
             path,
-            format!("a {} cache holds positions only, so its triangles must come from the mesh it animates", format.name()),
+            format!("{} holds positions only, so its triangles must come from the mesh it animates", format.described()),
             "give rest = \"mesh.obj\", the mesh the cache was baked from",
         ));
     };
@@ -171,7 +182,7 @@ impl VertexCache {
             return Err(unused(path, format, "prim", "only USD stages have prims"));
         }
         let need_fps = |why: &str| {
-            options.fps.ok_or_else(|| Error::in_file(path, format!("a {} cache needs a frame rate: {why}", format.name()), "give the cache's fps (frames per second)"))
+            options.fps.ok_or_else(|| Error::in_file(path, format!("{} needs a frame rate: {why}", format.described()), "give the cache's fps (frames per second)"))
         };
         let path_buf = path.to_path_buf();
         let cache = match format {
@@ -250,5 +261,136 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         Some(CacheFormat::Gltf) if !gltf_text => gltf_clip::write(path, mesh, frames, fps),
         Some(CacheFormat::Usd) => usd::write(path, mesh, frames, fps),
         _ => Err(Error::in_file(path, "is not a vertex cache format blendsim writes", "name the output frames/frame_####.obj, .pc2, .mdd, .glb, .usda, .usdc or .usd")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::tests::{assert_frames_equal, scratch, wave, wave_mesh};
+
+    fn options(fps: Option<f64>, rest: Option<&Path>) -> CacheOptions {
+        CacheOptions { fps, rest: rest.map(Path::to_path_buf), ..CacheOptions::default() }
+    }
+
+    #[test]
+    fn every_format_round_trips_through_write_and_open() {
+        let dir = scratch("vc-roundtrip");
+        let (mesh, mut frames) = (wave_mesh(4), wave(16, 6, 24.0));
+        let rest = dir.join("rest.obj");
+        std::fs::write(&rest, obj::write(&mesh)).unwrap();
+        let file = FpsSource::File;
+        let cases: Vec<(&str, CacheOptions, CacheFormat, FpsSource)> = vec![
+            ("seq/f_####.obj", options(Some(24.0), None), CacheFormat::ObjSequence, FpsSource::Caller),
+            ("a.pc2", options(Some(24.0), Some(&rest)), CacheFormat::Pc2, FpsSource::Caller),
+            ("a.mdd", options(None, Some(&rest)), CacheFormat::Mdd, file("the MDD frame times".into())),
+            ("a.glb", options(None, None), CacheFormat::Gltf, file("the spacing of the glTF animation's keys".into())),
+            ("a.usda", options(Some(60.0), None), CacheFormat::Usd, file("the stage's timeCodesPerSecond (prim /a/Mesh)".into())),
+            ("b.usdc", options(None, None), CacheFormat::Usd, file("the stage's timeCodesPerSecond (prim /b/Mesh)".into())),
+            ("c.usd", options(None, None), CacheFormat::Usd, file("the stage's timeCodesPerSecond (prim /c/Mesh)".into())),
+        ];
+        for (name, options, format, source) in cases {
+            let path = dir.join(name);
+            write(&path, &mesh, &mut frames, 24.0).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let mut cache = VertexCache::open(&path, &options).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!((cache.format, cache.fps, &cache.fps_source), (format, 24.0, &source), "{name}");
+            assert_eq!(cache.mesh.triangles, mesh.triangles, "{name}");
+            let first = if options.rest.is_some() { &mesh.positions } else { &frames.frames[0] };
+            assert!(cache.mesh.positions.iter().zip(first).all(|(a, b)| (0..3).all(|d| (a[d] - b[d]).abs() < 1e-6)), "{name}");
+            if format != CacheFormat::ObjSequence {
+                assert_eq!(cache.bytes, std::fs::metadata(&path).unwrap().len(), "{name}");
+            }
+            assert_frames_equal(&mut frames, cache.frames.as_mut(), 1e-6);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_range_selects_frames_and_the_mesh_is_its_first_frame() {
+        let dir = scratch("vc-range");
+        let (mesh, mut frames) = (wave_mesh(3), wave(9, 8, 30.0));
+        let range = FrameRange { start: 2, end: -3 };
+        for name in ["a.glb", "a.mdd"] {
+            let path = dir.join(name);
+            write(&path, &mesh, &mut frames, 30.0).unwrap();
+            let rest = dir.join("rest.obj");
+            std::fs::write(&rest, obj::write(&mesh)).unwrap();
+            let opts = CacheOptions { range, rest: name.ends_with(".mdd").then_some(rest), ..CacheOptions::default() };
+            let mut cache = VertexCache::open(&path, &opts).unwrap();
+            assert_eq!(cache.frame_count(), 4, "{name}");
+            assert!((cache.frames.time(0) - 2.0 / 30.0).abs() < 1e-7, "{name}: glTF keys are f32");
+            if name.ends_with(".glb") {
+                assert!(cache.mesh.positions.iter().zip(&frames.frames[2]).all(|(a, b)| (0..3).all(|d| (a[d] - b[d]).abs() < 1e-6)));
+            }
+            let mut out = vec![[0.0; 3]; 9];
+            cache.frames.read_frame(3, &mut out).unwrap();
+            assert!(out.iter().zip(&frames.frames[5]).all(|(a, b)| (0..3).all(|d| (a[d] - b[d]).abs() < 1e-6)), "{name}");
+            let bad = CacheOptions { range: FrameRange { start: 6, end: 3 }, ..opts };
+            let s = VertexCache::open(&path, &bad).unwrap_err().to_string();
+            assert!(s.contains("frame range start = 6, end = 3 selects no frames of the 8 the cache holds"), "{s}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn missing_and_misplaced_options_are_errors() {
+        let dir = scratch("vc-options");
+        let (mesh, mut frames) = (wave_mesh(3), wave(9, 3, 30.0));
+        let (pc2, glb) = (dir.join("a.pc2"), dir.join("a.glb"));
+        write(&pc2, &mesh, &mut frames, 30.0).unwrap();
+        write(&glb, &mesh, &mut frames, 30.0).unwrap();
+        let small = dir.join("small.obj");
+        std::fs::write(&small, obj::write(&wave_mesh(2))).unwrap();
+        let err = |path: &Path, o: CacheOptions| {
+            let s = VertexCache::open(path, &o).unwrap_err().to_string();
+            assert!(s.contains(" (fix: ") && !s.contains('\n'), "{s}");
+            s
+        };
+        assert!(err(&pc2, options(Some(30.0), None)).contains("a PC2 cache holds positions only, so its triangles must come from the mesh it animates (fix: give rest = "));
+        assert!(err(&pc2, options(None, Some(&small))).contains("a PC2 cache needs a frame rate: PC2 numbers its samples in frames, not seconds"));
+        let s = err(&pc2, options(Some(30.0), Some(&small)));
+        assert!(s.starts_with(&format!("{}: has 4 vertices, but {} has 9 points per frame", small.display(), pc2.display())), "{s}");
+        assert!(err(&glb, options(None, Some(&small))).contains("`rest` was given, but a glTF clip does not use it"));
+        assert!(err(&pc2, CacheOptions { animation: Some("x".into()), ..options(Some(30.0), Some(&small)) }).contains("`animation` was given, but a PC2 cache"));
+        assert!(err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip"));
+        assert!(err(&glb, options(Some(-1.0), None)).contains("fps -1 is not a positive number"));
+        assert!(err(&dir.join("a.abc"), CacheOptions::default()).contains("is not a vertex cache format blendsim reads"));
+        assert!(err(&dir.join("f_####.obj"), CacheOptions::default()).contains("an OBJ sequence needs a frame rate"));
+        let s = write(&dir.join("a.gltf"), &mesh, &mut frames, 30.0).unwrap_err().to_string();
+        assert!(s.contains("is not a vertex cache format blendsim writes"), "{s}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_fifo_as_input_is_refused_for_every_format() {
+        let dir = scratch("vc-fifo");
+        let (mesh, mut frames) = (wave_mesh(2), wave(4, 2, 30.0));
+        let rest = dir.join("rest.obj");
+        std::fs::write(&rest, obj::write(&mesh)).unwrap();
+        let pc2 = dir.join("ok.pc2");
+        write(&pc2, &mesh, &mut frames, 30.0).unwrap();
+        let fifo = |name: &str| {
+            let p = dir.join(name);
+            assert!(std::process::Command::new("mkfifo").arg(&p).status().unwrap().success());
+            p
+        };
+        let seq = dir.join("seq/f_#.obj");
+        write(&seq, &mesh, &mut frames, 30.0).unwrap();
+        std::fs::remove_file(dir.join("seq/f_1.obj")).unwrap();
+        fifo("seq/f_1.obj");
+        let cases = [
+            (fifo("a.pc2"), options(Some(30.0), Some(&rest)), "the PC2 cache is not a regular file"),
+            (fifo("a.mdd"), options(None, Some(&rest)), "the MDD cache is not a regular file"),
+            (fifo("a.glb"), CacheOptions::default(), "the glTF file is not a regular file"),
+            (fifo("a.usda"), CacheOptions::default(), "the USD file is not a regular file"),
+            (pc2.clone(), options(Some(30.0), Some(&fifo("rest-fifo.obj"))), "the rest mesh is not a regular file"),
+            (seq.clone(), options(Some(30.0), None), "the OBJ frame is not a regular file"),
+        ];
+        // Each would block forever if the reader opened the FIFO.
+        for (path, options, expected) in cases {
+            let s = VertexCache::open(&path, &options).unwrap_err().to_string();
+            assert!(s.contains(expected) && s.contains("(fix: give the path of a regular file"), "{}: {s}", path.display());
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
