@@ -113,7 +113,7 @@ pub(crate) fn check_writable(path: &Path, frames: &dyn FrameSource, fps: f64) ->
     if vertices > i32::MAX as usize / 12 || count > MAX_FRAMES {
         return fail(format!("{count} frames of {vertices} vertices is more than the cache formats hold"));
     }
-    if let Some(i) = (1..count).find(|&i| !(frames.time(i) > frames.time(i - 1))) {
+    if let Some(i) = (1..count).find(|&i| frames.time(i).partial_cmp(&frames.time(i - 1)) != Some(std::cmp::Ordering::Greater)) {
         return fail(format!("frame times do not increase at frame {i}"));
     }
     Ok((vertices, count))

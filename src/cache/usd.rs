@@ -59,6 +59,9 @@ fn run_script(path: &Path, args: &[&std::ffi::OsStr]) -> Result<()> {
     let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
     let py = python.to_string_lossy().into_owned();
     let output = Command::new(&python)
+        // usd-core maps .usdc files into memory by default, so every sample read stays
+        // resident; pread keeps the reader at one sample.
+        .env("USDC_USE_PREAD", "1")
         .arg("-c")
         .arg(SCRIPT)
         .args(args)

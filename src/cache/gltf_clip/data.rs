@@ -65,14 +65,14 @@ pub(crate) fn load(path: &Path) -> Result<Loaded> {
     };
     let root = gltf::json::Root::from_slice(&json).map_err(|e| damaged(path, format!("its glTF JSON does not parse: {e}")))?;
     drop(json);
-    let document = validate(path, root)?;
-    if let Some(ext) = document.extensions_required().find(|e| *e != "KHR_mesh_quantization") {
+    if let Some(ext) = root.extensions_required.iter().find(|e| *e != "KHR_mesh_quantization") {
         return Err(Error::in_file(
             path,
             format!("requires the glTF extension {ext}, which the cache reader does not decode"),
             "re-export without mesh compression (Draco, meshopt), e.g. with gltf-transform or your exporter's settings",
         ));
     }
+    let document = validate(path, root)?;
     let mut store = BufferStore { path: path.to_path_buf(), files: vec![(path.to_path_buf(), file)], buffers: Vec::new(), bytes: len };
     for buffer in document.buffers() {
         let need = buffer.length() as u64;
@@ -117,27 +117,53 @@ pub(crate) fn load(path: &Path) -> Result<Loaded> {
     Ok(Loaded { document, store })
 }
 
-/// The document, validated by gltf-json except for one rule it adds to the spec: an accessor
-/// without a buffer view and without sparse values is all zeros (glTF 2.0 §3.6.2.3), which
-/// is how a morph target that moves nothing is written (our frame 0 of a full-frame clip).
+/// The document, validated by gltf-json except for one rule it adds to the spec (an accessor
+/// without a buffer view and without sparse values is all zeros, glTF 2.0 §3.6.2.3: how a
+/// morph target that moves nothing is written, as our full-frame frame 0), and for the
+/// animation channel targets it does not check.
 fn validate(path: &Path, root: gltf::json::Root) -> Result<Document> {
-    use gltf::json::validation::{Error as Invalid, Validate};
+    use gltf::json::validation::{Checked, Error as Invalid, Validate};
+    // gltf-json's primitive check indexes the POSITION accessor before validating the index.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if primitive.attributes.get(&Checked::Valid(gltf::json::mesh::Semantic::Positions)).is_some_and(|a| a.value() >= root.accessors.len()) {
+                return Err(damaged(path, format!("its glTF JSON is not valid glTF 2.0 (meshes[{m}].primitives[{p}].attributes.POSITION: Index out of range)")));
+            }
+        }
+    }
     let mut errors = Vec::new();
     root.validate(&root, gltf::json::Path::new, &mut |at, error| {
         let at = at().to_string();
         let zeros = matches!(error, Invalid::Missing) && at.starts_with("accessors[") && at.ends_with("].bufferView");
-        if !zeros {
+        // Supported here, though gltf-json does not list it.
+        let quantization = matches!(error, Invalid::Unsupported) && at.contains("KHR_mesh_quantization");
+        if !zeros && !quantization {
             errors.push(format!("{at}: {error}"));
         }
     });
+    // gltf-json 1.4 does not validate animation channel targets, which the gltf crate then
+    // unwraps: check them here.
+    for (a, animation) in root.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            if channel.target.node.value() >= root.nodes.len() {
+                errors.push(format!("animations[{a}].channels[{c}].target.node: Index out of range"));
+            }
+            if !matches!(channel.target.path, gltf::json::validation::Checked::Valid(_)) {
+                errors.push(format!("animations[{a}].channels[{c}].target.path: Invalid value"));
+            }
+        }
+    }
     if let Some(first) = errors.first() {
         return Err(damaged(path, format!("its glTF JSON is not valid glTF 2.0 ({first}{})", if errors.len() > 1 { format!(", and {} more", errors.len() - 1) } else { String::new() })));
     }
     Ok(Document::from_json_without_validation(root))
 }
 
-/// The JSON chunk (read) and the BIN chunk (offset, length) of a GLB of `len` bytes.
-fn glb_chunks(path: &Path, file: &mut File, len: u64, header: &[u8]) -> Result<(Vec<u8>, Option<(u64, u64)>)> {
+/// Byte offset and length of a GLB's BIN chunk data.
+type BinChunk = (u64, u64);
+
+/// The JSON chunk (read) and the BIN chunk of a GLB of `len` bytes.
+fn glb_chunks(path: &Path, file: &mut File, len: u64, header: &[u8]) -> Result<(Vec<u8>, Option<BinChunk>)> {
     let u32_at = |b: &[u8], i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as u64;
     if len < 20 {
         return Err(damaged(path, format!("is {len} bytes, shorter than a GLB header and JSON chunk header (20 bytes): truncated")));
@@ -341,14 +367,25 @@ impl BufferStore {
                     IndexType::U16 => DataType::U16,
                     IndexType::U32 => DataType::U32,
                 };
-                let indices = self.span(&s.indices().view(), s.indices().offset() as u64, (n * component_size(index_type)) as u64, &format!("the sparse indices of {what}"))?;
-                let values = self.span(&s.values().view(), s.values().offset() as u64, (n * element) as u64, &format!("the sparse values of {what}"))?;
+                let bytes = |size: usize| u64::try_from(n as u128 * size as u128).map_err(|_| damaged(&self.path, format!("{what} has an impossible sparse count {n}")));
+                let indices = self.span(&s.indices().view(), s.indices().offset() as u64, bytes(component_size(index_type))?, &format!("the sparse indices of {what}"))?;
+                let values = self.span(&s.values().view(), s.values().offset() as u64, bytes(element)?, &format!("the sparse values of {what}"))?;
                 Some(SparseLayout { count: n, index_type, indices, values })
             }
         };
-        // Without a view (and without sparse values) an accessor is all zeros: allowed, and
-        // callers bound its count by an accessor that has data.
+        // Without a view an accessor is zeros (plus its sparse values): allowed, and callers
+        // check its count against an accessor that has data before reading it.
         Ok(Layout { index: accessor.index(), count, components, component, normalized: accessor.normalized(), dense, sparse })
+    }
+
+    /// Check that an accessor is backed by data (a buffer view), so its count is bounded by
+    /// the file; accessors read without that check have a count tied to one that is.
+    pub fn require_data(&self, layout: &Layout, what: &str) -> Result<()> {
+        match layout.dense {
+            Some(_) => Ok(()),
+            None if layout.count <= 1 => Ok(()),
+            None => Err(damaged(&self.path, format!("{what} (accessor {}) has {} elements but no buffer view", layout.index, layout.count))),
+        }
     }
 
     fn read_span(&mut self, span: Span, out: &mut Vec<u8>) -> Result<()> {

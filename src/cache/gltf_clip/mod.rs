@@ -182,7 +182,24 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
             GltfInterpolation::CubicSpline => Interpolation::CubicSpline,
         };
         let input = store.layout(&sampler.input(), &format!("the key times of {what}"))?;
+        store.require_data(&input, &format!("the key times of {what}"))?;
         let output = store.layout(&sampler.output(), &format!("the values of {what}"))?;
+        // Checked before reading: an output without a view (sparse) is bounded only by this.
+        let (groups, per_key) = (if interpolation == Interpolation::CubicSpline { 3 } else { 1 }, if matches!(target, Target::Weights) { width } else { 1 });
+        let components = if matches!(target, Target::Weights) { 1 } else { width };
+        if input.components != 1 || output.components != components || output.count as u128 != input.count as u128 * groups * per_key as u128 {
+            return Err(damaged(
+                path,
+                format!(
+                    "{what}, sampler {}: {} outputs of {} components for {} keys, expected {} of {components}",
+                    sampler.index(),
+                    output.count,
+                    output.components,
+                    input.count,
+                    input.count as u128 * groups * per_key as u128
+                ),
+            ));
+        }
         store.read_floats(&input, &mut floats, &mut bytes)?;
         let times = floats.clone();
         store.read_floats(&output, &mut floats, &mut bytes)?;
@@ -210,8 +227,9 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
         }
         let position = primitive.get(&Semantic::Positions).ok_or_else(|| damaged(path, format!("{what} has no POSITION")))?;
         let layout = store.layout(&position, &format!("POSITION of {what}"))?;
-        if layout.components != 3 || position.view().is_none() {
-            return Err(damaged(path, format!("POSITION of {what} is not VEC3 data")));
+        store.require_data(&layout, &format!("POSITION of {what}"))?;
+        if layout.components != 3 {
+            return Err(damaged(path, format!("POSITION of {what} is not VEC3")));
         }
         let (offset, count) = (base.len(), layout.count);
         store.read_floats(&layout, &mut floats, &mut bytes)?;
@@ -219,6 +237,7 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
         match primitive.indices() {
             Some(indices) => {
                 let layout = store.layout(&indices, &format!("the indices of {what}"))?;
+                store.require_data(&layout, &format!("the indices of {what}"))?;
                 let indices = store.read_uints(&layout, &format!("the indices of {what}"))?;
                 if indices.len() % 3 != 0 || layout.components != 1 {
                     return Err(damaged(path, format!("{what} has {} indices, not a whole number of triangles", indices.len())));
@@ -442,6 +461,7 @@ fn read_skin(path: &Path, store: &mut BufferStore, skin: &gltf::Skin, sets: Vec<
         None => vec![IDENTITY; joints.len()],
         Some(a) => {
             let layout = store.layout(&a, &format!("the inverse bind matrices of {what}"))?;
+            store.require_data(&layout, &format!("the inverse bind matrices of {what}"))?;
             if layout.components != 16 || layout.count < joints.len() {
                 return Err(damaged(path, format!("the inverse bind matrices of {what} are {} elements of {} components, for {} joints (need MAT4 each)", layout.count, layout.components, joints.len())));
             }

@@ -16,6 +16,10 @@ use super::*;
 use crate::cache::tests::{assert_frames_equal, scratch, wave, wave_mesh};
 use crate::cache::MemoryFrames;
 
+/// One animation channel for [`Builder::animation`]: node, property, interpolation, key
+/// times, output values.
+type ChannelSpec<'a> = (Index<json::Node>, Property, Interp, &'a [f32], &'a [f32]);
+
 /// A glTF document under construction: one buffer, one view per accessor.
 struct Builder {
     root: json::Root,
@@ -116,7 +120,7 @@ impl Builder {
     }
 
     /// An animation of `(node, property, interpolation, times, values)` channels.
-    fn animation(&mut self, name: &str, channels: &[(Index<json::Node>, Property, Interp, &[f32], &[f32])]) {
+    fn animation(&mut self, name: &str, channels: &[ChannelSpec]) {
         let (mut samplers, mut list) = (Vec::new(), Vec::new());
         for (i, &(node, property, interpolation, times, values)) in channels.iter().enumerate() {
             let input = self.floats(times, Type::Scalar, true);
@@ -451,4 +455,102 @@ fn bad_clips_are_one_line_errors_naming_the_file() {
     std::fs::write(&short, "{\"asset\": {\"version\": \"2.0\"}, \"accessors\": [{\"count\": 1}]}").unwrap();
     assert!(err(&short, None, None).contains("its glTF JSON"));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Every numeric leaf of a JSON value, as a JSON pointer.
+fn numeric_pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::Number(_) => out.push(at),
+        serde_json::Value::Array(a) => a.iter().enumerate().for_each(|(i, x)| numeric_pointers(x, format!("{at}/{i}"), out)),
+        serde_json::Value::Object(o) => o.iter().for_each(|(k, x)| numeric_pointers(x, format!("{at}/{k}"), out)),
+        _ => {}
+    }
+}
+
+/// A GLB with `json` as its JSON chunk and `bin` as its BIN chunk.
+fn glb_with(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut text = json.to_string().into_bytes();
+    text.resize(text.len().next_multiple_of(4), b' ');
+    let total = 12 + 8 + text.len() + 8 + bin.len();
+    let mut out = b"glTF".to_vec();
+    for w in [2u32, total as u32, text.len() as u32] {
+        out.extend(w.to_le_bytes());
+    }
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend((bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(bin);
+    out
+}
+
+/// Open a clip and read every frame (capped): errors are fine, panics are not.
+fn exercise_clip(path: &Path) {
+    match open(path, Some("swing"), Some(30.0)) {
+        Ok(mut clip) => {
+            let mut out = vec![[0.0; 3]; clip.frames.vertex_count()];
+            for f in 0..clip.frames.frame_count().min(40) {
+                if let Err(e) = clip.frames.read_frame(f, &mut out) {
+                    assert!(e.to_string().contains(" (fix: "), "{e}");
+                }
+            }
+        }
+        Err(e) => assert!(!e.to_string().contains('\n'), "{e}"),
+    }
+}
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The skinned clip's JSON and BIN, made once.
+    fn parts() -> &'static (serde_json::Value, Vec<u8>) {
+        static PARTS: std::sync::OnceLock<(serde_json::Value, Vec<u8>)> = std::sync::OnceLock::new();
+        PARTS.get_or_init(|| {
+            let dir = scratch("gltf-fuzz-source");
+            let path = dir.join("skinned.glb");
+            skinned_clip(&path);
+            let bytes = std::fs::read(&path).unwrap();
+            std::fs::remove_dir_all(&dir).unwrap();
+            let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+            (serde_json::from_slice(&bytes[20..20 + json_len]).unwrap(), bytes[20 + json_len + 8..].to_vec())
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 400, failure_persistence: None, ..ProptestConfig::default() })]
+
+        /// Numbers of the JSON (counts, offsets, indices, component types, ...) replaced by
+        /// extremes, and bytes of the BIN chunk flipped.
+        #[test]
+        fn mutated_clips_never_panic(
+            edits in prop::collection::vec((any::<prop::sample::Index>(), prop_oneof![
+                Just(-1i64), Just(0), Just(1), Just(3), Just(4), Just(5126), Just(5121), Just(65535), Just(1 << 31), Just(1 << 40), Just(i64::MAX), -10..400i64,
+            ]), 1..4),
+            flips in prop::collection::vec((any::<prop::sample::Index>(), 1..=255u8), 0..3),
+            truncate in prop::option::weighted(0.1, any::<prop::sample::Index>()),
+        ) {
+            let (json, bin) = parts();
+            let (mut json, mut bin) = (json.clone(), bin.clone());
+            let mut pointers = Vec::new();
+            numeric_pointers(&json, String::new(), &mut pointers);
+            for (at, value) in edits {
+                let pointer = at.get(&pointers).clone();
+                *json.pointer_mut(&pointer).unwrap() = serde_json::json!(value);
+            }
+            for (at, mask) in flips {
+                let i = at.index(bin.len());
+                bin[i] ^= mask;
+            }
+            let mut bytes = glb_with(&json, &bin);
+            if let Some(at) = truncate {
+                bytes.truncate(at.index(bytes.len()));
+            }
+            let dir = std::env::temp_dir().join(format!("blendsim-gltf-fuzz-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join(format!("{:?}.glb", std::thread::current().id()).replace(['(', ')'], ""));
+            std::fs::write(&path, &bytes).unwrap();
+            exercise_clip(&path);
+        }
+    }
 }

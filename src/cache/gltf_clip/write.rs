@@ -185,8 +185,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let vertex_bytes = 12 * n * (1 + dense);
     let sparse_bytes: usize = measures.iter().filter(|m| m.storage == Storage::Sparse).map(|m| pad4(m.moved * sparse_size) + 12 * m.moved).sum();
     let animation_bytes = 12 * count;
-    let mut root = json::Root::default();
-    root.asset = json::Asset {
+    let asset = json::Asset {
         copyright: None,
         extensions: None,
         extras: None,
@@ -194,6 +193,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         min_version: None,
         version: "2.0".into(),
     };
+    let mut root = json::Root { asset, ..Default::default() };
     let mut at = 0;
     let mut next_view = |root: &mut json::Root, len: usize, stride: Option<usize>, target: Option<ViewTarget>| -> Option<u32> {
         if len == 0 {
