@@ -90,7 +90,8 @@ fn child(args: &[String]) {
         }
         [mode, path, rest] if mode == "--read-cache" => {
             let rest = (rest != "-").then(|| PathBuf::from(rest));
-            let mut cache = VertexCache::open(Path::new(path), &CacheOptions { fps: Some(FPS), rest, ..CacheOptions::default() }).unwrap_or_else(|e| panic!("{e}"));
+            let mut cache = VertexCache::open(Path::new(path), &CacheOptions { fps: Some(FPS), rest, ..CacheOptions::default() })
+                .unwrap_or_else(|e| panic!("{e}"));
             let mut points = vec![[0.0; 3]; cache.frames.vertex_count()];
             let mut checksum = 0.0;
             for f in 0..cache.frame_count() {
@@ -107,7 +108,12 @@ fn child(args: &[String]) {
 /// Run this benchmark binary as a child under `/usr/bin/time -v`: (seconds, own peak KiB,
 /// tree peak KiB).
 fn timed(args: &[&str]) -> (f64, u64, u64) {
-    let output = Command::new("/usr/bin/time").arg("-v").arg(std::env::current_exe().unwrap()).args(args).output().expect("run /usr/bin/time (apt-get install time)");
+    let output = Command::new("/usr/bin/time")
+        .arg("-v")
+        .arg(std::env::current_exe().unwrap())
+        .args(args)
+        .output()
+        .expect("run /usr/bin/time (apt-get install time)");
     let (stdout, stderr) = (String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
     assert!(output.status.success(), "{args:?} failed:\n{stdout}\n{stderr}");
     let mut own = stdout.split_whitespace();
@@ -141,8 +147,14 @@ fn main() {
     std::fs::write(&rest, obj::write(&grid(side))).unwrap();
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
     println!("machine: load average {} (2 cores shared; times are only as good as that)", load());
-    println!("cache: {} vertices x {frames} frames at {FPS} fps; whole cache as f32 = {:.0} MiB\n", side * side, mib((side * side * frames * 12) as u64));
-    println!("| format | frames | file MiB | write s | write peak MiB (own / tree) | read s | read ms/frame | read peak MiB (own / tree) |");
+    println!(
+        "cache: {} vertices x {frames} frames at {FPS} fps; whole cache as f32 = {:.0} MiB\n",
+        side * side,
+        mib((side * side * frames * 12) as u64)
+    );
+    println!(
+        "| format | frames | file MiB | write s | write peak MiB (own / tree) | read s | read ms/frame | read peak MiB (own / tree) |"
+    );
     println!("|---|---|---|---|---|---|---|---|");
     let text_frames = frames.min(30);
     let cases = [

@@ -19,11 +19,7 @@ pub(crate) fn require_regular(path: &Path, what: &str) -> Result<u64> {
         return Ok(meta.len());
     }
     let kind = if meta.is_dir() { "a folder" } else { "not a regular file (a FIFO, socket or device)" };
-    Err(Error::in_file(
-        path,
-        format!("the {what} is {kind}"),
-        "give the path of a regular file; copy a stream to a file first",
-    ))
+    Err(Error::in_file(path, format!("the {what} is {kind}"), "give the path of a regular file; copy a stream to a file first"))
 }
 
 /// Open a regular file for reading; returns it with its size.
@@ -36,10 +32,13 @@ pub(crate) fn open_regular(path: &Path, what: &str) -> Result<(File, u64)> {
 
 /// Read `buf.len()` bytes at `offset`; a short read is an error naming the offset.
 pub(crate) fn read_exact_at<R: Read + Seek>(reader: &mut R, offset: u64, buf: &mut [u8], path: &Path) -> Result<()> {
-    reader
-        .seek(SeekFrom::Start(offset))
-        .and_then(|_| reader.read_exact(buf))
-        .map_err(|e| Error::in_file(path, format!("cannot read {} bytes at byte {offset}: {e}", buf.len()), "the file is damaged or changed while reading; re-export it"))
+    reader.seek(SeekFrom::Start(offset)).and_then(|_| reader.read_exact(buf)).map_err(|e| {
+        Error::in_file(
+            path,
+            format!("cannot read {} bytes at byte {offset}: {e}", buf.len()),
+            "the file is damaged or changed while reading; re-export it",
+        )
+    })
 }
 
 /// Byte order of a binary cache.
@@ -91,7 +90,12 @@ pub(crate) fn decode_points(bytes: &[u8], endian: Endian, out: &mut [Point], fra
         if let Some(d) = xyz.iter().position(|x| !x.is_finite()) {
             return Err(Error::in_file(
                 path,
-                format!("frame {frame}, vertex {v}: coordinate {} is {} (byte {})", ["x", "y", "z"][d], xyz[d], base_offset + 12 * v as u64 + 4 * d as u64),
+                format!(
+                    "frame {frame}, vertex {v}: coordinate {} is {} (byte {})",
+                    ["x", "y", "z"][d],
+                    xyz[d],
+                    base_offset + 12 * v as u64 + 4 * d as u64
+                ),
                 "the simulation that wrote the cache diverged or the file is damaged; re-bake it",
             ));
         }

@@ -141,7 +141,8 @@ fn mutation() -> impl Strategy<Value = Mutation> {
     prop_oneof![
         any::<usize>().prop_map(Mutation::Truncate),
         (any::<usize>(), 1..=255u8).prop_map(|(a, m)| Mutation::Flip(a, m)),
-        (any::<usize>(), prop_oneof![any::<i32>(), Just(i32::MAX), Just(i32::MIN), Just(-1), Just(0), 1..64i32]).prop_map(|(s, v)| Mutation::Word(s, v)),
+        (any::<usize>(), prop_oneof![any::<i32>(), Just(i32::MAX), Just(i32::MIN), Just(-1), Just(0), 1..64i32])
+            .prop_map(|(s, v)| Mutation::Word(s, v)),
         prop::collection::vec(any::<u8>(), 1..40).prop_map(Mutation::Append),
     ]
 }

@@ -74,7 +74,9 @@ impl<R: Read + Seek> MddFrames<R> {
         let (f, p) = (frames as u64, points as u64);
         let times_end = 8 + 4 * f;
         if len < times_end {
-            return bad(format!("the header says {frames} frames (byte 0), whose times end at byte {times_end}, but the file ends at byte {len}: truncated"));
+            return bad(format!(
+                "the header says {frames} frames (byte 0), whose times end at byte {times_end}, but the file ends at byte {len}: truncated"
+            ));
         }
         let frame_bytes = 12 * p;
         let expected = times_end as u128 + frame_bytes as u128 * f as u128;
@@ -83,13 +85,20 @@ impl<R: Read + Seek> MddFrames<R> {
         } else if len as u128 == expected + frame_bytes as u128 {
             times_end + frame_bytes
         } else {
-            return bad(size_mismatch(len, expected, times_end, frame_bytes, &format!("{frames} frames (byte 0) x {points} points (byte 4)")));
+            return bad(size_mismatch(
+                len,
+                expected,
+                times_end,
+                frame_bytes,
+                &format!("{frames} frames (byte 0) x {points} points (byte 4)"),
+            ));
         };
         // Bounded by the file size, checked above.
         let mut raw = vec![0u8; 4 * frames as usize];
         read_exact_at(&mut reader, 8, &mut raw, path)?;
         let file_times: Vec<f64> = raw.chunks_exact(4).map(|c| BE.f32(word(c, 0)) as f64).collect();
-        let unusable = file_times.iter().position(|t| !t.is_finite()).or_else(|| file_times.windows(2).position(|w| w[1] <= w[0]).map(|i| i + 1));
+        let unusable =
+            file_times.iter().position(|t| !t.is_finite()).or_else(|| file_times.windows(2).position(|w| w[1] <= w[0]).map(|i| i + 1));
         let (times, rate) = match (unusable, fps) {
             (None, _) if file_times.len() >= 2 => {
                 let fps = rate_of(&file_times).expect("increasing times have a rate");
@@ -101,13 +110,22 @@ impl<R: Read + Seek> MddFrames<R> {
                     path,
                     match i {
                         0 => format!("frame time 0 (byte 8) is {}: the frame times are not finite and increasing", file_times[0]),
-                        _ => format!("frame time {i} (byte {}) is {}, after {}: the frame times are not finite and increasing", 8 + 4 * i, file_times[i], file_times[i - 1]),
+                        _ => format!(
+                            "frame time {i} (byte {}) is {}, after {}: the frame times are not finite and increasing",
+                            8 + 4 * i,
+                            file_times[i],
+                            file_times[i - 1]
+                        ),
                     },
                     "give the cache's fps (frames per second); the frames are then numbered from time 0",
                 ))
             }
             (None, None) => {
-                return Err(Error::in_file(path, "holds a single frame, so its frame rate is unknown", "give the cache's fps (frames per second)"));
+                return Err(Error::in_file(
+                    path,
+                    "holds a single frame, so its frame rate is unknown",
+                    "give the cache's fps (frames per second)",
+                ));
             }
         };
         Ok(MddFrames { path: path.to_path_buf(), reader, points: points as usize, data_start, times, rate, bytes: Vec::new() })
@@ -191,7 +209,12 @@ mod tests {
         let mdd = open_bytes(zeros.clone(), Some(50.0)).unwrap();
         assert_eq!((mdd.rate(), mdd.time(2)), (MddTimes::Caller { fps: 50.0 }, 0.04));
         let s = open_bytes(zeros, None).unwrap_err().to_string();
-        assert!(s.starts_with("anim.mdd: frame time 1 (byte 12) is 0, after 0: the frame times are not finite and increasing (fix: give the cache's fps"), "{s}");
+        assert!(
+            s.starts_with(
+                "anim.mdd: frame time 1 (byte 12) is 0, after 0: the frame times are not finite and increasing (fix: give the cache's fps"
+            ),
+            "{s}"
+        );
     }
 
     #[test]
@@ -236,7 +259,10 @@ mod tests {
         ];
         for (bytes, expected) in cases {
             let s = open_bytes(bytes, Some(30.0)).unwrap_err().to_string();
-            assert!(s.starts_with("anim.mdd: ") && s.contains(expected) && s.contains(" (fix: ") && !s.contains('\n'), "expected {expected:?}, got {s}");
+            assert!(
+                s.starts_with("anim.mdd: ") && s.contains(expected) && s.contains(" (fix: ") && !s.contains('\n'),
+                "expected {expected:?}, got {s}"
+            );
         }
         let s = open_bytes(mdd_bytes(1, 2, &[0.0], &data[..6]), None).unwrap_err().to_string();
         assert!(s.contains("holds a single frame, so its frame rate is unknown"), "{s}");

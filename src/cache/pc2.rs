@@ -59,7 +59,8 @@ impl Pc2Header {
         if version != 1 {
             return Err(Error::in_file(path, format!("PC2 version {version} at byte 12 (only version 1 exists)"), FIX_DAMAGED));
         }
-        let (points, start, rate, samples) = (le.i32(word(header, 16)), le.f32(word(header, 20)), le.f32(word(header, 24)), le.i32(word(header, 28)));
+        let (points, start, rate, samples) =
+            (le.i32(word(header, 16)), le.f32(word(header, 20)), le.f32(word(header, 24)), le.i32(word(header, 28)));
         if points <= 0 {
             return bad(format!("point count {points} at byte 16 (must be positive)"));
         }
@@ -76,7 +77,13 @@ impl Pc2Header {
         let frame_bytes = 12 * points as u64;
         let expected = HEADER_BYTES as u128 + frame_bytes as u128 * samples as u128;
         if file_len as u128 != expected {
-            return bad(size_mismatch(file_len, expected, HEADER_BYTES, frame_bytes, &format!("{points} points (byte 16) x {samples} samples (byte 28)")));
+            return bad(size_mismatch(
+                file_len,
+                expected,
+                HEADER_BYTES,
+                frame_bytes,
+                &format!("{points} points (byte 16) x {samples} samples (byte 28)"),
+            ));
         }
         Ok(Pc2Header { points: points as usize, start_frame: start as f64, sample_rate: rate as f64, samples: samples as usize })
     }
@@ -259,7 +266,10 @@ mod tests {
         ];
         for (bytes, expected) in cases {
             let s = open_bytes(bytes).unwrap_err().to_string();
-            assert!(s.starts_with("anim.pc2: ") && s.contains(expected) && s.contains(" (fix: ") && !s.contains('\n'), "expected {expected:?}, got {s}");
+            assert!(
+                s.starts_with("anim.pc2: ") && s.contains(expected) && s.contains(" (fix: ") && !s.contains('\n'),
+                "expected {expected:?}, got {s}"
+            );
         }
         let mut nan = data.clone();
         nan[10] = f32::INFINITY;

@@ -82,8 +82,12 @@ impl SequencePattern {
 
     /// Parse a pattern; the problem on failure (the caller names the file).
     pub fn parse(path: &Path) -> std::result::Result<SequencePattern, String> {
-        let name = path.file_name().and_then(|n| n.to_str()).ok_or_else(|| "has no file name in UTF-8 to hold the frame-number placeholder".to_string())?;
-        let (start, end, width) = placeholder(name)?.ok_or_else(|| "has no frame-number placeholder (#### or %04d) in its file name".to_string())?;
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .ok_or_else(|| "has no file name in UTF-8 to hold the frame-number placeholder".to_string())?;
+        let (start, end, width) =
+            placeholder(name)?.ok_or_else(|| "has no frame-number placeholder (#### or %04d) in its file name".to_string())?;
         if width > 18 {
             return Err(format!("pads frame numbers to {width} digits; at most 18 are supported"));
         }
@@ -181,12 +185,20 @@ pub struct OpenedSequence {
 pub fn open(pattern: &Path, fps: f64, range: FrameRange) -> Result<OpenedSequence> {
     let parsed = SequencePattern::parse(pattern).map_err(|p| Error::in_file(pattern, p, "name the frames like frames/frame_####.obj"))?;
     if !parsed.suffix.to_ascii_lowercase().ends_with(".obj") {
-        return Err(Error::in_file(pattern, "is a frame sequence of another format than OBJ", "export the sequence as OBJ files (frame_####.obj)"));
+        return Err(Error::in_file(
+            pattern,
+            "is a frame sequence of another format than OBJ",
+            "export the sequence as OBJ files (frame_####.obj)",
+        ));
     }
     let numbers = parsed.scan(pattern)?;
     let (lowest, highest) = (numbers[0], numbers[numbers.len() - 1]);
     let available = usize::try_from(highest - lowest).ok().filter(|&n| n < MAX_FRAMES).map(|n| n + 1).ok_or_else(|| {
-        Error::in_file(pattern, format!("frame numbers run from {lowest} to {highest}, more than {MAX_FRAMES} frames"), "remove stray files that match the pattern, or rename the sequence")
+        Error::in_file(
+            pattern,
+            format!("frame numbers run from {lowest} to {highest}, more than {MAX_FRAMES} frames"),
+            "remove stray files that match the pattern, or rename the sequence",
+        )
     })?;
     let (start, count) = range.resolve(available).map_err(|(p, f)| Error::in_file(pattern, p, f))?;
     let first = lowest + start as u64;
@@ -242,12 +254,20 @@ impl FrameSource for ObjSequence {
         let first = self.pattern.file_name(self.first);
         let fix = "export every frame from the same mesh, with no modifier that changes vertices or faces";
         if mesh.positions.len() != self.vertices {
-            return Err(Error::in_file(&path, format!("has {} vertices, but the first frame {first} has {}", mesh.positions.len(), self.vertices), fix));
+            return Err(Error::in_file(
+                &path,
+                format!("has {} vertices, but the first frame {first} has {}", mesh.positions.len(), self.vertices),
+                fix,
+            ));
         }
         if mesh.triangles.len() != self.triangles.len() {
             return Err(Error::in_file(
                 &path,
-                format!("has {} triangles (after fan triangulation), but the first frame {first} has {}", mesh.triangles.len(), self.triangles.len()),
+                format!(
+                    "has {} triangles (after fan triangulation), but the first frame {first} has {}",
+                    mesh.triangles.len(),
+                    self.triangles.len()
+                ),
                 fix,
             ));
         }
@@ -255,7 +275,11 @@ impl FrameSource for ObjSequence {
             let one_based = |t: [u32; 3]| t.map(|i| (i + 1).to_string()).join(" ");
             return Err(Error::in_file(
                 &path,
-                format!("triangle {t} (after fan triangulation) joins vertices {}, but in the first frame {first} it joins {}", one_based(mesh.triangles[t]), one_based(self.triangles[t])),
+                format!(
+                    "triangle {t} (after fan triangulation) joins vertices {}, but in the first frame {first} it joins {}",
+                    one_based(mesh.triangles[t]),
+                    one_based(self.triangles[t])
+                ),
                 fix,
             ));
         }
@@ -272,11 +296,18 @@ pub fn write(pattern: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: 
     let parsed = SequencePattern::parse(pattern).map_err(|p| Error::in_file(pattern, p, "name the frames like frames/frame_####.obj"))?;
     let (vertices, count) = check_writable(pattern, frames, fps)?;
     if mesh.positions.len() != vertices {
-        return Err(Error::general(format!("cannot write {}: the mesh has {} vertices but the frames have {vertices}", pattern.display(), mesh.positions.len()), "pass the mesh the frames belong to"));
+        return Err(Error::general(
+            format!("cannot write {}: the mesh has {} vertices but the frames have {vertices}", pattern.display(), mesh.positions.len()),
+            "pass the mesh the frames belong to",
+        ));
     }
     let start = (frames.time(0) * fps).round();
     if start < 0.0 {
-        return Err(Error::in_file(pattern, format!("the first frame is at time {} s, a negative frame number", frames.time(0)), "shift the frames to start at time 0 or later"));
+        return Err(Error::in_file(
+            pattern,
+            format!("the first frame is at time {} s, a negative frame number", frames.time(0)),
+            "shift the frames to start at time 0 or later",
+        ));
     }
     let first = start as u64;
     let last = first + count as u64 - 1;
@@ -286,7 +317,11 @@ pub fn write(pattern: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: 
             if let Some(n) = entry.file_name().to_str().and_then(|name| parsed.number_of(name)).filter(|n| !(first..=last).contains(n)) {
                 return Err(Error::in_file(
                     parsed.path(n),
-                    format!("is a frame of the same pattern outside the {count} frames being written ({} to {})", parsed.file_name(first), parsed.file_name(last)),
+                    format!(
+                        "is a frame of the same pattern outside the {count} frames being written ({} to {})",
+                        parsed.file_name(first),
+                        parsed.file_name(last)
+                    ),
                     "remove the old sequence first, or write to another folder",
                 ));
             }
@@ -318,7 +353,16 @@ mod tests {
         assert_eq!(p.path(7), Path::new("frames/frame_0007.obj"));
         assert_eq!(p.number_of("frame_0007.obj"), Some(7));
         assert_eq!(p.number_of("frame_12345.obj"), Some(12345));
-        for other in ["frame_007.obj", "frame_00007.obj", "frame_01234.obj", "frame_00a7.obj", "frame_0007.obj.bak", "Frame_0007.obj", "frame_.obj", "frame_+007.obj"] {
+        for other in [
+            "frame_007.obj",
+            "frame_00007.obj",
+            "frame_01234.obj",
+            "frame_00a7.obj",
+            "frame_0007.obj.bak",
+            "Frame_0007.obj",
+            "frame_.obj",
+            "frame_+007.obj",
+        ] {
             assert_eq!(p.number_of(other), None, "{other}");
         }
         let plain = pattern("f#.obj");
@@ -358,7 +402,13 @@ mod tests {
         write(&pat, &mesh, &mut frames, 30.0).unwrap();
         std::fs::remove_file(dir.join("f_0002.obj")).unwrap();
         let e = open(&pat, 30.0, FrameRange::ALL).unwrap_err().to_string();
-        assert!(e.starts_with(&format!("{}: frame 2 of the OBJ sequence is missing (the folder has f_0000.obj to f_0004.obj)", dir.join("f_0002.obj").display())), "{e}");
+        assert!(
+            e.starts_with(&format!(
+                "{}: frame 2 of the OBJ sequence is missing (the folder has f_0000.obj to f_0004.obj)",
+                dir.join("f_0002.obj").display()
+            )),
+            "{e}"
+        );
         assert!(e.contains("(fix: re-export the missing frame, or choose a frame range"), "{e}");
         // A range that avoids the gap opens.
         assert_eq!(open(&pat, 30.0, FrameRange { start: 3, end: -1 }).unwrap().frames.frame_count(), 2);
@@ -372,7 +422,10 @@ mod tests {
         text = text.replacen("f 1 2 5", "f 1 5 2", 1);
         std::fs::write(dir.join("f_0004.obj"), text).unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();
-        assert!(e.contains("triangle 0 (after fan triangulation) joins vertices 1 5 2, but in the first frame f_0003.obj it joins 1 2 5"), "{e}");
+        assert!(
+            e.contains("triangle 0 (after fan triangulation) joins vertices 1 5 2, but in the first frame f_0003.obj it joins 1 2 5"),
+            "{e}"
+        );
         std::fs::write(dir.join("f_0004.obj"), "v 0 0 0\n").unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();
         assert!(e.contains("f_0004.obj: has no faces"), "{e}");
@@ -381,9 +434,15 @@ mod tests {
         assert!(e.contains("f_0004.obj: cannot read the OBJ frame"), "{e}");
 
         let e = open(&dir.join("g_####.obj"), 30.0, FrameRange::ALL).unwrap_err().to_string();
-        assert!(e.contains("no file in") && e.contains("matches the pattern g_####.obj (#### = the frame number zero-padded to 4 digits)"), "{e}");
+        assert!(
+            e.contains("no file in") && e.contains("matches the pattern g_####.obj (#### = the frame number zero-padded to 4 digits)"),
+            "{e}"
+        );
         let e = write(&pat, &mesh, &mut wave(9, 2, 30.0), 30.0).unwrap_err().to_string();
-        assert!(e.contains("f_0003.obj: is a frame of the same pattern outside the 2 frames being written (f_0000.obj to f_0001.obj)"), "{e}");
+        assert!(
+            e.contains("f_0003.obj: is a frame of the same pattern outside the 2 frames being written (f_0000.obj to f_0001.obj)"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

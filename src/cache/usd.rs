@@ -125,11 +125,19 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
     let bytes = require_regular(path, "USD file")?;
     let temp = TempDir::new("usd-read")?;
     let (start, end) = (range.start.to_string(), range.end.to_string());
-    let args = [std::ffi::OsStr::new("read"), path.as_os_str(), std::ffi::OsStr::new(prim.unwrap_or("-")), start.as_ref(), end.as_ref(), temp.0.as_os_str()];
+    let args = [
+        std::ffi::OsStr::new("read"),
+        path.as_os_str(),
+        std::ffi::OsStr::new(prim.unwrap_or("-")),
+        start.as_ref(),
+        end.as_ref(),
+        temp.0.as_os_str(),
+    ];
     run_script(path, &args)?;
     let info_path = temp.0.join("info.json");
     let text = std::fs::read(&info_path).map_err(|e| Error::io(&info_path, &e, "read what usd-core found"))?;
-    let info: ReadInfo = serde_json::from_slice(&text).map_err(|e| Error::in_file(path, format!("usd-core's summary does not parse: {e}"), "report this as a bug"))?;
+    let info: ReadInfo = serde_json::from_slice(&text)
+        .map_err(|e| Error::in_file(path, format!("usd-core's summary does not parse: {e}"), "report this as a bug"))?;
     let where_ = &info.prim;
     let bad = |problem: String| Error::in_file(path, problem, "re-export the mesh from your tool; check it with usd-core");
     if !(info.time_codes_per_second.is_finite() && info.time_codes_per_second > 0.0) {
@@ -141,7 +149,9 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
     let mut at = 0usize;
     for (f, &c) in info.face_vertex_counts.iter().enumerate() {
         if c < 3 || at + c as usize > info.face_vertex_indices.len() {
-            return Err(bad(format!("face {f} of {where_} has {c} vertices (faceVertexCounts and faceVertexIndices disagree, or a face has fewer than 3)")));
+            return Err(bad(format!(
+                "face {f} of {where_} has {c} vertices (faceVertexCounts and faceVertexIndices disagree, or a face has fewer than 3)"
+            )));
         }
         let face = &info.face_vertex_indices[at..at + c as usize];
         if let Some(&i) = face.iter().find(|&&i| i < 0 || i as usize >= n) {
@@ -154,7 +164,10 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
         at += c as usize;
     }
     if at != info.face_vertex_indices.len() || triangles.is_empty() {
-        return Err(bad(format!("{where_} has {} faceVertexIndices for faces totalling {at} (and needs at least one face)", info.face_vertex_indices.len())));
+        return Err(bad(format!(
+            "{where_} has {} faceVertexIndices for faces totalling {at} (and needs at least one face)",
+            info.face_vertex_indices.len()
+        )));
     }
     let pc2_path = temp.0.join("frames.pc2");
     let mut pc2 = pc2::open(&pc2_path, fps).map_err(|e| Error { path: Some(path.to_path_buf()), ..e })?;
@@ -206,7 +219,12 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let (n, _) = check_writable(path, frames, fps)?;
     if mesh.positions.len() != n || mesh.triangles.is_empty() {
         return Err(Error::general(
-            format!("cannot write {}: the mesh has {} vertices and {} triangles, the frames {n} vertices", path.display(), mesh.positions.len(), mesh.triangles.len()),
+            format!(
+                "cannot write {}: the mesh has {} vertices and {} triangles, the frames {n} vertices",
+                path.display(),
+                mesh.positions.len(),
+                mesh.triangles.len()
+            ),
             "pass the mesh the frames belong to",
         ));
     }
@@ -231,10 +249,20 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     });
     let info_path = temp.0.join("info.json");
     std::fs::write(&info_path, info.to_string()).map_err(|e| Error::io(&info_path, &e, "write a temporary file"))?;
-    crate::output::write_atomic_with(path, |tmp| run_script(path, &[std::ffi::OsStr::new("write"), pc2_path.as_os_str(), info_path.as_os_str(), tmp.as_os_str()]))
+    crate::output::write_atomic_with(path, |tmp| {
+        run_script(path, &[std::ffi::OsStr::new("write"), pc2_path.as_os_str(), info_path.as_os_str(), tmp.as_os_str()])
+    })
 }
 
-fn write_usda(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, codes: &[f64], settings: UsdSettings, start: i64, end: i64) -> Result<()> {
+fn write_usda(
+    path: &Path,
+    mesh: &TriMesh,
+    frames: &mut dyn FrameSource,
+    codes: &[f64],
+    settings: UsdSettings,
+    start: i64,
+    end: i64,
+) -> Result<()> {
     crate::output::write_atomic_with(path, |tmp| {
         let file = File::create(tmp).map_err(|e| Error::io(tmp, &e, "create the usda file"))?;
         let mut w = BufWriter::new(file);

@@ -124,7 +124,11 @@ impl std::fmt::Debug for VertexCache {
 }
 
 fn unused(path: &Path, format: CacheFormat, field: &str, used_by: &str) -> Error {
-    Error::in_file(path, format!("`{field}` was given, but {} does not use it ({used_by})", format.described()), format!("remove `{field}` from the [cache] table"))
+    Error::in_file(
+        path,
+        format!("`{field}` was given, but {} does not use it ({used_by})", format.described()),
+        format!("remove `{field}` from the [cache] table"),
+    )
 }
 
 /// The rest mesh of a PC2 / MDD cache, matched against its point count.
@@ -151,7 +155,11 @@ fn rest_mesh(path: &Path, rest: Option<&Path>, points: usize, format: CacheForma
 fn subrange<S: FrameSource + Send + 'static>(path: &Path, frames: S, range: FrameRange) -> Result<Box<dyn FrameSource + Send>> {
     let (first, count) = range.resolve(frames.frame_count()).map_err(|(p, f)| Error::in_file(path, p, f))?;
     if frames.frame_count() > super::MAX_FRAMES {
-        return Err(Error::in_file(path, format!("holds {} frames, more than {}", frames.frame_count(), super::MAX_FRAMES), "split the cache, or choose a frame range"));
+        return Err(Error::in_file(
+            path,
+            format!("holds {} frames, more than {}", frames.frame_count(), super::MAX_FRAMES),
+            "split the cache, or choose a frame range",
+        ));
     }
     Ok(Box::new(Subrange::new(frames, first, count)))
 }
@@ -168,7 +176,11 @@ impl VertexCache {
         })?;
         if let Some(fps) = options.fps {
             if !(fps.is_finite() && fps > 0.0) {
-                return Err(Error::in_file(path, format!("fps {fps} is not a positive number"), "give the cache's frames per second, e.g. fps = 60"));
+                return Err(Error::in_file(
+                    path,
+                    format!("fps {fps} is not a positive number"),
+                    "give the cache's frames per second, e.g. fps = 60",
+                ));
             }
         }
         let uses_rest = matches!(format, CacheFormat::Pc2 | CacheFormat::Mdd);
@@ -182,14 +194,28 @@ impl VertexCache {
             return Err(unused(path, format, "prim", "only USD stages have prims"));
         }
         let need_fps = |why: &str| {
-            options.fps.ok_or_else(|| Error::in_file(path, format!("{} needs a frame rate: {why}", format.described()), "give the cache's fps (frames per second)"))
+            options.fps.ok_or_else(|| {
+                Error::in_file(
+                    path,
+                    format!("{} needs a frame rate: {why}", format.described()),
+                    "give the cache's fps (frames per second)",
+                )
+            })
         };
         let path_buf = path.to_path_buf();
         let cache = match format {
             CacheFormat::ObjSequence => {
                 let fps = need_fps("OBJ files carry no time")?;
                 let opened = sequence::open(path, fps, options.range)?;
-                VertexCache { format, path: path_buf, mesh: opened.mesh, frames: Box::new(opened.frames), fps, fps_source: FpsSource::Caller, bytes: opened.bytes }
+                VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh: opened.mesh,
+                    frames: Box::new(opened.frames),
+                    fps,
+                    fps_source: FpsSource::Caller,
+                    bytes: opened.bytes,
+                }
             }
             CacheFormat::Pc2 => {
                 let fps = need_fps("PC2 numbers its samples in frames, not seconds")?;
@@ -197,7 +223,15 @@ impl VertexCache {
                 let mesh = rest_mesh(path, options.rest.as_deref(), frames.vertex_count(), format)?;
                 let sample_fps = frames.sample_fps();
                 let bytes = std::fs::metadata(path).map_err(|e| Error::io(path, &e, "measure the cache"))?.len();
-                VertexCache { format, path: path_buf, mesh, frames: subrange(path, frames, options.range)?, fps: sample_fps, fps_source: FpsSource::Caller, bytes }
+                VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh,
+                    frames: subrange(path, frames, options.range)?,
+                    fps: sample_fps,
+                    fps_source: FpsSource::Caller,
+                    bytes,
+                }
             }
             CacheFormat::Mdd => {
                 let frames = mdd::open(path, options.fps)?;
@@ -211,9 +245,14 @@ impl VertexCache {
             }
             CacheFormat::Gltf => {
                 let opened = gltf_clip::open(path, options.animation.as_deref(), options.fps)?;
-                let fps_source = if opened.fps_from_keys { FpsSource::File("the spacing of the glTF animation's keys".into()) } else { FpsSource::Caller };
+                let fps_source = if opened.fps_from_keys {
+                    FpsSource::File("the spacing of the glTF animation's keys".into())
+                } else {
+                    FpsSource::Caller
+                };
                 let frames = subrange(path, opened.frames, options.range)?;
-                let mut cache = VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
+                let mut cache =
+                    VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
                 if options.range != FrameRange::ALL {
                     // The mesh is the first frame of the range.
                     cache.frames.read_frame(0, &mut cache.mesh.positions)?;
@@ -223,7 +262,15 @@ impl VertexCache {
             CacheFormat::Usd => {
                 let opened = usd::open(path, options.prim.as_deref(), options.range)?;
                 let fps_source = FpsSource::File(format!("the stage's timeCodesPerSecond (prim {})", opened.prim));
-                VertexCache { format, path: path_buf, mesh: opened.mesh, frames: Box::new(opened.frames), fps: opened.fps, fps_source, bytes: opened.bytes }
+                VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh: opened.mesh,
+                    frames: Box::new(opened.frames),
+                    fps: opened.fps,
+                    fps_source,
+                    bytes: opened.bytes,
+                }
             }
         };
         Ok(cache)
@@ -249,7 +296,12 @@ impl VertexCache {
 pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64) -> Result<()> {
     if mesh.positions.len() != frames.vertex_count() {
         return Err(Error::general(
-            format!("cannot write {}: the mesh has {} vertices, the frames {}", path.display(), mesh.positions.len(), frames.vertex_count()),
+            format!(
+                "cannot write {}: the mesh has {} vertices, the frames {}",
+                path.display(),
+                mesh.positions.len(),
+                frames.vertex_count()
+            ),
             "pass the mesh the frames belong to",
         ));
     }
@@ -260,7 +312,11 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         Some(CacheFormat::Mdd) => mdd::write(path, frames, fps),
         Some(CacheFormat::Gltf) if !gltf_text => gltf_clip::write(path, mesh, frames, fps),
         Some(CacheFormat::Usd) => usd::write(path, mesh, frames, fps),
-        _ => Err(Error::in_file(path, "is not a vertex cache format blendsim writes", "name the output frames/frame_####.obj, .pc2, .mdd, .glb, .usda, .usdc or .usd")),
+        _ => Err(Error::in_file(
+            path,
+            "is not a vertex cache format blendsim writes",
+            "name the output frames/frame_####.obj, .pc2, .mdd, .glb, .usda, .usdc or .usd",
+        )),
     }
 }
 
@@ -346,13 +402,18 @@ mod tests {
             assert!(s.contains(" (fix: ") && !s.contains('\n'), "{s}");
             s
         };
-        assert!(err(&pc2, options(Some(30.0), None)).contains("a PC2 cache holds positions only, so its triangles must come from the mesh it animates (fix: give rest = "));
-        assert!(err(&pc2, options(None, Some(&small))).contains("a PC2 cache needs a frame rate: PC2 numbers its samples in frames, not seconds"));
+        assert!(err(&pc2, options(Some(30.0), None))
+            .contains("a PC2 cache holds positions only, so its triangles must come from the mesh it animates (fix: give rest = "));
+        assert!(err(&pc2, options(None, Some(&small)))
+            .contains("a PC2 cache needs a frame rate: PC2 numbers its samples in frames, not seconds"));
         let s = err(&pc2, options(Some(30.0), Some(&small)));
         assert!(s.starts_with(&format!("{}: has 4 vertices, but {} has 9 points per frame", small.display(), pc2.display())), "{s}");
         assert!(err(&glb, options(None, Some(&small))).contains("`rest` was given, but a glTF clip does not use it"));
-        assert!(err(&pc2, CacheOptions { animation: Some("x".into()), ..options(Some(30.0), Some(&small)) }).contains("`animation` was given, but a PC2 cache"));
-        assert!(err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip"));
+        assert!(err(&pc2, CacheOptions { animation: Some("x".into()), ..options(Some(30.0), Some(&small)) })
+            .contains("`animation` was given, but a PC2 cache"));
+        assert!(
+            err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip")
+        );
         assert!(err(&glb, options(Some(-1.0), None)).contains("fps -1 is not a positive number"));
         assert!(err(&dir.join("a.abc"), CacheOptions::default()).contains("is not a vertex cache format blendsim reads"));
         assert!(err(&dir.join("f_####.obj"), CacheOptions::default()).contains("an OBJ sequence needs a frame rate"));

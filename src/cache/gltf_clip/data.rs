@@ -19,13 +19,18 @@ use gltf::Document;
 use crate::cache::binary::{open_regular, read_exact_at, require_regular};
 use crate::error::{Error, Result};
 
-const FIX_DAMAGED: &str = "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
+const FIX_DAMAGED: &str =
+    "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
 
 /// Where one buffer's bytes are.
 #[derive(Debug)]
 enum BufferData {
     /// `len` bytes at `offset` of `files[file]`.
-    File { file: usize, offset: u64, len: u64 },
+    File {
+        file: usize,
+        offset: u64,
+        len: u64,
+    },
     Memory(Vec<u8>),
 }
 
@@ -79,26 +84,41 @@ pub(crate) fn load(path: &Path) -> Result<Loaded> {
         let data = match buffer.source() {
             Source::Bin => {
                 let Some((offset, bin_len)) = bin else {
-                    return Err(damaged(path, format!("buffer {} refers to the GLB's BIN chunk, which the file does not have", buffer.index())));
+                    return Err(damaged(
+                        path,
+                        format!("buffer {} refers to the GLB's BIN chunk, which the file does not have", buffer.index()),
+                    ));
                 };
                 if need > bin_len {
-                    return Err(damaged(path, format!("buffer {} is {need} bytes, but the BIN chunk (at byte {offset}) holds {bin_len}", buffer.index())));
+                    return Err(damaged(
+                        path,
+                        format!("buffer {} is {need} bytes, but the BIN chunk (at byte {offset}) holds {bin_len}", buffer.index()),
+                    ));
                 }
                 BufferData::File { file: 0, offset, len: need }
             }
             Source::Uri(uri) if uri.starts_with("data:") => {
-                let bytes = decode_data_uri(uri).ok_or_else(|| damaged(path, format!("buffer {}'s data URI is not base64 data", buffer.index())))?;
+                let bytes = decode_data_uri(uri)
+                    .ok_or_else(|| damaged(path, format!("buffer {}'s data URI is not base64 data", buffer.index())))?;
                 if (bytes.len() as u64) < need {
-                    return Err(damaged(path, format!("buffer {} is {need} bytes, but its data URI holds {}", buffer.index(), bytes.len())));
+                    return Err(damaged(
+                        path,
+                        format!("buffer {} is {need} bytes, but its data URI holds {}", buffer.index(), bytes.len()),
+                    ));
                 }
                 BufferData::Memory(bytes)
             }
             Source::Uri(uri) => {
-                let relative = percent_decode(uri).ok_or_else(|| damaged(path, format!("buffer {}'s URI {uri:?} is not a valid relative path", buffer.index())))?;
+                let relative = percent_decode(uri)
+                    .ok_or_else(|| damaged(path, format!("buffer {}'s URI {uri:?} is not a valid relative path", buffer.index())))?;
                 let bin_path = path.parent().unwrap_or(Path::new("")).join(relative);
                 let bin_len = require_regular(&bin_path, "glTF buffer file")?;
                 if need > bin_len {
-                    return Err(Error::in_file(&bin_path, format!("is {bin_len} bytes, but buffer {} of {} needs {need}", buffer.index(), path.display()), FIX_DAMAGED));
+                    return Err(Error::in_file(
+                        &bin_path,
+                        format!("is {bin_len} bytes, but buffer {} of {} needs {need}", buffer.index(), path.display()),
+                        FIX_DAMAGED,
+                    ));
                 }
                 let index = match store.files.iter().position(|(p, _)| *p == bin_path) {
                     Some(i) => i,
@@ -126,8 +146,15 @@ fn validate(path: &Path, root: gltf::json::Root) -> Result<Document> {
     // gltf-json's primitive check indexes the POSITION accessor before validating the index.
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
-            if primitive.attributes.get(&Checked::Valid(gltf::json::mesh::Semantic::Positions)).is_some_and(|a| a.value() >= root.accessors.len()) {
-                return Err(damaged(path, format!("its glTF JSON is not valid glTF 2.0 (meshes[{m}].primitives[{p}].attributes.POSITION: Index out of range)")));
+            if primitive
+                .attributes
+                .get(&Checked::Valid(gltf::json::mesh::Semantic::Positions))
+                .is_some_and(|a| a.value() >= root.accessors.len())
+            {
+                return Err(damaged(
+                    path,
+                    format!("its glTF JSON is not valid glTF 2.0 (meshes[{m}].primitives[{p}].attributes.POSITION: Index out of range)"),
+                ));
             }
         }
     }
@@ -154,7 +181,13 @@ fn validate(path: &Path, root: gltf::json::Root) -> Result<Document> {
         }
     }
     if let Some(first) = errors.first() {
-        return Err(damaged(path, format!("its glTF JSON is not valid glTF 2.0 ({first}{})", if errors.len() > 1 { format!(", and {} more", errors.len() - 1) } else { String::new() })));
+        return Err(damaged(
+            path,
+            format!(
+                "its glTF JSON is not valid glTF 2.0 ({first}{})",
+                if errors.len() > 1 { format!(", and {} more", errors.len() - 1) } else { String::new() }
+            ),
+        ));
     }
     Ok(Document::from_json_without_validation(root))
 }
@@ -324,10 +357,24 @@ impl BufferStore {
         let buffer = view.buffer().index();
         let (view_offset, view_len) = (view.offset() as u64, view.length() as u64);
         if view_offset as u128 + view_len as u128 > self.buffer_len(buffer) as u128 {
-            return Err(damaged(&self.path, format!("buffer view {} (bytes {view_offset} + {view_len}) runs past the end of buffer {buffer} ({} bytes)", view.index(), self.buffer_len(buffer))));
+            return Err(damaged(
+                &self.path,
+                format!(
+                    "buffer view {} (bytes {view_offset} + {view_len}) runs past the end of buffer {buffer} ({} bytes)",
+                    view.index(),
+                    self.buffer_len(buffer)
+                ),
+            ));
         }
         if offset as u128 + len as u128 > view_len as u128 {
-            return Err(damaged(&self.path, format!("{what} needs bytes {offset} to {} of buffer view {}, which has {view_len}", offset as u128 + len as u128, view.index())));
+            return Err(damaged(
+                &self.path,
+                format!(
+                    "{what} needs bytes {offset} to {} of buffer view {}, which has {view_len}",
+                    offset as u128 + len as u128,
+                    view.index()
+                ),
+            ));
         }
         Ok(Span { buffer, offset: view_offset + offset, len })
     }
@@ -348,7 +395,10 @@ impl BufferStore {
             Some(view) => {
                 let stride = view.stride().unwrap_or(element);
                 if stride < element {
-                    return Err(damaged(&self.path, format!("{what}: buffer view {} has stride {stride}, less than the {element}-byte element", view.index())));
+                    return Err(damaged(
+                        &self.path,
+                        format!("{what}: buffer view {} has stride {stride}, less than the {element}-byte element", view.index()),
+                    ));
                 }
                 let len = if count == 0 { 0 } else { stride as u128 * (count as u128 - 1) + element as u128 };
                 let len = u64::try_from(len).map_err(|_| damaged(&self.path, format!("{what} has an impossible count {count}")))?;
@@ -367,9 +417,18 @@ impl BufferStore {
                     IndexType::U16 => DataType::U16,
                     IndexType::U32 => DataType::U32,
                 };
-                let bytes = |size: usize| u64::try_from(n as u128 * size as u128).map_err(|_| damaged(&self.path, format!("{what} has an impossible sparse count {n}")));
-                let indices = self.span(&s.indices().view(), s.indices().offset() as u64, bytes(component_size(index_type))?, &format!("the sparse indices of {what}"))?;
-                let values = self.span(&s.values().view(), s.values().offset() as u64, bytes(element)?, &format!("the sparse values of {what}"))?;
+                let bytes = |size: usize| {
+                    u64::try_from(n as u128 * size as u128)
+                        .map_err(|_| damaged(&self.path, format!("{what} has an impossible sparse count {n}")))
+                };
+                let indices = self.span(
+                    &s.indices().view(),
+                    s.indices().offset() as u64,
+                    bytes(component_size(index_type))?,
+                    &format!("the sparse indices of {what}"),
+                )?;
+                let values =
+                    self.span(&s.values().view(), s.values().offset() as u64, bytes(element)?, &format!("the sparse values of {what}"))?;
                 Some(SparseLayout { count: n, index_type, indices, values })
             }
         };
@@ -384,7 +443,9 @@ impl BufferStore {
         match layout.dense {
             Some(_) => Ok(()),
             None if layout.count <= 1 => Ok(()),
-            None => Err(damaged(&self.path, format!("{what} (accessor {}) has {} elements but no buffer view", layout.index, layout.count))),
+            None => {
+                Err(damaged(&self.path, format!("{what} (accessor {}) has {} elements but no buffer view", layout.index, layout.count)))
+            }
         }
     }
 
@@ -433,7 +494,15 @@ impl BufferStore {
     /// Integer elements (indices, joints) as u32: `count * components` values.
     pub fn read_uints(&mut self, layout: &Layout, what: &str) -> Result<Vec<u32>> {
         if !matches!(layout.component, DataType::U8 | DataType::U16 | DataType::U32) || layout.normalized {
-            return Err(damaged(&self.path, format!("{what} (accessor {}) has {:?}{} components; it needs unsigned integers", layout.index, layout.component, if layout.normalized { " normalized" } else { "" })));
+            return Err(damaged(
+                &self.path,
+                format!(
+                    "{what} (accessor {}) has {:?}{} components; it needs unsigned integers",
+                    layout.index,
+                    layout.component,
+                    if layout.normalized { " normalized" } else { "" }
+                ),
+            ));
         }
         let mut scratch = Vec::new();
         // u32 through f32 would round above 2^24: decode integers directly.
@@ -466,7 +535,10 @@ impl BufferStore {
         if let Some(j) = (0..indices.len()).find(|&j| indices[j] as usize >= layout.count || (j > 0 && indices[j] <= indices[j - 1])) {
             return Err(damaged(
                 &self.path,
-                format!("sparse index {j} of accessor {} is {}: sparse indices must increase and stay below the count {}", layout.index, indices[j], layout.count),
+                format!(
+                    "sparse index {j} of accessor {} is {}: sparse indices must increase and stay below the count {}",
+                    layout.index, indices[j], layout.count
+                ),
             ));
         }
         Ok(indices)

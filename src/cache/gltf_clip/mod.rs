@@ -46,7 +46,8 @@ use data::{BufferStore, Layout};
 use sampler::{Curve, Interpolation};
 use transform::{apply, mul, Mat4, Trs, IDENTITY};
 
-const FIX_DAMAGED: &str = "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
+const FIX_DAMAGED: &str =
+    "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
 
 /// An opened clip: the first frame's mesh, the frames, and the rate.
 #[derive(Debug)]
@@ -185,9 +186,13 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
         store.require_data(&input, &format!("the key times of {what}"))?;
         let output = store.layout(&sampler.output(), &format!("the values of {what}"))?;
         // Checked before reading: an output without a view (sparse) is bounded only by this.
-        let (groups, per_key) = (if interpolation == Interpolation::CubicSpline { 3 } else { 1 }, if matches!(target, Target::Weights) { width } else { 1 });
+        let (groups, per_key) =
+            (if interpolation == Interpolation::CubicSpline { 3 } else { 1 }, if matches!(target, Target::Weights) { width } else { 1 });
         let components = if matches!(target, Target::Weights) { 1 } else { width };
-        if input.components != 1 || output.components != components || output.count as u128 != input.count as u128 * groups * per_key as u128 {
+        if input.components != 1
+            || output.components != components
+            || output.count as u128 != input.count as u128 * groups * per_key as u128
+        {
             return Err(damaged(
                 path,
                 format!(
@@ -221,9 +226,17 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
     let mut joint_sets: Vec<(usize, Vec<u32>, Vec<f32>, usize)> = Vec::new();
     let target_count = mesh.primitives().next().map_or(0, |p| p.morph_targets().len());
     for primitive in mesh.primitives() {
-        let what = format!("primitive {} of mesh {}", primitive.index(), mesh.name().map_or_else(|| mesh.index().to_string(), |n| format!("\"{n}\"")));
+        let what = format!(
+            "primitive {} of mesh {}",
+            primitive.index(),
+            mesh.name().map_or_else(|| mesh.index().to_string(), |n| format!("\"{n}\""))
+        );
         if primitive.mode() != Mode::Triangles {
-            return Err(Error::in_file(path, format!("{what} draws {:?}, not triangles", primitive.mode()), "export the mesh as triangles"));
+            return Err(Error::in_file(
+                path,
+                format!("{what} draws {:?}, not triangles", primitive.mode()),
+                "export the mesh as triangles",
+            ));
         }
         let position = primitive.get(&Semantic::Positions).ok_or_else(|| damaged(path, format!("{what} has no POSITION")))?;
         let layout = store.layout(&position, &format!("POSITION of {what}"))?;
@@ -251,7 +264,10 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
             None => return Err(damaged(path, format!("{what} has no indices and {count} vertices, not a whole number of triangles"))),
         }
         if primitive.morph_targets().len() != target_count {
-            return Err(damaged(path, format!("{what} has {} morph targets, but the mesh's first primitive has {target_count}", primitive.morph_targets().len())));
+            return Err(damaged(
+                path,
+                format!("{what} has {} morph targets, but the mesh's first primitive has {target_count}", primitive.morph_targets().len()),
+            ));
         }
         let mut targets = Vec::new();
         for (k, target) in primitive.morph_targets().enumerate() {
@@ -259,7 +275,13 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
                 Some(a) => {
                     let layout = store.layout(&a, &format!("morph target {k} of {what}"))?;
                     if layout.components != 3 || layout.count != count {
-                        return Err(damaged(path, format!("morph target {k} of {what} has {} elements of {} components; POSITION has {count} of 3", layout.count, layout.components)));
+                        return Err(damaged(
+                            path,
+                            format!(
+                                "morph target {k} of {what} has {} elements of {} components; POSITION has {count} of 3",
+                                layout.count, layout.components
+                            ),
+                        ));
                     }
                     Some(layout)
                 }
@@ -271,8 +293,11 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
             let mut set = 0;
             let (mut joints, mut weights) = (Vec::new(), Vec::new());
             while let Some(j) = primitive.get(&Semantic::Joints(set)) {
-                let w = primitive.get(&Semantic::Weights(set)).ok_or_else(|| damaged(path, format!("{what} has JOINTS_{set} but no WEIGHTS_{set}")))?;
-                let (jl, wl) = (store.layout(&j, &format!("JOINTS_{set} of {what}"))?, store.layout(&w, &format!("WEIGHTS_{set} of {what}"))?);
+                let w = primitive
+                    .get(&Semantic::Weights(set))
+                    .ok_or_else(|| damaged(path, format!("{what} has JOINTS_{set} but no WEIGHTS_{set}")))?;
+                let (jl, wl) =
+                    (store.layout(&j, &format!("JOINTS_{set} of {what}"))?, store.layout(&w, &format!("WEIGHTS_{set} of {what}"))?);
                 if jl.components != 4 || wl.components != 4 || jl.count != count || wl.count != count {
                     return Err(damaged(path, format!("JOINTS_{set} / WEIGHTS_{set} of {what} are not VEC4 with one element per vertex")));
                 }
@@ -302,7 +327,9 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
 
     let default_weights: Vec<f64> = match node.weights().or_else(|| mesh.weights()) {
         Some(w) if w.len() == target_count => w.iter().map(|&x| x as f64).collect(),
-        Some(w) => return Err(damaged(path, format!("{} has {} default morph weights for {target_count} targets", node_name(&node), w.len()))),
+        Some(w) => {
+            return Err(damaged(path, format!("{} has {} default morph weights for {target_count} targets", node_name(&node), w.len())))
+        }
         None => vec![0.0; target_count],
     };
     let skin = match node.skin() {
@@ -331,7 +358,11 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
     let whole = span.round();
     let frames = if (span - whole).abs() <= 1e-3 { whole } else { span.floor() };
     if frames + 1.0 > MAX_FRAMES as f64 {
-        return Err(Error::in_file(path, format!("{anim_name} lasts {} s: {} frames at {fps} fps is more than {MAX_FRAMES}", end - start, frames + 1.0), "give a lower fps or a shorter animation"));
+        return Err(Error::in_file(
+            path,
+            format!("{anim_name} lasts {} s: {} frames at {fps} fps is more than {MAX_FRAMES}", end - start, frames + 1.0),
+            "give a lower fps or a shorter animation",
+        ));
     }
 
     let mut clip = GltfFrames {
@@ -367,17 +398,24 @@ fn keys_rate(keys: &[f64]) -> Option<f64> {
 }
 
 fn choose_animation<'a>(path: &Path, document: &'a Document, name: Option<&str>) -> Result<gltf::Animation<'a>> {
-    let names: Vec<String> = document.animations().map(|a| a.name().map_or_else(|| format!("#{} (unnamed)", a.index()), |n| format!("\"{n}\""))).collect();
+    let names: Vec<String> =
+        document.animations().map(|a| a.name().map_or_else(|| format!("#{} (unnamed)", a.index()), |n| format!("\"{n}\""))).collect();
     let list = if names.is_empty() { "none".to_string() } else { names.join(", ") };
     match name {
         Some(name) => document.animations().find(|a| a.name() == Some(name)).ok_or_else(|| {
-            Error::in_file(path, format!("has no animation named \"{name}\" (its animations: {list})"), "set animation to one of the names the file has")
+            Error::in_file(
+                path,
+                format!("has no animation named \"{name}\" (its animations: {list})"),
+                "set animation to one of the names the file has",
+            )
         }),
         None => {
             let mut all = document.animations();
             match (all.next(), all.next()) {
                 (Some(only), None) => Ok(only),
-                (None, _) => Err(Error::in_file(path, "has no animation", "export the clip with its animation (morph weights or skinning)")),
+                (None, _) => {
+                    Err(Error::in_file(path, "has no animation", "export the clip with its animation (morph weights or skinning)"))
+                }
                 _ => Err(Error::in_file(path, format!("has several animations ({list})"), "choose one with animation = \"NAME\"")),
             }
         }
@@ -444,7 +482,8 @@ fn choose_mesh_node<'a>(path: &Path, document: &'a Document, parent: &[Option<us
         (1, _) => Ok(candidates[0].clone()),
         (_, 1) => Ok(animated[0].clone()),
         _ => {
-            let names: Vec<String> = (if animated.is_empty() { candidates.iter().collect() } else { animated }).iter().map(|n| node_name(n)).collect();
+            let names: Vec<String> =
+                (if animated.is_empty() { candidates.iter().collect() } else { animated }).iter().map(|n| node_name(n)).collect();
             Err(Error::in_file(
                 path,
                 format!("has several meshes the animation could be about: {}", names.join(", ")),
@@ -463,7 +502,15 @@ fn read_skin(path: &Path, store: &mut BufferStore, skin: &gltf::Skin, sets: Vec<
             let layout = store.layout(&a, &format!("the inverse bind matrices of {what}"))?;
             store.require_data(&layout, &format!("the inverse bind matrices of {what}"))?;
             if layout.components != 16 || layout.count < joints.len() {
-                return Err(damaged(path, format!("the inverse bind matrices of {what} are {} elements of {} components, for {} joints (need MAT4 each)", layout.count, layout.components, joints.len())));
+                return Err(damaged(
+                    path,
+                    format!(
+                        "the inverse bind matrices of {what} are {} elements of {} components, for {} joints (need MAT4 each)",
+                        layout.count,
+                        layout.components,
+                        joints.len()
+                    ),
+                ));
             }
             let (mut floats, mut bytes) = (Vec::new(), Vec::new());
             store.read_floats(&layout, &mut floats, &mut bytes)?;
@@ -477,10 +524,25 @@ fn read_skin(path: &Path, store: &mut BufferStore, skin: &gltf::Skin, sets: Vec<
         for v in 0..count {
             let (js, ws) = (&j[v * n..(v + 1) * n], &w[v * n..(v + 1) * n]);
             if let Some(k) = ws.iter().position(|&x| !(x.is_finite() && x >= 0.0)) {
-                return Err(damaged(path, format!("vertex {} of the skinned mesh has weight {} (weights must be finite and non-negative)", joint.len() / influences, ws[k])));
+                return Err(damaged(
+                    path,
+                    format!(
+                        "vertex {} of the skinned mesh has weight {} (weights must be finite and non-negative)",
+                        joint.len() / influences,
+                        ws[k]
+                    ),
+                ));
             }
             if let Some(k) = js.iter().position(|&x| x as usize >= joints.len()) {
-                return Err(damaged(path, format!("vertex {} of the skinned mesh uses joint {}, but {what} has {} joints", joint.len() / influences, js[k], joints.len())));
+                return Err(damaged(
+                    path,
+                    format!(
+                        "vertex {} of the skinned mesh uses joint {}, but {what} has {} joints",
+                        joint.len() / influences,
+                        js[k],
+                        joints.len()
+                    ),
+                ));
             }
             let sum: f64 = ws.iter().map(|&x| x as f64).sum();
             joint.extend_from_slice(js);
@@ -585,7 +647,10 @@ impl GltfFrames {
             }
         }
         if let Some(v) = out.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-            return Err(damaged(&self.path, format!("at {t} s vertex {v} evaluates to a non-finite position (non-finite data in the file)")));
+            return Err(damaged(
+                &self.path,
+                format!("at {t} s vertex {v} evaluates to a non-finite position (non-finite data in the file)"),
+            ));
         }
         Ok(())
     }
@@ -604,7 +669,11 @@ impl FrameSource for GltfFrames {
         let t = self.start + frame as f64 / self.fps;
         // A key within f32 rounding of the frame time is the frame the file meant.
         let i = self.keys.partition_point(|&k| k < t);
-        let near = [i.checked_sub(1), Some(i)].into_iter().flatten().filter_map(|j| self.keys.get(j)).min_by(|a, b| (*a - t).abs().total_cmp(&(*b - t).abs()));
+        let near = [i.checked_sub(1), Some(i)]
+            .into_iter()
+            .flatten()
+            .filter_map(|j| self.keys.get(j))
+            .min_by(|a, b| (*a - t).abs().total_cmp(&(*b - t).abs()));
         match near {
             Some(&k) if (k - t).abs() <= (2.0 * f32::EPSILON as f64 * k.abs()).min(0.25 / self.fps) => k,
             _ => t,

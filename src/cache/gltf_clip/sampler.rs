@@ -184,7 +184,14 @@ mod tests {
         let q = at(&c, 0.5);
         let angle = (std::f64::consts::PI / 8.0).sin();
         assert!((q[2] - angle).abs() < 1e-7 && (q[3] - (std::f64::consts::PI / 8.0).cos()).abs() < 1e-7, "{q:?}");
-        let cubic = Curve::new(vec![0.0, 1.0], [[0.0; 4], [0.0, 0.0, 0.0, 1.0], [0.0; 4], [0.0; 4], [0.0, 0.0, h, h], [0.0; 4]].concat(), 4, Interpolation::CubicSpline, true).unwrap();
+        let cubic = Curve::new(
+            vec![0.0, 1.0],
+            [[0.0; 4], [0.0, 0.0, 0.0, 1.0], [0.0; 4], [0.0; 4], [0.0, 0.0, h, h], [0.0; 4]].concat(),
+            4,
+            Interpolation::CubicSpline,
+            true,
+        )
+        .unwrap();
         let q = at(&cubic, 0.3);
         assert!((q.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12);
     }
@@ -192,9 +199,15 @@ mod tests {
     #[test]
     fn malformed_keys_are_refused() {
         assert!(Curve::new(vec![], vec![], 1, Interpolation::Linear, false).unwrap_err().contains("no keys"));
-        assert!(Curve::new(vec![0.0, 0.0], vec![1.0, 2.0], 1, Interpolation::Linear, false).unwrap_err().contains("do not increase at key 1"));
-        assert!(Curve::new(vec![0.0, f32::NAN], vec![1.0, 2.0], 1, Interpolation::Linear, false).unwrap_err().contains("key time 1 is NaN"));
-        assert!(Curve::new(vec![0.0, 1.0], vec![1.0, 2.0], 1, Interpolation::CubicSpline, false).unwrap_err().contains("expected 6 (3 x 1 per key)"));
+        assert!(Curve::new(vec![0.0, 0.0], vec![1.0, 2.0], 1, Interpolation::Linear, false)
+            .unwrap_err()
+            .contains("do not increase at key 1"));
+        assert!(Curve::new(vec![0.0, f32::NAN], vec![1.0, 2.0], 1, Interpolation::Linear, false)
+            .unwrap_err()
+            .contains("key time 1 is NaN"));
+        assert!(Curve::new(vec![0.0, 1.0], vec![1.0, 2.0], 1, Interpolation::CubicSpline, false)
+            .unwrap_err()
+            .contains("expected 6 (3 x 1 per key)"));
         assert!(Curve::new(vec![0.0], vec![f32::INFINITY], 1, Interpolation::Step, false).unwrap_err().contains("output value 0 is inf"));
     }
 }

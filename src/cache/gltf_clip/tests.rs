@@ -33,7 +33,14 @@ impl Builder {
         Builder { root, bin: Vec::new() }
     }
 
-    fn accessor(&mut self, bytes: &[u8], count: usize, component: ComponentType, type_: Type, target: Option<json::buffer::Target>) -> json::Accessor {
+    fn accessor(
+        &mut self,
+        bytes: &[u8],
+        count: usize,
+        component: ComponentType,
+        type_: Type,
+        target: Option<json::buffer::Target>,
+    ) -> json::Accessor {
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
         self.bin.resize(self.bin.len().next_multiple_of(4), 0);
@@ -69,8 +76,10 @@ impl Builder {
         let target = (type_ == Type::Vec3 || type_ == Type::Vec4).then_some(json::buffer::Target::ArrayBuffer).filter(|_| bounds);
         let mut a = self.accessor(&bytes, values.len() / width, ComponentType::F32, type_, target);
         if bounds {
-            let lo: Vec<f64> = (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::INFINITY, |m, &x| m.min(x)) as f64).collect();
-            let hi: Vec<f64> = (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::NEG_INFINITY, |m, &x| m.max(x)) as f64).collect();
+            let lo: Vec<f64> =
+                (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::INFINITY, |m, &x| m.min(x)) as f64).collect();
+            let hi: Vec<f64> =
+                (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::NEG_INFINITY, |m, &x| m.max(x)) as f64).collect();
             (a.min, a.max) = (Some(value!(lo)), Some(value!(hi)));
         }
         self.root.push(a)
@@ -86,7 +95,13 @@ impl Builder {
         self.root.push(a)
     }
 
-    fn mesh(&mut self, positions: &[[f32; 3]], triangles: &[[u32; 3]], targets: &[Vec<[f32; 3]>], skin: Option<(&[u16], &[f32])>) -> Index<json::Mesh> {
+    fn mesh(
+        &mut self,
+        positions: &[[f32; 3]],
+        triangles: &[[u32; 3]],
+        targets: &[Vec<[f32; 3]>],
+        skin: Option<(&[u16], &[f32])>,
+    ) -> Index<json::Mesh> {
         let position = self.points(positions);
         let indices: Vec<u16> = triangles.iter().flatten().map(|&i| i as u16).collect();
         let indices = self.u16s(&indices, Type::Scalar, json::buffer::Target::ElementArrayBuffer);
@@ -96,7 +111,8 @@ impl Builder {
             let w = self.floats(weights, Type::Vec4, false);
             attributes.insert(Valid(json::mesh::Semantic::Weights(0)), w);
         }
-        let targets: Vec<json::mesh::MorphTarget> = targets.iter().map(|t| json::mesh::MorphTarget { positions: Some(self.points(t)), normals: None, tangents: None }).collect();
+        let targets: Vec<json::mesh::MorphTarget> =
+            targets.iter().map(|t| json::mesh::MorphTarget { positions: Some(self.points(t)), normals: None, tangents: None }).collect();
         let count = targets.len();
         self.root.push(json::Mesh {
             extensions: None,
@@ -179,7 +195,13 @@ fn morph_clip(path: &Path) {
     let shear: Vec<[f32; 3]> = base.iter().map(|p| [0.2 * p[1], 0.0, 0.0]).collect();
     let mut b = Builder::new();
     let mesh = b.mesh(&base, &grid.triangles, &[bump, shear], None);
-    let node = b.node(json::Node { mesh: Some(mesh), name: Some("grid".into()), translation: Some([0.0, 0.5, 0.0]), scale: Some([1.0, 2.0, 1.0]), ..Default::default() });
+    let node = b.node(json::Node {
+        mesh: Some(mesh),
+        name: Some("grid".into()),
+        translation: Some([0.0, 0.5, 0.0]),
+        scale: Some([1.0, 2.0, 1.0]),
+        ..Default::default()
+    });
     let root = b.node(json::Node {
         name: Some("root".into()),
         children: Some(vec![node]),
@@ -196,7 +218,10 @@ fn morph_clip(path: &Path) {
     ];
     b.animation("cubic", &[(node, Property::MorphTargetWeights, Interp::CubicSpline, &[0.0, 0.4, 1.0], &cubic)]);
     b.animation("linear", &[(node, Property::MorphTargetWeights, Interp::Linear, &[0.0, 0.5, 1.0], &[0.0, 0.0, 1.0, 0.5, 0.2, 1.0])]);
-    b.animation("step", &[(node, Property::MorphTargetWeights, Interp::Step, &[0.0, 0.3, 0.6, 0.9], &[0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0])]);
+    b.animation(
+        "step",
+        &[(node, Property::MorphTargetWeights, Interp::Step, &[0.0, 0.3, 0.6, 0.9], &[0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0])],
+    );
     let spin = [quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 50.0), quat([1.0, 0.0, 0.0], 70.0)].concat();
     b.animation(
         "trs",
@@ -236,13 +261,27 @@ fn skinned_clip(path: &Path) {
     let mut b = Builder::new();
     let mesh = b.mesh(&positions, &triangles, &[thicken], Some((&joints, &weights)));
     let j2 = b.node(json::Node { name: Some("j2".into()), translation: Some([0.0, 1.0, 0.0]), ..Default::default() });
-    let j1 = b.node(json::Node { name: Some("j1".into()), translation: Some([0.0, 1.0, 0.0]), children: Some(vec![j2]), ..Default::default() });
+    let j1 =
+        b.node(json::Node { name: Some("j1".into()), translation: Some([0.0, 1.0, 0.0]), children: Some(vec![j2]), ..Default::default() });
     let j0 = b.node(json::Node { name: Some("j0".into()), children: Some(vec![j1]), ..Default::default() });
-    let armature = b.node(json::Node { name: Some("armature".into()), translation: Some([0.0, 0.5, 0.0]), children: Some(vec![j0]), ..Default::default() });
+    let armature = b.node(json::Node {
+        name: Some("armature".into()),
+        translation: Some([0.0, 0.5, 0.0]),
+        children: Some(vec![j0]),
+        ..Default::default()
+    });
     // Inverse bind matrices: the joints' rest globals are translations by (0, 0.5 + j, 0).
-    let ibm: Vec<f32> = (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -0.5 - j as f32, 0.0, 1.0]).collect();
+    let ibm: Vec<f32> =
+        (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -0.5 - j as f32, 0.0, 1.0]).collect();
     let ibm = b.floats(&ibm, Type::Mat4, false);
-    let skin = b.root.push(json::Skin { extensions: None, extras: None, inverse_bind_matrices: Some(ibm), joints: vec![j0, j1, j2], name: None, skeleton: Some(j0) });
+    let skin = b.root.push(json::Skin {
+        extensions: None,
+        extras: None,
+        inverse_bind_matrices: Some(ibm),
+        joints: vec![j0, j1, j2],
+        name: None,
+        skeleton: Some(j0),
+    });
     let node = b.node(json::Node { mesh: Some(mesh), skin: Some(skin), name: Some("ribbon".into()), ..Default::default() });
     let swing = [quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 40.0), quat([1.0, 0.0, 0.0], 40.0)].concat();
     let (r0, r1) = (quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 60.0));
@@ -305,7 +344,8 @@ fn three_js_agrees(file: &Path, animation: Option<&str>, times: &[f64], points: 
 fn motion(points: &[Vec<Point>]) -> f64 {
     let all: Vec<Point> = points.iter().flatten().copied().collect();
     let diagonal = crate::mesh::bbox_diagonal(&all);
-    points.iter().flat_map(|f| f.iter().zip(&points[0]).map(|(p, q)| crate::mesh::norm(crate::mesh::sub(*p, *q)))).fold(0.0, f64::max) / diagonal
+    points.iter().flat_map(|f| f.iter().zip(&points[0]).map(|(p, q)| crate::mesh::norm(crate::mesh::sub(*p, *q)))).fold(0.0, f64::max)
+        / diagonal
 }
 
 #[test]
@@ -378,7 +418,8 @@ fn glb_writer_round_trips_and_is_valid_for_three_js() {
     three_js_agrees(&path, None, &times, &points);
 
     // Few vertices move: sparse targets (and a frame equal to frame 0: a zero target).
-    let mut still = MemoryFrames { times: vec![0.0, 0.5, 1.0, 1.5], frames: vec![f32s(&mesh.positions).iter().map(|p| p.map(f64::from)).collect(); 4] };
+    let mut still =
+        MemoryFrames { times: vec![0.0, 0.5, 1.0, 1.5], frames: vec![f32s(&mesh.positions).iter().map(|p| p.map(f64::from)).collect(); 4] };
     still.frames[1][5][2] = 0.25;
     still.frames[3][0] = [-1.0, 2.0, 0.5];
     let sparse = dir.join("still.glb");
@@ -451,7 +492,10 @@ fn bad_clips_are_one_line_errors_naming_the_file() {
     root["accessors"][0]["count"] = value!(26);
     std::fs::write(&short, root.to_string()).unwrap();
     let s = err(&short, Some("cubic"), Some(30.0));
-    assert!(s.contains("POSITION of primitive 0 of mesh \"mesh\" (accessor 0) needs bytes 0 to 312 of buffer view 0, which has 300"), "{s}");
+    assert!(
+        s.contains("POSITION of primitive 0 of mesh \"mesh\" (accessor 0) needs bytes 0 to 312 of buffer view 0, which has 300"),
+        "{s}"
+    );
     std::fs::write(&short, "{\"asset\": {\"version\": \"2.0\"}, \"accessors\": [{\"count\": 1}]}").unwrap();
     assert!(err(&short, None, None).contains("its glTF JSON"));
     std::fs::remove_dir_all(&dir).unwrap();

@@ -110,7 +110,14 @@ fn accessor(view: Option<(u32, usize)>, count: usize, component: ComponentType, 
     }
 }
 
-fn sparse_of(count: usize, index_view: u32, index_offset: usize, index_component: ComponentType, value_view: u32, value_offset: usize) -> sparse::Sparse {
+fn sparse_of(
+    count: usize,
+    index_view: u32,
+    index_offset: usize,
+    index_component: ComponentType,
+    value_view: u32,
+    value_offset: usize,
+) -> sparse::Sparse {
     sparse::Sparse {
         count: USize64(count as u64),
         indices: sparse::Indices {
@@ -120,7 +127,12 @@ fn sparse_of(count: usize, index_view: u32, index_offset: usize, index_component
             extensions: None,
             extras: None,
         },
-        values: sparse::Values { buffer_view: Index::new(value_view), byte_offset: USize64(value_offset as u64), extensions: None, extras: None },
+        values: sparse::Values {
+            buffer_view: Index::new(value_view),
+            byte_offset: USize64(value_offset as u64),
+            extensions: None,
+            extras: None,
+        },
         extensions: None,
         extras: None,
     }
@@ -144,16 +156,29 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let (n, count) = check_writable(path, frames, fps)?;
     if mesh.positions.len() != n || mesh.triangles.is_empty() {
         return Err(Error::general(
-            format!("cannot write {}: the mesh has {} vertices and {} triangles, the frames {n} vertices", path.display(), mesh.positions.len(), mesh.triangles.len()),
+            format!(
+                "cannot write {}: the mesh has {} vertices and {} triangles, the frames {n} vertices",
+                path.display(),
+                mesh.positions.len(),
+                mesh.triangles.len()
+            ),
             "pass the mesh the frames belong to",
         ));
     }
     if count > MAX_GLB_FRAMES {
-        return Err(Error::in_file(path, format!("{count} frames is more than a glTF morph clip holds ({MAX_GLB_FRAMES})"), "write a shorter frame range, or use PC2, MDD or USD"));
+        return Err(Error::in_file(
+            path,
+            format!("{count} frames is more than a glTF morph clip holds ({MAX_GLB_FRAMES})"),
+            "write a shorter frame range, or use PC2, MDD or USD",
+        ));
     }
     let times: Vec<f32> = (0..count).map(|k| frames.time(k) as f32).collect();
     if let Some(k) = times.windows(2).position(|w| w[1] <= w[0]) {
-        return Err(Error::in_file(path, format!("frames {k} and {} have the same time in f32 ({} s)", k + 1, times[k]), "write frames with distinct times"));
+        return Err(Error::in_file(
+            path,
+            format!("frames {k} and {} have the same time in f32 ({} s)", k + 1, times[k]),
+            "write frames with distinct times",
+        ));
     }
 
     // Pass 1: the base and each target's bounds and moved vertices.
@@ -183,7 +208,8 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let index_bytes = pad4(3 * mesh.triangles.len() * index_size);
     let dense = measures.iter().filter(|m| m.storage == Storage::Dense).count();
     let vertex_bytes = 12 * n * (1 + dense);
-    let sparse_bytes: usize = measures.iter().filter(|m| m.storage == Storage::Sparse).map(|m| pad4(m.moved * sparse_size) + 12 * m.moved).sum();
+    let sparse_bytes: usize =
+        measures.iter().filter(|m| m.storage == Storage::Sparse).map(|m| pad4(m.moved * sparse_size) + 12 * m.moved).sum();
     let animation_bytes = 12 * count;
     let asset = json::Asset {
         copyright: None,
@@ -277,14 +303,25 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
             extensions: None,
             extras: None,
         }],
-        samplers: vec![json::animation::Sampler { extensions: None, extras: None, input, interpolation: Valid(Interpolation::Linear), output }],
+        samplers: vec![json::animation::Sampler {
+            extensions: None,
+            extras: None,
+            input,
+            interpolation: Valid(Interpolation::Linear),
+            output,
+        }],
     });
     root.push(json::Buffer { byte_length: USize64(bin_len as u64), name: None, uri: None, extensions: None, extras: None });
-    let mut json_bytes = root.to_vec().map_err(|e| Error::general(format!("cannot write {}: glTF JSON: {e}", path.display()), "report this as a bug"))?;
+    let mut json_bytes =
+        root.to_vec().map_err(|e| Error::general(format!("cannot write {}: glTF JSON: {e}", path.display()), "report this as a bug"))?;
     json_bytes.resize(pad4(json_bytes.len()), b' ');
     let total = 12 + 8 + json_bytes.len() + 8 + bin_len;
     if total > u32::MAX as usize {
-        return Err(Error::in_file(path, format!("would be {total} bytes, more than a GLB holds (4 GiB)"), "write a shorter frame range, or use PC2, MDD or USD"));
+        return Err(Error::in_file(
+            path,
+            format!("would be {total} bytes, more than a GLB holds (4 GiB)"),
+            "write a shorter frame range, or use PC2, MDD or USD",
+        ));
     }
 
     // Pass 2: stream the container.
@@ -323,10 +360,17 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         for (k, m) in measures.iter().enumerate() {
             if m.storage == Storage::Sparse {
                 frames.read_frame(k, &mut points)?;
-                let offsets: Vec<(usize, [f32; 3])> =
-                    f32_points(&points).zip(&base).map(|(p, b)| [p[0] - b[0], p[1] - b[1], p[2] - b[2]]).enumerate().filter(|(_, d)| *d != [0.0; 3]).collect();
+                let offsets: Vec<(usize, [f32; 3])> = f32_points(&points)
+                    .zip(&base)
+                    .map(|(p, b)| [p[0] - b[0], p[1] - b[1], p[2] - b[2]])
+                    .enumerate()
+                    .filter(|(_, d)| *d != [0.0; 3])
+                    .collect();
                 if offsets.len() != m.moved {
-                    return Err(Error::general(format!("cannot write {}: frame {k} changed while it was written", path.display()), "write from a cache that is not being modified"));
+                    return Err(Error::general(
+                        format!("cannot write {}: frame {k} changed while it was written", path.display()),
+                        "write from a cache that is not being modified",
+                    ));
                 }
                 sparse.clear();
                 offsets.iter().for_each(|&(i, _)| push_index(&mut sparse, i as u32, sparse_size));
