@@ -595,6 +595,7 @@ mod fuzz {
             let path = dir.join(format!("{:?}.glb", std::thread::current().id()).replace(['(', ')'], ""));
             std::fs::write(&path, &bytes).unwrap();
             exercise_clip(&path);
+            std::fs::remove_dir_all(&dir).unwrap();
         }
     }
 }
