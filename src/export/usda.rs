@@ -129,7 +129,7 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], settings: &UsdSett
     out
 }
 
-fn header(s: &UsdSettings, start: i64, end: i64) -> String {
+pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
     format!(
         "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"blendsim {version}\"\n    endTimeCode = {end}\n    \
          framesPerSecond = {fps}\n    metersPerUnit = {mpu}\n    startTimeCode = {start}\n    \
@@ -144,14 +144,14 @@ fn header(s: &UsdSettings, start: i64, end: i64) -> String {
 
 /// Triangles as USD faces; our triangles are counter-clockwise seen from outside, which is
 /// USD's `rightHanded` orientation.
-fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
+pub(crate) fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
     push_attr(out, 8, "int[] faceVertexCounts", |o| push_list(o, triangles.iter(), |o, _| o.push('3')));
     push_attr(out, 8, "int[] faceVertexIndices", |o| push_ints(o, triangles.iter().flatten().copied()));
     out.push_str("        uniform token orientation = \"rightHanded\"\n");
 }
 
 /// `[(lo), (hi)]` of a point set (zeros when empty).
-fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
+pub(crate) fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
     Bounds::of_f32(points).to_f32()
 }
 
@@ -185,7 +185,7 @@ fn push_tokens<'a>(out: &mut String, items: impl Iterator<Item = &'a str>) {
     });
 }
 
-fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
+pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
     push_list(out, items, |o, p| {
         o.push('(');
         push_f32(o, p[0]);
