@@ -4,6 +4,11 @@
 //! [`FrameSource`] is the contract between the cache readers and what consumes a cache
 //! (keyframe selection, the Hermite fit, the error report).
 
+pub mod band;
+pub mod deviation;
+pub mod fit;
+pub mod keyframes;
+
 use crate::error::Result;
 use crate::mesh::Point;
 
