@@ -77,6 +77,8 @@ test: test-deps
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"
 	$(CARGO) bench --locked --bench solver
+	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
+	$(CARGO) bench --locked --bench cache
 
 SCENE_NAMES := $(basename $(notdir $(wildcard $(SCENES)/*.toml)))
 batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)

@@ -10,8 +10,9 @@
 //!    (the slope of the parabola through `a` and the two frames after it, and through `b` and
 //!    the two before it). The interval is feasible when this model is within the tolerance at
 //!    every frame between. The fewest keys is the shortest path from the first frame to the
-//!    last over feasible intervals (ties: the smallest worst interval error, for headroom).
-//!    One pass over the cache with a sliding window of frames.
+//!    last over feasible intervals (ties: the path furthest inside the feasible reach, for
+//!    headroom). One pass over the cache with a sliding window of frames; the reach of each
+//!    frame is found by galloping search, a few interval checks per frame.
 //! 2. **Global fit and repair.** The least-squares fit on those keys is usually closer than
 //!    the model (it moves key positions and velocities), but least squares does not bound
 //!    the largest error: every interval still over the tolerance is split at its middle frame
@@ -23,8 +24,8 @@
 //! 4. **Final fit** on the surviving keys, with stage 2's repair if least squares lands over
 //!    the tolerance somewhere.
 //!
-//! Stage 1 is exact for its model (no fewer keys meet the tolerance with cache positions and
-//! cache slopes at the keys); stage 2 makes the fit meet it, and stage 3 turns the fit's extra
+//! Stage 1 is exact for its model when feasibility is monotone (then no fewer keys meet the
+//! tolerance with cache positions and cache slopes at the keys); stage 2 makes the fit meet it, and stage 3 turns the fit's extra
 //! freedom (moving key positions, sharing velocities) into fewer keys. Everything is sequential and deterministic: the same cache gives the same keys.
 
 use std::collections::{BTreeSet, VecDeque};
@@ -33,7 +34,7 @@ use super::deviation::{cache_diagonal, deviation, frame_distance, CacheDeviation
 use super::fit::{fit, FitSettings, NormalEquations};
 use super::FrameSource;
 use crate::error::{Error, Result};
-use crate::mesh::{norm, sub, Point};
+use crate::mesh::Point;
 use crate::spacetime::trajectory::{hermite_weights, Trajectory};
 
 /// Settings of the automatic key selection.
@@ -60,9 +61,8 @@ impl Default for AutoSettings {
 /// leaves the global refit room to redistribute the error.
 const REMOVAL_MARGIN: f64 = 0.9;
 
-/// Rounds of stages 1 and 2 at most: each reruns the model with the tolerance stretched by the
-/// headroom the previous fit left, while that gives fewer keys.
-const CALIBRATION_ROUNDS: usize = 4;
+/// Rounds of stages 1 and 2 at most (see the calibration in [`select`]).
+const CALIBRATION_ROUNDS: usize = 5;
 
 /// One round of stages 1 and 2.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -132,30 +132,51 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
     let max_window = (settings.window_bytes / (72 * vertices.max(1))).max(8);
 
     // Stages 1 and 2, calibrated: the fit is usually well inside the tolerance on the model's
-    // keys, so the model is rerun with the tolerance stretched by the headroom the fit left.
+    // keys, so the model is rerun with its tolerance stretched by the headroom the fit left
+    // (the slack). A slack whose keys the fit had to repair is too much: the next round
+    // bisects (geometrically) between the largest clean slack and the smallest repaired one.
     let mut stats = SelectionStats { frames, rounds: Vec::new(), inserted: 0, removed: 0, frame_reads: 0, window_frames: 0, global_fits: 0 };
-    let mut slack = 1.0;
+    let (mut slack, mut clean, mut repaired) = (1.0f64, 1.0f64, f64::INFINITY);
     let mut best: Option<(Vec<usize>, Trajectory, CacheDeviation)> = None;
-    let mut previous: Vec<usize> = Vec::new();
+    let mut best_clean = usize::MAX;
+    // Outcomes by candidate keys (fitted key count, headroom): the same keys need no new fit.
+    let mut seen: Vec<(Vec<usize>, usize, f64)> = Vec::new();
     for _ in 0..CALIBRATION_ROUNDS {
-        let (mut keys, window_frames) = shortest_path(&mut source, eps * slack, max_window)?;
+        let (candidates, window_frames) = shortest_path(&mut source, eps * slack, max_window)?;
         stats.window_frames = stats.window_frames.max(window_frames);
-        if keys == previous {
+        let (fitted, headroom) = match seen.iter().find(|s| s.0 == candidates) {
+            Some(&(_, fitted, headroom)) => (fitted, headroom),
+            None => {
+                let mut keys = candidates.clone();
+                let (trajectory, dev) = repair(&mut source, &mut keys, settings, diagonal, &mut stats)?;
+                let headroom = if dev.max > 0.0 { settings.tolerance / dev.max } else { f64::INFINITY };
+                let fitted = keys.len();
+                if best.as_ref().is_none_or(|b| fitted < b.0.len()) {
+                    best = Some((keys, trajectory, dev));
+                }
+                seen.push((candidates.clone(), fitted, headroom));
+                (fitted, headroom)
+            }
+        };
+        stats.rounds.push(Round { slack, candidate_keys: candidates.len(), fitted_keys: fitted });
+        if fitted == candidates.len() {
+            // Clean: stretch further, unless stretching stopped paying.
+            if fitted >= best_clean || candidates.len() <= 2 {
+                break;
+            }
+            best_clean = fitted;
+            clean = slack;
+            slack = if repaired.is_finite() { (clean * repaired).sqrt() } else { slack * headroom.min(16.0) };
+            if repaired.is_infinite() && headroom < 1.25 {
+                break;
+            }
+        } else {
+            repaired = slack;
+            slack = (clean * repaired).sqrt();
+        }
+        if repaired / clean < 1.15 {
             break;
         }
-        previous.clone_from(&keys);
-        let candidates = keys.len();
-        let (trajectory, dev) = repair(&mut source, &mut keys, settings, diagonal, &mut stats)?;
-        stats.rounds.push(Round { slack, candidate_keys: candidates, fitted_keys: keys.len() });
-        let headroom = if dev.max > 0.0 { settings.tolerance / dev.max } else { f64::INFINITY };
-        let improved = best.as_ref().is_none_or(|b| keys.len() < b.0.len());
-        if improved {
-            best = Some((keys, trajectory, dev));
-        }
-        if !improved || headroom < 1.25 || candidates <= 2 {
-            break;
-        }
-        slack *= headroom.min(16.0);
     }
     let (mut keys, mut trajectory, mut dev) = best.expect("at least one round");
 
@@ -188,30 +209,63 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
 /// Stage 1: the fewest keys such that every interval between consecutive keys, modelled from
 /// its own end frames, is within `eps` of every frame inside it. Returns the keys and the most
 /// frames held at once.
+///
+/// Feasibility is taken as monotone (a longer interval is no closer): the reach `e(a)`, the
+/// last frame an interval from `a` may end on, is found by galloping from `e(a - 1)` and
+/// bisecting, a few interval checks per frame instead of one per frame in reach. Every
+/// interval `[a, b]`, `b <= e(a)`, is then an edge; the shortest path breaks ties by the
+/// smallest largest `(b - a) / (e(a) - a)` on the path: the path furthest inside the reaches.
 fn shortest_path<S: FrameSource + ?Sized>(source: &mut S, eps: f64, max_window: usize) -> Result<(Vec<usize>, usize)> {
     let frames = source.frame_count();
     let mut window = FrameWindow::new(source);
-    // best[b] = (keys on the best path to b, worst interval error on it); pred[b] = the key before b.
+    // best[b] = (keys on the best path to b, largest reach use on it); pred[b] = the key before b.
     let mut best = vec![(usize::MAX, f64::INFINITY); frames];
     let mut pred = vec![usize::MAX; frames];
     best[0] = (1, 0.0);
+    let mut reach = 1;
     for a in 0..frames - 1 {
         window.drop_before(a);
-        // Adjacent frames: no frame between, always feasible.
-        let mut edges = vec![(a + 1, 0.0)];
-        for b in a + 2..frames {
-            if b + 1 - a > max_window {
-                break;
+        let cap = (frames - 1).min(a + max_window - 1);
+        // Adjacent frames have no frame between: always feasible.
+        let mut good = a + 1;
+        if cap >= a + 2 {
+            let mut feasible = |b: usize| -> Result<bool> {
+                window.load_through(source, b)?;
+                Ok(window.within(a, b, eps))
+            };
+            let start = reach.clamp(a + 2, cap);
+            let mut bad = None;
+            if feasible(start)? {
+                good = start;
+                let mut step = 1;
+                while good < cap {
+                    let next = (good + step).min(cap);
+                    if feasible(next)? {
+                        good = next;
+                        step *= 2;
+                    } else {
+                        bad = Some(next);
+                        break;
+                    }
+                }
+            } else {
+                bad = Some(start);
             }
-            window.load_through(source, b)?;
-            match window.interval_error(a, b, eps) {
-                Some(e) => edges.push((b, e)),
-                None => break,
+            if let Some(mut bad) = bad {
+                while bad - good > 1 {
+                    let mid = good + (bad - good) / 2;
+                    if feasible(mid)? {
+                        good = mid;
+                    } else {
+                        bad = mid;
+                    }
+                }
             }
         }
+        reach = good;
         let (count, worst) = best[a];
-        for (b, e) in edges {
-            let candidate = (count + 1, worst.max(e));
+        for b in a + 1..=good {
+            let candidate = (count + 1, worst.max((b - a) as f64 / (good - a) as f64));
             if candidate.0 < best[b].0 || (candidate.0 == best[b].0 && candidate.1 < best[b].1) {
                 best[b] = candidate;
                 pred[b] = a;
@@ -299,17 +353,19 @@ impl FrameWindow {
         (0..y0.len()).map(|p| std::array::from_fn(|d| c[0] * y0[p][d] + c[1] * y1[p][d] + c[2] * y2[p][d])).collect()
     }
 
-    /// Largest distance between the model interval `[a, b]` (`b >= a + 2`, both held) and the
-    /// frames strictly inside, or `None` as soon as one exceeds `eps`.
-    fn interval_error(&self, a: usize, b: usize, eps: f64) -> Option<f64> {
+    /// Whether the model interval `[a, b]` (`b >= a + 2`, all its frames held) is within `eps`
+    /// of every frame strictly inside.
+    fn within(&self, a: usize, b: usize, eps: f64) -> bool {
         let (ta, tb) = (self.times[a], self.times[b]);
         let len = tb - ta;
         let (ya, yb) = (self.frame(a), self.frame(b));
         let va = self.forward[a - self.first].as_deref().expect("frames a..a+2 are held");
         let vb = self.backward[b - self.first].as_deref().expect("frames b-2..b are held");
         let eps2 = eps * eps;
-        let mut worst2 = 0.0f64;
-        for f in a + 1..b {
+        // Middle frames first: that is where an interval too long fails.
+        let mid = (a + b) / 2;
+        let order = (mid..b).chain((a + 1..mid).rev());
+        for f in order {
             let w = hermite_weights((self.times[f] - ta) / len, len).pos;
             let y = self.frame(f);
             for p in 0..y.len() {
@@ -319,12 +375,11 @@ impl FrameWindow {
                     d2 += (x - y[p][d]) * (x - y[p][d]);
                 }
                 if d2 > eps2 {
-                    return None;
+                    return false;
                 }
-                worst2 = worst2.max(d2);
             }
         }
-        Some(worst2.sqrt())
+        true
     }
 }
 
@@ -398,9 +453,15 @@ fn try_removal<S: FrameSource + ?Sized>(
     let mut system = NormalEquations::new(times, vertices, settings.fit.regularization);
     let mut key_frames: Vec<Option<Vec<Point>>> = vec![None; window.len()];
     let mut frame = vec![[0.0; 3]; vertices];
+    // The window's frames are kept for the check below when they fit the memory budget.
+    let keep = (keys[hi] - keys[lo] + 1) * 24 * vertices <= settings.window_bytes;
+    let mut kept: Vec<Vec<Point>> = Vec::new();
     for f in keys[lo]..=keys[hi] {
         source.read_frame(f, &mut frame)?;
         system.add_frame(source.time(f), &frame);
+        if keep {
+            kept.push(frame.clone());
+        }
         if let Some(j) = window.iter().position(|&i| keys[i] == f) {
             if !settings.pinned.is_empty() {
                 key_frames[j] = Some(frame.clone());
@@ -430,21 +491,20 @@ fn try_removal<S: FrameSource + ?Sized>(
         // Undetermined without the key (possible only with no regularization): keep the key.
         return Ok(None);
     };
+    // Every frame of the window; the end keys' own frames only where the end key moved.
     let mut pose = vec![[0.0; 3]; vertices];
-    for f in keys[lo] + 1..keys[hi] {
-        source.read_frame(f, &mut frame)?;
-        local.evaluate_into(source.time(f), &mut pose);
-        if frame_distance(&frame, &pose).0 > eps {
-            return Ok(None);
-        }
-    }
-    // The end keys are part of the window's frames too when they moved.
-    for (j, f) in [(0, keys[lo]), (window.len() - 1, keys[hi])] {
-        if !held(j) {
+    let first = keys[lo] + usize::from(held(0));
+    let last = keys[hi] - usize::from(held(window.len() - 1));
+    for f in first..=last {
+        let y = if keep {
+            &kept[f - keys[lo]]
+        } else {
             source.read_frame(f, &mut frame)?;
-            if local.positions[j].iter().zip(&frame).any(|(p, q)| norm(sub(*p, *q)) > eps) {
-                return Ok(None);
-            }
+            &frame
+        };
+        local.evaluate_into(source.time(f), &mut pose);
+        if frame_distance(y, &pose).0 > eps {
+            return Ok(None);
         }
     }
     Ok(Some((lo, local)))
