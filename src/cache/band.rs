@@ -125,7 +125,8 @@ impl Band {
                 }
                 let idx = l.at(i, j);
                 if i == j {
-                    if !(s > PIVOT_TOLERANCE * scale) {
+                    // Also catches NaN pivots.
+                    if s.is_nan() || s <= PIVOT_TOLERANCE * scale {
                         return Err(NotPositiveDefinite { row: i, pivot: if scale > 0.0 { s / scale } else { s } });
                     }
                     l.data[idx] = s.sqrt();

@@ -102,7 +102,7 @@ fn singular(e: NotPositiveDefinite, keys: &[usize]) -> Error {
     Error::general(
         format!(
             "the Hermite fit cannot determine the {} of the key at frame {} (normal equations singular, relative pivot {:.1e})",
-            if e.row % 2 == 0 { "position" } else { "velocity" },
+            if e.row.is_multiple_of(2) { "position" } else { "velocity" },
             keys[k],
             e.pivot
         ),

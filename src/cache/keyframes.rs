@@ -2,8 +2,8 @@
 //! tolerance of every cache frame (largest vertex distance / the cache's bounding-box diagonal).
 //!
 //! Keys placed where the error is largest cluster around hard spots and stall (each new key
-//! next to an old one barely helps), so selection has four stages (formats/cache.md,
-//! "Keyframes from a cache", gives the costs):
+//! next to an old one barely helps), so selection is a shortest path over a cheap model,
+//! checked and repaired with the real fit (`formats/cache-keyframes.md` gives the costs):
 //!
 //! 1. **Candidates by shortest path.** A model that needs no solve: an interval `[a, b]` keeps
 //!    the cache positions at `a` and `b`, and takes the velocities the cache shows inside it
@@ -13,20 +13,25 @@
 //!    last over feasible intervals (ties: the path furthest inside the feasible reach, for
 //!    headroom). One pass over the cache with a sliding window of frames; the reach of each
 //!    frame is found by galloping search, a few interval checks per frame.
-//! 2. **Global fit and repair.** The least-squares fit on those keys is usually closer than
-//!    the model (it moves key positions and velocities), but least squares does not bound
-//!    the largest error: every interval still over the tolerance is split at its middle frame
-//!    (not at its worst frame), and the fit is redone, until no frame is over.
-//! 3. **Removal.** Keys of the quietest intervals first: remove the key and refit the two
-//!    keys on each side with the keys beyond them held (a local least-squares problem over
-//!    a few intervals, reading only their frames); keep the removal when that window stays
-//!    within 90% of the tolerance. The patched trajectory still meets the tolerance everywhere.
-//! 4. **Final fit** on the surviving keys, with stage 2's repair if least squares lands over
+//! 2. **Fit and repair.** The least-squares fit on those keys, checked at every frame; every
+//!    interval still over the tolerance is split at its middle frame (not at its worst frame),
+//!    and the fit is redone, until no frame is over.
+//! 3. **Calibration.** The fit is usually well inside the tolerance on the model's keys, so
+//!    stages 1 and 2 are rerun with the model's tolerance stretched by the headroom the fit
+//!    left, bisecting between stretches that needed repairs and stretches that did not; the
+//!    round with the fewest keys is kept.
+//! 4. **Removal.** Keys of the quietest intervals first: remove the key and refit the two keys
+//!    on each side with the keys beyond them held (a local least-squares problem over a few
+//!    intervals, reading only their frames); keep the removal when that window stays within
+//!    90% of the tolerance. The patched trajectory still meets the tolerance everywhere.
+//! 5. **Final fit** on the surviving keys, with stage 2's repair if least squares lands over
 //!    the tolerance somewhere.
 //!
 //! Stage 1 is exact for its model when feasibility is monotone (then no fewer keys meet the
-//! tolerance with cache positions and cache slopes at the keys); stage 2 makes the fit meet it, and stage 3 turns the fit's extra
-//! freedom (moving key positions, sharing velocities) into fewer keys. Everything is sequential and deterministic: the same cache gives the same keys.
+//! tolerance with cache positions and cache slopes at the keys); stage 2 makes the fit meet
+//! it, and stages 3 and 4 turn the fit's extra freedom (moving key positions, sharing
+//! velocities) into fewer keys. Everything is sequential and deterministic: the same cache
+//! gives the same keys.
 
 use std::collections::{BTreeSet, VecDeque};
 
@@ -46,8 +51,9 @@ pub struct AutoSettings {
     pub fit: FitSettings,
     /// Empty, or one flag per vertex: flagged vertices keep their cache positions at every key.
     pub pinned: Vec<bool>,
-    /// Memory for the frames stage 1 holds at once; it bounds the longest interval to
-    /// `window_bytes / (72 * vertices)` frames (at least 8).
+    /// Memory for the frames held at once: stage 1's window (it bounds the longest interval to
+    /// `window_bytes / (72 * vertices)` frames, at least 8) and stage 4's trials (re-read from
+    /// the source when over).
     pub window_bytes: usize,
 }
 
@@ -80,9 +86,9 @@ pub struct Round {
 pub struct SelectionStats {
     pub frames: usize,
     pub rounds: Vec<Round>,
-    /// Keys added by the repairs (stages 2 and 4, all rounds).
+    /// Keys added by the repairs (stages 2 and 5, all rounds).
     pub inserted: usize,
-    /// Keys removed by stage 3.
+    /// Keys removed by stage 4.
     pub removed: usize,
     /// Frames read from the source over the whole selection (a pass is `frames` reads).
     pub frame_reads: usize,
@@ -180,7 +186,7 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
     }
     let (mut keys, mut trajectory, mut dev) = best.expect("at least one round");
 
-    // Stage 3: quietest keys first; ties by position.
+    // Stage 4: quietest keys first; ties by position.
     let mut interval_error = vec![0.0f64; keys.len() - 1];
     for (f, &e) in dev.per_frame_max.iter().enumerate() {
         let i = keys.partition_point(|&k| k <= f).clamp(1, keys.len() - 1) - 1;
@@ -198,7 +204,7 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
         }
     }
 
-    // Stage 4.
+    // Stage 5.
     if stats.removed > 0 {
         (trajectory, dev) = repair(&mut source, &mut keys, settings, diagonal, &mut stats)?;
     }
@@ -383,7 +389,7 @@ impl FrameWindow {
     }
 }
 
-/// Stages 2 and 4: fit, and split every interval that is over the tolerance at its middle
+/// Stages 2 and 5: fit, and split every interval that is over the tolerance at its middle
 /// frame, until none is. Ends at the latest with every frame a key (an exact fit).
 fn repair<S: FrameSource + ?Sized>(
     source: &mut S,
@@ -434,7 +440,7 @@ fn middle_frame<S: FrameSource + ?Sized>(source: &S, a: usize, b: usize) -> usiz
     (a + 1..b).min_by(|&f, &g| (source.time(f) - mid).abs().total_cmp(&(source.time(g) - mid).abs())).expect("a frame between")
 }
 
-/// Stage 3: the fit of the keys around key `k` without it, the keys two away (if any) held at
+/// Stage 4: the fit of the keys around key `k` without it, the keys two away (if any) held at
 /// their current positions and velocities. Returns the first key index of the window and the
 /// refitted window (its keys, `k` left out), if it stays within `eps` of its frames.
 fn try_removal<S: FrameSource + ?Sized>(
@@ -478,7 +484,7 @@ fn try_removal<S: FrameSource + ?Sized>(
         let (j, v, d) = (row / 2, column / 3, column % 3);
         if held(j) {
             let i = window[j];
-            if row % 2 == 0 {
+            if row.is_multiple_of(2) {
                 trajectory.positions[i][v][d]
             } else {
                 trajectory.velocities[i][v][d]
