@@ -9,6 +9,8 @@
 //! Bytes: "f32" columns count the raw numbers a file must hold (blendshapes: base + sparse
 //! targets as index + offset + f32 Hermite weight keys; full frame: every vertex of every frame;
 //! PCA: mean + basis + per-frame weights), the glb/usda columns are our exporters' files.
+//! "passes" is frames read by the selection over the frame count; "held frames" the most
+//! frames it held in memory at once.
 
 #[path = "../tests/common/bar.rs"]
 mod bar;
@@ -119,12 +121,13 @@ fn run(name: &str, cache: &BarCache) {
     let (rank, pca_bytes, pca_max) = pca_baseline(&frames, diagonal);
     let (keys, n) = (auto.keys.len(), frames.frame_count());
     println!(
-        "| {name} | {} | {} | {n} | {keys} | {:.3} | {:.4} | {:.1} | {:.2e} | {:.2e} | {} | {} | {} | {} | {} | {} | {:.1}x | {:.1}x | {rank} | {} | {:.2e} | {} |",
+        "| {name} | {} | {} | {n} | {keys} | {:.3} | {:.4} | {:.1} | {} | {:.2e} | {:.2e} | {} | {} | {} | {} | {} | {} | {:.1}x | {:.1}x | {rank} | {} | {:.2e} | {} |",
         cache.body.tets.len(),
         frames.vertex_count(),
         median(select_s),
         median(fit_s),
         auto.stats.frame_reads as f64 / n as f64,
+        auto.stats.window_frames,
         auto.deviation.max,
         auto.deviation.rms,
         kb(clip_f32_bytes(&clip)),
@@ -149,8 +152,8 @@ fn main() {
     ];
     println!("machine: {} threads, load average {}; tolerance {TOLERANCE} of the cache's bbox diagonal; sizes in KB", rayon::current_num_threads(), load());
     println!();
-    println!("| cache | tets | vertices | frames | keys | select s | fit s | passes | max error | rms error | blendshape f32 | blendshape glb | blendshape usda | full-frame f32 | full-frame glb | full-frame usda | glb smaller | usda smaller | PCA rank | PCA f32 | PCA max error | load |");
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("| cache | tets | vertices | frames | keys | select s | fit s | passes | held frames | max error | rms error | blendshape f32 | blendshape glb | blendshape usda | full-frame f32 | full-frame glb | full-frame usda | glb smaller | usda smaller | PCA rank | PCA f32 | PCA max error | load |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     for (name, settings) in &cases {
         let t = Instant::now();
         let cache = bar(settings);
