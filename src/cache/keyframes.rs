@@ -25,7 +25,8 @@
 //!    intervals, reading only their frames); keep the removal when that window stays within
 //!    90% of the tolerance. The patched trajectory still meets the tolerance everywhere.
 //! 5. **Final fit** on the surviving keys, with stage 2's repair if least squares lands over
-//!    the tolerance somewhere.
+//!    the tolerance somewhere (and the keys before stage 4 if that repair adds as many keys
+//!    as stage 4 removed).
 //!
 //! Stage 1 is exact for its model when feasibility is monotone (then no fewer keys meet the
 //! tolerance with cache positions and cache slopes at the keys); stage 2 makes the fit meet
@@ -88,7 +89,7 @@ pub struct SelectionStats {
     pub rounds: Vec<Round>,
     /// Keys added by the repairs (stages 2 and 5, all rounds).
     pub inserted: usize,
-    /// Keys removed by stage 4.
+    /// Keys removed by stage 4 (0 when stage 5 had to take them back).
     pub removed: usize,
     /// Frames read from the source over the whole selection (a pass is `frames` reads).
     pub frame_reads: usize,
@@ -184,7 +185,8 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
             break;
         }
     }
-    let (mut keys, mut trajectory, mut dev) = best.expect("at least one round");
+    let best_fit = best.expect("at least one round");
+    let (mut keys, mut trajectory, mut dev) = best_fit.clone();
 
     // Stage 4: quietest keys first; ties by position.
     let mut interval_error = vec![0.0f64; keys.len() - 1];
@@ -204,9 +206,15 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
         }
     }
 
-    // Stage 5.
+    // Stage 5. Should the refit need more repairs than the removals saved, the keys before
+    // stage 4 stand.
     if stats.removed > 0 {
+        let before = (keys.len() + stats.removed, best_fit);
         (trajectory, dev) = repair(&mut source, &mut keys, settings, diagonal, &mut stats)?;
+        if keys.len() >= before.0 {
+            (keys, trajectory, dev) = before.1;
+            stats.removed = 0;
+        }
     }
     stats.frame_reads = source.reads;
     Ok(AutoKeys { keys, trajectory, deviation: dev, stats })
