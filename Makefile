@@ -78,6 +78,8 @@ test: test-deps
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"
 	$(CARGO) bench --locked --bench solver
+	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
+	$(CARGO) bench --locked --bench cache
 
 # Peak memory is measured with GNU time (Debian package `time`).
 bench-cache: deps-usd

@@ -1,6 +1,9 @@
 //! Not API: the solver's parts, for the benchmark (`benches/solver.rs`), which times them one
-//! by one. Nothing here is stable; library users call [`crate::stages`].
+//! by one, and the writers, whose byte counts `benches/cache.rs` compares. Nothing here is stable; library users call [`crate::stages`].
 
+pub use crate::export::fullframe::FullFrame;
+pub use crate::export::glb::{self, Placement};
+pub use crate::export::usda::{self, UsdSettings};
 pub use crate::physics::elastic::Elastic;
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};
 pub use crate::spacetime::objective::{Evaluation, Objective, Projections};

@@ -11,7 +11,11 @@
 //! anything sized by the file, and reads one frame per call: memory stays at a few frames
 //! whatever the cache's length.
 
+mod band;
 mod binary;
+pub mod deviation;
+pub mod fit;
+pub mod keyframes;
 #[cfg(test)]
 mod fuzz;
 mod gltf_clip;

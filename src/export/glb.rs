@@ -22,6 +22,7 @@ use crate::mesh::Bounds;
 pub struct Placement {
     /// The scene's up axis is Z (rotated -90° about X to glTF's Y up).
     pub z_up: bool,
+    /// Scene units in meters (the node is scaled by it).
     pub meters_per_unit: f64,
 }
 

@@ -16,9 +16,11 @@ use crate::spacetime::trajectory::frames_between;
 pub struct UsdSettings {
     /// Prim-safe name of the asset (used for the SkelRoot / mesh names).
     pub name: String,
+    /// Frames per second (`timeCodesPerSecond`).
     pub fps: f64,
     /// "Y" or "Z".
     pub up_axis: char,
+    /// Scene units in meters (`metersPerUnit`).
     pub meters_per_unit: f64,
 }
 

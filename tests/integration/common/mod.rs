@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 pub mod assets;
+pub mod bar;
 pub mod checkers;
 pub mod cli;
 pub mod verify;
