@@ -9,4 +9,5 @@ pub mod equilibrium;
 pub mod mat3;
 pub mod ordering;
 pub mod projection;
+pub mod projection_curvature;
 pub mod svd3;
