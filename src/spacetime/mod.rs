@@ -5,13 +5,15 @@
 //! - [`unknowns`]: free keyframe positions/velocities (masks eliminated, loops aliased);
 //! - [`objective`]: W, its gradient, and the local step over all samples;
 //! - [`global_step`]: the constant normal matrix, assembled and factorized once;
-//! - [`solver`]: the local/global iteration.
+//! - [`solver`]: the local/global iteration;
+//! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step.
 
 pub mod global_step;
 pub mod objective;
 pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;
+pub mod timing;
 pub mod trajectory;
 pub mod unknowns;
 

@@ -11,15 +11,15 @@ use crate::physics::svd3::tests::Rng;
 use crate::scene::Material;
 use crate::stage::{KeyPoses, VertexSet};
 
-fn material() -> Material {
+pub(super) fn material() -> Material {
     Material { stiffness: 70.0, volume: 70.0, density: 1.0, damping: 0.0, gravity: [0.0; 3] }
 }
 
-fn settings() -> Settings {
+pub(super) fn settings() -> Settings {
     Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3] }
 }
 
-fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<VertexSet>, cyclic: bool) -> KeyPoses {
+pub(super) fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<VertexSet>, cyclic: bool) -> KeyPoses {
     let n = times.len();
     KeyPoses { times, positions, fixed, fixed_velocity: vec![VertexSet::default(); n], cyclic }
 }
@@ -30,7 +30,7 @@ fn rotate_y(p: Point, angle: f64) -> Point {
 }
 
 /// A non-rigid, non-trivial trajectory on a cube: stretched, sheared and twisted keys.
-fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
+pub(super) fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
     let mut rng = Rng(42);
     let shapes: Vec<Vec<Point>> = (0..4)
         .map(|k| {
