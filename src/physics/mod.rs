@@ -11,3 +11,4 @@ pub mod ordering;
 pub mod projection;
 pub mod projection_curvature;
 pub mod svd3;
+pub mod vibration;
