@@ -29,7 +29,7 @@
 
 use super::mat3::{mul, transpose, Mat3};
 use super::projection::volume_preserving;
-use super::svd3::svd3;
+use super::svd3::{svd3, Svd3};
 
 /// `P(F)`, `dP/dτ` and `d²P/dτ²` of `τ ↦ P(F + τG)` at `τ = 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,7 +100,12 @@ fn volume_stretch_derivatives(sigma: &[f64; 3], sp: &[f64; 3], ds: &Mat3, dds: &
 /// [`ProjectionPath`] of the blended projection (strain share `strain_share`, as in
 /// [`project`](super::projection::project)) at `f` in direction `g`.
 pub fn project_along(f: &Mat3, strain_share: f64, g: &Mat3) -> ProjectionPath {
-    let svd = svd3(f);
+    project_along_svd(&svd3(f), strain_share, g)
+}
+
+/// [`project_along`] from the signed SVD of `F` (e.g. from [`svd3_batch`](super::svd3::svd3_batch),
+/// which gives the same bytes).
+pub fn project_along_svd(svd: &Svd3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     let (u, s, v) = (&svd.u, svd.sigma, &svd.v);
     let gt = mul(&mul(&transpose(u), g), v);
     // Rotation: R' = Ω, R'' = Ω² + Ω'.
@@ -198,7 +203,11 @@ mod tests {
                 for i in 0..3 {
                     for j in 0..3 {
                         assert!((path.value[i][j] - p[i][j]).abs() < 1e-12 * scale, "{f:?}");
-                        assert!((path.first[i][j] - dp[i][j]).abs() < 1e-9 * (1.0 + max_abs(&dp)), "{f:?} share {share}: {:?} vs {dp:?}", path.first);
+                        assert!(
+                            (path.first[i][j] - dp[i][j]).abs() < 1e-9 * (1.0 + max_abs(&dp)),
+                            "{f:?} share {share}: {:?} vs {dp:?}",
+                            path.first
+                        );
                     }
                 }
             }

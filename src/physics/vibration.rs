@@ -67,7 +67,13 @@ pub fn natural_vibration(elastic: &Elastic, held: &[bool], stiffness: RestStiffn
 }
 
 /// [`natural_vibration`], solving densely up to `dense_limit` free coordinates.
-pub fn natural_vibration_with(elastic: &Elastic, held: &[bool], stiffness: RestStiffness, count: usize, dense_limit: usize) -> Result<Vibration> {
+pub fn natural_vibration_with(
+    elastic: &Elastic,
+    held: &[bool],
+    stiffness: RestStiffness,
+    count: usize,
+    dense_limit: usize,
+) -> Result<Vibration> {
     let (k, free) = scaled_stiffness(elastic, held, stiffness);
     let dim = k.n;
     if dim == 0 || count == 0 {
@@ -173,9 +179,8 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
         col_ptr.push(rows.len());
     }
     let lower = SparseColMat::new(SymbolicSparseColMat::new_checked(n, n, col_ptr, None, rows), vals);
-    let chol = Cholesky::factor(&lower, &Ordering::Amd, Par::Seq).map_err(|_| {
-        Error::general("the rest stiffness is not positive semidefinite", "check the mesh for inverted tets")
-    })?;
+    let chol = Cholesky::factor(&lower, &Ordering::Amd, Par::Seq)
+        .map_err(|_| Error::general("the rest stiffness is not positive semidefinite", "check the mesh for inverted tets"))?;
     // A fixed start block (a Weyl sequence), so results do not depend on anything but the input.
     let mut q = Mat::<f64>::from_fn(n, p, |i, j| ((i as f64 + 1.0) * (j as f64 + 1.0) * 0.618_033_988_749_895).fract() - 0.5);
     let mut previous = vec![f64::INFINITY; p];
@@ -203,7 +208,10 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
         }
         previous = theta;
     }
-    Err(Error::general("the vibration eigensolver did not converge in 2000 subspace iterations", "ask for fewer modes, or use a coarser mesh"))
+    Err(Error::general(
+        "the vibration eigensolver did not converge in 2000 subspace iterations",
+        "ask for fewer modes, or use a coarser mesh",
+    ))
 }
 
 #[cfg(test)]

@@ -4,7 +4,8 @@
 //! - [`sampling`]: sample points of the residual, and the time slots of the unknowns;
 //! - [`unknowns`]: free keyframe positions/velocities (masks eliminated, loops aliased);
 //! - [`objective`]: W, its gradient, and the local step over all samples;
-//! - [`global_step`]: the constant normal matrix, assembled and factorized once;
+//! - [`global_step`]: the normal matrix, assembled and factorized once (refactorized when the
+//!   key times move);
 //! - [`solver`]: the local/global iteration;
 //! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step.
 

@@ -65,7 +65,8 @@ use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
 use crate::physics::mat3::Mat3;
-use crate::physics::projection_curvature::project_along;
+use crate::physics::projection_curvature::project_along_svd;
+use crate::physics::svd3::{svd3_batch, BATCH};
 
 /// Powers of `T` in the Hermite weights of `(x_i, v_i, x_{i+1}, v_{i+1})`.
 const POS_POWER: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
@@ -210,16 +211,33 @@ impl<'a> Timing<'a> {
         match mode {
             ProjectionMode::Frozen(p) => el.apply_j_sequential(&p.targets[k], &mut jp),
             ProjectionMode::Fresh => {
+                // p, p_T, p_TT of every tet (SVDs in batches), scattered in tet order like
+                // `apply_j_sequential`.
                 let share = el.strain_share();
-                let paths: Vec<[Mat3; 3]> = (0..el.tet_count())
-                    .map(|e| {
-                        let path = project_along(&el.deformation_gradient(e, &x), share, &el.deformation_gradient(e, &x_t));
-                        [path.value, path.first, path.second]
-                    })
-                    .collect();
-                el.apply_j_sequential_with(|e| paths[e][0], &mut jp);
-                el.apply_j_sequential_with(|e| paths[e][1], &mut jp_t);
-                el.apply_j_sequential_with(|e| paths[e][2], &mut jp_tt);
+                let count = el.tet_count();
+                for first in (0..count).step_by(BATCH) {
+                    let f: [Mat3; BATCH] = std::array::from_fn(|l| {
+                        if first + l < count {
+                            el.deformation_gradient(first + l, &x)
+                        } else {
+                            crate::physics::mat3::IDENTITY
+                        }
+                    });
+                    let svds = svd3_batch(&f);
+                    for (l, svd) in svds.iter().enumerate().take(count - first) {
+                        let e = first + l;
+                        let path = project_along_svd(svd, share, &el.deformation_gradient(e, &x_t));
+                        let w = el.weights[e];
+                        for (&a, g) in el.tets[e].iter().zip(&el.grads[e]) {
+                            let a = a as usize;
+                            for i in 0..3 {
+                                jp[a][i] += w * (path.value[i][0] * g[0] + path.value[i][1] * g[1] + path.value[i][2] * g[2]);
+                                jp_t[a][i] += w * (path.first[i][0] * g[0] + path.first[i][1] * g[1] + path.first[i][2] * g[2]);
+                                jp_tt[a][i] += w * (path.second[i][0] * g[0] + path.second[i][1] * g[1] + path.second[i][2] * g[2]);
+                            }
+                        }
+                    }
+                }
             }
         }
         let g = self.gravity;
@@ -282,7 +300,7 @@ impl<'a> Timing<'a> {
             let lo: Vec<f64> = (0..keys - 1).map(|i| lower[i] - t[i]).collect();
             let step = blocks.newton_step(&d.gradient, &h, &lo);
             let decrease: f64 = -step.iter().zip(&d.gradient).map(|(s, g)| s * g).sum::<f64>();
-            if !(decrease > settings.tolerance * w) {
+            if decrease.is_nan() || decrease <= settings.tolerance * w {
                 break format!("stationary: the predicted decrease {:.3e} is below {:.0e} of W", decrease.max(0.0), settings.tolerance);
             }
             // Start at the full step, or less where an interval would more than double.
@@ -353,7 +371,7 @@ impl Blocks {
             }
             anchored[k] = true;
         }
-        if let Some(i) = (0..keys - 1).find(|&i| !(times[i + 1] >= times[i])) {
+        if let Some(i) = (0..keys - 1).find(|&i| times[i + 1].partial_cmp(&times[i]).is_none_or(|o| o.is_lt())) {
             return Err(Error::general(
                 format!("key {} (t = {}) comes before key {i} (t = {})", i + 1, times[i + 1], times[i]),
                 "give the keys non-decreasing times",

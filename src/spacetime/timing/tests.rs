@@ -46,7 +46,12 @@ fn table(damping: f64, gravity: Point, cyclic: bool, frozen: bool) -> Vec<Row> {
     let timing = Timing { elastic: &el, slots: TimeSlots { keys: 4, cyclic }, per_interval: 5, damping, gravity };
     let p = timing.objective(&tr.times).local_step(&tr, false);
     let d = timing.derivatives(&tr, if frozen { ProjectionMode::Frozen(&p) } else { ProjectionMode::Fresh });
-    let case = format!("damping {damping}, gravity {}, {}, {}", gravity != [0.0; 3], if cyclic { "cyclic" } else { "open" }, if frozen { "frozen" } else { "fresh" });
+    let case = format!(
+        "damping {damping}, gravity {}, {}, {}",
+        gravity != [0.0; 3],
+        if cyclic { "cyclic" } else { "open" },
+        if frozen { "frozen" } else { "fresh" }
+    );
     (0..3)
         .map(|i| {
             let t = tr.times[i + 1] - tr.times[i];
@@ -122,7 +127,13 @@ fn timing_step_never_increases_w_and_respects_the_constraints() {
             let settings = TimingSettings { keep_duration, fixed_times: fixed_times.clone(), ..TimingSettings::default() };
             let step = timing.optimize_times(&tr, &settings).unwrap();
             let w = &step.energy;
-            println!("cyclic {cyclic}, keep {keep_duration}, fixed {fixed_times:?}: T {:?} -> {:?}, W {:?} ({})", lengths(&tr.times), lengths(&step.times), w, step.stop_reason);
+            println!(
+                "cyclic {cyclic}, keep {keep_duration}, fixed {fixed_times:?}: T {:?} -> {:?}, W {:?} ({})",
+                lengths(&tr.times),
+                lengths(&step.times),
+                w,
+                step.stop_reason
+            );
             assert!(w.windows(2).all(|p| p[1] < p[0]), "{w:?}");
             let moved = Trajectory { times: step.times.clone(), ..tr.clone() };
             assert_eq!(timing.energy(&moved), *w.last().unwrap(), "the reported W is W at the new times");
@@ -159,7 +170,8 @@ fn intervals_clamp_at_the_minimum() {
     for t in lengths(&clamped.times) {
         assert!((t - 0.2).abs() < 1e-12, "{:?}", clamped.times);
     }
-    let kept = timing.optimize_times(&tr, &TimingSettings { min_interval: 0.25, keep_duration: true, ..TimingSettings::default() }).unwrap();
+    let kept =
+        timing.optimize_times(&tr, &TimingSettings { min_interval: 0.25, keep_duration: true, ..TimingSettings::default() }).unwrap();
     let t = lengths(&kept.times);
     println!("clamped {:?}; kept duration with minimum 0.25: {t:?}", lengths(&clamped.times));
     assert!(t.iter().all(|&x| x >= 0.25 - 1e-12), "{t:?}");
@@ -272,7 +284,13 @@ fn retimed_global_step_equals_a_fresh_one() {
 
 /// Alternate a converged position/velocity solve at the current times with one timing step,
 /// as the solver will; the times after every round and W before and after every timing step.
-fn alternate(el: &Elastic, keys: &crate::stage::KeyPoses, settings: &crate::spacetime::solver::Settings, timing: &TimingSettings, rounds: usize) -> (Vec<Vec<f64>>, Vec<(f64, f64)>) {
+fn alternate(
+    el: &Elastic,
+    keys: &crate::stage::KeyPoses,
+    settings: &crate::spacetime::solver::Settings,
+    timing: &TimingSettings,
+    rounds: usize,
+) -> (Vec<Vec<f64>>, Vec<(f64, f64)>) {
     let mut keys = keys.clone();
     let (mut times, mut energy) = (vec![keys.times.clone()], Vec::new());
     for _ in 0..rounds {
@@ -308,7 +326,13 @@ fn free_fall_key_times_move_back_to_the_parabola() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..crate::spacetime::tests::settings() };
+    let settings = crate::spacetime::solver::Settings {
+        gravity: g,
+        samples: 6,
+        tolerance: 1e-12,
+        max_iterations: 500,
+        ..crate::spacetime::tests::settings()
+    };
     let (times, energy) = alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
         println!("t1 = {:.6}: W {:.4e} -> {:.4e}", t[1], w.0, w.1);
@@ -328,8 +352,15 @@ fn a_high_jump_gets_longer_intervals_around_its_apex() {
     // ground intervals (the paper's Fig. 10).
     let g = [0.0, -9.81, 0.0];
     let (el, keys) = rigid_keys(&[[0.0; 3], [0.0; 3], [0.0, 3.0, 0.0], [0.0; 3], [0.0; 3]], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
-    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..crate::spacetime::tests::settings() };
-    let (times, energy) = alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, min_interval: 0.05, ..TimingSettings::default() }, 4);
+    let settings = crate::spacetime::solver::Settings {
+        gravity: g,
+        samples: 6,
+        tolerance: 1e-12,
+        max_iterations: 500,
+        ..crate::spacetime::tests::settings()
+    };
+    let (times, energy) =
+        alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, min_interval: 0.05, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
         println!("T = {:?}: W {:.4e} -> {:.4e}", lengths(t), w.0, w.1);
     }
@@ -348,7 +379,13 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-14, max_iterations: 2000, ..crate::spacetime::tests::settings() };
+    let settings = crate::spacetime::solver::Settings {
+        gravity: g,
+        samples: 6,
+        tolerance: 1e-14,
+        max_iterations: 2000,
+        ..crate::spacetime::tests::settings()
+    };
     let solve_at = |t1: f64| {
         let mut k = keys.clone();
         k.times[1] = t1;
