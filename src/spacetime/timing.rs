@@ -280,23 +280,8 @@ impl<'a> Timing<'a> {
             }
             let d = self.derivatives(&tr, ProjectionMode::Fresh);
             let t = lengths(&tr.times);
-            // Safe curvature: where the exact one is not positive, a gradient step changing the
-            // interval by GRADIENT_STEP of its length.
-            let g_scale = d.gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
-            let h: Vec<f64> = (0..keys - 1)
-                .map(|i| {
-                    let safe = g_scale.max(f64::MIN_POSITIVE) * 1e-6;
-                    let fallback = d.gradient[i].abs().max(safe) / (GRADIENT_STEP * t[i].max(f64::MIN_POSITIVE));
-                    if d.curvature[i] > 0.0 && d.curvature[i].is_finite() {
-                        d.curvature[i]
-                    } else {
-                        if blocks.moves(i) {
-                            gradient_steps += 1;
-                        }
-                        fallback
-                    }
-                })
-                .collect();
+            let h = safe_curvature(&d.gradient, &d.curvature, &t);
+            gradient_steps += (0..keys - 1).filter(|&i| h[i] != d.curvature[i] && blocks.moves(i)).count();
             let lo: Vec<f64> = (0..keys - 1).map(|i| lower[i] - t[i]).collect();
             let step = blocks.newton_step(&d.gradient, &h, &lo);
             let decrease: f64 = -step.iter().zip(&d.gradient).map(|(s, g)| s * g).sum::<f64>();
@@ -337,6 +322,23 @@ impl<'a> Timing<'a> {
         }
         Ok(w)
     }
+}
+
+/// The curvatures for the Newton model: the exact ones where positive, elsewhere the one
+/// that turns the Newton step into a gradient step changing the interval by
+/// [`GRADIENT_STEP`] of its length `t` (floored at 1e-6 of the largest gradient, so an
+/// interval with no gradient and no curvature is not thrown far by a block's multiplier).
+fn safe_curvature(gradient: &[f64], curvature: &[f64], t: &[f64]) -> Vec<f64> {
+    let floor = gradient.iter().fold(0.0f64, |m, g| m.max(g.abs())).max(f64::MIN_POSITIVE) * 1e-6;
+    (0..gradient.len())
+        .map(|i| {
+            if curvature[i] > 0.0 && curvature[i].is_finite() {
+                curvature[i]
+            } else {
+                gradient[i].abs().max(floor) / (GRADIENT_STEP * t[i].max(f64::MIN_POSITIVE))
+            }
+        })
+        .collect()
 }
 
 /// The intervals grouped by the fixed key times (see the module documentation).

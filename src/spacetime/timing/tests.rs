@@ -243,6 +243,15 @@ fn constrained_newton_step_satisfies_its_optimality_conditions() {
             }
         }
     }
+    // A non-positive or undefined curvature becomes a gradient step of a quarter interval.
+    let (g, t) = ([2.0, -3.0, 0.5, 1.0], [0.4, 0.2, 1.0, 1.0]);
+    let h = safe_curvature(&g, &[-1.0, 0.0, f64::NAN, 7.0], &t);
+    let free = Blocks::new(&[0.0, 0.4, 0.6, 1.6, 2.6], &TimingSettings::default()).unwrap();
+    let step = free.newton_step(&g, &h, &[-1.0; 4]);
+    for i in 0..3 {
+        assert!((step[i] + GRADIENT_STEP * t[i] * g[i].signum()).abs() < 1e-15, "{step:?}");
+    }
+    assert_eq!((h[3], step[3]), (7.0, -1.0 / 7.0));
     // Free intervals after the last fixed key; a contact (zero length) in no block.
     let blocks = Blocks::new(&[0.0, 1.0, 1.0, 2.0, 3.0], &TimingSettings { fixed_times: vec![3], ..TimingSettings::default() }).unwrap();
     assert_eq!(blocks.blocks, vec![(vec![0, 2], true), (vec![3], false)]);
