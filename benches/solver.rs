@@ -14,17 +14,15 @@
 use std::path::Path;
 use std::time::Instant;
 
-use blendsim::physics::elastic::Elastic;
+use blendsim::internals::{apply_step, initial_trajectory, objective, solver_inputs, tetgen, GlobalStep, TetgenOptions, Unknowns};
+use blendsim::internals::{Elastic, GlobalStats, KeyConstraints, ProjectionMode, Settings, Timing, TimingSettings};
+use blendsim::Trajectory;
+use blendsim::mesh::Axis;
+use blendsim::procedural::{self, Twist};
 use blendsim::progress::Progress;
-use blendsim::scene::{Axis, SceneFile, Twist};
-use blendsim::spacetime::global_step::{GlobalStats, GlobalStep};
-use blendsim::spacetime::sampling::TimeSlots;
-use blendsim::spacetime::solver::{self, apply_step, initial_trajectory, Settings};
-use blendsim::spacetime::timing::{ProjectionMode, Timing, TimingSettings};
-use blendsim::spacetime::trajectory::Trajectory;
-use blendsim::spacetime::unknowns::Unknowns;
+use blendsim::scene::{Scene, SceneFile};
 use blendsim::stage::{Body, KeyPoses, VertexSet};
-use blendsim::{import, procedural, tetgen, tetrahedralize};
+use blendsim::stages::Bake;
 
 struct Paper {
     /// The "timing optimization" column of Table 1 (s per iteration).
@@ -44,8 +42,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn scene_body(path: &str) -> Body {
     let scene = SceneFile::load(Path::new(env!("CARGO_MANIFEST_DIR")).join(path).as_path()).expect("scene loads");
-    let keys = import::import(&scene).expect("import");
-    tetrahedralize::tetrahedralize(&keys, &Progress::hidden()).expect("tetrahedralize")
+    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
 }
 
 /// ARMADILLO-size: a closed surface tetrahedralized by TetGen to the paper's ARMADILLO counts
@@ -55,12 +52,12 @@ fn scene_body(path: &str) -> Body {
 /// rest, twisted +60°, rest, twisted -60°, rest, about the long axis; the bottom face held.
 fn armadillo_size() -> Body {
     let surface = procedural::prism([1.2, 3.6, 1.2], [12, 36, 12]);
-    let opts = tetgen::TetgenOptions { quality: 1.414, max_volume: 0.003, timeout: 120.0 };
-    let mesh = tetgen::tetrahedralize(&surface, &opts, Path::new("prism")).expect("tetgen");
+    let opts = TetgenOptions { quality: 1.414, max_volume: 0.003, timeout: 120.0 };
+    let mesh = tetgen(&surface, &opts, Path::new("prism")).expect("tetgen");
     let twisted = |deg: f64| procedural::twist(&mesh.positions, &Twist { axis: Axis::Y, degrees: deg, axial_scale: 1.0 });
     let positions = vec![mesh.positions.clone(), twisted(60.0), mesh.positions.clone(), twisted(-60.0), mesh.positions.clone()];
     let bottom = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] < 1e-3).collect::<Vec<_>>());
-    let mut scene = blendsim::scene::Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
+    let mut scene = Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
     scene.solver.samples = 10;
     scene.material.damping = 0.1;
     let keys = KeyPoses {
@@ -70,7 +67,6 @@ fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    let surface = blendsim::mesh::TriMesh { positions: surface.positions, triangles: surface.triangles };
     Body { scene, mesh, keys, surface }
 }
 
@@ -107,20 +103,19 @@ struct TimingMeasured {
 }
 
 fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
-    let settings = Settings::from_scene(&body.scene);
     let mut pre = Vec::new();
     let mut last = None;
     for _ in 0..repeats {
         let t = Instant::now();
-        let elastic = Elastic::new(&body.mesh, &body.scene.material).unwrap();
-        let objective = solver::objective(&elastic, &body.keys, &settings);
-        let global = GlobalStep::new(&objective, Unknowns::new(&body.keys, elastic.node_count()), settings.regularization).unwrap();
+        let (elastic, keys, settings) = solver_inputs(body).unwrap();
+        let objective = objective(&elastic, &keys, &settings);
+        let global = GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).unwrap();
         pre.push(t.elapsed().as_secs_f64());
-        last = Some((elastic, global));
+        last = Some((elastic, keys, settings, global));
     }
-    let (elastic, global) = last.unwrap();
-    let objective = solver::objective(&elastic, &body.keys, &settings);
-    let mut tr = initial_trajectory(&body.keys);
+    let (elastic, keys, settings, global) = last.unwrap();
+    let objective = objective(&elastic, &keys, &settings);
+    let mut tr = initial_trajectory(&keys);
     let (mut it, mut loc, mut glo) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..iterations {
         let t = Instant::now();
@@ -142,7 +137,7 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
         global.apply_inverse(&mut g);
         exact.push(t.elapsed().as_secs_f64());
     }
-    let (timing, s) = measure_timing(body, &elastic, &tr, global, repeats);
+    let (timing, s) = measure_timing(&elastic, &keys, &settings, &tr, global, repeats);
     Measured {
         timing,
         ordering: s.ordering,
@@ -160,15 +155,15 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
 }
 
 /// A timing round and a retime at the trajectory `tr`; `global` is retimed in place.
-fn measure_timing(body: &Body, elastic: &Elastic, tr: &Trajectory, mut global: GlobalStep, repeats: usize) -> (TimingMeasured, GlobalStats) {
-    let settings = Settings::from_scene(&body.scene);
-    let timing = Timing {
-        elastic,
-        slots: TimeSlots { keys: body.keys.times.len(), cyclic: body.keys.cyclic },
-        per_interval: settings.samples,
-        damping: settings.damping,
-        gravity: settings.gravity,
-    };
+fn measure_timing(
+    elastic: &Elastic,
+    keys: &KeyConstraints,
+    settings: &Settings,
+    tr: &Trajectory,
+    mut global: GlobalStep,
+    repeats: usize,
+) -> (TimingMeasured, GlobalStats) {
+    let timing = Timing::new(elastic, keys, settings);
     let (mut derivatives, mut energy, mut round) = (Vec::new(), Vec::new(), Vec::new());
     let (mut retime, mut refactor, mut reused) = (Vec::new(), Vec::new(), true);
     let one_newton = TimingSettings { max_iterations: 1, tolerance: 0.0, ..TimingSettings::default() };

@@ -8,6 +8,7 @@ use std::fmt::Write;
 
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
+use crate::mesh::Bounds;
 use crate::spacetime::trajectory::frames_between;
 
 /// Stage-level settings shared by both USD files.
@@ -50,15 +51,12 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
 
     // The SkelRoot's extent bounds the whole animation, so culling never clips a deformed pose.
     let weights: Vec<Vec<f64>> = frames.iter().map(|&(_, t)| clip.weights_at(t)).collect();
-    let mut lo_hi = extent(&clip.base);
+    let mut bounds = Bounds::of_f32(&clip.base);
     for w in &weights {
         let posed: Vec<[f32; 3]> = clip.points_with_weights(w).iter().map(|p| p.map(|x| x as f32)).collect();
-        let e = extent(&posed);
-        for d in 0..3 {
-            lo_hi[0][d] = lo_hi[0][d].min(e[0][d]);
-            lo_hi[1][d] = lo_hi[1][d].max(e[1][d]);
-        }
+        bounds = bounds.union(Bounds::of_f32(&posed));
     }
+    let lo_hi = bounds.to_f32();
     let names = || clip.targets.iter().map(|t| t.name.as_str());
 
     let _ = writeln!(out, "def SkelRoot \"{root}\"\n{{");
@@ -154,14 +152,7 @@ fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
 
 /// `[(lo), (hi)]` of a point set (zeros when empty).
 fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
-    let Some(first) = points.first() else { return [[0.0; 3]; 2] };
-    points.iter().fold([*first, *first], |[mut lo, mut hi], p| {
-        for d in 0..3 {
-            lo[d] = lo[d].min(p[d]);
-            hi[d] = hi[d].max(p[d]);
-        }
-        [lo, hi]
-    })
+    Bounds::of_f32(points).to_f32()
 }
 
 /// `INDENT DECLARATION = VALUE\n`.

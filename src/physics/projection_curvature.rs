@@ -29,7 +29,9 @@
 
 use super::mat3::{mul, transpose, Mat3};
 use super::projection::volume_preserving;
-use super::svd3::{svd3, Svd3};
+#[cfg(test)]
+use super::svd3::svd3;
+use super::svd3::Svd3;
 
 /// `P(F)`, `dP/dτ` and `d²P/dτ²` of `τ ↦ P(F + τG)` at `τ = 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,13 +100,16 @@ fn volume_stretch_derivatives(sigma: &[f64; 3], sp: &[f64; 3], ds: &Mat3, dds: &
 }
 
 /// [`ProjectionPath`] of the blended projection (strain share `strain_share`, as in
-/// [`project`](super::projection::project)) at `f` in direction `g`.
+/// [`project`](super::projection::project)) at `f` in direction `g`. The timing derivatives
+/// call [`project_along_svd`] with batched decompositions; this entry point is for tests.
+#[cfg(test)]
 pub fn project_along(f: &Mat3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     project_along_svd(&svd3(f), strain_share, g)
 }
 
-/// [`project_along`] from the signed SVD of `F` (e.g. from [`svd3_batch`](super::svd3::svd3_batch),
-/// which gives the same bytes).
+/// `P(F + τG)` and its τ-derivatives at 0 from the signed SVD of `F` (e.g. from
+/// [`svd3_batch`](super::svd3::svd3_batch), which gives the bytes of
+/// [`svd3`](super::svd3::svd3)).
 pub fn project_along_svd(svd: &Svd3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     let (u, s, v) = (&svd.u, svd.sigma, &svd.v);
     let gt = mul(&mul(&transpose(u), g), v);
@@ -162,7 +167,7 @@ mod tests {
     use super::*;
     use crate::physics::mat3::IDENTITY;
     use crate::physics::projection::{project, project_with_jacobian};
-    use crate::physics::svd3::tests::Rng;
+    use crate::testing::Rng;
 
     fn axpy(f: &Mat3, t: f64, g: &Mat3) -> Mat3 {
         std::array::from_fn(|i| std::array::from_fn(|j| f[i][j] + t * g[i][j]))

@@ -20,9 +20,10 @@
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Mat, Par, Side};
 
-use super::cholesky::{Cholesky, Ordering};
+use super::cholesky::Cholesky;
 use super::csr::Csr;
 use super::elastic::Elastic;
+use super::ordering::FillOrdering;
 use super::projection::project_with_jacobian;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
@@ -46,6 +47,7 @@ pub struct Vibration {
     pub shapes: Vec<Vec<Point>>,
     /// Zero eigenvalues skipped (free rigid motions).
     pub zero_modes: usize,
+    /// "dense" or "subspace iteration".
     pub method: &'static str,
 }
 
@@ -179,7 +181,7 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
         col_ptr.push(rows.len());
     }
     let lower = SparseColMat::new(SymbolicSparseColMat::new_checked(n, n, col_ptr, None, rows), vals);
-    let chol = Cholesky::factor(&lower, &Ordering::Amd, Par::Seq)
+    let chol = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq)
         .map_err(|_| Error::general("the rest stiffness is not positive semidefinite", "check the mesh for inverted tets"))?;
     // A fixed start block (a Weyl sequence), so results do not depend on anything but the input.
     let mut q = Mat::<f64>::from_fn(n, p, |i, j| ((i as f64 + 1.0) * (j as f64 + 1.0) * 0.618_033_988_749_895).fract() - 0.5);
@@ -218,11 +220,11 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
 mod tests {
     use super::*;
     use crate::mesh::TetMesh;
-    use crate::physics::elastic::tests::cube_mesh;
-    use crate::scene::Material;
+    use crate::physics::elastic::Material;
+    use crate::testing::cube_mesh;
 
     fn material(stiffness: f64, volume: f64, density: f64) -> Material {
-        Material { stiffness, volume, density, damping: 0.0, gravity: [0.0; 3] }
+        Material { stiffness, volume, density }
     }
 
     #[test]

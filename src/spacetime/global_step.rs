@@ -35,8 +35,8 @@ use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
-use crate::physics::cholesky::{Cholesky, Ordering};
-use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, Graph};
+use crate::physics::cholesky::Cholesky;
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -79,19 +79,23 @@ pub struct GlobalStats {
     pub matrix_nnz: usize,
     /// Stored entries of the Cholesky factor.
     pub factor_nnz: usize,
-    /// The fill-reducing ordering that was used (see [`fill_reducing_order`]).
+    /// The fill-reducing ordering that was used (see `fill_reducing_order`).
     pub ordering: &'static str,
+    /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,
     /// Ordering, symbolic analysis and numeric factorization.
     pub factor_seconds: f64,
 }
 
+/// The normal matrix of the free unknowns, factorized: solves the global step.
 pub struct GlobalStep {
     unknowns: Unknowns,
+    /// None when there are no unknowns.
     cholesky: Option<Cholesky>,
     /// Which time-slot pairs the matrix couples ([`coupling`]): the matrix pattern depends on
     /// the time coefficients only through this, so equal couplings mean equal patterns.
     coupling: Vec<(bool, bool)>,
+    /// What the precomputation built.
     pub stats: GlobalStats,
 }
 
@@ -248,7 +252,7 @@ impl GlobalStep {
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
         // faer's parallel supernodal factorization pays off only for large fronts.
         let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
-        let cholesky = Cholesky::factor(&a, &Ordering::Custom(order.perm), par).map_err(|_| {
+        let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
@@ -290,6 +294,7 @@ impl GlobalStep {
         Ok(Retimed { assemble_seconds, factor_seconds: t1.elapsed().as_secs_f64(), reused_symbolic: true })
     }
 
+    /// The free unknowns and their order.
     pub fn unknowns(&self) -> &Unknowns {
         &self.unknowns
     }

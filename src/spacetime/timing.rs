@@ -29,7 +29,7 @@
 //!   reference code does);
 //! - **fresh**: `p_s = P(x(t_s))` re-projected, so `p_T = DP[dF(x_T)]` and, as `F` is affine in
 //!   `T` too, `p_TT = D²P[dF(x_T), dF(x_T)]`
-//!   ([`project_along`](crate::physics::projection_curvature::project_along)). This is the total derivative
+//!   ([`project_along_svd`]). This is the total derivative
 //!   of W itself, the quantity the solver measures and the line search compares.
 //!
 //! There is no envelope argument that makes the two first derivatives agree: the projections
@@ -70,13 +70,16 @@ use rayon::prelude::*;
 
 use super::objective::{Objective, Projections};
 use super::sampling::{samples, Sample, TimeSlots};
+use super::solver::Settings;
 use super::trajectory::Trajectory;
+use super::unknowns::KeyConstraints;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
+use crate::physics::lanes::BATCH;
 use crate::physics::mat3::Mat3;
 use crate::physics::projection_curvature::project_along_svd;
-use crate::physics::svd3::{svd3_batch, BATCH};
+use crate::physics::svd3::svd3_batch;
 
 /// Powers of `T` in the Hermite weights of `(x_i, v_i, x_{i+1}, v_{i+1})`.
 const POS_POWER: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
@@ -86,12 +89,15 @@ const ACC_POWER: [f64; 4] = [-2.0, -1.0, -2.0, -1.0];
 /// The spacetime objective as a function of the key times.
 #[derive(Clone, Copy)]
 pub struct Timing<'a> {
+    /// The body.
     pub elastic: &'a Elastic,
+    /// The keys' time slots (a loop's last key is its first).
     pub slots: TimeSlots,
     /// Samples per interval of positive length.
     pub per_interval: usize,
     /// Rayleigh mass damping α.
     pub damping: f64,
+    /// Gravitational acceleration.
     pub gravity: Point,
 }
 
@@ -107,6 +113,7 @@ pub enum ProjectionMode<'p> {
 /// W and its derivatives in every interval length (zero for zero-length intervals).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TimeDerivatives {
+    /// W.
     pub value: f64,
     /// `∂W/∂T_i`.
     pub gradient: Vec<f64>,
@@ -148,6 +155,7 @@ pub struct TimingStep {
     pub gradient_steps: usize,
     /// Step halvings of the line search, in all.
     pub halvings: usize,
+    /// Why the step stopped, in words.
     pub stop_reason: String,
 }
 
@@ -161,6 +169,17 @@ const ARMIJO: f64 = 1e-4;
 const MAX_HALVINGS: usize = 30;
 
 impl<'a> Timing<'a> {
+    /// The timing problem of the solver's objective for `keys` with these settings.
+    pub fn new(elastic: &'a Elastic, keys: &KeyConstraints, settings: &Settings) -> Timing<'a> {
+        Timing {
+            elastic,
+            slots: TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic },
+            per_interval: settings.samples,
+            damping: settings.damping,
+            gravity: settings.gravity,
+        }
+    }
+
     /// The objective at key times `times`: samples on every interval of positive length
     /// (zero-length intervals have none).
     pub fn objective(&self, times: &[f64]) -> Objective<'a> {

@@ -1,9 +1,10 @@
 //! Verification of the timing derivatives and the timing step.
 
 use super::*;
-use crate::physics::elastic::tests::cube_mesh;
 use crate::physics::elastic::Elastic;
-use crate::spacetime::tests::{material, wobbly};
+use crate::spacetime::tests::{all, from_mask, keys, material, settings, wobbly};
+use crate::spacetime::unknowns::KeyConstraints;
+use crate::testing::{cube_mesh, Rng};
 
 /// `tr` with interval `i` set to length `len`, later keys shifted with it.
 fn with_length(tr: &Trajectory, i: usize, len: f64) -> Trajectory {
@@ -223,7 +224,7 @@ fn constrained_newton_step_satisfies_its_optimality_conditions() {
     let times = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
     let blocks = Blocks::new(&times, &TimingSettings { keep_duration: true, fixed_times: vec![4], ..TimingSettings::default() }).unwrap();
     assert_eq!(blocks.blocks, vec![(vec![0, 1, 2, 3], true), (vec![4, 5], true)]);
-    let mut rng = crate::physics::svd3::tests::Rng(3);
+    let mut rng = Rng(3);
     for _ in 0..200 {
         let g: Vec<f64> = (0..6).map(|_| 3.0 * rng.next()).collect();
         let h: Vec<f64> = (0..6).map(|_| 1.5 + rng.next()).collect();
@@ -263,14 +264,13 @@ fn constrained_newton_step_satisfies_its_optimality_conditions() {
 fn retimed_global_step_equals_a_fresh_one() {
     use crate::spacetime::global_step::GlobalStep;
     use crate::spacetime::unknowns::Unknowns;
-    use crate::stage::VertexSet;
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let n = el.node_count();
     let tr = wobbly(&mesh.positions, true);
-    let mut fixed = vec![VertexSet::default(); 4];
-    fixed[1] = VertexSet::from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
-    let keys = crate::spacetime::tests::keys(tr.times.clone(), tr.positions.clone(), fixed, true);
+    let mut fixed = vec![Vec::new(); 4];
+    fixed[1] = from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
+    let keys = keys(tr.times.clone(), tr.positions.clone(), fixed, true);
     let timing = Timing { damping: 0.7, ..wobbly_timing(&el, true) };
     let unknowns = Unknowns::new(&keys, n);
     let mut global = GlobalStep::new(&timing.objective(&tr.times), unknowns.clone(), 0.1).unwrap();
@@ -295,7 +295,7 @@ fn retimed_global_step_equals_a_fresh_one() {
 /// as the solver will; the times after every round and W before and after every timing step.
 fn alternate(
     el: &Elastic,
-    keys: &crate::stage::KeyPoses,
+    keys: &KeyConstraints,
     settings: &crate::spacetime::solver::Settings,
     timing: &TimingSettings,
     rounds: usize,
@@ -320,13 +320,12 @@ fn alternate(
 }
 
 /// A rigid cube at the given centre offsets, every position held.
-fn rigid_keys(offsets: &[Point], times: Vec<f64>) -> (Elastic, crate::stage::KeyPoses) {
+fn rigid_keys(offsets: &[Point], times: Vec<f64>) -> (Elastic, KeyConstraints) {
     let mesh = cube_mesh(1);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let n = mesh.positions.len();
     let poses = offsets.iter().map(|o| mesh.positions.iter().map(|p| crate::mesh::add(*p, *o)).collect()).collect();
-    let fixed = vec![crate::stage::VertexSet::all(n); offsets.len()];
-    (el, crate::spacetime::tests::keys(times, poses, fixed, false))
+    (el, keys(times, poses, vec![all(n); offsets.len()], false))
 }
 
 #[test]
@@ -335,13 +334,7 @@ fn free_fall_key_times_move_back_to_the_parabola() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::spacetime::solver::Settings {
-        gravity: g,
-        samples: 6,
-        tolerance: 1e-12,
-        max_iterations: 500,
-        ..crate::spacetime::tests::settings()
-    };
+    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let (times, energy) = alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
         println!("t1 = {:.6}: W {:.4e} -> {:.4e}", t[1], w.0, w.1);
@@ -361,13 +354,7 @@ fn a_high_jump_gets_longer_intervals_around_its_apex() {
     // ground intervals (the paper's Fig. 10).
     let g = [0.0, -9.81, 0.0];
     let (el, keys) = rigid_keys(&[[0.0; 3], [0.0; 3], [0.0, 3.0, 0.0], [0.0; 3], [0.0; 3]], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
-    let settings = crate::spacetime::solver::Settings {
-        gravity: g,
-        samples: 6,
-        tolerance: 1e-12,
-        max_iterations: 500,
-        ..crate::spacetime::tests::settings()
-    };
+    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let (times, energy) =
         alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, min_interval: 0.05, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
@@ -388,13 +375,7 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::spacetime::solver::Settings {
-        gravity: g,
-        samples: 6,
-        tolerance: 1e-14,
-        max_iterations: 2000,
-        ..crate::spacetime::tests::settings()
-    };
+    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-14, max_iterations: 2000, ..settings() };
     let solve_at = |t1: f64| {
         let mut k = keys.clone();
         k.times[1] = t1;

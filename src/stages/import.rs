@@ -1,6 +1,6 @@
 //! The `import` stage: read the scene's keyframe meshes, check they share one topology,
 //! apply procedural deformations, orient the rest shape, and resolve the per-key vertex
-//! selections into sets.
+//! selections (the scene's `fixed` and `fixed_velocity`) into sets.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -84,14 +84,14 @@ fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &Mes
 }
 
 /// Vertices selected by `selection`, over `rest` positions.
-pub fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
+fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
     let n = rest.len();
     Ok(match selection {
         Selection::All => vec![true; n],
         Selection::None => vec![false; n],
         Selection::File { file, invert } => {
             let path = scene.resolve(file);
-            let mut mask = read_selection_file(&path, n)?;
+            let mut mask = mesh::selection::read(&path, n)?;
             if *invert {
                 mask.iter_mut().for_each(|m| *m = !*m);
             }
@@ -117,106 +117,18 @@ pub fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point
     })
 }
 
-/// A `.dmat` column of 0/1 flags (libigl ASCII: `cols rows` then values), or a text file of
-/// 0-based vertex indices, one per line (`#` starts a comment).
-fn read_selection_file(path: &Path, n: usize) -> Result<Vec<bool>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the vertex selection"))?;
-    let is_dmat = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dmat"));
-    let mut mask = vec![false; n];
-    if is_dmat {
-        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-        let header = lines.next().map(|(_, l)| l.split_whitespace().map(str::parse::<usize>).collect::<Vec<_>>());
-        match header.as_deref() {
-            Some([Ok(1), Ok(rows)]) if *rows == n => {}
-            Some([Ok(cols), Ok(rows)]) => {
-                return Err(Error::in_file(
-                    path,
-                    format!("is a {rows}x{cols} matrix but the mesh has {n} vertices"),
-                    format!("give one 0/1 value per vertex: a header \"1 {n}\" and {n} values"),
-                ))
-            }
-            _ => return Err(Error::in_file(path, "has no \"cols rows\" header", "write libigl's ASCII .dmat: \"1 N\", then one value per line")),
-        }
-        let values: Vec<(usize, &str)> = lines.map(|(i, l)| (i, l.trim())).collect();
-        if values.len() != n {
-            return Err(Error::in_file(path, format!("has {} values for {n} vertices", values.len()), "give one value per vertex"));
-        }
-        for (v, (line, value)) in values.iter().enumerate() {
-            let x: f64 = value.parse().map_err(|_| {
-                Error::in_file(path, format!("line {}: {value:?} is not a number", line + 1), "write 0 or 1 per vertex")
-            })?;
-            mask[v] = x != 0.0;
-        }
-    } else {
-        for (i, line) in text.lines().enumerate() {
-            let content = line.split('#').next().unwrap_or("").trim();
-            if content.is_empty() {
-                continue;
-            }
-            let index: usize = content.parse().map_err(|_| {
-                Error::in_file(path, format!("line {}: {content:?} is not a vertex index", i + 1), "write one 0-based vertex index per line")
-            })?;
-            if index >= n {
-                return Err(Error::in_file(
-                    path,
-                    format!("line {}: vertex {index} does not exist (the mesh has {n} vertices, indexed from 0)", i + 1),
-                    "use indices of the keyframe mesh this scene reads",
-                ));
-            }
-            mask[index] = true;
-        }
-    }
-    Ok(mask)
-}
-
 /// Read and check the keyframes of a scene.
 pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     let scene = &scene_file.scene;
     let keys = &scene.keyframes;
-    let mut cache = MeshCache::default();
-    let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
-    let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
-    let first = cache.get(&paths[0])?.clone();
-    let first_topology = Topology::of(&first);
-    for (k, key) in keys.meshes.iter().enumerate() {
-        let m = cache.get(&paths[k])?;
-        if k > 0 {
-            check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
-        }
-        let positions = match key.twist() {
-            Some(t) => crate::procedural::twist(m.positions(), t),
-            None => m.positions().to_vec(),
-        };
-        poses.push(positions);
-    }
-    let (rest_positions, rest_source) = match &keys.rest {
-        Rest::Key(r) => (poses[*r].clone(), paths[*r].clone()),
-        Rest::Mesh(p) => {
-            let path = scene_file.resolve(p);
-            let m = cache.get(&path)?;
-            check_same_topology((&paths[0], &first, &first_topology), (&path, m, &Topology::of(m)))?;
-            (m.positions().to_vec(), path)
-        }
-    };
-    let n = rest_positions.len();
-    let rest = match first {
-        MeshFile::Surface(s) => {
-            let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles };
-            surface::orient_outward(&mut rest);
-            Shape::Surface(rest)
-        }
-        MeshFile::Volume(v) => {
-            let mut rest = TetMesh { positions: rest_positions, tets: v.tets };
-            rest.orient_positive();
-            Shape::Volume(rest)
-        }
-    };
+    let mut meshes = KeyMeshes::read(scene_file)?;
+    let (rest, rest_source) = meshes.rest_shape(scene_file)?;
     let rest_points = match &rest {
         Shape::Surface(s) => &s.positions,
         Shape::Volume(v) => &v.positions,
     };
     let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
-        (0..poses.len())
+        (0..meshes.poses.len())
             .map(|k| {
                 let sel = list.as_ref().map_or(&default, |l| &l[k]);
                 resolve_selection(sel, scene_file, rest_points).map(|m| VertexSet::from_mask(&m))
@@ -226,20 +138,11 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     let fixed = masks(&keys.fixed, Selection::All)?;
     let fixed_velocity = masks(&keys.fixed_velocity, Selection::None)?;
     if keys.cyclic {
-        let last = poses.len() - 1;
-        let gap = poses[0].iter().zip(&poses[last]).map(|(a, b)| mesh::norm(mesh::sub(*a, *b))).fold(0.0, f64::max);
-        if gap > 1e-9 * mesh::bbox_diagonal(rest_points).max(f64::MIN_POSITIVE) {
-            return Err(Error::in_file(
-                &paths[last],
-                format!("cyclic = true, but the last keyframe differs from the first ({}) by up to {gap:.4e}", paths[0].display()),
-                "repeat the first keyframe's mesh as the last key of a loop",
-            ));
-        }
+        meshes.check_loop(rest_points)?;
     }
-    debug_assert!(poses.iter().all(|p| p.len() == n));
     let display = match &scene.embed.surface {
         Some(p) => {
-            let mut s = crate::mesh::obj::read(&scene_file.resolve(p))?;
+            let mut s = mesh::obj::read(&scene_file.resolve(p))?;
             surface::orient_outward(&mut s);
             Some(s)
         }
@@ -250,10 +153,89 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         rest_source: rest_source.display().to_string(),
         rest,
         times: keys.times.clone(),
-        poses,
+        poses: meshes.poses,
         fixed,
         fixed_velocity,
         cyclic: keys.cyclic,
         display,
     })
+}
+
+/// The keyframe meshes of a scene, read and checked against the first.
+struct KeyMeshes {
+    cache: MeshCache,
+    /// Resolved path of every key's mesh.
+    paths: Vec<PathBuf>,
+    first: MeshFile,
+    first_topology: Topology,
+    /// `poses[key][vertex]`, after any procedural deformation.
+    poses: Vec<Vec<Point>>,
+}
+
+impl KeyMeshes {
+    /// Read every key's mesh (each file once), check it has the first one's topology, and
+    /// deform it as the scene says.
+    fn read(scene_file: &SceneFile) -> Result<KeyMeshes> {
+        let keys = &scene_file.scene.keyframes;
+        let mut cache = MeshCache::default();
+        let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
+        let first = cache.get(&paths[0])?.clone();
+        let first_topology = Topology::of(&first);
+        let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
+        for (k, key) in keys.meshes.iter().enumerate() {
+            let m = cache.get(&paths[k])?;
+            if k > 0 {
+                check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
+            }
+            let positions = match key.twist() {
+                Some(t) => crate::procedural::twist(m.positions(), t),
+                None => m.positions().to_vec(),
+            };
+            poses.push(positions);
+        }
+        Ok(KeyMeshes { cache, paths, first, first_topology, poses })
+    }
+
+    /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came
+    /// from.
+    fn rest_shape(&mut self, scene_file: &SceneFile) -> Result<(Shape, PathBuf)> {
+        let (rest_positions, rest_source) = match &scene_file.scene.keyframes.rest {
+            Rest::Key(r) => (self.poses[*r].clone(), self.paths[*r].clone()),
+            Rest::Mesh(p) => {
+                let path = scene_file.resolve(p);
+                let m = self.cache.get(&path)?;
+                check_same_topology((&self.paths[0], &self.first, &self.first_topology), (&path, m, &Topology::of(m)))?;
+                (m.positions().to_vec(), path)
+            }
+        };
+        debug_assert!(self.poses.iter().all(|p| p.len() == rest_positions.len()));
+        let rest = match &self.first {
+            MeshFile::Surface(s) => {
+                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone() };
+                surface::orient_outward(&mut rest);
+                Shape::Surface(rest)
+            }
+            MeshFile::Volume(v) => {
+                let mut rest = TetMesh { positions: rest_positions, tets: v.tets.clone() };
+                rest.orient_positive();
+                Shape::Volume(rest)
+            }
+        };
+        Ok((rest, rest_source))
+    }
+
+    /// A loop's last key must repeat the first (to 1e-9 of the rest size).
+    fn check_loop(&self, rest_points: &[Point]) -> Result<()> {
+        let (poses, paths) = (&self.poses, &self.paths);
+        let last = poses.len() - 1;
+        let gap = poses[0].iter().zip(&poses[last]).map(|(a, b)| mesh::norm(mesh::sub(*a, *b))).fold(0.0, f64::max);
+        if gap > 1e-9 * mesh::bbox_diagonal(rest_points).max(f64::MIN_POSITIVE) {
+            return Err(Error::in_file(
+                &paths[last],
+                format!("cyclic = true, but the last keyframe differs from the first ({}) by up to {gap:.4e}", paths[0].display()),
+                "repeat the first keyframe's mesh as the last key of a loop",
+            ));
+        }
+        Ok(())
+    }
 }

@@ -4,17 +4,18 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use blendsim::export::clip::BlendShapeClip;
+use blendsim::clip::BlendShapeClip;
 use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
 use blendsim::progress::Progress;
 use blendsim::scene::{Axis, Format, Method, SceneFile};
 use blendsim::stage::{Animation, OutputFile, OutputKind};
+use blendsim::stages::Bake;
 use serde_json::Value;
 
 use super::checkers::{check_glb, check_usd, Expected};
 
-/// The animation of a scene computed in this process by the library, stage by stage, as
-/// `bake` does (our reference evaluation; no file in between).
+/// The animation of a scene computed in this process by the library, as `bake` does (our
+/// reference evaluation; no file in between).
 pub fn library_animation(scene: &Path) -> Animation {
     library_animation_with(scene, None)
 }
@@ -22,14 +23,8 @@ pub fn library_animation(scene: &Path) -> Animation {
 /// [`library_animation`] with the scene's solver method overridden (as `--method` does).
 pub fn library_animation_with(scene: &Path, method: Option<Method>) -> Animation {
     let hidden = Progress::hidden();
-    let mut scene = SceneFile::load(scene).unwrap_or_else(|e| panic!("{e}"));
-    if let Some(m) = method {
-        scene.scene.solver.method = m;
-    }
-    let keys = blendsim::import::import(&scene).unwrap_or_else(|e| panic!("{e}"));
-    let body = blendsim::tetrahedralize::tetrahedralize(&keys, &hidden).unwrap_or_else(|e| panic!("{e}"));
-    let solution = blendsim::solve::solve(&body, &hidden).unwrap_or_else(|e| panic!("{e}"));
-    blendsim::embed::embed(&solution).unwrap_or_else(|e| panic!("{e}"))
+    let scene = SceneFile::load(scene).unwrap_or_else(|e| panic!("{e}"));
+    Bake::new(&scene, &hidden).method(method).animation().unwrap_or_else(|e| panic!("{e}"))
 }
 
 pub fn max_distance(a: &[Point], b: &[Point]) -> f64 {
@@ -64,7 +59,7 @@ pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Ve
     let tr = &anim.trajectory;
     let fps = anim.scene.fps;
     let export = &anim.scene.export;
-    let clip = BlendShapeClip::from_trajectory(tr, anim.scene.keyframes.cyclic);
+    let clip = BlendShapeClip::from_trajectory(tr);
     let frames: Vec<f64> = tr.frames(fps).iter().map(|f| f.1).collect();
     // Our two evaluations agree before either is compared with a file.
     let diagonal = bbox_diagonal(&tr.positions.concat());

@@ -7,15 +7,14 @@
 //! line. Every file the demo bake writes (usda, usdc, glb and their full-frame versions) is
 //! checked by the independent tools.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
 use blendsim::scene::Method;
 use blendsim::stage::{OutputFile, OutputKind};
-use common::cli::{energies, names, read_json, run, without_timings, Run, TempDir};
-use common::verify::{check_outputs, library_animation, library_animation_with, output_files};
 use serde_json::Value;
+
+use crate::common::cli::{energies, names, read_json, run, without_timings, Run, TempDir};
+use crate::common::verify::{check_outputs, library_animation, library_animation_with, output_files};
 
 fn demo_scene() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo/twist.toml")

@@ -10,16 +10,15 @@
 //!
 //! The assets live in `../shared/assets/paper`; with `CI=true` a missing asset fails.
 
-mod common;
-
 use std::path::Path;
 
 use blendsim::mesh::Point;
 use blendsim::stage::{Animation, OutputKind};
-use common::assets::{paper_asset, paper_asset_in, paper_scene};
-use common::cli::{energies, names, read_json, run, TempDir};
-use common::verify::{check_outputs, library_animation, output_files};
 use serde_json::Value;
+
+use crate::common::assets::{paper_asset, paper_asset_in, paper_scene};
+use crate::common::cli::{energies, names, read_json, run, TempDir};
+use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// Bake `scene` into `dir/out` with the CLI and check the report and every file. Returns the
 /// report and the library's animation of the scene.
@@ -108,7 +107,7 @@ fn dino_walk() {
         anim.trajectory.positions[k]
             .iter()
             .zip(&anim.input_keys[k])
-            .map(|(p, q)| common::verify::max_distance(&[*p], &[*q]))
+            .map(|(p, q)| crate::common::verify::max_distance(&[*p], &[*q]))
             .fold(0.0, f64::max)
     };
     assert_eq!(first_last_gap(0), 0.0);
@@ -258,7 +257,7 @@ fn paper_scenes_chain_like_bake() {
 /// The asset rule itself: a missing asset is a failure under CI and a skip elsewhere.
 #[test]
 fn a_missing_paper_asset_fails_under_ci() {
-    let dir = common::assets::paper_dir();
+    let dir = crate::common::assets::paper_dir();
     assert!(paper_asset_in(&dir, "no/such/asset.mesh", false).is_none());
     let under_ci = std::panic::catch_unwind(|| paper_asset_in(&dir, "no/such/asset.mesh", true));
     assert!(under_ci.is_err(), "with CI=true a missing asset must fail the test");

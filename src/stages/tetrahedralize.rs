@@ -22,6 +22,8 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
     keys.display.clone().unwrap_or_else(|| surface::compact(&rest_surface).0)
 }
 
+/// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
+/// to export.
 pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
     let scene = &keys.scene;
     let key_poses = |positions: Vec<Vec<Point>>| KeyPoses {
@@ -39,11 +41,11 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
         Shape::Surface(rest) => {
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.stage("tetrahedralize: TetGen");
-            let mesh: TetMesh = tetgen::tetrahedralize(rest, &options, std::path::Path::new(&keys.rest_source))?;
+            let mesh: TetMesh = tetgen::run(rest, &options, std::path::Path::new(&keys.rest_source))?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();
-            let elastic = Elastic::new(&mesh, &scene.material)?;
+            let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
             let equilibrium = Equilibrium::new(&elastic, &pinned)?;
             let tolerance = 1e-10 * crate::mesh::bbox_diagonal(&mesh.positions);
             let bar = progress.bar(keys.poses.len() as u64, "tetrahedralize: fit interior nodes");

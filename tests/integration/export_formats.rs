@@ -1,22 +1,21 @@
-//! `export` end to end: synthetic animations go through `export::export`, and every file it
+//! `export` end to end: synthetic animations go through `stages::export`, and every file it
 //! writes is opened by the reference tools (usd-core, the Khronos glTF validator, three.js,
 //! Chromium) and evaluated against our own evaluation of the same animation.
-
-mod common;
 
 use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use blendsim::export::clip::BlendShapeClip;
-use blendsim::export::export;
+use blendsim::clip::BlendShapeClip;
 use blendsim::mesh::Point;
 use blendsim::output::Staging;
+use blendsim::procedural::prism as box_mesh;
 use blendsim::scene::Format;
 use blendsim::stage::{Animation, OutputKind, Outputs};
-use common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
-use blendsim::procedural::prism as box_mesh;
-use common::{animation, sample_motion, scratch};
+use blendsim::stages::export;
+
+use crate::common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
+use crate::common::{animation, sample_motion, scratch};
 
 /// A twist about the box's vertical (y) axis: the angle grows with height above `from` (a
 /// fraction of the height) and with `s(t)`; `ds` is `s'(t)`. Returns the position and its
@@ -95,7 +94,7 @@ fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let on_disk: BTreeSet<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(listed, on_disk, "the folder holds exactly the listed files");
-    common::verify::check_outputs(&dir, anim, &outputs.files);
+    crate::common::verify::check_outputs(&dir, anim, &outputs.files);
     (dir, outputs)
 }
 
@@ -122,7 +121,7 @@ fn cyclic_z_up_centimeters_without_usda() {
 #[test]
 fn sparse_targets_stay_sparse() {
     let anim = waving_top("[\"usda\", \"glb\"]");
-    let clip = BlendShapeClip::from_trajectory(&anim.trajectory, false);
+    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
     let n = clip.vertex_count();
     assert!(clip.targets.iter().all(|t| 4 * t.indices.len() < 3 * n), "the test needs sparse targets");
     let (dir, _) = export_and_check(&anim);
@@ -135,7 +134,7 @@ fn sparse_targets_stay_sparse() {
 #[test]
 fn a_static_animation_still_validates() {
     let anim = still_box("[\"usda\", \"usdc\", \"glb\"]");
-    assert!(BlendShapeClip::from_trajectory(&anim.trajectory, false).targets.is_empty());
+    assert!(BlendShapeClip::from_trajectory(&anim.trajectory).targets.is_empty());
     export_and_check(&anim);
 }
 
@@ -213,7 +212,7 @@ fn checkers_reject_wrong_points_and_broken_files() {
     anim.scene.export.full_frame = false;
     let dir = scratch("negative").join("out");
     export_to(&anim, &dir);
-    let clip = BlendShapeClip::from_trajectory(&anim.trajectory, false);
+    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
     let frames: Vec<f64> = anim.trajectory.frames(60.0).iter().map(|f| f.1).collect();
     // Expected one frame late.
     let late = Expected::at(&frames, 60.0, |t| clip.points_at(t + 1.0 / 60.0));

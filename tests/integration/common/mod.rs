@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use blendsim::mesh::{Point, TriMesh};
 use blendsim::scene::{Method, Scene};
-use blendsim::spacetime::trajectory::Trajectory;
+use blendsim::Trajectory;
 use blendsim::stage::{Animation, Counts, SolverLog};
 
 /// A fresh, empty folder under Cargo's per-target scratch space, kept after the test so its

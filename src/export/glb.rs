@@ -15,6 +15,7 @@ use serde_json::{json as value, Value};
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
 use super::sparse_is_smaller;
+use crate::mesh::Bounds;
 
 /// How the node maps scene units to glTF's y-up meters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -96,14 +97,10 @@ fn f32x3_value(v: [f32; 3]) -> Value {
     value!([v[0] as f64, v[1] as f64, v[2] as f64])
 }
 
+/// `(lo, hi)` of the points (infinite, inverted, for none).
 fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
-    points.iter().fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(mut lo, mut hi), p| {
-        for d in 0..3 {
-            lo[d] = lo[d].min(p[d]);
-            hi[d] = hi[d].max(p[d]);
-        }
-        (lo, hi)
-    })
+    let b = Bounds::of_f32(points);
+    (b.lo.map(|x| x as f32), b.hi.map(|x| x as f32))
 }
 
 fn vec3_bytes(points: impl Iterator<Item = [f32; 3]>) -> Vec<u8> {

@@ -1,12 +1,11 @@
 //! The solver's analytic cases through the CLI, as a user runs it: tet-mesh keyframes written
 //! as MEDIT files, `import -> tetrahedralize -> solve`, and the solution stage file read back.
 
-mod common;
-
 use blendsim::mesh::Point;
-use blendsim::spacetime::trajectory::Trajectory;
 use blendsim::stage::{self, Solution};
-use common::cli::{read_json, run, TempDir};
+use blendsim::Trajectory;
+
+use crate::common::cli::{read_json, run, TempDir};
 
 /// MEDIT text of a cube `[0,1]³` split into `n³` cells of 6 tets, its nodes moved by `place`.
 fn cube_medit(n: usize, place: impl Fn(Point) -> Point) -> String {

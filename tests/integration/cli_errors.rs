@@ -7,14 +7,13 @@
 //! errors exit 2. Each case builds its inputs in a fresh folder; meshes come from
 //! `blendsim::procedural` and `blendsim::mesh::obj::write`, or are written out by hand.
 
-mod common;
-
 use std::ffi::OsStr;
 use std::path::Path;
 
 use blendsim::mesh::{obj, TriMesh};
 use blendsim::procedural::prism;
-use common::cli::{run, run_env, tree, Run, TempDir};
+
+use crate::common::cli::{run, run_env, tree, Run, TempDir};
 
 /// A closed 1 x 1 x 1 box surface with 2 segments per side (26 vertices, 48 triangles).
 fn cube() -> TriMesh {

@@ -2,12 +2,10 @@
 //! the full-frame `.glb`) rendered by three.js in headless Chromium, which must show the mesh
 //! and show it move between the rest pose (0 s) and the left twist key (0.5 s).
 
-mod common;
-
 use std::path::Path;
 
-use common::checkers::render_glb;
-use common::cli::{run, TempDir};
+use crate::common::checkers::render_glb;
+use crate::common::cli::{run, TempDir};
 
 #[test]
 fn demo_glb_renders_and_moves_in_chromium() {

@@ -4,9 +4,8 @@
 
 use std::path::Path;
 
-use blendsim::mesh::obj;
-use blendsim::procedural::{prism, twist};
-use blendsim::scene::{Axis, Twist};
+use blendsim::mesh::{obj, Axis};
+use blendsim::procedural::{prism, twist, Twist};
 
 /// (file name, contents) of every generated demo file.
 fn demo_files() -> Vec<(&'static str, String)> {
