@@ -1,13 +1,17 @@
 //! Not API: the solver's parts, for the benchmark (`benches/solver.rs`), which times them one
-//! by one, and the writers, whose byte counts `benches/cache.rs` compares. Nothing here is stable; library users call [`crate::stages`].
+//! by one, the writers, whose byte counts `benches/cache.rs` compares, and the natural
+//! vibration periods for tests that compare against them. Nothing here is stable; library users
+//! call [`crate::stages`].
 
 pub use crate::export::fullframe::FullFrame;
 pub use crate::export::glb::{self, Placement};
 pub use crate::export::usda::{self, UsdSettings};
 pub use crate::physics::elastic::Elastic;
+pub use crate::physics::vibration::{natural_vibration, RestStiffness, Vibration};
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};
 pub use crate::spacetime::objective::{Evaluation, Objective, Projections};
 pub use crate::spacetime::solver::{apply_step, initial_trajectory, objective, Settings};
+pub use crate::spacetime::timing::{ProjectionMode, TimeDerivatives, Timing, TimingSettings, TimingStep};
 pub use crate::spacetime::unknowns::{KeyConstraints, Unknowns};
 pub use crate::tetgen::{run as tetgen, TetgenOptions};
 

@@ -12,4 +12,6 @@ pub mod lanes;
 pub mod mat3;
 pub mod ordering;
 pub mod projection;
+pub mod projection_curvature;
 pub mod svd3;
+pub mod vibration;

@@ -10,7 +10,7 @@
 //! small eigenvalues).
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
-//! ~370 ns), so the local step decomposes [`BATCH`](super::lanes::BATCH) matrices at once
+//! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
 //! ([`svd_lanes`]): the same code runs on lanes ([`super::lanes`]: `[f64; N]` arithmetic that
 //! the compiler turns into SIMD, AVX-512 or AVX2 chosen at run time), every branch a per-lane
 //! select and the Jacobi sweeps continuing until the slowest lane has converged while converged
@@ -19,7 +19,6 @@
 //! same bytes whichever path and batch it goes through.
 
 use super::lanes::{cross, det, dot, lane, mul_lanes, select3, to_lanes, Lanes, Mask, M3, V3};
-#[cfg(test)]
 use super::lanes::{with_widest_simd, BATCH};
 use super::mat3::Mat3;
 
@@ -147,16 +146,14 @@ pub fn svd3(f: &Mat3) -> Svd3 {
     Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
 }
 
-/// [`svd3`] of [`BATCH`](super::lanes::BATCH) matrices at once (bit-identical to it, lane by
+/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by
 /// lane). The local step runs [`svd_lanes`] inside its own batched kernels; this entry point is
-/// for tests.
-#[cfg(test)]
+/// for the timing derivatives, which need the decompositions themselves.
 pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
     let (u, sigma, v) = dispatch_svd(&to_lanes(f));
     std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })
 }
 
-#[cfg(test)]
 with_widest_simd!(dispatch_svd, fn(f: &M3<BATCH>) -> (M3<BATCH>, V3<BATCH>, M3<BATCH>) { svd_lanes(f) });
 
 #[cfg(test)]

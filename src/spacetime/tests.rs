@@ -8,26 +8,26 @@ use crate::mesh::{add, norm, sub, Point};
 use crate::physics::elastic::{Elastic, Material};
 use crate::testing::{cube_mesh, Rng};
 
-fn material() -> Material {
+pub(super) fn material() -> Material {
     Material { stiffness: 70.0, volume: 70.0, density: 1.0 }
 }
 
 /// Node index lists.
-type Nodes = Vec<u32>;
+pub(super) type Nodes = Vec<u32>;
 
-fn all(n: usize) -> Nodes {
+pub(super) fn all(n: usize) -> Nodes {
     (0..n as u32).collect()
 }
 
-fn from_mask(mask: &[bool]) -> Nodes {
+pub(super) fn from_mask(mask: &[bool]) -> Nodes {
     (0..mask.len() as u32).filter(|&i| mask[i as usize]).collect()
 }
 
-fn settings() -> Settings {
+pub(super) fn settings() -> Settings {
     Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3] }
 }
 
-fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<Nodes>, cyclic: bool) -> KeyConstraints {
+pub(super) fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<Nodes>, cyclic: bool) -> KeyConstraints {
     let n = times.len();
     KeyConstraints { times, positions, fixed, fixed_velocity: vec![Nodes::default(); n], cyclic }
 }
@@ -38,7 +38,7 @@ fn rotate_y(p: Point, angle: f64) -> Point {
 }
 
 /// A non-rigid, non-trivial trajectory on a cube: stretched, sheared and twisted keys.
-fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
+pub(super) fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
     let mut rng = Rng(42);
     let shapes: Vec<Vec<Point>> = (0..4)
         .map(|k| {
