@@ -57,6 +57,7 @@ enum Command {
 pub enum MethodArg {
     Hermite,
     Spacetime,
+    Fit,
 }
 
 impl From<MethodArg> for Method {
@@ -64,6 +65,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Hermite => Method::Hermite,
             MethodArg::Spacetime => Method::Spacetime,
+            MethodArg::Fit => Method::Fit,
         }
     }
 }

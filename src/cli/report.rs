@@ -24,7 +24,7 @@ pub struct Args {
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let outputs: Outputs = stage::read(&args.outputs)?;
-    let report = stages::report(&animation, &outputs);
+    let report = stages::report(&animation, &outputs)?;
     let mut staging = Staging::new(&args.out)?;
     report.write(&mut staging)?;
     staging.commit()

@@ -7,6 +7,7 @@
 
 mod common;
 
+mod cache_bake;
 mod cache_fit;
 mod cli_errors;
 mod cli_physics;

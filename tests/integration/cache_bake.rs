@@ -1,0 +1,134 @@
+//! Caches through the whole toolchain, through the CLI: the rapier3d bar (an independent
+//! simulator) written in every cache format, baked with `[cache] keyframes = "auto"`, measured
+//! against the cache by the report and re-checked here by reading the written blendshape glb
+//! back at the cache's frames.
+
+use std::path::{Path, PathBuf};
+
+use blendsim::cache::deviation::cache_diagonal;
+use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
+use blendsim::mesh::{norm, obj, sub, TriMesh};
+use serde_json::Value;
+
+use crate::common::bar::{bar, BarCache, BarSettings};
+use crate::common::cli::{run, TempDir};
+
+/// Each format the bar is written in: (label, cache path, extra [cache] keys).
+pub const FORMATS: [(&str, &str, &str); 5] = [
+    ("obj-sequence", "frames/frame_####.obj", "fps = 60\n"),
+    ("pc2", "bar.pc2", "fps = 60\nrest = \"rest.obj\"\n"),
+    ("mdd", "bar.mdd", "rest = \"rest.obj\"\n"),
+    ("usd", "bar.usda", ""),
+    ("gltf", "bar.glb", "fps = 60\n"),
+];
+
+/// Write `cache` into `dir` as `path` (and the rest mesh as rest.obj).
+pub fn write_cache(dir: &Path, cache: &BarCache, path: &str) {
+    std::fs::write(dir.join("rest.obj"), obj::write(&cache.surface)).unwrap();
+    if let Some(parent) = dir.join(path).parent() {
+        std::fs::create_dir_all(parent).unwrap();
+    }
+    blendsim::cache::write(&dir.join(path), &cache.surface, &mut cache.frames.clone(), cache.settings.fps).unwrap();
+}
+
+/// A scene baking the cache at `path` with `method` and `keys` (`"auto"` with a tolerance, or
+/// a list).
+pub fn scene(path: &str, extra: &str, method: &str, keys: &str) -> String {
+    format!(
+        "name = \"bar\"\n[cache]\npath = \"{path}\"\n{extra}{keys}\n[solver]\nmethod = \"{method}\"\n[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = true\n"
+    )
+}
+
+/// Largest distance between the frames of `a` and `b`, relative to `diagonal`.
+fn max_distance(a: &mut dyn FrameSource, b: &mut dyn FrameSource, diagonal: f64) -> f64 {
+    assert_eq!(a.frame_count(), b.frame_count());
+    assert_eq!(a.vertex_count(), b.vertex_count());
+    let (mut x, mut y) = (vec![[0.0; 3]; a.vertex_count()], vec![[0.0; 3]; a.vertex_count()]);
+    let mut max = 0.0f64;
+    for f in 0..a.frame_count() {
+        assert!((a.time(f) - b.time(f)).abs() < 1e-6, "frame {f}: {} vs {}", a.time(f), b.time(f));
+        a.read_frame(f, &mut x).unwrap();
+        b.read_frame(f, &mut y).unwrap();
+        max = x.iter().zip(&y).map(|(p, q)| norm(sub(*p, *q))).fold(max, f64::max);
+    }
+    max / diagonal
+}
+
+fn report(out: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap()
+}
+
+fn bytes_of(report: &Value, file: &str) -> f64 {
+    report["outputs"].as_array().unwrap().iter().find(|f| f["path"] == file).unwrap_or_else(|| panic!("no {file} in {report}"))["bytes"].as_f64().unwrap()
+}
+
+/// Bake the bar in every format with `auto` keys at 0.005 (method `fit`): the report says the
+/// tolerance is met at every frame, and reading the written blendshape glb back at the cache's
+/// frames confirms it. Prints the sizes against the full-frame files.
+#[test]
+fn the_bar_in_every_format_bakes_within_the_tolerance() {
+    let cache = bar(&BarSettings::default());
+    let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
+    let dir = TempDir::new("cache-bake-formats");
+    let mut keys_seen = None;
+    for (label, path, extra) in FORMATS {
+        let sub_dir = dir.join(label);
+        std::fs::create_dir_all(&sub_dir).unwrap();
+        write_cache(&sub_dir, &cache, path);
+        std::fs::write(sub_dir.join("scene.toml"), scene(path, extra, "fit", "keyframes = \"auto\"\ntolerance = 0.005")).unwrap();
+        run(&sub_dir, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+        let out = sub_dir.join("out");
+        let r = report(&out);
+        let c = &r["cache"];
+        assert_eq!(c["format"], label, "{c}");
+        assert_eq!(c["frames"], 181);
+        assert_eq!(c["fps"], 60.0);
+        assert_eq!(c["error"]["reference"], "cache");
+        assert_eq!(c["error"]["relative_to"], "bbox_diagonal");
+        let per_frame = c["error"]["per_frame"].as_array().unwrap();
+        assert_eq!(per_frame.len(), 181);
+        assert!(per_frame.iter().all(|e| e.as_f64().unwrap() <= 0.005), "{label}: a frame over the tolerance: {per_frame:?}");
+        assert!((c["error"]["diagonal"].as_f64().unwrap() / diagonal - 1.0).abs() < 1e-6);
+        // The same keys whatever the format (the formats store the same f32 frames).
+        let keys = c["keys"].clone();
+        assert_eq!(keys_seen.get_or_insert_with(|| keys.clone()), &keys, "{label}");
+        // Independent re-check: the blendshape glb as written, evaluated by the glTF clip
+        // reader at the cache rate, against the cache's frames.
+        let written = VertexCache::open(&out.join("bar.glb"), &CacheOptions { fps: Some(60.0), ..CacheOptions::default() }).unwrap();
+        let mut frames = written.frames;
+        let measured = max_distance(&mut cache.frames.clone(), frames.as_mut(), diagonal);
+        println!(
+            "{label}: {} keys, report max {:.3e}, glb re-read max {measured:.3e}; usda {:.0} / {:.0} B = {:.1}x, glb {:.0} / {:.0} B = {:.1}x, cache {} B",
+            keys.as_array().unwrap().len(),
+            c["error"]["max"].as_f64().unwrap(),
+            bytes_of(&r, "bar.full.usda"),
+            bytes_of(&r, "bar.usda"),
+            bytes_of(&r, "bar.full.usda") / bytes_of(&r, "bar.usda"),
+            bytes_of(&r, "bar.full.glb"),
+            bytes_of(&r, "bar.glb"),
+            bytes_of(&r, "bar.full.glb") / bytes_of(&r, "bar.glb"),
+            c["bytes"]
+        );
+        assert!(measured <= 0.005 + 1e-6, "{label}: the written glb is {measured} from the cache");
+        assert!((measured - c["error"]["max"].as_f64().unwrap()).abs() < 1e-5, "{label}: report {} vs re-read {measured}", c["error"]["max"]);
+        assert!(out.join("report.md").is_file());
+    }
+}
+
+/// Unused in this file's tests but shared with the converter tests.
+#[allow(dead_code)]
+pub fn frames_of(path: &Path, options: &CacheOptions) -> (TriMesh, MemoryFrames) {
+    let mut c = VertexCache::open(path, options).unwrap();
+    let mut frames = Vec::new();
+    let mut f = vec![[0.0; 3]; c.frames.vertex_count()];
+    let mut times = Vec::new();
+    for i in 0..c.frame_count() {
+        c.frames.read_frame(i, &mut f).unwrap();
+        frames.push(f.clone());
+        times.push(c.frames.time(i));
+    }
+    (c.mesh, MemoryFrames { times, frames })
+}
+
+#[allow(dead_code)]
+fn _unused(_: PathBuf) {}
