@@ -132,3 +132,111 @@ pub fn frames_of(path: &Path, options: &CacheOptions) -> (TriMesh, MemoryFrames)
 
 #[allow(dead_code)]
 fn _unused(_: PathBuf) {}
+
+/// `method = "spacetime"` on the bar's cache: the auto keys go through TetGen and the physics
+/// fills the in-betweens; the report gives its error against the cache and the fit's on the
+/// same keys. The keys' `fixed = "all"` holds every vertex on its cache frame at the keys.
+#[test]
+fn spacetime_on_a_cache_reports_its_error_beside_the_fit() {
+    let cache = bar(&BarSettings::default());
+    let dir = TempDir::new("cache-bake-spacetime");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "spacetime", "keyframes = \"auto\"\ntolerance = 0.005")
+        .replace("[solver]\n", "[solver]\nmax_iterations = 15\n")
+        + "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n";
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let r = report(&dir.join("out"));
+    assert_eq!(r["solver"]["method"], "spacetime");
+    assert!(r["tets"].as_u64().unwrap() > 0, "spacetime simulates a tet body");
+    let c = &r["cache"];
+    let keys: Vec<usize> = c["keys"].as_array().unwrap().iter().map(|k| k.as_u64().unwrap() as usize).collect();
+    let per_frame: Vec<f64> = c["error"]["per_frame"].as_array().unwrap().iter().map(|e| e.as_f64().unwrap()).collect();
+    let fit = c["fit_error"]["max"].as_f64().unwrap();
+    println!(
+        "spacetime on {} keys: max {:.3e}, rms {:.3e}; fit on the same keys: max {fit:.3e}, rms {:.3e}",
+        keys.len(),
+        c["error"]["max"].as_f64().unwrap(),
+        c["error"]["rms"].as_f64().unwrap(),
+        c["fit_error"]["rms"].as_f64().unwrap()
+    );
+    assert!(fit <= 0.005, "the fit on the keys chosen for it meets the tolerance: {fit}");
+    for &k in &keys {
+        assert!(per_frame[k] < 1e-6, "key frame {k} is held on the cache: {}", per_frame[k]);
+    }
+    assert!(per_frame.iter().all(|e| e.is_finite()));
+    assert!(std::fs::read_to_string(dir.join("out/report.md")).unwrap().contains("least-squares fit, same keys"));
+}
+
+/// Listed keys: exactly those frames become the keys.
+#[test]
+fn listed_keys_are_the_keys() {
+    let cache = bar(&BarSettings { duration: 0.25, ..BarSettings::default() });
+    let dir = TempDir::new("cache-bake-listed");
+    write_cache(&dir.path, &cache, "bar.mdd");
+    std::fs::write(dir.join("scene.toml"), scene("bar.mdd", "rest = \"rest.obj\"\n", "fit", "keyframes = [0, 5, 13]\nstart = 2\nend = -1")).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let r = report(&dir.join("out"));
+    assert_eq!(r["cache"]["keys"], serde_json::json!([0, 5, 13]));
+    assert_eq!(r["cache"]["frames"], 14);
+    assert_eq!(r["keyframes"], 3);
+    assert_eq!(r["cache"]["tolerance"], Value::Null);
+}
+
+/// A bad bake: exit 1, one line `error: ... (fix: ...)` naming `names`, nothing written.
+fn bad(dir: &TempDir, scene_text: &str, says: &str) {
+    std::fs::write(dir.join("scene.toml"), scene_text).unwrap();
+    let before = crate::common::cli::tree(&dir.path);
+    let r = run(&dir.path, &["bake", "scene.toml", "--out", "out"]);
+    assert_eq!(r.code, Some(1), "bad input must exit 1:\n{r}");
+    assert!(r.stderr.starts_with("error: ") && r.stderr.lines().count() == 1 && r.stderr.contains("(fix: "), "one line with a fix:\n{r}");
+    assert!(r.stderr.contains(says), "the message must say {says:?}:\n{r}");
+    assert!(!dir.join("out").exists(), "nothing written:\n{r}");
+    assert_eq!(crate::common::cli::tree(&dir.path), before, "files left behind:\n{r}");
+}
+
+#[test]
+fn bad_caches_are_one_line_errors_and_write_nothing() {
+    let cache = bar(&BarSettings { duration: 0.25, ..BarSettings::default() });
+    let dir = TempDir::new("cache-bake-bad");
+    let auto = "keyframes = \"auto\"\ntolerance = 0.005";
+    // Truncated PC2 and MDD (mid-frame).
+    for (path, extra) in [("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n"), ("bar.mdd", "rest = \"rest.obj\"\n")] {
+        write_cache(&dir.path, &cache, path);
+        let bytes = std::fs::read(dir.join(path)).unwrap();
+        std::fs::write(dir.join(path), &bytes[..bytes.len() - 100]).unwrap();
+        bad(&dir, &scene(path, extra, "fit", auto), path);
+        std::fs::remove_file(dir.join(path)).unwrap();
+    }
+    // An OBJ sequence with a frame of another vertex count, then with a frame missing.
+    write_cache(&dir.path, &cache, "seq/f_####.obj");
+    let frame = dir.join("seq/f_0007.obj");
+    let text = std::fs::read_to_string(&frame).unwrap();
+    let fewer: String = text.lines().filter(|l| !l.starts_with("f ")).skip(1).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&frame, fewer).unwrap();
+    bad(&dir, &scene("seq/f_####.obj", "fps = 60\n", "fit", auto), "f_0007.obj");
+    std::fs::remove_file(&frame).unwrap();
+    bad(&dir, &scene("seq/f_####.obj", "fps = 60\n", "fit", auto), "f_0007.obj");
+    std::fs::remove_dir_all(dir.join("seq")).unwrap();
+    // A glTF clip without the named animation.
+    write_cache(&dir.path, &cache, "bar.glb");
+    bad(&dir, &scene("bar.glb", "fps = 60\nanimation = \"walk\"\n", "fit", auto), "walk");
+    std::fs::remove_file(dir.join("bar.glb")).unwrap();
+    // A USD Mesh prim without time samples.
+    std::fs::write(
+        dir.join("still.usda"),
+        "#usda 1.0\n(\n    defaultPrim = \"Mesh\"\n)\n\ndef Mesh \"Mesh\"\n{\n    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0, 1, 2]\n    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]\n}\n",
+    )
+    .unwrap();
+    bad(&dir, &scene("still.usda", "", "fit", auto), "still.usda");
+    std::fs::remove_file(dir.join("still.usda")).unwrap();
+    // [cache] with [keyframes]; auto with a tolerance <= 0; a listed frame beyond the range.
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let pc2 = "fps = 60\nrest = \"rest.obj\"\n";
+    bad(&dir, &(scene("bar.pc2", pc2, "fit", auto) + "[keyframes]\nmeshes = [\"rest.obj\", \"rest.obj\"]\ntimes = [0.0, 1.0]\n"), "both [keyframes] and [cache]");
+    bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = 0.0"), "tolerance = 0 must be positive");
+    bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = -0.1"), "must be positive");
+    bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = [0, 99]"), "frame 99");
+    bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\nspeed = 3"), "unknown field `speed`");
+    bad(&dir, &scene("bar.pc2", "fps = 60\n", "fit", auto), "rest = \"mesh.obj\"");
+}
