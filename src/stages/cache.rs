@@ -77,9 +77,16 @@ pub fn error_against(record: &CacheRecord, trajectory: &Trajectory) -> Result<Ca
     deviation(cache.frames.as_mut(), trajectory, record.diagonal)
 }
 
-/// Read a `[cache]` scene: the keyframes stage data, with the record of the cache.
-pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
-    let scene = &scene_file.scene;
+/// Write the `[cache]` of a scene (its range, as the scene opens it) to `out`, in the format
+/// `out` names: a converter, streaming one frame at a time.
+pub fn convert(scene_file: &SceneFile, spec: &CacheSpec, out: &Path) -> Result<()> {
+    let (path, options) = open_options(scene_file, spec)?;
+    let mut cache = VertexCache::open(&path, &reader_options(&options))?;
+    crate::cache::write(out, &cache.mesh, cache.frames.as_mut(), cache.fps)
+}
+
+/// The resolved cache path and the reader's options of a `[cache]` table.
+fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, CacheRecordOptions)> {
     let path = scene_file.resolve(&spec.path);
     let format = CacheFormat::of(&path);
     let topology_mesh = matches!(format, Some(CacheFormat::Pc2 | CacheFormat::Mdd));
@@ -104,6 +111,18 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
         prim: spec.prim.clone(),
         start: spec.start,
         end: spec.end,
+    };
+    Ok((path, options))
+}
+
+/// Read a `[cache]` scene: the keyframes stage data, with the record of the cache.
+pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
+    let scene = &scene_file.scene;
+    let (path, options) = open_options(scene_file, spec)?;
+    let topology_mesh = options.rest.is_some();
+    let rest_mesh_path = match &spec.rest {
+        Some(Rest::Mesh(m)) => Some(scene_file.resolve(m)),
+        _ => None,
     };
     let mut cache = VertexCache::open(&path, &reader_options(&options))?;
     let frames = cache.frame_count();

@@ -3,7 +3,7 @@
 //! against the cache by the report and re-checked here by reading the written blendshape glb
 //! back at the cache's frames.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use blendsim::cache::deviation::cache_diagonal;
 use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
@@ -115,8 +115,7 @@ fn the_bar_in_every_format_bakes_within_the_tolerance() {
     }
 }
 
-/// Unused in this file's tests but shared with the converter tests.
-#[allow(dead_code)]
+/// Every frame of a cache, in memory.
 pub fn frames_of(path: &Path, options: &CacheOptions) -> (TriMesh, MemoryFrames) {
     let mut c = VertexCache::open(path, options).unwrap();
     let mut frames = Vec::new();
@@ -129,9 +128,6 @@ pub fn frames_of(path: &Path, options: &CacheOptions) -> (TriMesh, MemoryFrames)
     }
     (c.mesh, MemoryFrames { times, frames })
 }
-
-#[allow(dead_code)]
-fn _unused(_: PathBuf) {}
 
 /// `method = "spacetime"` on the bar's cache: the auto keys go through TetGen and the physics
 /// fills the in-betweens; the report gives its error against the cache and the fit's on the
@@ -239,4 +235,46 @@ fn bad_caches_are_one_line_errors_and_write_nothing() {
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = [0, 99]"), "frame 99");
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\nspeed = 3"), "unknown field `speed`");
     bad(&dir, &scene("bar.pc2", "fps = 60\n", "fit", auto), "rest = \"mesh.obj\"");
+}
+
+/// `blendsim import --cache-out` converts a cache from format to format: the bar goes
+/// PC2 -> OBJ sequence -> MDD -> usda -> glb -> usdc -> PC2, and every step reads back as the
+/// original frames (to f32 rounding), with the original triangles.
+#[test]
+fn import_converts_caches_between_every_format() {
+    let cache = bar(&BarSettings { duration: 0.25, ..BarSettings::default() });
+    let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
+    let dir = TempDir::new("cache-convert");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let extra = |path: &str| match path.rsplit('.').next().unwrap() {
+        "pc2" => "fps = 60\nrest = \"rest.obj\"\n",
+        "mdd" => "rest = \"rest.obj\"\n",
+        "usda" | "usdc" => "",
+        _ => "fps = 60\n",
+    };
+    let chain = ["bar.pc2", "seq/f_####.obj", "c.mdd", "c.usda", "c.glb", "c.usdc", "back.pc2"];
+    for step in chain.windows(2) {
+        let (from, to) = (step[0], step[1]);
+        std::fs::write(dir.join("scene.toml"), scene(from, extra(from), "fit", "keyframes = \"auto\"")).unwrap();
+        if let Some(parent) = Path::new(to).parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir.join(parent)).unwrap();
+        }
+        run(&dir.path, &["import", "scene.toml", "--cache-out", to]).success();
+        let options = match to.rsplit('.').next().unwrap() {
+            "pc2" => CacheOptions { fps: Some(60.0), rest: Some(dir.join("rest.obj")), ..CacheOptions::default() },
+            "mdd" => CacheOptions { rest: Some(dir.join("rest.obj")), ..CacheOptions::default() },
+            "usda" | "usdc" => CacheOptions::default(),
+            _ => CacheOptions { fps: Some(60.0), ..CacheOptions::default() },
+        };
+        let (mesh, mut frames) = frames_of(&dir.join(to), &options);
+        assert_eq!(mesh.triangles, cache.surface.triangles, "{from} -> {to}: triangles");
+        let d = max_distance(&mut cache.frames.clone(), &mut frames, diagonal);
+        println!("{from} -> {to}: max {d:.2e} of the diagonal from the simulated frames");
+        assert!(d < 1e-6, "{from} -> {to}: {d}");
+    }
+    // A keyframe scene has no cache to convert.
+    std::fs::write(dir.join("keys.toml"), "name = \"k\"\n[keyframes]\nmeshes = [\"rest.obj\", \"rest.obj\"]\ntimes = [0.0, 1.0]\n").unwrap();
+    let r = run(&dir.path, &["import", "keys.toml", "--cache-out", "x.pc2"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert!(r.stderr.contains("has [keyframes]") && !dir.join("x.pc2").exists(), "{r}");
 }
