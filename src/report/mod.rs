@@ -8,6 +8,7 @@
 //!
 //! The `report` stage (`crate::stages::report`) fills the model from an animation and its files.
 
+pub mod batch;
 pub mod cache;
 pub mod markdown;
 pub mod measures;

@@ -113,6 +113,20 @@ fn the_bar_in_every_format_bakes_within_the_tolerance() {
         assert!((measured - c["error"]["max"].as_f64().unwrap()).abs() < 1e-5, "{label}: report {} vs re-read {measured}", c["error"]["max"]);
         assert!(out.join("report.md").is_file());
     }
+    // The five bakes in one summary.
+    let dirs: Vec<String> = FORMATS.iter().map(|f| format!("{}/out", f.0)).collect();
+    let mut args = vec!["report", "--out", "summary", "--batch"];
+    args.extend(dirs.iter().map(String::as_str));
+    run(&dir.path, &args).success();
+    let csv = std::fs::read_to_string(dir.join("summary/summary.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 6, "{csv}");
+    assert!(lines[0].starts_with("bake,scene,method,"), "{csv}");
+    for (line, (label, _, _)) in lines[1..].iter().zip(FORMATS) {
+        assert!(line.starts_with(&format!("{label}/out,bar,fit,514,0,")) && line.contains(&format!(",{label},")), "{line}");
+    }
+    let md = std::fs::read_to_string(dir.join("summary/summary.md")).unwrap();
+    assert_eq!(md.lines().filter(|l| l.starts_with("| ")).count(), 6, "{md}");
 }
 
 /// Every frame of a cache, in memory.
@@ -337,4 +351,39 @@ fn a_cubicspline_morph_clip_is_a_cache_too() {
     assert_eq!(r["cache"]["frames"], 61);
     assert!(r["cache"]["error"]["max"].as_f64().unwrap() <= 0.005, "{}", r["cache"]["error"]["max"]);
     assert!(r["cache"]["fps_source"].as_str().unwrap().contains("given by the scene"));
+}
+
+/// `make batch`: the generated caches (the bar at 2 and 1 Hz in every format, baked with
+/// `fit`, and the 2 Hz PC2 with `spacetime` and `hermite` on the same keys) baked into
+/// `$BLENDSIM_BATCH_DIR/bakes` (default: Cargo's target tmp folder), then summarized there by
+/// `blendsim report --batch`.
+#[test]
+#[ignore = "run by `make batch`"]
+fn batch_of_the_generated_caches() {
+    let root = std::env::var_os("BLENDSIM_BATCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("batch"));
+    let _ = std::fs::remove_dir_all(&root);
+    let bakes = root.join("bakes");
+    for (freq, settings) in [("2hz", BarSettings::default()), ("1hz", BarSettings { young_modulus: 2.5e6, ..BarSettings::default() })] {
+        let cache = bar(&settings);
+        for (label, path, extra) in FORMATS {
+            let dir = root.join("caches").join(format!("{freq}-{label}"));
+            std::fs::create_dir_all(&dir).unwrap();
+            write_cache(&dir, &cache, path);
+            let mut methods = vec!["fit"];
+            if freq == "2hz" && label == "pc2" {
+                methods.extend(["spacetime", "hermite"]);
+            }
+            for method in methods {
+                let text = scene(path, extra, method, "keyframes = \"auto\"\ntolerance = 0.005").replace("[material]", "") + if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n" };
+                std::fs::write(dir.join(format!("{method}.toml")), text).unwrap();
+                let out = bakes.join(format!("bar-{freq}-{label}-{method}"));
+                run(&dir, &["bake", &format!("{method}.toml"), "--out", out.to_str().unwrap(), "--quiet"]).success();
+            }
+        }
+    }
+    run(&root, &["report", "--batch", bakes.to_str().unwrap(), "--out", root.to_str().unwrap()]).success();
+    let md = std::fs::read_to_string(root.join("summary.md")).unwrap();
+    println!("{md}");
+    println!("written: {} and summary.csv", root.join("summary.md").display());
+    assert_eq!(md.lines().filter(|l| l.starts_with("| bar") || l.starts_with(&format!("| {}", bakes.display()))).count(), 12, "{md}");
 }
