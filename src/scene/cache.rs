@@ -164,3 +164,54 @@ impl CacheSpec {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CACHE: &str = "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"bar.obj\"\n";
+
+    #[test]
+    fn a_cache_table_takes_its_defaults() {
+        let s = Scene::parse(CACHE).unwrap();
+        assert!(s.keyframes.is_none());
+        let c = s.cache.unwrap();
+        assert_eq!((c.start, c.end, &c.keyframes, c.tolerance()), (0, -1, &CacheKeys::Auto, DEFAULT_TOLERANCE));
+        assert_eq!(c.rest, Some(Rest::Mesh("bar.obj".into())));
+        assert_eq!((c.fixed_for(Method::Spacetime), c.fixed_for(Method::Fit)), (Selection::All, Selection::None));
+        let listed = Scene::parse(&(CACHE.to_string() + "keyframes = [0, 10, 20]\nfixed = { axis = \"x\", max = 0.0 }\n[solver]\nmethod = \"fit\"\n")).unwrap();
+        let c = listed.cache.clone().unwrap();
+        assert_eq!(c.keyframes, CacheKeys::Frames(vec![0, 10, 20]));
+        assert_eq!(c.fixed_for(Method::Fit), Selection::Slab { axis: crate::mesh::Axis::X, min: None, max: Some(0.0), invert: false });
+        // The stage files carry the scene: it round-trips through JSON.
+        let json = serde_json::to_string(&listed).unwrap();
+        assert_eq!(serde_json::from_str::<Scene>(&json).unwrap(), listed, "{json}");
+    }
+
+    #[test]
+    fn bad_cache_tables_are_rejected_with_a_fix() {
+        let keys = "[keyframes]\nmeshes = [\"a.obj\", \"b.obj\"]\ntimes = [0.0, 1.0]\n";
+        let cases = [
+            (CACHE.to_string() + keys, "both [keyframes] and [cache]"),
+            ("name = \"x\"\n".to_string(), "neither [keyframes] nor [cache]"),
+            (CACHE.to_string() + "tolerance = 0.0\n", "tolerance = 0 must be positive"),
+            (CACHE.to_string() + "tolerance = -1.0\n", "must be positive"),
+            (CACHE.to_string() + "keyframes = [0, 5]\ntolerance = 0.01\n", "tolerance is given, but keyframes lists"),
+            (CACHE.to_string() + "keyframes = [5, 5]\n", "not strictly increasing"),
+            (CACHE.to_string() + "keyframes = [3]\n", "lists 1 frame"),
+            (CACHE.to_string() + "keyframes = [0, -2]\n", "negative"),
+            (CACHE.to_string() + "keyframes = \"every\"\n", "expected \"auto\""),
+            (CACHE.replace("fps = 60", "fps = 0"), "fps = 0 must be positive"),
+            (CACHE.to_string() + "speed = 2\n", "unknown field `speed`"),
+            (CACHE.to_string() + "[embed]\nsurface = \"fine.obj\"\n", "[embed] surface is set"),
+            ("name = \"k\"\n".to_string() + keys + "[solver]\nmethod = \"fit\"\n", "fits a vertex cache"),
+        ];
+        for (text, expect) in cases {
+            let e = Scene::parse(&text).unwrap_err().to_string();
+            assert!(e.contains(expect), "expected {expect:?} in {e}");
+            assert!(e.contains("(fix: "), "{e}");
+        }
+        let e = Scene::parse(&(CACHE.to_string() + "speed = 2\n")).unwrap_err().to_string();
+        assert!(e.contains("line 6"), "{e}");
+    }
+}
