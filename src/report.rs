@@ -6,7 +6,6 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::export::clip::BlendShapeClip;
 use crate::mesh::{bbox_diagonal, norm, sub, surface, Point};
 use crate::scene::Format;
 use crate::spacetime::trajectory::Trajectory;
@@ -109,7 +108,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
-    let clip = BlendShapeClip::from_trajectory(tr, scene.keyframes.cyclic);
+    let clip = crate::export::blendshape_clip(tr, scene.export.weights);
     // As USD stores it: f32 weights sampled at frames.
     let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
     let error = deviation(frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))), diagonal);

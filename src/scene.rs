@@ -198,6 +198,33 @@ pub struct Export {
     /// Scene units in meters (USD `metersPerUnit`; glTF files are scaled to meters).
     #[serde(default = "defaults::one")]
     pub meters_per_unit: f64,
+    /// The blendshape form of the trajectory in every blendshape file.
+    #[serde(default = "defaults::weights")]
+    pub weights: Weights,
+    /// How the blendshape glTF animates its weights.
+    #[serde(default = "defaults::gltf_interpolation")]
+    pub gltf_interpolation: GltfInterpolation,
+}
+
+/// How blendshape weights are written (`formats/usd.md`, "Weights").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Weights {
+    /// Each interval in the Bernstein basis: a shape per key pose and per control point, every
+    /// weight in [0, 1]. Plays right in consumers that clamp shape-key values (Blender).
+    Bernstein,
+    /// A pose and a velocity shape per key; velocity weights go negative. Fewer shapes.
+    Signed,
+}
+
+/// The interpolation of the blendshape glTF's weight animation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GltfInterpolation {
+    /// Weights and their slopes at the keys: the trajectory exactly, at any instant.
+    Cubicspline,
+    /// Weights sampled at every frame: exact at frames, linear in between (Blender plays it).
+    Linear,
 }
 
 mod defaults {
@@ -247,6 +274,12 @@ mod defaults {
     pub fn one() -> f64 {
         1.0
     }
+    pub fn weights() -> super::Weights {
+        super::Weights::Bernstein
+    }
+    pub fn gltf_interpolation() -> super::GltfInterpolation {
+        super::GltfInterpolation::Cubicspline
+    }
 }
 
 impl Default for Tet {
@@ -286,6 +319,8 @@ impl Default for Export {
             full_frame: true,
             up_axis: defaults::up_axis(),
             meters_per_unit: defaults::one(),
+            weights: defaults::weights(),
+            gltf_interpolation: defaults::gltf_interpolation(),
         }
     }
 }
@@ -658,6 +693,7 @@ times = [0.0, 0.5]
         assert_eq!(s.solver.method, Method::Spacetime);
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
+        assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
         assert_eq!(s.keyframes.rest, Rest::Key(0));
     }
 
@@ -689,6 +725,8 @@ full_frame = true
 "#;
         let s = Scene::parse(text).unwrap();
         assert_eq!(s.solver.method, Method::Hermite);
+        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
+        assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
         assert_eq!(
             s.keyframes.fixed,
             Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }])
@@ -759,6 +797,8 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
             (MINIMAL.to_string() + "[solver]\nsamples = 0\n", "samples = 0"),
             (MINIMAL.to_string() + "[solver]\nmethod = \"magic\"\n", "unknown variant `magic`"),
             (MINIMAL.to_string() + "[export]\nformats = [\"fbx\"]\n", "unknown variant `fbx`"),
+            (MINIMAL.to_string() + "[export]\nweights = \"positive\"\n", "unknown variant `positive`"),
+            (MINIMAL.to_string() + "[export]\ngltf_interpolation = \"step\"\n", "unknown variant `step`"),
         ];
         for (text, expect) in cases {
             let e = Scene::parse(&text).unwrap_err().to_string();

@@ -9,10 +9,10 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use blendsim::export::clip::BlendShapeClip;
-use blendsim::export::export;
+use blendsim::export::{blendshape_clip, export};
 use blendsim::mesh::Point;
 use blendsim::output::Staging;
-use blendsim::scene::Format;
+use blendsim::scene::{Format, Weights};
 use blendsim::stage::{Animation, OutputKind, Outputs};
 use common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
 use blendsim::procedural::prism as box_mesh;
@@ -112,6 +112,16 @@ fn twisting_box_in_every_format() {
     );
 }
 
+/// The other forms: signed weights, and weights sampled per frame in a LINEAR glTF.
+#[test]
+fn signed_weights_and_linear_gltf_in_every_format() {
+    for export in ["weights = \"signed\"", "gltf_interpolation = \"linear\"", "weights = \"signed\"\ngltf_interpolation = \"linear\""] {
+        let anim = cyclic_box(&format!("[\"usda\", \"usdc\", \"glb\"]\n{export}"));
+        let (_, outputs) = export_and_check(&anim);
+        assert_eq!(outputs.files.len(), 6, "{export}");
+    }
+}
+
 #[test]
 fn cyclic_z_up_centimeters_without_usda() {
     let (_, outputs) = export_and_check(&cyclic_box("[\"usdc\", \"glb\"]"));
@@ -122,7 +132,7 @@ fn cyclic_z_up_centimeters_without_usda() {
 #[test]
 fn sparse_targets_stay_sparse() {
     let anim = waving_top("[\"usda\", \"glb\"]");
-    let clip = BlendShapeClip::from_trajectory(&anim.trajectory, false);
+    let clip = blendshape_clip(&anim.trajectory, Weights::Bernstein);
     let n = clip.vertex_count();
     assert!(clip.targets.iter().all(|t| 4 * t.indices.len() < 3 * n), "the test needs sparse targets");
     let (dir, _) = export_and_check(&anim);

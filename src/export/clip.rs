@@ -1,5 +1,8 @@
 //! The blendshape form of a Hermite trajectory, shared by every blendshape writer.
 //!
+//! This is the *signed* form (`[export] weights = "signed"`); the default Bernstein form, whose
+//! weights stay in [0, 1], is built in `bernstein.rs` from the same types.
+//!
 //! With base pose `b = x_0`, a *pose target* `P_k = x_k - b` per key and a *velocity target*
 //! `V_k = v_k` per key, the trajectory is exactly
 //!
@@ -24,7 +27,7 @@ use crate::spacetime::trajectory::Trajectory;
 /// One blendshape: a named set of vertex offsets.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
-    /// A valid USD prim name and glTF target name (`pose_3`, `velocity_0`).
+    /// A valid USD prim name and glTF target name (`key_3`, `key_0_velocity`, `key_3_out`).
     pub name: String,
     /// The vertices this target moves, increasing. Vertices not listed have zero offset.
     pub indices: Vec<u32>,
@@ -52,12 +55,12 @@ pub struct BlendShapeClip {
     pub curves: Vec<WeightCurve>,
 }
 
-fn f32x3(p: Point) -> [f32; 3] {
+pub(super) fn f32x3(p: Point) -> [f32; 3] {
     [p[0] as f32, p[1] as f32, p[2] as f32]
 }
 
 /// The nonzero entries of `offsets` (after rounding to f32).
-fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<Target> {
+pub(super) fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<Target> {
     let (mut indices, mut values) = (Vec::new(), Vec::new());
     for (i, o) in offsets.enumerate() {
         let o = f32x3(o);
@@ -70,7 +73,8 @@ fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<T
 }
 
 impl BlendShapeClip {
-    /// The blendshape form of `trajectory`. `cyclic` says the last key aliases the first.
+    /// The signed blendshape form of `trajectory`: `key_K` (pose) and `key_K_velocity`.
+    /// `cyclic` says the last key aliases the first.
     pub fn from_trajectory(trajectory: &Trajectory, cyclic: bool) -> Self {
         let n_keys = trajectory.key_count();
         let base_f64 = &trajectory.positions[0];
@@ -88,7 +92,7 @@ impl BlendShapeClip {
                 continue;
             }
             let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| crate::mesh::sub(*x, *b));
-            if let Some(t) = sparse_target(format!("pose_{k}"), offsets) {
+            if let Some(t) = sparse_target(format!("key_{k}"), offsets) {
                 let mut values = zeros();
                 values[k] = 1.0;
                 targets.push(t);
@@ -99,7 +103,7 @@ impl BlendShapeClip {
             if owner(k) != k {
                 continue;
             }
-            if let Some(t) = sparse_target(format!("velocity_{k}"), trajectory.velocities[k].iter().copied()) {
+            if let Some(t) = sparse_target(format!("key_{k}_velocity"), trajectory.velocities[k].iter().copied()) {
                 let (mut in_t, mut out_t) = (zeros(), zeros());
                 for key in (0..n_keys).filter(|&key| owner(key) == k) {
                     in_t[key] = 1.0;
@@ -205,9 +209,9 @@ mod tests {
     fn zero_targets_are_dropped_and_sparse_ones_are_sparse() {
         let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
         let clip = BlendShapeClip::from_trajectory(&tr, true);
-        // Key 2 aliases key 0 (cyclic), velocities are zero: only pose_1 remains, moving vertex 1.
+        // Key 2 aliases key 0 (cyclic), velocities are zero: only key_1 remains, moving vertex 1.
         assert_eq!(clip.targets.len(), 1);
-        assert_eq!(clip.targets[0].name, "pose_1");
+        assert_eq!(clip.targets[0].name, "key_1");
         assert_eq!(clip.targets[0].indices, vec![1]);
         assert!(max_error(&tr, &clip) < 1e-6);
     }

@@ -1,6 +1,7 @@
 //! Writers of the animation files (helper-owned, except `clip`).
 //!
-//! Contract of [`export`]: build the [`clip::BlendShapeClip`] (blendshapes) and the
+//! Contract of [`export`]: build the [`clip::BlendShapeClip`] (blendshapes, in the form
+//! `[export] weights` names: [`blendshape_clip`]) and the
 //! [`fullframe::FullFrame`] (one pose per frame) from the animation, and stage, for each
 //! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
 //! `NAME.full.EXT` (full-frame). `usdc` is converted from the staged `.usda` by usd-core.
@@ -8,6 +9,7 @@
 //!
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`.
 
+pub mod bernstein;
 pub mod clip;
 pub mod fullframe;
 pub mod gltf;
@@ -16,7 +18,7 @@ pub mod usdc;
 
 use crate::error::{Error, Result};
 use crate::output::Staging;
-use crate::scene::{Axis, Format};
+use crate::scene::{Axis, Format, GltfInterpolation, Weights};
 use crate::spacetime::trajectory::Trajectory;
 use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 
@@ -41,7 +43,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     };
     let placement = gltf::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
 
-    let clip = BlendShapeClip::from_trajectory(trajectory, keys_alias(trajectory));
+    let clip = blendshape_clip(trajectory, scene.export.weights);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     let mut forms = vec![(OutputKind::Blendshape, String::new())];
     if full.is_some() {
@@ -82,6 +84,10 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                 Format::Glb => {
                     let bytes = match (&kind, &full) {
                         (OutputKind::FullFrame, Some(full)) => gltf::full_frame(full, triangles, &scene.name, placement),
+                        _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
+                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
+                            gltf::blendshapes_sampled(&clip, &frame_times, triangles, &scene.name, placement)
+                        }
                         _ => gltf::blendshapes(&clip, triangles, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;
@@ -91,6 +97,15 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
         }
     }
     Ok(Outputs { files })
+}
+
+/// The blendshape clip every blendshape file of `trajectory` holds, in the given form.
+pub fn blendshape_clip(trajectory: &Trajectory, weights: Weights) -> BlendShapeClip {
+    let cyclic = keys_alias(trajectory);
+    match weights {
+        Weights::Bernstein => BlendShapeClip::bernstein(trajectory, cyclic),
+        Weights::Signed => BlendShapeClip::from_trajectory(trajectory, cyclic),
+    }
 }
 
 /// Whether a target moving `moved` of `vertices` vertices is smaller stored sparse (an index of
