@@ -74,7 +74,7 @@ deps-blender:
 	@if $(BLENDER_VENV)/bin/python -c 'import bpy' >/dev/null 2>&1; then \
 		echo "==> $(BPY) (Blender as a Python module): already installed in $(BLENDER_VENV)"; \
 	else \
-		if ! command -v $(PYTHON311) >/dev/null 2>&1 || ! $(PYTHON311) -c 'import ensurepip, venv' >/dev/null 2>&1 || ! ldconfig -p | grep -q libXrender.so.1; then \
+		if ! command -v $(PYTHON311) >/dev/null 2>&1 || ! $(PYTHON311) -c 'import ensurepip, venv' >/dev/null 2>&1 || ! ldconfig -p | grep libXrender.so.1 >/dev/null; then \
 			echo "==> installing Python 3.11 with venv and Blender's X/GL client libraries (apt-get)"; \
 			$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(BLENDER_APT); \
 		fi; \

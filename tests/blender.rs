@@ -108,7 +108,7 @@ fn print_sizes(name: &str, forms: &[(&str, PathBuf, Vec<OutputFile>)]) -> BTreeM
             kb(row.2),
             kb(row.3)
         );
-        table.insert(if weights == "signed" { "signed" } else { "bernstein" }, row);
+        table.insert(weights, row);
     }
     table
 }
@@ -124,7 +124,7 @@ fn every_frame(anim: &Animation) -> Expected {
     e
 }
 
-fn file<'a>(forms: &'a [(&str, PathBuf, Vec<OutputFile>)], form: &str, name: &str) -> PathBuf {
+fn file(forms: &[(&str, PathBuf, Vec<OutputFile>)], form: &str, name: &str) -> PathBuf {
     forms.iter().find(|f| f.0 == form).unwrap().1.join(name)
 }
 

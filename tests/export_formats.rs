@@ -252,3 +252,65 @@ fn checkers_reject_wrong_points_and_broken_files() {
     let e = try_check_glb(&dir.join("broken.glb"), &right).unwrap_err();
     assert!(e.contains("VALUE_NOT_IN_LIST"), "{e}");
 }
+
+/// The tetrahedron of `formats/usd.md` and `formats/gltf.md`: its top vertex rises by 0.5 in
+/// 0.5 s while the whole shape starts with a sideways velocity of 0.5 units/s; z up, 4 fps.
+fn tetra(export: &str) -> Animation {
+    let positions = vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let mesh = blendsim::mesh::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] };
+    let mut risen = positions.clone();
+    risen[3][2] += 0.5;
+    let tr = blendsim::spacetime::trajectory::Trajectory {
+        times: vec![0.0, 0.5],
+        positions: vec![positions, risen],
+        velocities: vec![vec![[0.5, 0.0, 0.0]; 4], vec![[0.0; 3]; 4]],
+    };
+    animation("tetra", 4.0, mesh, tr, false, &format!("formats = [\"usda\", \"glb\"]\nup_axis = \"z\"\n{export}"))
+}
+
+/// The fenced block of `doc` that follows the line containing `after`.
+fn block_after<'a>(doc: &'a str, after: &str) -> &'a str {
+    let at = doc.find(after).unwrap_or_else(|| panic!("no {after:?} in the doc"));
+    let start = at + doc[at..].find("```").unwrap();
+    let start = start + doc[start..].find('\n').unwrap() + 1;
+    &doc[start..start + doc[start..].find("```").unwrap()]
+}
+
+/// The examples in the format documents are this version's real output, byte for byte (USD)
+/// and value for value (the glTF JSON), and the sizes they state are the files' sizes.
+#[test]
+fn format_documents_show_real_output() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let usd_doc = std::fs::read_to_string(root.join("formats/usd.md")).unwrap();
+    let gltf_doc = std::fs::read_to_string(root.join("formats/gltf.md")).unwrap();
+    let (dir, outputs) = export_and_check(&tetra(""));
+    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    for name in ["tetra.usda", "tetra.full.usda"] {
+        let text = String::from_utf8(read(name)).unwrap();
+        assert_eq!(block_after(&usd_doc, &format!("`{name}` (")), text, "formats/usd.md's {name} is not the current output");
+        let stated = format!("`{name}` ({} bytes", fmt_thousands(text.len()));
+        assert!(usd_doc.contains(&stated), "formats/usd.md must state {stated}");
+    }
+    let glb = read("tetra.glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let actual: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let documented: serde_json::Value = serde_json::from_str(block_after(&gltf_doc, "Its JSON chunk, pretty-printed")).unwrap();
+    assert_eq!(documented, actual, "formats/gltf.md's JSON chunk is not the current output");
+    for name in ["tetra.glb", "tetra.full.glb"] {
+        let bytes = outputs.files.iter().find(|f| f.path == name).unwrap().bytes as usize;
+        let stated = format!("`{name}` ({} bytes", fmt_thousands(bytes));
+        assert!(gltf_doc.contains(&stated) || gltf_doc.contains(&format!("`{name}` is {} bytes", fmt_thousands(bytes))), "formats/gltf.md must state the size of {name}: {bytes}");
+    }
+}
+
+fn fmt_thousands(n: usize) -> String {
+    let s = n.to_string();
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i > 0 && (s.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}

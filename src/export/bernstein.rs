@@ -54,7 +54,7 @@ impl BlendShapeClip {
                 }
             }
             // The control point before key k (on interval k-1) and after it (on interval k).
-            let sides = [(k > 0).then(|| (k - 1, "in", -1.0)), (k + 1 < n_keys).then(|| (k, "out", 1.0))];
+            let sides = [(k > 0).then(|| (k - 1, "in", -1.0)), (k + 1 < n_keys).then_some((k, "out", 1.0))];
             for (interval, side, sign) in sides.into_iter().flatten() {
                 let length = times[interval + 1] - times[interval];
                 let offsets = trajectory.velocities[k].iter().map(|&v| scale(v, sign * length / 3.0));
