@@ -40,27 +40,27 @@ import os
 import sys
 
 import bpy
-from mathutils import Matrix, Vector
+import numpy as np
 
 
 def placement(expected):
-    """The world matrix a user expects: scene units -> meters, scene up axis -> Blender's Z."""
-    m = Matrix.Diagonal((*[expected.get("meters_per_unit", 1.0)] * 3, 1.0))
+    """The linear map a user expects: scene units -> meters, scene up axis -> Blender's Z."""
+    m = np.eye(3) * expected.get("meters_per_unit", 1.0)
     if expected.get("up_axis", "y") == "y":
-        m = Matrix.Rotation(math.pi / 2, 4, "X") @ m
+        # +90 degrees about X: (x, y, z) -> (x, -z, y).
+        m = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]) @ m
     return m
 
 
-def diagonal(frames):
-    lo = [min(p[d] for f in frames for p in f) for d in range(3)]
-    hi = [max(p[d] for f in frames for p in f) for d in range(3)]
-    return math.dist(lo, hi)
+def diagonal(points):
+    """Bounding-box diagonal of an array of points (any leading shape)."""
+    flat = points.reshape(-1, 3)
+    return float(np.linalg.norm(flat.max(axis=0) - flat.min(axis=0)))
 
 
 def max_distance(a, b):
-    """The largest point distance; NaN when any distance is (max() would skip it)."""
-    distances = [math.dist(p, q) for p, q in zip(a, b)]
-    return math.nan if any(math.isnan(d) for d in distances) else max(distances)
+    """The largest point distance (NaN when any point is NaN)."""
+    return float(np.linalg.norm(a - b, axis=1).max())
 
 
 def import_file(path, expected):
@@ -96,10 +96,11 @@ def evaluate(obj, frame):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     evaluated = obj.evaluated_get(depsgraph)
     mesh = evaluated.to_mesh()
-    world = evaluated.matrix_world.copy()
-    points = [tuple(world @ v.co) for v in mesh.vertices]
+    world = np.array(evaluated.matrix_world)
+    local = np.empty(3 * len(mesh.vertices))
+    mesh.vertices.foreach_get("co", local)
     evaluated.to_mesh_clear()
-    return points, world
+    return local.reshape(-1, 3) @ world[:3, :3].T + world[:3, 3], world
 
 
 def check(path, expected):
@@ -122,8 +123,9 @@ def check(path, expected):
         frame_range=[scene.frame_start, scene.frame_end],
     )
     place = placement(expected)
-    unplace = place.inverted()
-    want_world = [[tuple(place @ Vector(p)) for p in f] for f in expected["points"]]
+    unplace = np.linalg.inv(place)
+    want_local = np.array(expected["points"], dtype=float)
+    want_world = want_local @ place.T
     scale = max(diagonal(want_world), 1e-30)
     worst, worst_local, worst_unscaled, worst_frame, world, size = 0.0, 0.0, 0.0, None, None, None
     for i, want in enumerate(want_world):
@@ -138,9 +140,9 @@ def check(path, expected):
         # The size Blender gave the object relative to the expected one (from the first frame),
         # and the error once that size is undone: right up to its units, or not at all.
         if size is None:
-            size = diagonal([got]) / max(diagonal([want]), 1e-30)
-        worst_unscaled = max(worst_unscaled, max_distance([tuple(x / size for x in p) for p in got], want) / scale)
-        local = max_distance([tuple(unplace @ Vector(p)) for p in got], expected["points"][i]) / scale * expected.get("meters_per_unit", 1.0)
+            size = diagonal(got) / max(diagonal(want), 1e-30)
+        worst_unscaled = max(worst_unscaled, max_distance(got / size, want) / scale)
+        local = max_distance(got @ unplace.T, want_local[i]) / scale * expected.get("meters_per_unit", 1.0)
         worst_local = max(worst_local, local)
         if error >= worst:
             worst, worst_frame = error, frame
@@ -151,7 +153,7 @@ def check(path, expected):
         local_error=worst_local,
         scale=size,
         unscaled_error=worst_unscaled,
-        matrix_world=[[round(x, 6) for x in row] for row in world],
+        matrix_world=[[round(float(x), 6) for x in row] for row in world],
     )
     tolerance = expected.get("tolerance", 1e-5)
     if worst > tolerance:
