@@ -11,6 +11,7 @@ use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+pub use crate::export::clip::Weights;
 pub use crate::mesh::Axis;
 pub use crate::procedural::Twist;
 
@@ -213,6 +214,20 @@ pub struct Export {
     pub up_axis: Axis,
     /// Scene units in meters (USD `metersPerUnit`; glTF files are scaled to meters).
     pub meters_per_unit: f64,
+    /// The blendshape form of the trajectory in every blendshape file.
+    pub weights: Weights,
+    /// How the blendshape glTF animates its weights.
+    pub gltf_interpolation: GltfInterpolation,
+}
+
+/// The interpolation of the blendshape glTF's weight animation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GltfInterpolation {
+    /// Weights and their slopes at the keys: the trajectory exactly, at any instant.
+    Cubicspline,
+    /// Weights sampled at every frame: exact at frames, linear in between (Blender plays it).
+    Linear,
 }
 
 // The defaults of every table, written once: `#[serde(default)]` fills a missing key from these.
@@ -237,7 +252,14 @@ impl Default for Solver {
 
 impl Default for Export {
     fn default() -> Self {
-        Export { formats: vec![Format::Usda, Format::Glb], full_frame: true, up_axis: Axis::Y, meters_per_unit: 1.0 }
+        Export {
+            formats: vec![Format::Usda, Format::Glb],
+            full_frame: true,
+            up_axis: Axis::Y,
+            meters_per_unit: 1.0,
+            weights: Weights::Bernstein,
+            gltf_interpolation: GltfInterpolation::Cubicspline,
+        }
     }
 }
 
@@ -643,6 +665,7 @@ times = [0.0, 0.5]
         assert_eq!(s.solver.method, Method::Spacetime);
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
+        assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
         assert_eq!(s.keyframes.rest, Rest::Key(0));
     }
 
@@ -683,6 +706,8 @@ full_frame = true
 "#;
         let s = Scene::parse(text).unwrap();
         assert_eq!(s.solver.method, Method::Hermite);
+        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
+        assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
         assert_eq!(
             s.keyframes.fixed,
             Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }])
@@ -753,6 +778,8 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
             (MINIMAL.to_string() + "[solver]\nsamples = 0\n", "samples = 0"),
             (MINIMAL.to_string() + "[solver]\nmethod = \"magic\"\n", "unknown variant `magic`"),
             (MINIMAL.to_string() + "[export]\nformats = [\"fbx\"]\n", "unknown variant `fbx`"),
+            (MINIMAL.to_string() + "[export]\nweights = \"positive\"\n", "unknown variant `positive`"),
+            (MINIMAL.to_string() + "[export]\ngltf_interpolation = \"step\"\n", "unknown variant `step`"),
         ];
         for (text, expect) in cases {
             let e = Scene::parse(&text).unwrap_err().to_string();
