@@ -91,7 +91,7 @@ pub fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point
         Selection::None => vec![false; n],
         Selection::File { file, invert } => {
             let path = scene.resolve(file);
-            let mut mask = read_selection_file(&path, n)?;
+            let mut mask = mesh::selection::read(&path, n)?;
             if *invert {
                 mask.iter_mut().for_each(|m| *m = !*m);
             }
@@ -115,58 +115,6 @@ pub fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point
             mask
         }
     })
-}
-
-/// A `.dmat` column of 0/1 flags (libigl ASCII: `cols rows` then values), or a text file of
-/// 0-based vertex indices, one per line (`#` starts a comment).
-fn read_selection_file(path: &Path, n: usize) -> Result<Vec<bool>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the vertex selection"))?;
-    let is_dmat = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("dmat"));
-    let mut mask = vec![false; n];
-    if is_dmat {
-        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
-        let header = lines.next().map(|(_, l)| l.split_whitespace().map(str::parse::<usize>).collect::<Vec<_>>());
-        match header.as_deref() {
-            Some([Ok(1), Ok(rows)]) if *rows == n => {}
-            Some([Ok(cols), Ok(rows)]) => {
-                return Err(Error::in_file(
-                    path,
-                    format!("is a {rows}x{cols} matrix but the mesh has {n} vertices"),
-                    format!("give one 0/1 value per vertex: a header \"1 {n}\" and {n} values"),
-                ))
-            }
-            _ => return Err(Error::in_file(path, "has no \"cols rows\" header", "write libigl's ASCII .dmat: \"1 N\", then one value per line")),
-        }
-        let values: Vec<(usize, &str)> = lines.map(|(i, l)| (i, l.trim())).collect();
-        if values.len() != n {
-            return Err(Error::in_file(path, format!("has {} values for {n} vertices", values.len()), "give one value per vertex"));
-        }
-        for (v, (line, value)) in values.iter().enumerate() {
-            let x: f64 = value.parse().map_err(|_| {
-                Error::in_file(path, format!("line {}: {value:?} is not a number", line + 1), "write 0 or 1 per vertex")
-            })?;
-            mask[v] = x != 0.0;
-        }
-    } else {
-        for (i, line) in text.lines().enumerate() {
-            let content = line.split('#').next().unwrap_or("").trim();
-            if content.is_empty() {
-                continue;
-            }
-            let index: usize = content.parse().map_err(|_| {
-                Error::in_file(path, format!("line {}: {content:?} is not a vertex index", i + 1), "write one 0-based vertex index per line")
-            })?;
-            if index >= n {
-                return Err(Error::in_file(
-                    path,
-                    format!("line {}: vertex {index} does not exist (the mesh has {n} vertices, indexed from 0)", i + 1),
-                    "use indices of the keyframe mesh this scene reads",
-                ));
-            }
-            mask[index] = true;
-        }
-    }
-    Ok(mask)
 }
 
 /// Read and check the keyframes of a scene.

@@ -18,7 +18,11 @@ pub mod cache;
 pub mod embed;
 pub mod error;
 pub mod export;
+#[cfg(test)]
+mod fuzz;
 pub mod import;
+pub mod input;
+pub mod interrupt;
 pub mod mesh;
 pub mod output;
 pub mod physics;

@@ -1,7 +1,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use blendsim::output::Staging;
+use blendsim::interrupt;
+use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
 use blendsim::{embed, export, import, report, solve, tetrahedralize, Result};
@@ -12,7 +13,8 @@ use super::solve::MethodArg;
 ///
 /// Writes NAME.usda / NAME.glb (and the other formats of [export]), their full-frame
 /// versions NAME.full.EXT, report.json and report.md into --out. Nothing is written unless
-/// the whole bake succeeds.
+/// the whole bake succeeds; the folder is then replaced in one step, keeping files that are
+/// not blendsim's and removing those an earlier bake wrote that this one does not.
 #[derive(clap::Args)]
 pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
@@ -23,6 +25,15 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
+    /// Fail at once if another blendsim is writing into --out (by default: wait for it).
+    #[arg(long)]
+    no_wait: bool,
+}
+
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.scene
+    }
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
@@ -32,13 +43,16 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
         scene.scene.solver.method = m.into();
     }
     // Check the output location before the work, not after.
-    let mut staging = Staging::new(&args.out)?;
+    let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let keys = import::import(&scene)?;
     let body = tetrahedralize::tetrahedralize(&keys, progress)?;
+    interrupt::pause_point("solve", "");
     let solution = solve::solve(&body, progress)?;
     let animation = embed::embed(&solution)?;
+    staging.set_group(&format!("export:{}", animation.scene.name));
     let outputs = export::export(&animation, &mut staging)?;
     let r = report::report(&animation, &outputs);
+    staging.set_group("report");
     staging.write("report.json", &r.to_json())?;
     staging.write("report.md", r.to_markdown().as_bytes())?;
     staging.commit()?;

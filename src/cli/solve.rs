@@ -36,6 +36,12 @@ impl From<MethodArg> for Method {
     }
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.body
+    }
+}
+
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let mut body: Body = stage::read(&args.body)?;
     if let Some(m) = args.method {

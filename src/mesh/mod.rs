@@ -8,6 +8,7 @@
 
 pub mod medit;
 pub mod obj;
+pub mod selection;
 pub mod surface;
 pub mod tetgen_io;
 
