@@ -17,11 +17,12 @@ USD_CORE := usd-core==26.11
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium bench batch clean
+.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium bench batch clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers)"
+	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
 	@echo "make test-deps / build / clean"
@@ -73,6 +74,13 @@ demo: build deps-tetgen deps-usd
 test: test-deps
 	@echo "==> running the test suite (release build)"
 	$(CARGO) test --release --locked
+
+# The readers' property tests (src/fuzz.rs) run 10,000 cases per property in `make test`;
+# this runs many more (random bytes and mutations of valid files, with shrinking).
+FUZZ_CASES ?= 1000000
+fuzz:
+	@echo "==> fuzzing the OBJ, MEDIT, TetGen, selection and scene readers ($(FUZZ_CASES) cases per property)"
+	PROPTEST_CASES=$(FUZZ_CASES) $(CARGO) test --release --locked --lib fuzz -- --nocapture
 
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"

@@ -92,15 +92,26 @@ where
     let config = Config { cases: cases(), failure_persistence: None, max_shrink_iters: 2000, ..Config::default() };
     let started = Instant::now();
     PARSED.with(|p| p.set((0, 0)));
+    WORST.with(|w| w.set(0.0));
     TestRunner::new(config).run(&strategy, property).unwrap_or_else(|e| panic!("{name}: {e}"));
     let (ok, all) = PARSED.with(std::cell::Cell::get);
-    eprintln!("fuzz {name}: {} cases, {ok} of {all} parses accepted, in {:.2} s", cases(), started.elapsed().as_secs_f64());
+    let worst = match WORST.with(std::cell::Cell::get) {
+        0.0 => "no input of 1 KB or more".to_string(),
+        w => format!("peak allocation up to {w:.1} bytes per input byte over inputs of 1 KB or more"),
+    };
+    eprintln!(
+        "fuzz {name}: {} cases, {ok} of {all} parses accepted, {worst}, in {:.2} s",
+        cases(),
+        started.elapsed().as_secs_f64()
+    );
 }
 
 thread_local! {
     /// Parses accepted and parses run by the current property (so a run shows it reached both
     /// the error paths and the invariants of accepted inputs).
     static PARSED: std::cell::Cell<(usize, usize)> = const { std::cell::Cell::new((0, 0)) };
+    /// The largest peak allocation per input byte seen by the current property.
+    static WORST: std::cell::Cell<f64> = const { std::cell::Cell::new(0.0) };
 }
 
 /// Parse `text` with `parse`, checking time, allocation and the shape of an error.
@@ -111,6 +122,9 @@ fn bounded<T>(text: &str, parse: impl FnOnce(&str) -> Result<T>) -> Result<Resul
     prop_assert!(elapsed < Duration::from_secs_f64(MAX_SECONDS), "a parse of {} bytes took {elapsed:?}", text.len());
     let bound = ALLOC_PER_BYTE * text.len() + ALLOC_SLACK;
     prop_assert!(peak <= bound, "a parse of {} bytes allocated {peak} bytes at once (bound {bound})", text.len());
+    if text.len() >= 1024 {
+        WORST.with(|w| w.set(w.get().max(peak as f64 / text.len() as f64)));
+    }
     if let Err(e) = &result {
         check_message(e)?;
     }
@@ -297,6 +311,70 @@ fn selection_readers() {
 fn scene_reader() {
     fuzz("scene random", random_text(), check_scene);
     fuzz("scene mutated", mutated(SCENE), check_scene);
+}
+
+/// Large valid files (about a megabyte each): the peak allocation of a parse stays a small
+/// multiple of the file's size, far inside the bound the fuzzing checks.
+#[test]
+fn allocation_is_proportional_to_the_input() {
+    let n = 30;
+    let id = |i: usize, j: usize, k: usize| (i * (n + 1) + j) * (n + 1) + k;
+    let mut points = Vec::new();
+    for i in 0..=n {
+        for j in 0..=n {
+            for k in 0..=n {
+                points.push([i as f64 / n as f64, j as f64 / n as f64 + 1e-3 * i as f64, k as f64 / n as f64]);
+            }
+        }
+    }
+    // Kuhn's six tets per cell: the paths from corner 000 to 111 along the axes.
+    let mut tets = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                for perm in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+                    let mut c = [i, j, k];
+                    let mut tet = vec![id(c[0], c[1], c[2])];
+                    for axis in perm {
+                        c[axis] += 1;
+                        tet.push(id(c[0], c[1], c[2]));
+                    }
+                    tets.push(tet);
+                }
+            }
+        }
+    }
+    let mut medit_text = format!("MeshVersionFormatted 1\nDimension 3\nVertices {}\n", points.len());
+    points.iter().for_each(|p| medit_text += &format!("{} {} {} 0\n", p[0], p[1], p[2]));
+    medit_text += &format!("Tetrahedra {}\n", tets.len());
+    tets.iter().for_each(|t| medit_text += &format!("{} {} {} {} 0\n", t[0] + 1, t[1] + 1, t[2] + 1, t[3] + 1));
+    let mut node = format!("{} 3 0 0\n", points.len());
+    points.iter().enumerate().for_each(|(i, p)| node += &format!("{i} {} {} {}\n", p[0], p[1], p[2]));
+    let mut ele = format!("{} 4 0\n", tets.len());
+    tets.iter().enumerate().for_each(|(i, t)| ele += &format!("{i} {} {} {} {}\n", t[0], t[1], t[2], t[3]));
+    let obj_text = obj::write(&crate::procedural::prism([1.0; 3], [60, 60, 60]));
+    let v = points.len();
+    let dmat = format!("1 {v}\n{}", "1\n0\n".repeat(v / 2) + if v % 2 == 1 { "1\n" } else { "" });
+    let indices: String = (0..v).step_by(3).map(|i| format!("{i}\n")).collect();
+    let meshes = vec!["\"k.obj\""; 20_000].join(", ");
+    let times: Vec<String> = (0..20_000).map(|t| format!("{t}.0")).collect();
+    let scene = format!("name = \"big\"\n[keyframes]\nmeshes = [{meshes}]\ntimes = [{}]\n", times.join(", "));
+    let mut rows = Vec::new();
+    let mut measure = |what: &str, text: &str, parse: &dyn Fn(&str) -> bool| {
+        let (ok, peak) = meter::peak(|| parse(text));
+        assert!(ok, "{what} parses");
+        let ratio = peak as f64 / text.len() as f64;
+        assert!(ratio < ALLOC_PER_BYTE as f64, "{what}: {ratio:.1} bytes per input byte");
+        rows.push(format!("{what}: {} bytes, peak {peak} bytes ({ratio:.1} per input byte)", text.len()));
+    };
+    measure("OBJ", &obj_text, &|t| obj::parse(t).is_ok());
+    measure("MEDIT", &medit_text, &|t| medit::parse(t).is_ok());
+    measure(".node", &node, &|t| tetgen_io::parse_node(t).is_ok());
+    measure(".ele", &ele, &|t| tetgen_io::parse_ele(t, 0, v).is_ok());
+    measure(".dmat", &dmat, &|t| selection::parse_dmat(t, v).is_ok());
+    measure(".txt", &indices, &|t| selection::parse_indices(t, v).is_ok());
+    measure("scene", &scene, &|t| Scene::parse(t).is_ok());
+    eprintln!("{}", rows.join("\n"));
 }
 
 /// The seeds are valid, so the mutations start from files that parse.

@@ -73,6 +73,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         return Err(Error::in_file(dir, "output folder does not exist", "create the folder first, or choose another output path"));
     }
     let name = path.file_name().ok_or_else(|| Error::in_file(path, "is not a file path", "give a file name"))?;
+    // The rename would replace a device, FIFO or folder (e.g. `-o /dev/null`) with a file.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(Error::in_file(path, "exists and is not a regular file, so it cannot be replaced by the output", "give the path of a file to write"));
+    }
     let prefix = format!(".{}.tmp-", name.to_string_lossy());
     remove_dead_temporaries(dir, &prefix);
     let tmp = dir.join(format!("{prefix}{}", unique_suffix()));
@@ -689,6 +693,10 @@ mod tests {
         std::fs::write(d.join(".a.txt.tmp-999999999-0"), b"x").unwrap();
         write_atomic(&f, b"three").unwrap();
         assert_eq!(listing(&d), ["a.txt"]);
+        let e = write_atomic(Path::new("/dev/null"), b"x").unwrap_err().to_string();
+        assert!(e.contains("/dev/null: exists and is not a regular file"), "{e}");
+        std::fs::create_dir(d.join("sub")).unwrap();
+        assert!(write_atomic(&d.join("sub"), b"x").is_err());
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -690,3 +690,35 @@ fn byte_order_marks_are_accepted_everywhere() {
     std::fs::write(tets.join("scene.toml"), bom(scene(&["k0.mesh", "k0.mesh"], "", "[export]\nformats = [\"glb\"]"))).unwrap();
     run(&dir.path, &["bake", "tets/scene.toml", "--out", "out2", "-q"]).success();
 }
+
+/// Errors found after a stage file was read (by the solver, the export's checks) once named
+/// no file; they name the stage file the subcommand was given.
+#[test]
+fn errors_found_after_reading_a_stage_file_name_it() {
+    let dir = TempDir::new("errors-after-stage");
+    stage_files(&dir.path);
+    let edit = |file: &str, to: &str, change: &dyn Fn(&mut serde_json::Value)| {
+        let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(file)).unwrap()).unwrap();
+        change(&mut v);
+        std::fs::write(dir.join(to), serde_json::to_vec(&v).unwrap()).unwrap();
+    };
+    edit("body.json", "free.json", &|v| {
+        v["data"]["scene"]["solver"]["regularization"] = 0.0.into();
+        let keys = v["data"]["keys"]["fixed"].as_array().unwrap().len();
+        v["data"]["keys"]["fixed"] = serde_json::json!(vec![Vec::<u32>::new(); keys]);
+    });
+    edit("animation.json", "broken.json", &|v| v["data"]["mesh"]["triangles"][0] = serde_json::json!([0, 1, 100000]));
+    let before = tree(&dir.path);
+    let cases: [(&[&str], &str, &str); 2] = [
+        (&["solve", "free.json", "-o", "new.json"], "free.json", "the spacetime system is singular"),
+        (&["export", "broken.json", "--out", "new"], "broken.json", "cannot export: the animation mesh triangle 0 uses a vertex index beyond"),
+    ];
+    for (args, file, problem) in cases {
+        let r = run(&dir.path, args);
+        assert_eq!(r.code, Some(1), "{args:?}:\n{r}");
+        assert_one_line_error(&r);
+        assert_names(&r, file);
+        assert_says(&r, problem);
+        assert_eq!(tree(&dir.path), before, "{args:?} left files behind:\n{r}");
+    }
+}

@@ -193,8 +193,7 @@ fn interrupt(signal: i32, phase: &Phase) -> String {
     assert_eq!(state, expected, "{} at {}", signal_name(signal), phase.hook);
     let out = case.join("out");
     let leftovers: Vec<String> = names(&out).into_iter().filter(|n| n != "box").collect();
-    let leftover_note;
-    if signal == libc::SIGKILL {
+    let leftover_note = if signal == libc::SIGKILL {
         // The killed run left its staging folder (and lock) for the next run to find.
         assert!(!leftovers.is_empty(), "a SIGKILL leaves what the next run must clean: {leftovers:?}");
         if state == State::MovedAside {
@@ -208,12 +207,12 @@ fn interrupt(signal: i32, phase: &Phase) -> String {
         let r = run_env(&case.path, &["bake", "in/new.toml", "--out", "out/box", "-q"], &[("TMPDIR", tmp.as_os_str())]).success();
         assert!(r.stderr.is_empty(), "{r}");
         assert_eq!(normalized(&folder), f.new, "the next bake completes");
-        leftover_note = format!("{} left; removed by the next bake", leftovers.join(" "));
+        format!("{} left; removed by the next bake", leftovers.join(" "))
     } else {
         assert!(leftovers.is_empty(), "{} at {} left {leftovers:?}", signal_name(signal), phase.hook);
         assert!(run.stderr.ends_with(&format!("blendsim: stopped by {}; unfinished files were removed\n", signal_name(signal))), "{run}");
-        leftover_note = "none".into();
-    }
+        "none".to_string()
+    };
     assert_eq!(names(&out), ["box".to_string()].into(), "nothing beside the output folder");
     assert!(names(&tmp).is_empty(), "TetGen's work folder is gone: {:?}", names(&tmp));
     assert_eq!(inodes(&folder), foreign, "the user's files are the same files");
