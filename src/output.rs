@@ -81,9 +81,18 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     remove_dead_temporaries(dir, &prefix);
     let tmp = dir.join(format!("{prefix}{}", unique_suffix()));
     let token = interrupt::register_file(tmp.clone());
-    let result = std::fs::write(&tmp, bytes)
+    // Locked while written, so a run in another PID namespace never takes it for a leftover.
+    let result = File::create(&tmp)
+        .and_then(|mut f| {
+            let _ = f.lock();
+            f.write_all(bytes).map(|_| f)
+        })
         .map_err(|e| Error::io(&tmp, &e, "write a temporary output file"))
-        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, &e, "move the finished file into place")));
+        .and_then(|f| {
+            let moved = std::fs::rename(&tmp, path).map_err(|e| Error::io(path, &e, "move the finished file into place"));
+            drop(f);
+            moved
+        });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
@@ -91,13 +100,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     result
 }
 
-/// Temporaries `PREFIX{pid}-{n}` in `dir` whose process is gone (killed mid-write).
+/// Temporaries `PREFIX{pid}-{n}` in `dir` whose process is gone (killed mid-write) and whose
+/// lock nobody holds.
 fn remove_dead_temporaries(dir: &Path, prefix: &str) {
     let Ok(entries) = std::fs::read_dir(dir) else { return };
     for entry in entries.flatten() {
         let name = entry.file_name();
         let Some(pid) = name.to_str().and_then(|n| n.strip_prefix(prefix)).and_then(pid_of) else { continue };
-        if pid != std::process::id() && !interrupt::process_alive(pid) {
+        let unlocked = || File::open(entry.path()).is_ok_and(|f| f.try_lock().is_ok());
+        if pid != std::process::id() && !interrupt::process_alive(pid) && unlocked() {
             let _ = std::fs::remove_file(entry.path());
         }
     }
@@ -474,6 +485,13 @@ impl Staging {
             match exchange_dirs(&self.dir, &self.folder) {
                 Ok(()) => return Ok(None),
                 Err(e) if exchange_unsupported(&e) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::CrossesDevices || e.kind() == std::io::ErrorKind::ResourceBusy => {
+                    return Err(Error::in_file(
+                        &self.target,
+                        format!("cannot be replaced as a whole ({e}): it is a mount point or on another file system than its parent"),
+                        "bake into a folder inside it, e.g. --out DIR/NAME",
+                    ))
+                }
                 Err(e) => return Err(Error::io(&self.target, &e, "swap the finished outputs into place")),
             }
         }

@@ -354,10 +354,13 @@ fn run(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, source: &
 }
 
 /// A fresh folder only this run uses (so no stray `surface.poly` is picked up), removed
-/// with everything in it when dropped or when the run is interrupted. Creating one also
-/// removes the work folders of runs that were killed (their process is gone).
+/// with everything in it when dropped or when the run is interrupted. It is flocked while in
+/// use; creating one removes the work folders of runs that were killed (their process is gone
+/// and nobody holds their lock: the lock also protects a run in another PID namespace sharing
+/// the temporary folder).
 struct WorkDir {
     path: PathBuf,
+    _lock: Option<std::fs::File>,
     _token: crate::interrupt::Token,
 }
 
@@ -374,7 +377,8 @@ impl WorkDir {
             match builder.create(&path) {
                 Ok(()) => {
                     let token = crate::interrupt::register_tree(path.clone());
-                    return Ok(WorkDir { path, _token: token });
+                    let lock = std::fs::File::open(&path).ok().filter(|f| f.lock().is_ok());
+                    return Ok(WorkDir { path, _lock: lock, _token: token });
                 }
                 // Left behind by an earlier process with the same id: take the next name.
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
@@ -384,7 +388,8 @@ impl WorkDir {
     }
 }
 
-/// `blendsim-tetgen-PID-N` folders of ours in the temporary folder whose process is gone.
+/// `blendsim-tetgen-PID-N` folders of our user in the temporary folder whose process is gone
+/// and whose lock nobody holds.
 fn remove_dead_work_dirs() {
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
     for entry in entries.flatten() {
@@ -401,7 +406,8 @@ fn remove_dead_work_dirs() {
                 continue;
             }
         }
-        if pid != std::process::id() && !crate::interrupt::process_alive(pid) {
+        let unlocked = || std::fs::File::open(entry.path()).is_ok_and(|f| f.try_lock().is_ok());
+        if pid != std::process::id() && !crate::interrupt::process_alive(pid) && unlocked() {
             let _ = std::fs::remove_dir_all(entry.path());
         }
     }
