@@ -17,7 +17,11 @@ pub fn read_bytes(path: &Path, what: &str) -> Result<Vec<u8>> {
     let mut file = options.open(path).map_err(|e| Error::io(path, &e, &format!("read {what}")))?;
     let meta = file.metadata().map_err(|e| Error::io(path, &e, &format!("read {what}")))?;
     if !meta.is_file() {
-        return Err(Error::in_file(path, format!("is {}, not a regular file, so it cannot be read as {what}", kind(&meta)), "give the path of the file itself"));
+        return Err(Error::in_file(
+            path,
+            format!("is {}, not a regular file, so it cannot be read as {what}", kind(&meta)),
+            "give the path of the file itself",
+        ));
     }
     let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0).min(1 << 30));
     file.read_to_end(&mut bytes).map_err(|e| Error::io(path, &e, &format!("read {what}")))?;

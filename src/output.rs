@@ -75,7 +75,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let name = path.file_name().ok_or_else(|| Error::in_file(path, "is not a file path", "give a file name"))?;
     // The rename would replace a device, FIFO or folder (e.g. `-o /dev/null`) with a file.
     if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-        return Err(Error::in_file(path, "exists and is not a regular file, so it cannot be replaced by the output", "give the path of a file to write"));
+        return Err(Error::in_file(
+            path,
+            "exists and is not a regular file, so it cannot be replaced by the output",
+            "give the path of a file to write",
+        ));
     }
     let prefix = format!(".{}.tmp-", name.to_string_lossy());
     remove_dead_temporaries(dir, &prefix);
@@ -240,7 +244,11 @@ impl Staging {
     pub fn open(target: &Path, wait: LockWait) -> Result<Staging> {
         let folder = resolve(target)?;
         let (Some(parent), Some(name)) = (folder.parent(), folder.file_name().and_then(|n| n.to_str())) else {
-            return Err(Error::in_file(target, "cannot be an output folder (it has no parent folder or no UTF-8 name)", "choose a folder such as build/NAME"));
+            return Err(Error::in_file(
+                target,
+                "cannot be an output folder (it has no parent folder or no UTF-8 name)",
+                "choose a folder such as build/NAME",
+            ));
         };
         let (parent, name) = (parent.to_path_buf(), name.to_string());
         if let Ok(cwd) = std::env::current_dir().and_then(|d| d.canonicalize()) {
@@ -447,7 +455,11 @@ impl Staging {
         }
         interrupt::pause_point("commit-staged", "");
         if let Some(signal) = interrupt::requested() {
-            return Err(Error::in_file(&self.target, format!("the run was stopped by signal {signal} before its outputs were committed"), "run it again"));
+            return Err(Error::in_file(
+                &self.target,
+                format!("the run was stopped by signal {signal} before its outputs were committed"),
+                "run it again",
+            ));
         }
         std::fs::remove_file(self.dir.join(MARKER)).map_err(|e| Error::io(&self.dir, &e, "finish the staging folder"))?;
         sync_dir(&self.dir);
@@ -470,7 +482,10 @@ impl Staging {
                 Ok(()) => {
                     let _ = std::fs::remove_dir_all(&old);
                 }
-                Err(e) => eprintln!("blendsim: warning: {e}; the previous bake stays in {} until the next run", crate::error::printable(&old.display().to_string())),
+                Err(e) => {
+                    let old = crate::error::printable(&old.display().to_string());
+                    eprintln!("blendsim: warning: {e}; the previous bake stays in {old} until the next run")
+                }
             }
         }
         Ok(())

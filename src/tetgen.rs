@@ -394,14 +394,15 @@ fn remove_dead_work_dirs() {
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
     for entry in entries.flatten() {
         let name = entry.file_name();
-        let Some(pid) = name.to_str().and_then(|n| n.strip_prefix("blendsim-tetgen-")).and_then(|r| r.split_once('-')).and_then(|(p, _)| p.parse::<u32>().ok()) else {
-            continue;
-        };
+        let pid = name.to_str().and_then(|n| n.strip_prefix("blendsim-tetgen-")).and_then(|r| r.split_once('-'));
+        let Some(pid) = pid.and_then(|(p, _)| p.parse::<u32>().ok()) else { continue };
         #[cfg(unix)]
         {
             // Only our own user's folders (a shared /tmp holds other users' too).
             use std::os::unix::fs::MetadataExt;
-            let mine = entry.metadata().is_ok_and(|m| m.uid() == unsafe { libc::getuid() });
+            // SAFETY: getuid cannot fail and touches no memory.
+            let uid = unsafe { libc::getuid() };
+            let mine = entry.metadata().is_ok_and(|m| m.uid() == uid);
             if !mine {
                 continue;
             }
