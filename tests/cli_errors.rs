@@ -6,6 +6,9 @@
 //! folder (the child's TMPDIR is a folder of the test's own, which must stay empty). Usage
 //! errors exit 2. Each case builds its inputs in a fresh folder; meshes come from
 //! `blendsim::procedural` and `blendsim::mesh::obj::write`, or are written out by hand.
+//! `corpus_of_bad_inputs` runs a table of bad inputs of every family twice, into a fresh
+//! place and over a good bake (which must stay byte-identical), and prints the table of
+//! messages with `--nocapture`.
 
 mod common;
 
