@@ -23,11 +23,12 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch clean
+.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
+	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
@@ -97,6 +98,14 @@ demo: build deps-tetgen deps-usd
 test: test-deps
 	@echo "==> running the test suite (release build)"
 	$(CARGO) test --release --locked
+
+# The readers' property tests (src/fuzz.rs) run 10,000 cases per property in `make test`;
+# this runs many more (random bytes and mutations of valid files, with shrinking). The filter
+# also runs the vertex-cache readers' properties (src/cache/fuzz.rs, a fixed 3,000 cases).
+FUZZ_CASES ?= 1000000
+fuzz:
+	@echo "==> fuzzing the OBJ, MEDIT, TetGen, selection and scene readers ($(FUZZ_CASES) cases per property)"
+	PROPTEST_CASES=$(FUZZ_CASES) $(CARGO) test --release --locked --lib fuzz -- --nocapture
 
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"

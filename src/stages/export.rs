@@ -1,10 +1,14 @@
 //! The `export` stage: the animation's blendshape and full-frame files.
 //!
-//! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights` names)
-//! and the `FullFrame` (one pose per frame) from the animation, and stage, for each format in `scene.export.formats`,
-//! `NAME.EXT` (blendshapes) and, when `full_frame`, `NAME.full.EXT` (full-frame). `usdc` is
-//! converted from the staged `.usda` by usd-core. Returns the list of staged files with their
-//! sizes. The layouts are specified in `formats/usd.md` and `formats/gltf.md`.
+//! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights`
+//! names) and the `FullFrame` (one pose per frame) from the animation, and stage, for each
+//! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
+//! `NAME.full.EXT` (full-frame). `usdc` is converted from the staged `.usda` by usd-core.
+//! Returns the list of staged files with their sizes. The files (and whatever the caller
+//! stages after them, e.g. `NAME.outputs.json`) are in the staging group `export:NAME`: a
+//! commit removes the files an earlier export of the same scene wrote that this one did not,
+//! and keeps the report and other scenes' files. The layouts are specified in
+//! `formats/usd.md` and `formats/gltf.md`.
 
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
@@ -20,6 +24,7 @@ use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     check(animation)?;
     let scene = &animation.scene;
+    staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
     let triangles = &animation.mesh.triangles;
     let mut formats = scene.export.formats.clone();

@@ -90,10 +90,11 @@ fn export_to(anim: &Animation, dir: &Path) -> Outputs {
 fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let dir = scratch(&anim.scene.name).join("out");
     let outputs = export_to(anim, &dir);
-    let listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
+    let mut listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
+    listed.insert(blendsim::output::MANIFEST.to_string());
     let on_disk: BTreeSet<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    assert_eq!(listed, on_disk, "the folder holds exactly the listed files");
+    assert_eq!(listed, on_disk, "the folder holds exactly the listed files and the manifest");
     crate::common::verify::check_outputs(&dir, anim, &outputs.files);
     (dir, outputs)
 }

@@ -10,6 +10,8 @@ mod common;
 mod blender;
 mod cache_fit;
 mod cli_errors;
+mod cli_interrupt;
+mod cli_output;
 mod cli_physics;
 mod cli_stages;
 mod export_formats;
