@@ -8,7 +8,9 @@
 //!
 //! Bytes: "f32" columns count the raw numbers a file must hold (blendshapes: base + sparse
 //! targets as index + offset + f32 Hermite weight keys; full frame: every vertex of every frame;
-//! PCA: mean + basis + per-frame weights), the glb/usda columns are our exporters' files.
+//! PCA: mean + basis + per-frame weights), the glb/usda columns are our exporters' files. The
+//! blendshapes are in the signed form (`[export] weights = "signed"`), whose weights are signed
+//! like PCA's; the default Bernstein form costs one more shape per key with a velocity.
 //! "passes" is frames read by the selection over the frame count; "held frames" the most
 //! frames it held in memory at once.
 //!
@@ -31,11 +33,11 @@ use blendsim::cache::deviation::{cache_diagonal, deviation};
 use blendsim::cache::fit::{fit, FitSettings};
 use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
+use blendsim::clip::{BlendShapeClip, Weights};
 use blendsim::mesh::obj;
 use blendsim::output::Staging;
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
-use blendsim::clip::BlendShapeClip;
 use blendsim::internals::{glb, usda, FullFrame, Placement, UsdSettings};
 
 const TOLERANCE: f64 = 0.005;
@@ -115,7 +117,7 @@ fn run(name: &str, cache: &BarCache) {
     }
     let auto = auto.unwrap();
     let diagonal = cache_diagonal(&mut frames).unwrap();
-    let clip = BlendShapeClip::from_trajectory(&auto.trajectory);
+    let clip = BlendShapeClip::new(&auto.trajectory, Weights::Signed);
     let triangles = &cache.surface.triangles;
     let placement = Placement { z_up: false, meters_per_unit: 1.0 };
     let usd = UsdSettings { name: name.replace(' ', "_"), fps: cache.settings.fps, up_axis: 'Y', meters_per_unit: 1.0 };
@@ -203,15 +205,15 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// One bake of the cache through the library's chain (as `blendsim bake`): seconds, keys,
 /// blendshape glb and usda bytes, max error against the cache.
-fn bake(dir: &Path, method: &str) -> (f64, usize, u64, u64, f64) {
+fn bake(dir: &Path, method: &str, weights: &str) -> (f64, usize, u64, u64, f64) {
     let physics = if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n[solver]\nmax_iterations = 15\n" };
     let text = format!(
-        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = false\n",
+        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = false\nweights = \"{weights}\"\n",
         if method == "fit" { "[solver]\nmethod = \"fit\"\n" } else { "" }
     );
-    let scene_path = dir.join(format!("{method}.toml"));
+    let scene_path = dir.join(format!("{method}-{weights}.toml"));
     std::fs::write(&scene_path, text).unwrap();
-    let out = dir.join(format!("out-{method}"));
+    let out = dir.join(format!("out-{method}-{weights}"));
     let _ = std::fs::remove_dir_all(&out);
     let t = Instant::now();
     let scene = SceneFile::load(&scene_path).unwrap_or_else(|e| panic!("{e}"));
@@ -285,9 +287,9 @@ fn compare(name: &str, cache: &BarCache) {
         )
     };
     row("full frame (the cache as glb / usda)", "-".into(), full_glb, Some(full_usda), 0.0, None);
-    for method in ["fit", "spacetime"] {
-        let (s, keys, glb, usda, max) = bake(&dir, method);
-        row(&format!("blendsim {method}"), keys.to_string(), glb, Some(usda), max, Some(1e3 * s / frames));
+    for (method, weights) in [("fit", "bernstein"), ("fit", "signed"), ("spacetime", "bernstein")] {
+        let (s, keys, glb, usda, max) = bake(&dir, method, weights);
+        row(&format!("blendsim {method} ({weights} weights)"), keys.to_string(), glb, Some(usda), max, Some(1e3 * s / frames));
     }
     match gltfpack(&dir.join("full.glb"), cache, diagonal) {
         Some(rows) => rows.into_iter().for_each(|(label, bytes, max)| row(label, "-".into(), bytes, None, max, None)),

@@ -24,6 +24,12 @@ pub struct Args {
     cache_out: Option<PathBuf>,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.scene
+    }
+}
+
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
     if let Some(out) = &args.cache_out {

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use blendsim::output::Staging;
+use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
 use blendsim::report::batch;
 use blendsim::stage::{self, Animation, Outputs};
@@ -27,10 +27,19 @@ pub struct Args {
     /// Output folder for report.json and report.md (summary.csv and summary.md with --batch).
     #[arg(long)]
     out: PathBuf,
+    /// Fail at once if another blendsim is writing into --out (by default: wait for it).
+    #[arg(long)]
+    no_wait: bool,
+}
+
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        self.animation.as_deref().or(self.batch.first().map(PathBuf::as_path)).unwrap_or(&self.out)
+    }
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
-    let mut staging = Staging::new(&args.out)?;
+    let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
         let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;
         let (csv, md) = batch::summarize(&reports);

@@ -295,35 +295,40 @@ fn import_converts_caches_between_every_format() {
 
 /// The size targets, measured: the bar at two swing frequencies (the default 2 Hz bar, E = 10
 /// MPa, and a softer 1 Hz one, E = 2.5 MPa; both 1.2 x 0.16 x 0.16 m, 1000 kg/m³, ν = 0.3,
-/// clamped at one end, 3 s at 60 fps), baked from PC2 with `fit`, auto keys at 0.005. Prints
-/// full-frame / blendshape bytes per exported form; the 10x against the full-frame usda
-/// is NOT asserted (it is not met: about 7x at 2 Hz), only what holds.
+/// clamped at one end, 3 s at 60 fps), baked from PC2 with `fit`, auto keys at 0.005, in both
+/// blendshape forms (`[export] weights`: the default "bernstein", three shapes per key with a
+/// velocity, and "signed", two). Prints full-frame / blendshape bytes per exported form; the
+/// issue's 10x against the full-frame usda is NOT asserted (it is not met: 4.9x / 7.0x at
+/// 2 Hz), only what holds.
 #[test]
 fn size_ratios_at_two_swing_frequencies() {
     for (label, settings) in [("2 Hz", BarSettings::default()), ("1 Hz", BarSettings { young_modulus: 2.5e6, ..BarSettings::default() })] {
         let cache = bar(&settings);
-        let dir = TempDir::new(&format!("cache-ratio-{}", label.replace(' ', "")));
-        write_cache(&dir.path, &cache, "bar.pc2");
-        let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.005").replace("[\"usda\", \"glb\"]", "[\"usda\", \"usdc\", \"glb\"]");
-        std::fs::write(dir.join("scene.toml"), text).unwrap();
-        run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
-        let r = report(&dir.join("out"));
-        let c = &r["cache"];
-        assert!(c["error"]["max"].as_f64().unwrap() <= 0.005);
-        let ratio = |ext: &str| bytes_of(&r, &format!("bar.full.{ext}")) / bytes_of(&r, &format!("bar.{ext}"));
-        println!(
-            "bar {label}: {} keys / {} frames, max error {:.2e}; full-frame / blendshape: usda {:.1}x, usdc {:.1}x, glb {:.1}x; cache (pc2) / blendshape: usda {:.1}x, glb {:.1}x",
-            c["keys"].as_array().unwrap().len(),
-            c["frames"],
-            c["error"]["max"].as_f64().unwrap(),
-            ratio("usda"),
-            ratio("usdc"),
-            ratio("glb"),
-            c["ratios"]["usda"].as_f64().unwrap(),
-            c["ratios"]["glb"].as_f64().unwrap()
-        );
-        for ext in ["usda", "usdc", "glb"] {
-            assert!(ratio(ext) > 5.0, "{label} {ext}: {}", ratio(ext));
+        for (weights, lowest) in [("bernstein", 4.0), ("signed", 5.0)] {
+            let dir = TempDir::new(&format!("cache-ratio-{}-{weights}", label.replace(' ', "")));
+            write_cache(&dir.path, &cache, "bar.pc2");
+            let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.005")
+                .replace("[\"usda\", \"glb\"]", &format!("[\"usda\", \"usdc\", \"glb\"]\nweights = \"{weights}\""));
+            std::fs::write(dir.join("scene.toml"), text).unwrap();
+            run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+            let r = report(&dir.join("out"));
+            let c = &r["cache"];
+            assert!(c["error"]["max"].as_f64().unwrap() <= 0.005);
+            let ratio = |ext: &str| bytes_of(&r, &format!("bar.full.{ext}")) / bytes_of(&r, &format!("bar.{ext}"));
+            println!(
+                "bar {label}, {weights}: {} keys / {} frames, max error {:.2e}; full-frame / blendshape: usda {:.1}x, usdc {:.1}x, glb {:.1}x; cache (pc2) / blendshape: usda {:.1}x, glb {:.1}x",
+                c["keys"].as_array().unwrap().len(),
+                c["frames"],
+                c["error"]["max"].as_f64().unwrap(),
+                ratio("usda"),
+                ratio("usdc"),
+                ratio("glb"),
+                c["ratios"]["usda"].as_f64().unwrap(),
+                c["ratios"]["glb"].as_f64().unwrap()
+            );
+            for ext in ["usda", "usdc", "glb"] {
+                assert!(ratio(ext) > lowest, "{label} {weights} {ext}: {}", ratio(ext));
+            }
         }
     }
 }
