@@ -185,6 +185,12 @@ fn listed_keys_are_the_keys() {
     let dir = TempDir::new("cache-bake-listed");
     write_cache(&dir.path, &cache, "bar.mdd");
     std::fs::write(dir.join("scene.toml"), scene("bar.mdd", "rest = \"rest.obj\"\n", "fit", "keyframes = [0, 5, 13]\nstart = 2\nend = -1")).unwrap();
+    // A frame as the rest shape (the topology from the frames themselves).
+    write_cache(&dir.path, &cache, "bar.usda");
+    std::fs::write(dir.join("usd.toml"), scene("bar.usda", "rest = 4\n", "fit", "keyframes = [0, 15]")).unwrap();
+    run(&dir.path, &["bake", "usd.toml", "--out", "usd", "--quiet"]).success();
+    let r = report(&dir.join("usd"));
+    assert!(r["cache"]["fps_source"].as_str().unwrap().contains("timeCodesPerSecond"), "{}", r["cache"]);
     run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
     let r = report(&dir.join("out"));
     assert_eq!(r["cache"]["keys"], serde_json::json!([0, 5, 13]));
@@ -247,6 +253,10 @@ fn bad_caches_are_one_line_errors_and_write_nothing() {
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = 0.0"), "tolerance = 0 must be positive");
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = -0.1"), "must be positive");
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = [0, 99]"), "frame 99");
+    write_cache(&dir.path, &cache, "bar.usda");
+    bad(&dir, &scene("bar.usda", "rest = 99\n", "fit", auto), "rest = 99, but the range has 16 frames");
+    bad(&dir, &scene("bar.usda", "fps = 60\n", "fit", auto), "a USD stage carries its own rate");
+    std::fs::remove_file(dir.join("bar.usda")).unwrap();
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\nspeed = 3"), "unknown field `speed`");
     bad(&dir, &scene("bar.pc2", "fps = 60\n", "fit", auto), "rest = \"mesh.obj\"");
 }
