@@ -43,6 +43,7 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     if !args.batch.is_empty() {
         let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;
         let (csv, md) = batch::summarize(&reports);
+        staging.set_group("summary");
         staging.write("summary.csv", csv.as_bytes())?;
         staging.write("summary.md", md.as_bytes())?;
         return staging.commit();

@@ -396,7 +396,7 @@ fn batch_of_the_generated_caches() {
             }
         }
     }
-    run(&root, &["report", "--batch", bakes.to_str().unwrap(), "--out", root.to_str().unwrap()]).success();
+    run(root.parent().unwrap(), &["report", "--batch", bakes.to_str().unwrap(), "--out", root.to_str().unwrap()]).success();
     let md = std::fs::read_to_string(root.join("summary.md")).unwrap();
     println!("{md}");
     println!("written: {} and summary.csv", root.join("summary.md").display());
