@@ -155,6 +155,11 @@ impl CacheSpec {
             }
             _ => {}
         }
+        for (what, sel) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
+            if let Some(sel) = sel {
+                check_slabs(what, sel)?;
+            }
+        }
         if scene.embed.surface.is_some() {
             return invalid(
                 "[embed] surface is set, but a [cache] scene exports the cache's own mesh (its error is measured vertex by vertex)".into(),
@@ -162,6 +167,23 @@ impl CacheSpec {
             );
         }
         Ok(())
+    }
+}
+
+/// Slab bounds are numbers with `min <= max` (NaN or crossed bounds select nothing).
+fn check_slabs(what: &str, selection: &Selection) -> Result<()> {
+    match selection {
+        Selection::Slab { min, max, .. } => {
+            if min.is_some_and(f64::is_nan) || max.is_some_and(f64::is_nan) || matches!((min, max), (Some(lo), Some(hi)) if lo > hi) {
+                return invalid(
+                    format!("[cache] {what}: a slab has bounds {min:?}, {max:?}, so it selects nothing"),
+                    "give numbers with min <= max, or leave a bound out (use `invert = true` to select outside a slab)",
+                );
+            }
+            Ok(())
+        }
+        Selection::Union(items) => items.iter().try_for_each(|i| check_slabs(what, i)),
+        _ => Ok(()),
     }
 }
 
@@ -203,6 +225,7 @@ mod tests {
             (CACHE.to_string() + "keyframes = \"every\"\n", "expected \"auto\""),
             (CACHE.replace("fps = 60", "fps = 0"), "fps = 0 must be positive"),
             (CACHE.to_string() + "speed = 2\n", "unknown field `speed`"),
+            (CACHE.to_string() + "fixed = [\"all\", { axis = \"x\", min = 2.0, max = 1.0 }]\n", "[cache] fixed: a slab has bounds"),
             (CACHE.to_string() + "[embed]\nsurface = \"fine.obj\"\n", "[embed] surface is set"),
             ("name = \"k\"\n".to_string() + keys + "[solver]\nmethod = \"fit\"\n", "fits a vertex cache"),
         ];
