@@ -67,7 +67,7 @@ fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    Body { scene, mesh, keys, surface }
+    Body { scene, mesh, keys, surface, cage: None }
 }
 
 struct Measured {

@@ -2,16 +2,19 @@
 //!
 //! The fine surface is bound to the cage at rest by barycentric weights `W` (fine = `W` cage,
 //! exact at rest because the cage encloses the surface). A key pose `X` of the fine vertices
-//! gives the cage pose `C = C₀ + U` whose embedding is closest to it:
+//! gives the cage pose `C` whose embedding is closest to it, regularized by the cage's own
+//! projective-dynamics elastic energy:
 //!
 //! ```text
-//! min_U |W U - (X - X₀)|² + λ Uᵀ G U
+//! min_C |W C - X|² + μ E(C),   E(C) = ½ Σ_e w_e |G_e C - P_e(C)|²
 //! ```
 //!
-//! where `G` is the graph Laplacian of the cage's tet edges: a small smoothness term on the
-//! displacement that decides the nodes no fine vertex constrains (deep interior nodes) and
-//! keeps the system positive definite. `λ = SMOOTHNESS · tr(WᵀW) / tr(G)`, so the term is
-//! scale free and small against the data. One factorization serves every key and coordinate.
+//! by local/global iterations (projections `P_e` of the current pose, then the linear solve
+//! `(WᵀW + μ L) C = Wᵀ X + μ J p`; one factorization serves every iteration, key and
+//! coordinate). The elastic term decides the nodes no fine vertex constrains (the cage's
+//! interior) and keeps weakly constrained ones from flying off, and costs nothing for rigid
+//! motions, so rotated parts are not shrunk the way a Laplacian of the displacement would
+//! shrink them. `μ = ELASTIC · tr(WᵀW) / tr(L)` makes it scale free and small against the data.
 //!
 //! Masks: a cage node is held at a key when the fine vertices held there carry at least half
 //! of the binding weight on that node (`Σ_{v held} w_va ≥ ½ Σ_v w_va > 0`); nodes no fine vertex
@@ -25,15 +28,25 @@ use faer::Par;
 use crate::embed::Binding;
 use crate::mesh::{norm, sub, Point, TetMesh};
 use crate::physics::cholesky::Cholesky;
+use crate::physics::elastic::Elastic;
+use crate::physics::mat3::Mat3;
 use crate::physics::ordering::FillOrdering;
 
-/// Weight of the smoothness term relative to the data term (see the module documentation).
-pub const SMOOTHNESS: f64 = 1e-7;
+/// Weight of the elastic term against the data term, as a ratio of their traces (see the
+/// module documentation).
+pub const ELASTIC: f64 = 1e-2;
 
-/// The least-squares fit of cage poses to fine poses through a fixed binding.
+/// Local/global iterations per key at most; they stop earlier when no node moves by more than
+/// `1e-9` of the cage's size.
+const ITERATIONS: usize = 200;
+
+/// The fit of cage poses to fine poses through a fixed binding.
 pub struct CageFit<'a> {
     cage: &'a TetMesh,
     binding: &'a Binding,
+    elastic: &'a Elastic,
+    /// The weight of the elastic term.
+    mu: f64,
     cholesky: Cholesky,
 }
 
@@ -46,8 +59,9 @@ pub struct Reproduction {
 }
 
 impl<'a> CageFit<'a> {
-    /// Prepare the fit for `binding` (of the fine points to `cage`).
-    pub fn new(cage: &'a TetMesh, binding: &'a Binding) -> CageFit<'a> {
+    /// Prepare the fit for `binding` (of the fine points to `cage`), regularized by the cage's
+    /// elastic energy `elastic` (built on `cage`).
+    pub fn new(cage: &'a TetMesh, binding: &'a Binding, elastic: &'a Elastic) -> CageFit<'a> {
         let n = cage.positions.len();
         let mut triplets: Vec<Triplet<usize, usize, f64>> = Vec::new();
         let mut data_trace = 0.0;
@@ -63,44 +77,58 @@ impl<'a> CageFit<'a> {
                 data_trace += w[i] * w[i];
             }
         }
-        let mut edges: Vec<(u32, u32)> = cage
-            .tets
-            .iter()
-            .flat_map(|t| (0..4).flat_map(move |i| (i + 1..4).map(move |j| (t[i].min(t[j]), t[i].max(t[j])))))
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-        let lambda = SMOOTHNESS * data_trace.max(1.0) / (2.0 * edges.len().max(1) as f64);
-        for &(a, b) in &edges {
-            let (a, b) = (a as usize, b as usize);
-            triplets.push(Triplet::new(a, a, lambda));
-            triplets.push(Triplet::new(b, b, lambda));
-            triplets.push(Triplet::new(b, a, -lambda));
-        }
-        // A tiny diagonal shift keeps a cage part without any bound vertex (impossible for a
-        // cage built around the surface, but cheap to rule out) from being singular.
-        for a in 0..n {
-            triplets.push(Triplet::new(a, a, 1e-9 * lambda));
-        }
-        let lower = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).expect("valid triplets");
-        let cholesky = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq).expect("WᵀW + λG + εI is positive definite");
-        CageFit { cage, binding, cholesky }
-    }
-
-    /// The cage pose whose embedding best matches `fine` (the fine points' pose), given the
-    /// cage rest pose and the fine rest pose.
-    pub fn pose(&self, cage_rest: &[Point], fine_rest: &[Point], fine: &[Point]) -> Vec<Point> {
-        let mut rhs = vec![[0.0; 3]; self.cage.positions.len()];
-        for (v, (t, w)) in self.binding.tets.iter().zip(&self.binding.weights).enumerate() {
-            let d = sub(fine[v], fine_rest[v]);
-            for (i, &a) in self.cage.tets[*t as usize].iter().enumerate() {
-                for c in 0..3 {
-                    rhs[a as usize][c] += w[i] * d[c];
+        let l = &elastic.stiffness;
+        let elastic_trace: f64 = (0..n).map(|a| l.get(a, a)).sum();
+        let mu = ELASTIC * data_trace.max(1.0) / elastic_trace;
+        for b in 0..n {
+            for (a, v) in l.row(b) {
+                if a >= b {
+                    triplets.push(Triplet::new(a, b, mu * v));
                 }
             }
         }
-        self.cholesky.solve_rows3(&mut rhs);
-        cage_rest.iter().zip(&rhs).map(|(p, u)| [p[0] + u[0], p[1] + u[1], p[2] + u[2]]).collect()
+        let lower = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).expect("valid triplets");
+        // L is singular only for translations, which the data term (every part of a cage holds
+        // fine vertices) removes.
+        let cholesky = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq).expect("WᵀW + μL is positive definite");
+        CageFit { cage, binding, elastic, mu, cholesky }
+    }
+
+    /// The cage pose whose embedding best matches `fine` (the fine points' pose) under the
+    /// elastic regularization, by local/global iterations from the cage's rest pose; the fine
+    /// rest pose gives the cage rest pose.
+    pub fn pose(&self, fine_rest: &[Point], fine: &[Point]) -> Vec<Point> {
+        let rest = &self.cage.positions;
+        if fine == fine_rest {
+            return rest.clone();
+        }
+        let n = rest.len();
+        // Wᵀ X, fixed over the iterations.
+        let mut data = vec![[0.0; 3]; n];
+        for (v, (t, w)) in self.binding.tets.iter().zip(&self.binding.weights).enumerate() {
+            for (i, &a) in self.cage.tets[*t as usize].iter().enumerate() {
+                for c in 0..3 {
+                    data[a as usize][c] += w[i] * fine[v][c];
+                }
+            }
+        }
+        let tolerance = 1e-9 * crate::mesh::bbox_diagonal(rest);
+        let mut x = rest.clone();
+        let mut targets: Vec<Mat3> = vec![[[0.0; 3]; 3]; self.elastic.tet_count()];
+        let mut jp = vec![[0.0; 3]; n];
+        for _ in 0..ITERATIONS {
+            self.elastic.local_step(&x, &mut targets);
+            self.elastic.apply_j(&targets, &mut jp);
+            let mut rhs = faer::Mat::<f64>::from_fn(n, 3, |a, c| data[a][c] + self.mu * jp[a][c]);
+            self.cholesky.solve_in_place(rhs.as_mut());
+            let next: Vec<Point> = (0..n).map(|a| [rhs[(a, 0)], rhs[(a, 1)], rhs[(a, 2)]]).collect();
+            let moved = x.iter().zip(&next).map(|(a, b)| norm(sub(*a, *b))).fold(0.0, f64::max);
+            x = next;
+            if moved <= tolerance {
+                break;
+            }
+        }
+        x
     }
 
     /// How far the embedding of the cage poses is from the fine poses, over all keys.
@@ -120,7 +148,8 @@ impl<'a> CageFit<'a> {
 }
 
 /// The binding weight each cage node carries (`Σ_v w_va`).
-pub fn bound_weight(cage: &TetMesh, binding: &Binding) -> Vec<f64> {
+#[cfg(test)]
+fn bound_weight(cage: &TetMesh, binding: &Binding) -> Vec<f64> {
     let mut weight = vec![0.0; cage.positions.len()];
     for (t, w) in binding.tets.iter().zip(&binding.weights) {
         for (i, &a) in cage.tets[*t as usize].iter().enumerate() {
@@ -165,26 +194,41 @@ mod tests {
         points
     }
 
-    #[test]
-    fn an_affine_motion_is_reproduced_exactly() {
-        let cage = cube_mesh(3);
-        let fine = fine_points();
-        let binding = Binding::compute(&cage, &fine);
-        let fit = CageFit::new(&cage, &binding);
-        let affine = |p: Point| [1.1 * p[0] + 0.2 * p[1] + 0.3, 0.9 * p[1] - 0.1 * p[2], p[2] + 0.05 * p[0] - 1.0];
-        let moved: Vec<Point> = fine.iter().map(|&p| affine(p)).collect();
-        let pose = fit.pose(&cage.positions, &fine, &moved);
-        let r = fit.reproduction(&[pose], &[moved], 1.0);
-        assert!(r.max < 1e-7, "{r:?}");
+    fn elastic(cage: &TetMesh) -> Elastic {
+        Elastic::new(cage, &crate::physics::elastic::Material { stiffness: 70.0, volume: 70.0, density: 1.0 }).unwrap()
     }
 
     #[test]
-    fn the_rest_pose_is_the_cage_rest() {
-        let cage = cube_mesh(2);
+    fn a_rigid_motion_is_reproduced_exactly_and_moves_every_node_rigidly() {
+        let cage = cube_mesh(3);
         let fine = fine_points();
         let binding = Binding::compute(&cage, &fine);
-        let fit = CageFit::new(&cage, &binding);
-        assert_eq!(fit.pose(&cage.positions, &fine, &fine), cage.positions);
+        let el = elastic(&cage);
+        let fit = CageFit::new(&cage, &binding, &el);
+        let (s, c) = 1.3f64.sin_cos();
+        let rigid = |p: Point| [c * p[0] - s * p[2] + 0.3, p[1] - 2.0, s * p[0] + c * p[2]];
+        let moved: Vec<Point> = fine.iter().map(|&p| rigid(p)).collect();
+        let pose = fit.pose(&fine, &moved);
+        let r = fit.reproduction(std::slice::from_ref(&pose), &[moved], 1.0);
+        assert!(r.max < 1e-7, "{r:?}");
+        // Nodes no fine point constrains follow too: a rigid motion costs no elastic energy.
+        for (a, p) in cage.positions.iter().enumerate() {
+            assert!(norm(sub(pose[a], rigid(*p))) < 1e-6, "node {a}");
+        }
+    }
+
+    #[test]
+    fn a_stretch_is_reproduced_closely_and_the_rest_pose_exactly() {
+        let cage = cube_mesh(3);
+        let fine = fine_points();
+        let binding = Binding::compute(&cage, &fine);
+        let el = elastic(&cage);
+        let fit = CageFit::new(&cage, &binding, &el);
+        assert_eq!(fit.pose(&fine, &fine), cage.positions);
+        let moved: Vec<Point> = fine.iter().map(|&p| [1.2 * p[0], p[1], p[2]]).collect();
+        let pose = fit.pose(&fine, &moved);
+        let r = fit.reproduction(&[pose], &[moved], 1.0);
+        assert!(r.max < 2e-3, "{r:?}");
     }
 
     #[test]
@@ -209,3 +253,4 @@ mod tests {
         assert!(!carry_mask(&cage, &binding, &vec![false; fine.len()]).iter().any(|&m| m));
     }
 }
+

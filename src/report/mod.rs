@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Result;
 use crate::output::Staging;
 use crate::scene::Format;
-use crate::stage::{OutputFile, SolverLog};
+use crate::stage::{CageInfo, OutputFile, SolverLog};
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -92,6 +92,10 @@ pub struct Report {
     pub keyframe_deviation: Deviation,
     /// Present when the surface is closed.
     pub volume: Option<Volume>,
+    /// Present when the surface was simulated on a generated cage: why, its size, and how
+    /// closely the embedded cage keys reproduce the input keyframes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cage: Option<CageInfo>,
 }
 
 impl Report {

@@ -28,5 +28,6 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         trajectory: solution.trajectory.map_linear(carry),
         input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
         log: solution.log.clone(),
+        cage: body.cage.clone(),
     })
 }

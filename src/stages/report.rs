@@ -42,5 +42,6 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
         error,
         keyframe_deviation,
         volume,
+        cage: animation.cage.clone(),
     }
 }
