@@ -179,6 +179,10 @@ pub struct SolverLog {
     pub converged: bool,
     /// Why the iteration stopped, in words.
     pub stop_reason: String,
+    /// How the global step was solved: `direct` (sparse Cholesky) or `iterative` (conjugate
+    /// gradients, when the factor would not fit in the memory budget).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub linear_solver: String,
 }
 
 /// Output of `solve`: the body and its optimized node trajectory.
