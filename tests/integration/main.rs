@@ -8,6 +8,7 @@
 mod common;
 
 mod cache_fit;
+mod cli_budget;
 mod cli_cage;
 mod cli_errors;
 mod cli_physics;
