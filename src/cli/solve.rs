@@ -26,6 +26,12 @@ pub struct Args {
     max_memory: Option<u64>,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.body
+    }
+}
+
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let body: Body = stage::read(&args.body)?;
     stage::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)

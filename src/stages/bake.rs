@@ -43,7 +43,10 @@ impl<'a> Bake<'a> {
 
     /// ... `solve`, `embed`: the exported surface's animation.
     pub fn animation(&self) -> Result<Animation> {
-        embed(&solve_within(&self.body()?, self.method, self.max_memory, self.progress)?)
+        let body = self.body()?;
+        // The interruption tests stop here, between TetGen and the solver.
+        crate::interrupt::pause_point("solve", "");
+        embed(&solve_within(&body, self.method, self.max_memory, self.progress)?)
     }
 
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the
