@@ -139,7 +139,7 @@ pub fn voxel_cage(surface: &TriMesh, points: &[Point], target: usize) -> Result<
     let bounds = Bounds::of(&vertices).union(Bounds::of(points));
     let sides: Point = std::array::from_fn(|d| bounds.hi[d] - bounds.lo[d]);
     let longest = sides.iter().fold(0.0f64, |m, &s| m.max(s));
-    if surface.triangles.is_empty() || !(longest > 0.0) || !longest.is_finite() {
+    if surface.triangles.is_empty() || !longest.is_finite() || longest <= 0.0 {
         return Err(CageError::Empty);
     }
     let tree = TriangleTree::new(surface);

@@ -147,7 +147,7 @@ const CG_MAX_ITERATIONS: usize = 5000;
 
 /// How the global step is inverted.
 enum Inverse {
-    Direct(Cholesky),
+    Direct(Box<Cholesky>),
     Iterative(Iterative),
 }
 
@@ -412,7 +412,7 @@ impl GlobalStep {
         let (inverse, factor_nnz, ordering, linear_solver) = if predicted_bytes <= budget as f64 {
             let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
             let nnz = cholesky.factor_nnz();
-            (Inverse::Direct(cholesky), nnz, order.name, "direct")
+            (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
         } else {
             let iterative = Iterative::new(&a, &unknowns).map_err(|_| singular())?;
             let nnz = iterative.preconditioner.factor_nnz();
@@ -582,6 +582,52 @@ mod tests {
                 assert!(crate::mesh::norm(crate::mesh::sub(*x, *y)) <= 1e-7 * scale, "{x:?} vs {y:?}");
             }
         }
+    }
+
+    /// The predicted flops of the node order and the key-separator order on a cube body with
+    /// 5, 10 and 20 keys (`cargo test --release --lib key_separator_prediction -- --ignored
+    /// --nocapture`): what `fill_reducing_order` weighs.
+    #[test]
+    #[ignore]
+    fn key_separator_prediction() {
+        for n in [8, 12] {
+            let mesh = cube_mesh(n);
+            let el = Elastic::new(&mesh, &material()).unwrap();
+            for keys_count in [5, 10, 20] {
+                let times: Vec<f64> = (0..keys_count).map(|k| 0.2 * k as f64).collect();
+                let poses = vec![mesh.positions.clone(); keys_count];
+                let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
+                let k = keys(times, poses, vec![bottom; keys_count], false);
+                let s = settings();
+                let obj = objective(&el, &k, &s);
+                let unknowns = Unknowns::new(&k, el.node_count());
+                let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 1.0 / s.regularization.powi(4)));
+                let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
+                let nd = nested_dissection(&graph, &el.rest);
+                let by_keys = key_separator_order(&a, &unknowns, &nd).unwrap();
+                let chosen = fill_reducing_order(&a, &unknowns, &el.rest);
+                println!(
+                    "{} nodes, {keys_count} keys: node order {:.3e} flops, keys as separators {:.3e} ({:.2}x); chosen: {}",
+                    unknowns.nodes,
+                    by_keys.node_cost.flops,
+                    by_keys.cost.flops,
+                    by_keys.node_cost.flops / by_keys.cost.flops,
+                    chosen.name
+                );
+            }
+        }
+    }
+
+    fn node_blocks(unknowns: &Unknowns) -> Vec<u32> {
+        let mut block_of = vec![0u32; unknowns.count()];
+        for a in 0..unknowns.nodes {
+            for s in 0..unknowns.slots.count() {
+                if let Some(u) = unknowns.get(a, s) {
+                    block_of[u] = a as u32;
+                }
+            }
+        }
+        block_of
     }
 
     #[test]
