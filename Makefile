@@ -23,13 +23,14 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch batch-caches clean
+.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
+	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
 	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
@@ -113,6 +114,13 @@ bench: build deps-tetgen
 	$(CARGO) bench --locked --bench solver
 	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
 	$(CARGO) bench --locked --bench cache
+
+# Production-size bakes through the CLI (100k-vertex cage, 20 keys, CHEB-style volume);
+# peak memory by GNU time (Debian package `time`).
+bench-scale: build deps-tetgen deps-usd
+	@command -v /usr/bin/time >/dev/null 2>&1 || { echo "==> installing GNU time (apt-get)"; $(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq time; }
+	@echo "==> scale benchmark: whole bakes of production-size surfaces (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench scale
 
 # Peak memory is measured with GNU time (Debian package `time`).
 bench-cache: deps-usd

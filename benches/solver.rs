@@ -67,7 +67,7 @@ fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None }
 }
 
 struct Measured {

@@ -50,6 +50,7 @@ pub mod scene;
 pub mod stage;
 pub mod stages;
 
+mod cage;
 mod embed;
 mod error;
 mod export;

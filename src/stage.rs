@@ -120,6 +120,31 @@ pub struct KeyPoses {
     pub cyclic: bool,
 }
 
+/// A generated cage: why it was used, its size, and how well its posed keys reproduce the
+/// fine keyframes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CageInfo {
+    /// Why the surface was simulated on a cage, in words.
+    pub reason: String,
+    /// Vertices of the fine keyframe surface.
+    pub fine_vertices: usize,
+    /// Nodes on the cage's boundary.
+    pub boundary_nodes: usize,
+    /// Tet nodes of the cage.
+    pub nodes: usize,
+    /// Tets of the cage.
+    pub tets: usize,
+    /// The side of the cage's cubes, in scene units (the cage reaches at most one cube
+    /// diagonal beyond the fine surface).
+    pub spacing: f64,
+    /// The fine keyframes against their embedding on the posed cage keys, relative to the
+    /// fine rest surface's bounding-box diagonal: largest and root mean square over every
+    /// vertex of every key.
+    pub key_error_max: f64,
+    /// See `key_error_max`.
+    pub key_error_rms: f64,
+}
+
 /// Output of `tetrahedralize`: the simulation body, its keyframes, and the surface to export.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Body {
@@ -136,6 +161,9 @@ pub struct Body {
     /// The cache the keys were taken from (`[cache]` scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheRecord>,
+    /// When `mesh` is a generated cage around the keyframe surface: how it was made.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cage: Option<CageInfo>,
 }
 
 /// What the solver did.
@@ -161,6 +189,10 @@ pub struct SolverLog {
     pub converged: bool,
     /// Why the iteration stopped, in words.
     pub stop_reason: String,
+    /// How the global step was solved: `direct` (sparse Cholesky) or `iterative` (conjugate
+    /// gradients, when the factor would not fit in the memory budget).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub linear_solver: String,
 }
 
 /// Output of `solve`: the body and its optimized node trajectory.
@@ -207,6 +239,9 @@ pub struct Animation {
     /// The cache the keys were taken from (`[cache]` scenes): the report measures against it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheRecord>,
+    /// The cage the surface was simulated on, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cage: Option<CageInfo>,
 }
 
 /// The two forms of the animation in the files.

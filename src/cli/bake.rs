@@ -24,6 +24,10 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
+    /// Memory the solve's global step may use (e.g. 4G, 512M); past it the step is solved
+    /// iteratively instead of by a sparse factorization. Default: 60% of the available memory.
+    #[arg(long, value_parser = super::parse_bytes)]
+    max_memory: Option<u64>,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
@@ -40,7 +44,7 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
-    let r = stages::bake(&scene, args.method.map(Into::into), &mut staging, progress)?;
+    let r = stages::Bake::new(&scene, progress).method(args.method.map(Into::into)).max_memory(args.max_memory).files(&mut staging)?;
     staging.commit()?;
     if !quiet {
         let best = r.ratios.iter().map(|(f, x)| format!("{f} {x:.1}x")).collect::<Vec<_>>().join(", ");

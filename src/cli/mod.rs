@@ -71,6 +71,28 @@ impl From<MethodArg> for Method {
     }
 }
 
+/// A byte count as `--max-memory` takes it: a number with an optional K, M, G or T suffix
+/// (powers of 1024; `4G`, `512M`, `1500000`).
+pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let (number, unit) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => (&t[..i], c.to_ascii_uppercase()),
+        _ => (t, 'B'),
+    };
+    let scale: f64 = match unit {
+        'B' => 1.0,
+        'K' => 1024.0,
+        'M' => 1024.0 * 1024.0,
+        'G' => 1024.0 * 1024.0 * 1024.0,
+        'T' => 1024.0f64.powi(4),
+        _ => return Err(format!("unknown unit {unit:?} in {text:?}: use K, M, G or T, e.g. 4G")),
+    };
+    match number.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok((x * scale) as u64),
+        _ => Err(format!("{text:?} is not a positive amount of memory: give e.g. 4G or 512M")),
+    }
+}
+
 pub fn main() -> ExitCode {
     // Before any thread starts, so every thread inherits the blocked signals.
     blendsim::interrupt::install();

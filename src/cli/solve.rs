@@ -20,6 +20,10 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
+    /// Memory the global step may use (e.g. 4G, 512M); past it the step is solved iteratively
+    /// instead of by a sparse factorization. Default: 60% of the available memory.
+    #[arg(long, value_parser = super::parse_bytes)]
+    max_memory: Option<u64>,
 }
 
 impl Args {
@@ -30,5 +34,5 @@ impl Args {
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let body: Body = stage::read(&args.body)?;
-    stage::write(&args.output, &stages::solve(&body, args.method.map(Into::into), progress)?)
+    stage::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)
 }

@@ -11,6 +11,7 @@ pub mod equilibrium;
 pub mod lanes;
 pub mod mat3;
 pub mod ordering;
+pub mod pcg;
 pub mod projection;
 pub mod projection_curvature;
 pub mod svd3;

@@ -15,6 +15,15 @@ pub fn render(report: &Report) -> String {
     push(&mut s, "|---|---|".into());
     push(&mut s, format!("| surface | {} vertices, {} triangles |", report.vertices, report.faces));
     push(&mut s, format!("| body | {} tet nodes, {} tets |", report.tet_nodes, report.tets));
+    if let Some(c) = &report.cage {
+        push(
+            &mut s,
+            format!(
+                "| cage | {} nodes ({} on its boundary, cubes of side {:.3e}) around {} vertices, because {}; keys reproduced to max {:.2e}, rms {:.2e} of the bbox diagonal |",
+                c.nodes, c.boundary_nodes, c.spacing, c.fine_vertices, c.reason, c.key_error_max, c.key_error_rms
+            ),
+        );
+    }
     push(&mut s, format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames));
     let sv = &report.solver;
     let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Result;
 use crate::output::Staging;
 use crate::scene::Format;
-use crate::stage::{OutputFile, SolverLog};
+use crate::stage::{CageInfo, OutputFile, SolverLog};
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -97,6 +97,10 @@ pub struct Report {
     /// A cache bake: the cache, sizes against it, and the error against its frames.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<cache::CacheReport>,
+    /// Present when the surface was simulated on a generated cage: why, its size, and how
+    /// closely the embedded cage keys reproduce the input keyframes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cage: Option<CageInfo>,
 }
 
 impl Report {

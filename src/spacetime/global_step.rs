@@ -23,6 +23,12 @@
 //! solves sweep the factor once per direction for all three coordinates, on two threads
 //! ([`Cholesky::solve_rows3`]).
 //!
+//! Bounded: the factor's size and time are predicted from the symbolic count before anything
+//! is allocated ([`fill_reducing_order`]), and when the predicted peak is over the memory
+//! budget the step is solved by preconditioned conjugate gradients instead (per-key block
+//! Jacobi, warm-started from the previous solution; see [`crate::physics::pcg`]): slower per
+//! iteration, but in memory that grows like the matrix, not like its factor.
+//!
 //! The step itself is the minimizer of the quadratic model plus the proximal term around the
 //! current iterate `q`: `q + Δ` with `(H + P) Δ = -∇W`. At a fixed point `∇W = 0`, so the
 //! regularization never moves the fixed point; it only damps the path to it.
@@ -37,6 +43,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::cholesky::Cholesky;
 use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
+use crate::physics::pcg::{pcg, BlockJacobi, SymmetricRows};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -83,15 +90,74 @@ pub struct GlobalStats {
     pub ordering: &'static str,
     /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,
-    /// Ordering, symbolic analysis and numeric factorization.
+    /// Ordering, symbolic analysis and numeric factorization (or the preconditioner's).
     pub factor_seconds: f64,
+    /// The direct factor's predicted peak memory in bytes (see [`predicted_peak_bytes`]), and
+    /// its predicted factorization time.
+    pub predicted_bytes: f64,
+    /// See `predicted_bytes`.
+    pub predicted_seconds: f64,
+    /// `"direct"` (sparse Cholesky), or `"iterative"` when the predicted peak was over the
+    /// memory budget.
+    pub linear_solver: &'static str,
+}
+
+/// Bytes a direct factorization needs per stored factor entry, measured as the whole
+/// process's peak over the predicted entries (values, faer's row indices and its numeric
+/// scratch, the assembled matrix, and the rest of the solve): see [`predicted_peak_bytes`].
+pub const BYTES_PER_FACTOR_ENTRY: f64 = 12.0;
+
+/// The predicted peak memory of a direct solve with `cost`.
+pub fn predicted_peak_bytes(cost: &Cost) -> f64 {
+    BYTES_PER_FACTOR_ENTRY * cost.entries
+}
+
+/// Predicted flops per second of the numeric factorization (measured on 2 cores: 85 G flops
+/// in 1.4 s parallel, 2.3 s sequential).
+const FACTOR_FLOPS_PER_SECOND: [f64; 2] = [3.7e10, 6.0e10];
+
+/// The fraction of the machine's available memory a solve may use when no budget is given.
+pub const DEFAULT_MEMORY_FRACTION: f64 = 0.6;
+
+/// The default memory budget: [`DEFAULT_MEMORY_FRACTION`] of `MemAvailable` (Linux), or 4 GiB
+/// when that cannot be read.
+pub fn default_memory_budget() -> u64 {
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
+        let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+        Some(kb * 1024)
+    });
+    available.map_or(4 << 30, |bytes| (bytes as f64 * DEFAULT_MEMORY_FRACTION) as u64)
+}
+
+/// The iterative global step (see the module documentation).
+struct Iterative {
+    rows: SymmetricRows,
+    preconditioner: BlockJacobi,
+    /// The previous solution, the next solve's start.
+    previous: std::sync::Mutex<Option<Vec<Point>>>,
+}
+
+/// Relative residual at which a CG solve of the global step stops: far below the solver's
+/// tolerance on W, so the iterates follow the direct solve's.
+const CG_TOLERANCE: f64 = 1e-10;
+
+/// CG iterations per solve at most.
+const CG_MAX_ITERATIONS: usize = 5000;
+
+/// How the global step is inverted.
+enum Inverse {
+    Direct(Box<Cholesky>),
+    Iterative(Iterative),
 }
 
 /// The normal matrix of the free unknowns, factorized: solves the global step.
 pub struct GlobalStep {
     unknowns: Unknowns,
     /// None when there are no unknowns.
-    cholesky: Option<Cholesky>,
+    cholesky: Option<Inverse>,
+    /// The memory budget it was built under, in bytes.
+    budget: u64,
     /// Which time-slot pairs the matrix couples ([`coupling`]): the matrix pattern depends on
     /// the time coefficients only through this, so equal couplings mean equal patterns.
     coupling: Vec<(bool, bool)>,
@@ -197,8 +263,12 @@ pub struct FillReducingOrder {
 /// (best on large 3D bodies: 85 G vs 101 G flops for minimum degree on the 2.6k-node benchmark
 /// body, whose matrix faer's AMD orders to 127 G) and minimum degree (better on small or thin
 /// bodies: 0.37 G vs 0.98 G on DINO). Both and their predictions take about 60 ms on the
-/// 2.6k-node body. The winner is put in postorder of its elimination tree (same fill), which
-/// lets the solve give whole subtrees to two threads.
+/// 2.6k-node body. With many keys a third candidate is weighed on the finer graph of (node,
+/// key) blocks: the keys as the top-level separators (the middle key last, each half ordered
+/// the same way, every key's nodes in the better node order), which cuts the fill that the
+/// coupling of neighbouring keys causes once there are more than about ten keys
+/// ([`KEY_SEPARATOR_MIN_KEYS`]). The winner is put in postorder of its elimination tree (same
+/// fill), which lets the solve give whole subtrees to two threads.
 pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
@@ -224,12 +294,81 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
     } else {
         (degree, "minimum degree (nodes)", cost_md)
     };
+    let keys = slots / 2;
+    if keys >= KEY_SEPARATOR_MIN_KEYS {
+        if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
+            if by_keys.cost.flops < by_keys.node_cost.flops {
+                return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
+            }
+        }
+    }
     FillReducingOrder { perm: expand(&postorder(&graph, &order), &block_start), name, cost }
 }
 
+/// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
+/// predicted flops at 20 keys on a 1k-node body, 1.3x on 2.6k, worse at 10 keys or fewer).
+pub const KEY_SEPARATOR_MIN_KEYS: usize = 8;
+
+/// The key-separator candidate, with the node order's cost on the same (node, key) graph so
+/// that the two compare exactly.
+struct KeySeparators {
+    perm: Vec<usize>,
+    cost: Cost,
+    node_cost: Cost,
+}
+
+/// See [`fill_reducing_order`]. Blocks are (node `a`, key `k`) with id `k * nodes + a`, holding
+/// that node's free position and velocity of key `k`.
+fn key_separator_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, node_order: &[u32]) -> Option<KeySeparators> {
+    let nodes = unknowns.nodes;
+    let keys = unknowns.slots.count() / 2;
+    let mut block_of = vec![0u32; unknowns.count()];
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); nodes * keys];
+    for a in 0..nodes {
+        for s in 0..2 * keys {
+            if let Some(u) = unknowns.get(a, s) {
+                let b = (s / 2) * nodes + a;
+                block_of[u] = b as u32;
+                members[b].push(u);
+            }
+        }
+    }
+    let blocks = nodes * keys;
+    if blocks > u32::MAX as usize {
+        return None;
+    }
+    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &block_of, blocks);
+    let weights: Vec<usize> = members.iter().map(Vec::len).collect();
+    fn bisect(lo: usize, hi: usize, nodes: usize, node_order: &[u32], out: &mut Vec<u32>) {
+        if lo >= hi {
+            return;
+        }
+        let m = if hi - lo == 1 { lo } else { (lo + hi) / 2 };
+        if hi - lo > 1 {
+            bisect(lo, m, nodes, node_order, out);
+            bisect(m + 1, hi, nodes, node_order, out);
+        }
+        out.extend(node_order.iter().map(|&a| (m * nodes + a as usize) as u32));
+    }
+    let mut by_keys = Vec::with_capacity(blocks);
+    bisect(0, keys, nodes, node_order, &mut by_keys);
+    let by_nodes: Vec<u32> = node_order.iter().flat_map(|&a| (0..keys).map(move |k| (k * nodes + a as usize) as u32)).collect();
+    let (cost, node_cost) = (predicted_cost(&graph, &by_keys, &weights), predicted_cost(&graph, &by_nodes, &weights));
+    let perm = postorder(&graph, &by_keys).iter().flat_map(|&b| members[b as usize].iter().copied()).collect();
+    Some(KeySeparators { perm, cost, node_cost })
+}
+
 impl GlobalStep {
-    /// Assemble and factorize. `regularization` is the proximal time scale h (0 = off).
+    /// Assemble and factorize under the default memory budget ([`default_memory_budget`]).
+    /// `regularization` is the proximal time scale h (0 = off).
     pub fn new(objective: &Objective, unknowns: Unknowns, regularization: f64) -> Result<GlobalStep> {
+        GlobalStep::within(objective, unknowns, regularization, None)
+    }
+
+    /// Assemble, and factorize when the predicted peak fits in `max_memory` bytes (default:
+    /// [`default_memory_budget`]); otherwise prepare the iterative step.
+    pub fn within(objective: &Objective, unknowns: Unknowns, regularization: f64, max_memory: Option<u64>) -> Result<GlobalStep> {
+        let budget = max_memory.unwrap_or_else(default_memory_budget);
         let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
         if proximal == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
             // Singular by construction; a factorization may still pass on roundoff pivots.
@@ -242,31 +381,55 @@ impl GlobalStep {
         let coefficients = TimeCoefficients::new(objective, proximal);
         let dim = unknowns.count();
         if dim == 0 {
-            let stats =
-                GlobalStats { unknowns: 0, matrix_nnz: 0, factor_nnz: 0, ordering: "none", assemble_seconds: 0.0, factor_seconds: 0.0 };
-            return Ok(GlobalStep { unknowns, cholesky: None, coupling: coupling(&coefficients), stats });
+            let stats = GlobalStats {
+                unknowns: 0,
+                matrix_nnz: 0,
+                factor_nnz: 0,
+                ordering: "none",
+                assemble_seconds: 0.0,
+                factor_seconds: 0.0,
+                predicted_bytes: 0.0,
+                predicted_seconds: 0.0,
+                linear_solver: "none",
+            };
+            return Ok(GlobalStep { unknowns, cholesky: None, budget, coupling: coupling(&coefficients), stats });
         }
         let a = assemble(objective, &unknowns, &coefficients);
         let assemble_seconds = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
         // faer's parallel supernodal factorization pays off only for large fronts.
-        let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
-        let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| {
+        let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
+        let par = if parallel { Par::rayon(0) } else { Par::Seq };
+        let predicted_bytes = predicted_peak_bytes(&order.cost);
+        let predicted_seconds = order.cost.flops / FACTOR_FLOPS_PER_SECOND[parallel as usize];
+        let singular = || {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
             )
-        })?;
+        };
+        let (inverse, factor_nnz, ordering, linear_solver) = if predicted_bytes <= budget as f64 {
+            let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
+            let nnz = cholesky.factor_nnz();
+            (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
+        } else {
+            let iterative = Iterative::new(&a, &unknowns).map_err(|_| singular())?;
+            let nnz = iterative.preconditioner.factor_nnz();
+            (Inverse::Iterative(iterative), nnz, "per-key blocks (preconditioner)", "iterative")
+        };
         let stats = GlobalStats {
             unknowns: dim,
             matrix_nnz: a.compute_nnz(),
-            factor_nnz: cholesky.factor_nnz(),
-            ordering: order.name,
+            factor_nnz,
+            ordering,
             assemble_seconds,
             factor_seconds: t1.elapsed().as_secs_f64(),
+            predicted_bytes,
+            predicted_seconds,
+            linear_solver,
         };
-        Ok(GlobalStep { unknowns, cholesky: Some(cholesky), coupling: coupling(&coefficients), stats })
+        Ok(GlobalStep { unknowns, cholesky: Some(inverse), budget, coupling: coupling(&coefficients), stats })
     }
 
     /// Rebuild for new key times, `objective` holding the samples at those times: the time
@@ -277,8 +440,8 @@ impl GlobalStep {
         let t0 = std::time::Instant::now();
         let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
         let coefficients = TimeCoefficients::new(objective, proximal);
-        let Some(cholesky) = self.cholesky.as_mut().filter(|_| coupling(&coefficients) == self.coupling) else {
-            *self = GlobalStep::new(objective, self.unknowns.clone(), regularization)?;
+        let Some(Inverse::Direct(cholesky)) = self.cholesky.as_mut().filter(|_| coupling(&coefficients) == self.coupling) else {
+            *self = GlobalStep::within(objective, self.unknowns.clone(), regularization, Some(self.budget))?;
             let s = self.stats;
             return Ok(Retimed { assemble_seconds: s.assemble_seconds, factor_seconds: s.factor_seconds, reused_symbolic: false });
         };
@@ -329,8 +492,11 @@ impl GlobalStep {
 
     /// `x <- (H + P)⁻¹ x` on free entries, the three coordinates as three right-hand sides.
     pub fn apply_inverse(&self, x: &mut [Point]) {
-        let Some(chol) = &self.cholesky else { return };
-        chol.solve_rows3(x);
+        match &self.cholesky {
+            None => {}
+            Some(Inverse::Direct(chol)) => chol.solve_rows3(x),
+            Some(Inverse::Iterative(it)) => it.solve(x),
+        }
     }
 
     /// The step `Δ = -(H + P)⁻¹ ∇W` per slot (zero at fixed entries).
@@ -339,5 +505,155 @@ impl GlobalStep {
         self.apply_inverse(&mut g);
         g.iter_mut().for_each(|v| *v = crate::mesh::scale(*v, -1.0));
         self.scatter(&g)
+    }
+}
+
+impl Iterative {
+    /// The full rows of `a` and its per-key block preconditioner.
+    fn new(a: &SparseColMat<usize, f64>, unknowns: &Unknowns) -> std::result::Result<Iterative, crate::physics::cholesky::NotPositiveDefinite> {
+        let mut key_of = vec![0u32; unknowns.count()];
+        let slots = unknowns.slots.count();
+        for node in 0..unknowns.nodes {
+            for s in 0..slots {
+                if let Some(u) = unknowns.get(node, s) {
+                    key_of[u] = (s / 2) as u32;
+                }
+            }
+        }
+        let preconditioner = BlockJacobi::new(a, &key_of, slots / 2)?;
+        Ok(Iterative { rows: SymmetricRows::from_lower(a), preconditioner, previous: std::sync::Mutex::new(None) })
+    }
+
+    /// `x <- A⁻¹ x` by PCG from the previous solution.
+    fn solve(&self, x: &mut [Point]) {
+        let mut previous = self.previous.lock().expect("no panic while solving");
+        let mut solution = previous.take().unwrap_or_else(|| vec![[0.0; 3]; x.len()]);
+        pcg(&self.rows, &self.preconditioner, x, &mut solution, CG_TOLERANCE, CG_MAX_ITERATIONS);
+        x.copy_from_slice(&solution);
+        *previous = Some(solution);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::elastic::Elastic;
+    use crate::spacetime::solver::objective;
+    use crate::spacetime::tests::{keys, material, settings};
+    use crate::testing::{cube_mesh, Rng};
+
+    /// Ten keys of a bent cube, the bottom held at the first: enough keys for the
+    /// key-separator candidate.
+    fn problem() -> (Elastic, KeyConstraints) {
+        let mesh = cube_mesh(4);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let times: Vec<f64> = (0..10).map(|k| 0.2 * k as f64).collect();
+        let poses = (0..10).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * k as f64 * p[1] * p[1], p[1], p[2]]).collect()).collect();
+        let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
+        let mut fixed = vec![Vec::new(); 10];
+        fixed[0] = bottom;
+        (el, keys(times, poses, fixed, false))
+    }
+
+    use crate::spacetime::unknowns::KeyConstraints;
+
+    fn gradient(unknowns: &Unknowns) -> Vec<Vec<Point>> {
+        let mut rng = Rng(7);
+        (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect()
+    }
+
+    #[test]
+    fn the_iterative_step_over_budget_gives_the_direct_step() {
+        let (el, k) = problem();
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let direct = GlobalStep::within(&obj, unknowns.clone(), s.regularization, Some(u64::MAX)).unwrap();
+        let iterative = GlobalStep::within(&obj, unknowns.clone(), s.regularization, Some(1)).unwrap();
+        assert_eq!((direct.stats.linear_solver, iterative.stats.linear_solver), ("direct", "iterative"));
+        assert!(direct.stats.predicted_bytes > 1.0 && direct.stats.predicted_seconds > 0.0);
+        let g = gradient(&unknowns);
+        // Twice: the second solve starts from the first's solution (a different right-hand
+        // side), and must still converge to the direct answer.
+        for g in [g.clone(), g.iter().map(|v| v.iter().map(|p| [p[1], -p[0], 2.0 * p[2]]).collect()).collect()] {
+            let (a, b) = (direct.step(&g), iterative.step(&g));
+            let scale = a.iter().flatten().map(|p| crate::mesh::norm(*p)).fold(0.0, f64::max);
+            for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
+                assert!(crate::mesh::norm(crate::mesh::sub(*x, *y)) <= 1e-7 * scale, "{x:?} vs {y:?}");
+            }
+        }
+    }
+
+    /// The predicted flops of the node order and the key-separator order on a cube body with
+    /// 5, 10 and 20 keys (`cargo test --release --lib key_separator_prediction -- --ignored
+    /// --nocapture`): what `fill_reducing_order` weighs.
+    #[test]
+    #[ignore]
+    fn key_separator_prediction() {
+        for n in [8, 12] {
+            let mesh = cube_mesh(n);
+            let el = Elastic::new(&mesh, &material()).unwrap();
+            for keys_count in [5, 10, 20] {
+                let times: Vec<f64> = (0..keys_count).map(|k| 0.2 * k as f64).collect();
+                let poses = vec![mesh.positions.clone(); keys_count];
+                let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
+                let k = keys(times, poses, vec![bottom; keys_count], false);
+                let s = settings();
+                let obj = objective(&el, &k, &s);
+                let unknowns = Unknowns::new(&k, el.node_count());
+                let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 1.0 / s.regularization.powi(4)));
+                let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
+                let nd = nested_dissection(&graph, &el.rest);
+                let by_keys = key_separator_order(&a, &unknowns, &nd).unwrap();
+                let chosen = fill_reducing_order(&a, &unknowns, &el.rest);
+                println!(
+                    "{} nodes, {keys_count} keys: node order {:.3e} flops, keys as separators {:.3e} ({:.2}x); chosen: {}",
+                    unknowns.nodes,
+                    by_keys.node_cost.flops,
+                    by_keys.cost.flops,
+                    by_keys.node_cost.flops / by_keys.cost.flops,
+                    chosen.name
+                );
+            }
+        }
+    }
+
+    fn node_blocks(unknowns: &Unknowns) -> Vec<u32> {
+        let mut block_of = vec![0u32; unknowns.count()];
+        for a in 0..unknowns.nodes {
+            for s in 0..unknowns.slots.count() {
+                if let Some(u) = unknowns.get(a, s) {
+                    block_of[u] = a as u32;
+                }
+            }
+        }
+        block_of
+    }
+
+    #[test]
+    fn keys_as_separators_is_a_valid_order_that_solves_the_system() {
+        let (el, k) = problem();
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let c = TimeCoefficients::new(&obj, 1.0 / s.regularization.powi(4));
+        let a = assemble(&obj, &unknowns, &c);
+        let node_order: Vec<u32> = (0..unknowns.nodes as u32).rev().collect();
+        let by_keys = key_separator_order(&a, &unknowns, &node_order).unwrap();
+        let mut sorted = by_keys.perm.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..unknowns.count()).collect::<Vec<_>>());
+        assert!(by_keys.cost.flops > 0.0 && by_keys.node_cost.flops > 0.0);
+        // Factorized in that order it solves the system.
+        let chol = Cholesky::factor(&a, &FillOrdering::Custom(by_keys.perm), Par::Seq).unwrap();
+        let b: Vec<Point> = (0..unknowns.count()).map(|i| [i as f64, 1.0, -1.0]).collect();
+        let mut x = b.clone();
+        chol.solve_rows3(&mut x);
+        let rows = SymmetricRows::from_lower(&a);
+        let mut ax = vec![[0.0; 3]; x.len()];
+        rows.apply(&x, &mut ax);
+        for (p, q) in ax.iter().zip(&b) {
+            assert!(crate::mesh::norm(crate::mesh::sub(*p, *q)) < 1e-8 * (1.0 + crate::mesh::norm(*q)));
+        }
     }
 }

@@ -33,6 +33,9 @@ pub struct Settings {
     pub damping: f64,
     /// Gravitational acceleration.
     pub gravity: Point,
+    /// Bytes the global step may use (its direct factor's predicted peak); past them it is
+    /// solved iteratively. `None`: a fraction of the machine's available memory.
+    pub max_memory: Option<u64>,
 }
 
 /// What the iteration did.
@@ -56,6 +59,8 @@ pub struct Log {
     pub converged: bool,
     /// Why the iteration stopped, in words.
     pub stop_reason: String,
+    /// How the global step was solved: `direct` or `iterative` (over the memory budget).
+    pub linear_solver: String,
 }
 
 /// A finished solve.
@@ -158,7 +163,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let start = Instant::now();
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
-    let global = GlobalStep::new(&objective, unknowns, settings.regularization)?;
+    let global = GlobalStep::within(&objective, unknowns, settings.regularization, settings.max_memory)?;
     let precompute_seconds = start.elapsed().as_secs_f64();
     let solver = Solver { objective, global, settings, on_iteration };
 
@@ -180,6 +185,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
         halvings: it.halvings,
         converged,
         stop_reason,
+        linear_solver: solver.global.stats.linear_solver.to_string(),
     };
     Ok(Solved { trajectory: it.tr, log })
 }

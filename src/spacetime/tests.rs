@@ -24,7 +24,7 @@ pub(super) fn from_mask(mask: &[bool]) -> Nodes {
 }
 
 pub(super) fn settings() -> Settings {
-    Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3] }
+    Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3], max_memory: None }
 }
 
 pub(super) fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<Nodes>, cyclic: bool) -> KeyConstraints {

@@ -8,25 +8,32 @@ use crate::report::Report;
 use crate::scene::{Method, SceneFile};
 use crate::stage::{Animation, Body};
 
-use super::{embed, export, import, report, solve, tetrahedralize};
+use super::{embed, export, import, report, solve_within, tetrahedralize};
 
 /// A scene to bake, with the options the CLI gives (`--method`).
 #[derive(Debug, Clone)]
 pub struct Bake<'a> {
     scene: &'a SceneFile,
     method: Option<Method>,
+    max_memory: Option<u64>,
     progress: &'a Progress,
 }
 
 impl<'a> Bake<'a> {
     /// The chain for `scene`, reporting progress to `progress`.
     pub fn new(scene: &'a SceneFile, progress: &'a Progress) -> Bake<'a> {
-        Bake { scene, method: None, progress }
+        Bake { scene, method: None, max_memory: None, progress }
     }
 
     /// Solve with `method` instead of the scene's `[solver] method` (when given).
     pub fn method(self, method: Option<Method>) -> Bake<'a> {
         Bake { method, ..self }
+    }
+
+    /// Solve the global step within `max_memory` bytes (when given; see
+    /// [`super::solve_within`]).
+    pub fn max_memory(self, max_memory: Option<u64>) -> Bake<'a> {
+        Bake { max_memory, ..self }
     }
 
     /// `import`, `tetrahedralize`: the simulation body. The method is known from the start, so
@@ -44,7 +51,7 @@ impl<'a> Bake<'a> {
         let body = self.body()?;
         // The interruption tests stop here, between TetGen and the solver.
         crate::interrupt::pause_point("solve", "");
-        embed(&solve(&body, self.method, self.progress)?)
+        embed(&solve_within(&body, self.method, self.max_memory, self.progress)?)
     }
 
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the

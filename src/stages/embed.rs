@@ -23,6 +23,7 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
             input_keys: body.keys.positions.clone(),
             log: solution.log.clone(),
             cache: body.cache.clone(),
+            cage: None,
         });
     };
     let binding = Binding::compute(tets, &body.surface.positions);
@@ -41,5 +42,6 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
         log: solution.log.clone(),
         cache: body.cache.clone(),
+        cage: body.cage.clone(),
     })
 }

@@ -33,7 +33,7 @@ pub use embed::embed;
 pub use export::export;
 pub use import::import;
 pub use report::report;
-pub use solve::solve;
+pub use solve::{solve, solve_within};
 pub use tetrahedralize::tetrahedralize;
 
 use crate::physics::elastic;

@@ -49,6 +49,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         keyframe_deviation,
         volume,
         cache,
+        cage: animation.cage.clone(),
     })
 }
 

@@ -20,6 +20,13 @@ use crate::stage::{Body, KeyPoses, Solution, SolverLog};
 /// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
 /// the solution's scene records the method used.
 pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result<Solution> {
+    solve_within(body, method, None, progress)
+}
+
+/// [`solve`] with the global step's memory budget in bytes (the CLI's `--max-memory`; `None`:
+/// a fraction of the machine's available memory). Past it the global step is solved
+/// iteratively, to the same solution within the solver's tolerance.
+pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>, progress: &Progress) -> Result<Solution> {
     let mut body = body.clone();
     if let Some(m) = method {
         body.scene.solver.method = m;
@@ -42,7 +49,7 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
         }
     };
     let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
-    let settings = settings(scene);
+    let settings = Settings { max_memory, ..settings(scene) };
     let keys = key_constraints(&body.keys);
     let (trajectory, log) = match scene.solver.method {
         Method::Hermite => {
@@ -59,6 +66,7 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
                 halvings: 0,
                 converged: true,
                 stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
+                linear_solver: String::new(),
             };
             (trajectory, log)
         }
@@ -81,6 +89,7 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
                 halvings: l.halvings,
                 converged: l.converged,
                 stop_reason: l.stop_reason,
+                linear_solver: l.linear_solver,
             };
             (solved.trajectory, log)
         }
@@ -106,6 +115,7 @@ fn solve_fit(body: Body) -> Result<Solution> {
         halvings: 0,
         converged: true,
         stop_reason: "fit: linear least squares, solved exactly".into(),
+        linear_solver: String::new(),
     };
     Ok(Solution { body, trajectory, log })
 }
@@ -119,6 +129,7 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         regularization: scene.solver.regularization,
         damping: scene.material.damping,
         gravity: scene.material.gravity,
+        max_memory: None,
     }
 }
 

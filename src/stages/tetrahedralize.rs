@@ -5,16 +5,28 @@
 //! adds get a pose per keyframe from a quasi-static fit (surface nodes pinned to that key,
 //! interior nodes at elastic equilibrium), so no key starts with its inside at the rest pose.
 //! Masks apply to the keyframes' own vertices; added interior nodes are free.
+//!
+//! A surface with more vertices than `[tet] max_nodes`, or a messy one (open, in several parts,
+//! non-manifold, self-intersecting), is simulated on an automatic cage instead (`[tet] cage`,
+//! on by default; see `crate::cage`): a voxel tet body around the surface, whose keyframes are
+//! fitted to the fine keyframes by least squares through the binding (regularized by the
+//! cage's elastic energy), whose masks are carried over from the fine vertices by the majority
+//! of binding weight; the fine surface is the one exported (embedded in the cage).
+
+use std::path::Path;
 
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::cage::fit::{carry_mask, CageFit};
+use crate::cage::{voxel_cage, CageError, Defects};
+use crate::embed::Binding;
+use crate::error::{Error, Result};
 use crate::mesh::{surface, Point, TetMesh, TriMesh};
 use crate::physics::elastic::Elastic;
 use crate::physics::equilibrium::Equilibrium;
 use crate::progress::Progress;
 use crate::scene::Method;
-use crate::stage::{Body, KeyPoses, Keyframes, Shape};
+use crate::stage::{Body, CageInfo, KeyPoses, Keyframes, Shape, VertexSet};
 use crate::tetgen::{self, TetgenOptions};
 
 /// The surface that is exported: the scene's display mesh, or the keyframe surface without
@@ -38,13 +50,16 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
     match &keys.rest {
         // The fit of a cache simulates nothing: its trajectory is the surface's own.
         Shape::Surface(rest) if scene.solver.method == Method::Fit => {
-            Ok(Body { scene: scene.clone(), mesh: None, keys: key_poses(keys.poses.clone()), surface: rest.clone(), cache })
+            Ok(Body { scene: scene.clone(), mesh: None, keys: key_poses(keys.poses.clone()), surface: rest.clone(), cache, cage: None })
         }
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh) };
-            Ok(Body { scene: scene.clone(), mesh: Some(mesh.clone()), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary), cache })
+            Ok(Body { scene: scene.clone(), mesh: Some(mesh.clone()), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary), cache, cage: None })
         }
         Shape::Surface(rest) => {
+            if let Some(reason) = cage_reason(rest, &scene.tet) {
+                return caged(keys, rest, reason, progress);
+            }
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.stage("tetrahedralize: TetGen");
             let mesh: TetMesh = tetgen::run(rest, &options, std::path::Path::new(&keys.rest_source))?;
@@ -70,7 +85,73 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
                 })
                 .collect();
             bar.finish_and_clear();
-            Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses(positions), surface: export_surface(keys, rest.clone()), cache })
+            Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses(positions), surface: export_surface(keys, rest.clone()), cache, cage: None })
         }
     }
+}
+
+/// Why `rest` should be simulated on a cage, if it should (see the module documentation).
+fn cage_reason(rest: &TriMesh, tet: &crate::scene::Tet) -> Option<String> {
+    if !tet.cage {
+        return None;
+    }
+    let (fine, _) = surface::compact(rest);
+    let n = fine.positions.len();
+    if n > tet.max_nodes {
+        return Some(format!("the surface has {n} vertices, more than [tet] max_nodes = {}", tet.max_nodes));
+    }
+    Defects::of(&fine, true).describe().map(|d| format!("the surface is {d}"))
+}
+
+/// The body of surface keyframes simulated on a generated cage.
+fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) -> Result<Body> {
+    let scene = &keys.scene;
+    let source = Path::new(&keys.rest_source);
+    let (fine, kept) = surface::compact(rest);
+    let fine_poses: Vec<Vec<Point>> = keys.poses.iter().map(|p| kept.iter().map(|&v| p[v as usize]).collect()).collect();
+    let mut enclose = fine.positions.clone();
+    if let Some(display) = &keys.display {
+        enclose.extend(&display.positions);
+    }
+    let target = scene.tet.cage_nodes;
+    let bar = progress.stage(format!("tetrahedralize: cage of about {target} nodes around {} vertices", fine.positions.len()));
+    let cage = voxel_cage(&fine, &enclose, target).map_err(|CageError::Empty| {
+        Error::in_file(source, "the surface has no extent: no triangle, or every vertex at one point", "give a surface with faces")
+    })?;
+    bar.finish_and_clear();
+    let mesh = cage.mesh;
+    let bar = progress.stage(format!("tetrahedralize: fit {} cage keys to {} vertices", keys.poses.len(), fine.positions.len()));
+    let binding = Binding::compute(&mesh, &fine.positions);
+    let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
+    let fit = CageFit::new(&mesh, &binding, &elastic);
+    let positions: Vec<Vec<Point>> = fine_poses.par_iter().map(|pose| fit.pose(&fine.positions, pose)).collect();
+    let reproduction = fit.reproduction(&positions, &fine_poses, crate::mesh::bbox_diagonal(&fine.positions));
+    let carry = |sets: &[VertexSet]| -> Vec<VertexSet> {
+        sets.iter()
+            .map(|set| {
+                let mask = set.to_mask(rest.positions.len());
+                let fine_mask: Vec<bool> = kept.iter().map(|&v| mask[v as usize]).collect();
+                VertexSet::from_mask(&carry_mask(&mesh, &binding, &fine_mask))
+            })
+            .collect()
+    };
+    let key_poses = KeyPoses {
+        times: keys.times.clone(),
+        positions,
+        fixed: carry(&keys.fixed),
+        fixed_velocity: carry(&keys.fixed_velocity),
+        cyclic: keys.cyclic,
+    };
+    bar.finish_and_clear();
+    let info = CageInfo {
+        reason,
+        fine_vertices: fine.positions.len(),
+        boundary_nodes: cage.boundary_nodes,
+        nodes: mesh.positions.len(),
+        tets: mesh.tets.len(),
+        spacing: cage.spacing,
+        key_error_max: reproduction.max,
+        key_error_rms: reproduction.rms,
+    };
+    Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses, surface: export_surface(keys, rest.clone()), cache: keys.cache.clone(), cage: Some(info) })
 }

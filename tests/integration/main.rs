@@ -10,6 +10,8 @@ mod common;
 mod blender;
 mod cache_bake;
 mod cache_fit;
+mod cli_budget;
+mod cli_cage;
 mod cli_errors;
 mod cli_interrupt;
 mod cli_output;

@@ -70,7 +70,9 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             halvings: 0,
             converged: true,
             stop_reason: "synthetic test animation".into(),
+            linear_solver: String::new(),
         },
         cache: None,
+        cage: None,
     }
 }
