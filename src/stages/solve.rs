@@ -4,16 +4,19 @@
 //!   still evaluated, so reports compare methods on one scale.
 //! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
 //!
-//! The scene's `[solver]` and `[material]` become the solver's [`Settings`] and the body's
-//! elastic material here; the body's keyframes become its [`KeyConstraints`].
+//! The scene's `[solver]`, `[material]` and `[[obstacle]]` become the solver's [`Settings`] and
+//! the body's elastic material here; the body's keyframes become its [`KeyConstraints`].
 
 use std::time::Instant;
 
 use crate::error::Result;
 use crate::physics::elastic::Elastic;
 use crate::progress::Progress;
-use crate::scene::{Method, Scene};
+use crate::scene::{Method, ObstacleSpec, Scene};
+use crate::spacetime::contact::Contacts;
+use crate::spacetime::obstacles::Obstacle;
 use crate::spacetime::solver::{self, Settings};
+use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
 use crate::stage::{Body, KeyPoses, Solution, SolverLog};
 
@@ -28,6 +31,7 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
     let elastic = Elastic::new(&body.mesh, &super::elastic_material(&scene.material))?;
     let settings = settings(scene);
     let keys = key_constraints(&body.keys);
+    let input_times = keys.times.clone();
     let (trajectory, log) = match scene.solver.method {
         Method::Hermite => {
             let start = Instant::now();
@@ -43,6 +47,13 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
                 halvings: 0,
                 converged: true,
                 stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
+                last_decrease: 0.0,
+                predicted_remaining: None,
+                input_times,
+                timing_iterations: 0,
+                refactorizations: 0,
+                active_contacts: 0,
+                clearance: None,
             };
             (trajectory, log)
         }
@@ -65,6 +76,13 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
                 halvings: l.halvings,
                 converged: l.converged,
                 stop_reason: l.stop_reason,
+                last_decrease: l.last_decrease,
+                predicted_remaining: l.predicted_remaining,
+                input_times,
+                timing_iterations: l.timing_iterations,
+                refactorizations: l.refactorizations,
+                active_contacts: l.active_contacts,
+                clearance: l.clearance,
             };
             (solved.trajectory, log)
         }
@@ -72,15 +90,38 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
     Ok(Solution { body, trajectory, log })
 }
 
-/// The solver settings of a scene (`[solver]`, and the damping and gravity of `[material]`).
+/// The solver settings of a scene (`[solver]`, the damping and gravity of `[material]`, the
+/// obstacles checked at every frame of `fps`). `fixed_times` index the scene's keys; a contact
+/// key's duplicate is inserted after it, so later keys shift by the contacts before them.
 pub(crate) fn settings(scene: &Scene) -> Settings {
+    let s = &scene.solver;
+    let contacts = &scene.keyframes.contact;
+    let body_key = |k: usize| k + contacts.iter().filter(|&&c| c < k).count();
     Settings {
-        samples: scene.solver.samples,
-        max_iterations: scene.solver.max_iterations,
-        tolerance: scene.solver.tolerance,
-        regularization: scene.solver.regularization,
+        samples: s.samples,
+        contact_samples: s.contact_samples,
+        max_iterations: s.max_iterations,
+        tolerance: s.tolerance,
+        regularization: s.regularization,
         damping: scene.material.damping,
         gravity: scene.material.gravity,
+        timing: s.optimize_timing.then(|| TimingSettings {
+            min_interval: s.min_interval,
+            keep_duration: s.keep_duration,
+            fixed_times: s.fixed_times.iter().map(|&k| body_key(k)).collect(),
+            ..TimingSettings::default()
+        }),
+        contacts: (!scene.obstacles.is_empty()).then(|| Contacts {
+            obstacles: scene
+                .obstacles
+                .iter()
+                .map(|o| match *o {
+                    ObstacleSpec::Plane { point, normal } => Obstacle::plane(point, normal),
+                    ObstacleSpec::Sphere { center, radius } => Obstacle::Sphere { center, radius },
+                })
+                .collect(),
+            frame_rate: scene.fps,
+        }),
     }
 }
 

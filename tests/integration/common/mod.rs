@@ -70,6 +70,13 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             halvings: 0,
             converged: true,
             stop_reason: "synthetic test animation".into(),
+            last_decrease: 0.0,
+            predicted_remaining: None,
+            input_times: Vec::new(),
+            timing_iterations: 0,
+            refactorizations: 0,
+            active_contacts: 0,
+            clearance: None,
         },
     }
 }
