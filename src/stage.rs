@@ -159,9 +159,13 @@ pub struct SolverLog {
     /// when the last windows' decreases shrink geometrically.
     #[serde(default)]
     pub predicted_remaining: Option<f64>,
-    /// The key times given to the solver (the trajectory's are the optimized ones).
+    /// The key times given to the solver.
     #[serde(default)]
     pub input_times: Vec<f64>,
+    /// The key times of the solution: the optimized ones with `optimize_timing`, else the
+    /// input ones (the trajectory's, repeated here for the report).
+    #[serde(default)]
+    pub times: Vec<f64>,
     /// Iterations that moved the key times (with `optimize_timing`).
     #[serde(default)]
     pub timing_iterations: usize,

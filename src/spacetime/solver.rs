@@ -413,10 +413,10 @@ impl<'a> Solver<'a> {
 
     /// The joint gradient of an exact evaluation: the free unknowns' (flat), then the interval
     /// variables'.
-    fn joint_gradient(&self, eval: &Evaluation) -> Vec<f64> {
+    fn joint_gradient(&self, eval: &Evaluation, times: bool) -> Vec<f64> {
         let g = self.global.gather(eval.exact_gradient.as_ref().expect("exact phase"));
         let mut z: Vec<f64> = g.as_flattened().to_vec();
-        if let Some(t) = &eval.time_gradient {
+        if let Some(t) = eval.time_gradient.as_ref().filter(|_| times) {
             z.extend(self.intervals.iter().map(|&i| t[i]));
         }
         z
@@ -551,7 +551,14 @@ impl<'a> Solver<'a> {
         }
         let phase1 = if self.unknown_count() > 0 { self.local_global(it)? } else { PhaseEnd::Stalled };
         let local_global_iterations = it.energy.len() - 1;
-        let phase2 = if phase1 == PhaseEnd::OutOfIterations { PhaseEnd::OutOfIterations } else { self.quasi_newton(it)? };
+        let mut phase2 = if phase1 == PhaseEnd::OutOfIterations { PhaseEnd::OutOfIterations } else { self.quasi_newton(it, false)? };
+        if self.blocks.is_some() && phase2 != PhaseEnd::OutOfIterations {
+            // The keys first settle at the given times, then keys and times move together: only
+            // at settled keys is the held-keys time gradient the gradient of the reduced W (the
+            // W of the best keys for those times, part 1's measurement); far from them it
+            // mostly measures how bad the first guess is.
+            phase2 = self.quasi_newton(it, true)?;
+        }
         let mut phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
         if self.blocks.is_some() {
             phases += &format!(", {} moving the key times, {} refactorizations", it.timing_iterations, it.refactorizations);
@@ -613,15 +620,14 @@ impl<'a> Solver<'a> {
 
     /// Phase 2: L-BFGS on the exact W (and the key times), preconditioned by the global
     /// step's matrix and the held-keys time curvature, restricted to the active rows.
-    fn quasi_newton(&mut self, it: &mut Iterate) -> Result<PhaseEnd> {
-        let times = self.blocks.is_some();
+    fn quasi_newton(&mut self, it: &mut Iterate, times: bool) -> Result<PhaseEnd> {
         it.eval = self.evaluate(&it.tr, it.energy.len(), true)?;
         if times {
             self.update_curvature(&it.tr, &it.eval);
         }
         let since = it.energy.len() - 1;
         let mut lbfgs = Lbfgs::new(LBFGS_MEMORY);
-        let mut g = self.joint_gradient(&it.eval);
+        let mut g = self.joint_gradient(&it.eval, times);
         let (mut blocked, mut holds) = (None, 0);
         loop {
             let k = it.energy.len() - 1;
@@ -629,22 +635,6 @@ impl<'a> Solver<'a> {
                 let w = it.energy[k];
                 let change = (it.energy[k - WINDOW] - w) / w;
                 if change <= self.settings.tolerance {
-                    if std::env::var("BLENDSIM_DEBUG_STOP").is_ok() {
-                        let solve = |x: &mut [Point]| self.global.apply_inverse(x);
-                        let h0 = self.preconditioner(&solve, times);
-                        let projection = self.projection(it, times);
-                        let d = lbfgs.direction(&g, |q| {
-                            projection.apply(q, &h0);
-                        });
-                        let mut pg = g.clone();
-                        projection.apply(&mut pg, &h0);
-                        eprintln!(
-                            "STOP k={k} W={w:.6e} lbfgs_model={:.3e} precond_model={:.3e} window={:.3e}",
-                            -0.5 * dot(&g, &d) / w,
-                            0.5 * dot(&g, &pg) / w,
-                            change
-                        );
-                    }
                     return Ok(PhaseEnd::Settled(change));
                 }
             }
@@ -695,7 +685,7 @@ impl<'a> Solver<'a> {
                 // The new row shrinks the subspace the curvature pairs live in.
                 lbfgs.clear();
             }
-            let g_new = self.joint_gradient(&it.eval);
+            let g_new = self.joint_gradient(&it.eval, times);
             let s: Vec<f64> = d.iter().map(|v| v * step.scale).collect();
             let y: Vec<f64> = g_new.iter().zip(&g).map(|(a, b)| a - b).collect();
             lbfgs.push(s, y);

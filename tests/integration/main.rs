@@ -11,6 +11,7 @@ mod cache_fit;
 mod cli_errors;
 mod cli_physics;
 mod cli_stages;
+mod cli_timing;
 mod export_formats;
 mod fixtures;
 mod paper_scenes;
