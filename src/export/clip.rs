@@ -55,7 +55,7 @@ pub struct BlendShapeClip {
     pub base: Vec<[f32; 3]>,
     /// The blendshapes.
     pub targets: Vec<Target>,
-    /// Key times in seconds (strictly increasing).
+    /// Key times in seconds (strictly increasing: a contact's two keys are one clip key).
     pub times: Vec<f64>,
     /// `curves[j]` drives `targets[j]`.
     pub curves: Vec<WeightCurve>,
@@ -94,6 +94,11 @@ impl BlendShapeClip {
     }
 
     /// The blendshape form of `trajectory`; `cyclic`: the last key aliases the first.
+    ///
+    /// A contact (two keys at one time, one pose, two velocities) becomes one clip key: its
+    /// pose once, the arriving key's velocity as the in-tangent and the leaving key's as the
+    /// out-tangent (glTF CUBICSPLINE keys carry both), so the clip's times stay strictly
+    /// increasing.
     fn with_layout(trajectory: &Trajectory, cyclic: bool) -> Self {
         let n_keys = trajectory.key_count();
         let base_f64 = &trajectory.positions[0];
@@ -102,18 +107,30 @@ impl BlendShapeClip {
         let base_rounded: Vec<Point> = base.iter().map(|b| [b[0] as f64, b[1] as f64, b[2] as f64]).collect();
         // Keys that own their own unknowns: in a cyclic clip the last key is the first.
         let owner = |k: usize| if cyclic && k == n_keys - 1 { 0 } else { k };
+        // The second key of a contact shares the first's clip key.
+        let leaves_contact = |k: usize| k > 0 && trajectory.times[k] == trajectory.times[k - 1];
+        let arrives_contact = |k: usize| k + 1 < n_keys && trajectory.times[k + 1] == trajectory.times[k];
+        let mut clip_key = Vec::with_capacity(n_keys);
+        let mut times = Vec::with_capacity(n_keys);
+        for k in 0..n_keys {
+            if !leaves_contact(k) {
+                times.push(trajectory.times[k]);
+            }
+            clip_key.push(times.len() - 1);
+        }
+        let n_clip = times.len();
 
         let mut targets = Vec::new();
         let mut curves = Vec::new();
-        let zeros = || vec![0.0f32; n_keys];
+        let zeros = || vec![0.0f32; n_clip];
         for k in 1..n_keys {
-            if owner(k) != k {
+            if owner(k) != k || leaves_contact(k) {
                 continue;
             }
             let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| crate::mesh::sub(*x, *b));
             if let Some(t) = sparse_target(format!("pose_{k}"), offsets) {
                 let mut values = zeros();
-                values[k] = 1.0;
+                values[clip_key[k]] = 1.0;
                 targets.push(t);
                 curves.push(WeightCurve { values, in_tangents: zeros(), out_tangents: zeros() });
             }
@@ -125,14 +142,18 @@ impl BlendShapeClip {
             if let Some(t) = sparse_target(format!("velocity_{k}"), trajectory.velocities[k].iter().copied()) {
                 let (mut in_t, mut out_t) = (zeros(), zeros());
                 for key in (0..n_keys).filter(|&key| owner(key) == k) {
-                    in_t[key] = 1.0;
-                    out_t[key] = 1.0;
+                    if !leaves_contact(key) {
+                        in_t[clip_key[key]] = 1.0;
+                    }
+                    if !arrives_contact(key) {
+                        out_t[clip_key[key]] = 1.0;
+                    }
                 }
                 targets.push(t);
                 curves.push(WeightCurve { values: zeros(), in_tangents: in_t, out_tangents: out_t });
             }
         }
-        BlendShapeClip { base, targets, times: trajectory.times.clone(), curves }
+        BlendShapeClip { base, targets, times, curves }
     }
 
     /// Vertices of the mesh.
@@ -218,6 +239,30 @@ mod tests {
             assert_eq!(is_cyclic(&tr), cyclic);
             let clip = BlendShapeClip::from_trajectory(&tr);
             assert!(max_error(&tr, &clip) < 1e-5, "cyclic={cyclic}: {}", max_error(&tr, &clip));
+        }
+    }
+
+    #[test]
+    fn a_contact_is_one_clip_key_with_its_two_velocities_as_tangents() {
+        // Keys 1 and 2 are a contact: one pose, the velocity jumps from arriving to leaving.
+        let mut tr = wavy(false);
+        tr.times = vec![0.0, 0.4, 0.4, 1.5];
+        tr.positions[2] = tr.positions[1].clone();
+        let clip = BlendShapeClip::from_trajectory(&tr);
+        assert_eq!(clip.times, vec![0.0, 0.4, 1.5]);
+        assert!(clip.targets.iter().all(|t| t.name != "pose_2"), "the shared pose is one target");
+        assert!(max_error(&tr, &clip) < 1e-5, "{}", max_error(&tr, &clip));
+        // Both sides of the contact: the arriving and the leaving velocity.
+        let slope = |t0: f64, t1: f64| -> Vec<Point> {
+            let (a, b) = (clip.points_at(t0), clip.points_at(t1));
+            a.iter().zip(&b).map(|(p, q)| crate::mesh::scale(crate::mesh::sub(*q, *p), 1.0 / (t1 - t0))).collect()
+        };
+        let h = 1e-4;
+        for (v, (before, after)) in slope(0.4 - h, 0.4).iter().zip(slope(0.4, 0.4 + h)).enumerate() {
+            for d in 0..3 {
+                assert!((before[d] - tr.velocities[1][v][d]).abs() < 1e-2, "arriving, vertex {v}");
+                assert!((after[d] - tr.velocities[2][v][d]).abs() < 1e-2, "leaving, vertex {v}");
+            }
         }
     }
 

@@ -256,3 +256,80 @@ fn gltf_sampler_input(glb: &[u8]) -> Vec<f32> {
     let offset = bin_start + view["byteOffset"].as_u64().unwrap_or(0) as usize + accessor["byteOffset"].as_u64().unwrap_or(0) as usize;
     (0..accessor["count"].as_u64().unwrap() as usize).map(|i| f32::from_le_bytes(glb[offset + 4 * i..offset + 4 * i + 4].try_into().unwrap())).collect()
 }
+
+/// The paper's ball (`../shared/assets/paper/ball/unit_sphere.obj`, diameter 1) moved up by
+/// `dy`, as OBJ text.
+fn ball_obj(dy: f64) -> Option<String> {
+    let text = std::fs::read_to_string(crate::common::assets::paper_asset("ball/unit_sphere.obj")?).unwrap();
+    let lines = text.lines().filter(|l| l.starts_with("v ") || l.starts_with("f ")).map(|l| {
+        if let Some(rest) = l.strip_prefix("v ") {
+            let p: Vec<f64> = rest.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            format!("v {:.17e} {:.17e} {:.17e}", p[0], p[1] + dy, p[2])
+        } else {
+            l.to_string()
+        }
+    });
+    Some(lines.collect::<Vec<_>>().join("\n") + "\n")
+}
+
+#[test]
+fn a_dropped_ball_bounces_off_the_plane_at_the_parabola_time() {
+    // BALL: dropped from rest 1 m above its contact pose (touching the plane y = 0), it bounces
+    // (`contact = [1]`: one pose, two velocities) and rises to where it started. The contact
+    // time is free: it must move to where the free-fall parabola meets the plane, sqrt(2/g).
+    let g: f64 = 9.81;
+    let Some(high) = ball_obj(1.5) else { return };
+    let low = ball_obj(0.5).unwrap();
+    let dir = TempDir::new("timing-ball");
+    for (name, text) in [("high.obj", &high), ("low.obj", &low)] {
+        std::fs::write(dir.join(name), text).unwrap();
+    }
+    let scene = r#"
+name = "ball"
+fps = 60
+[keyframes]
+meshes = ["high.obj", "low.obj", "high.obj"]
+times = [0.0, 0.4, 0.9]
+contact = [1]
+fixed_velocity = ["all", "none", "none"]
+[tet]
+max_volume = 0.01
+[material]
+stiffness = 60.0
+volume = 60.0
+damping = 0.0
+gravity = [0.0, -9.81, 0.0]
+[solver]
+samples = 20
+optimize_timing = true
+fixed_times = [0]
+[[obstacle]]
+kind = "plane"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 1.0, 0.0]
+[export]
+formats = ["usda", "glb"]
+"#;
+    std::fs::write(dir.join("scene.toml"), scene).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out"]).success();
+    let report = report(&dir);
+    let solver = &report["solver"];
+    let times: Vec<f64> = solver["times"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
+    let energy: Vec<f64> = solver["energy"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
+    let parabola = (2.0 / g).sqrt();
+    println!("ball: times {times:?} (parabola meets the plane at {parabola:.6}), W {:.3e} -> {:.3e}, clearance {}, {}", energy[0], energy.last().unwrap(), solver["clearance"], solver["stop_reason"]);
+    assert_eq!(times.len(), 4, "the contact key is duplicated");
+    assert_eq!(times[1], times[2], "a contact is a zero-length interval");
+    assert!((times[1] - parabola).abs() < 1e-3, "contact at {} vs {parabola}", times[1]);
+    assert!(solver["clearance"].as_f64().unwrap() >= -1e-4);
+    // No vertex below the plane at any frame of the full-frame output (1e-4 of the diameter),
+    // and the files (usd-core, glTF validator, three.js) play exactly this animation.
+    let anim = library_animation(&dir.join("scene.toml"));
+    assert_eq!(anim.trajectory.times, times);
+    let lowest = anim.trajectory.frames(60.0).iter().map(|(_, t)| anim.trajectory.evaluate(*t).iter().map(|p| p[1]).fold(f64::INFINITY, f64::min)).fold(f64::INFINITY, f64::min);
+    println!("lowest vertex over the frames: {lowest:.3e}");
+    assert!(lowest >= -1e-4, "a vertex at {lowest}");
+    let glb = std::fs::read(dir.join("out/ball.glb")).unwrap();
+    assert_eq!(gltf_sampler_input(&glb).len(), 3, "the contact is one glTF key");
+    check_outputs(&dir.join("out"), &anim, &output_files(&report["outputs"]));
+}
