@@ -12,7 +12,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
-    let error = blendshape_error(tr, &frames, diagonal);
+    let error = blendshape_error(tr, scene.export.weights, &frames, diagonal);
     let keyframe_deviation =
         deviation(tr.positions.iter().cloned().zip(animation.input_keys.iter().cloned()), diagonal);
     let triangles = &animation.mesh.triangles;
