@@ -655,7 +655,8 @@ impl<'a> Solver<'a> {
                 projection.apply(q, &h0);
             };
             let mut d = lbfgs.direction(&g, precondition);
-            if !(dot(&g, &d) < 0.0) {
+            // Not a descent direction (or NaN): start over from the preconditioned gradient.
+            if dot(&g, &d).partial_cmp(&0.0) != Some(std::cmp::Ordering::Less) {
                 lbfgs.clear();
                 d = lbfgs.direction(&g, precondition);
             }
