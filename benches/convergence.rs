@@ -4,7 +4,7 @@
 //! iterations and seconds. The default tolerance must stop every scene within 2% of the
 //! reference (issue 10).
 //!
-//! `cargo bench --bench convergence` (or `make bench-convergence`); `-- TWIST` runs one scene.
+//! `cargo bench --bench convergence`; `-- TWIST` runs one scene.
 
 use std::time::Instant;
 
