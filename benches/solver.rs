@@ -11,18 +11,15 @@
 //! runs only the named scenes. The machine's load average is printed with
 //! every row: on a shared machine the timings are only as good as that number.
 
-use std::path::Path;
 use std::time::Instant;
 
-use blendsim::internals::{apply_step, initial_trajectory, objective, solver_inputs, tetgen, GlobalStep, TetgenOptions, Unknowns};
+use blendsim::internals::{apply_step, initial_trajectory, objective, solver_inputs, GlobalStep, Unknowns};
 use blendsim::internals::{Elastic, GlobalStats, KeyConstraints, ProjectionMode, Settings, Timing, TimingSettings};
+use blendsim::stage::Body;
 use blendsim::Trajectory;
-use blendsim::mesh::Axis;
-use blendsim::procedural::{self, Twist};
-use blendsim::progress::Progress;
-use blendsim::scene::{Scene, SceneFile};
-use blendsim::stage::{Body, KeyPoses, VertexSet};
-use blendsim::stages::Bake;
+
+mod common;
+use common::{armadillo_size, load, median, scene_body};
 
 struct Paper {
     /// The "timing optimization" column of Table 1 (s per iteration).
@@ -33,41 +30,6 @@ struct Paper {
     samples: usize,
     precompute: f64,
     iteration: f64,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-fn scene_body(path: &str) -> Body {
-    let scene = SceneFile::load(Path::new(env!("CARGO_MANIFEST_DIR")).join(path).as_path()).expect("scene loads");
-    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
-}
-
-/// ARMADILLO-size: a closed surface tetrahedralized by TetGen to the paper's ARMADILLO counts
-/// (2598 nodes, 10024 tets): a 1.2 x 3.6 x 1.2 prism with 0.1 surface spacing, `-q1.414
-/// -a0.003`, gives 2645 nodes and 9970 tets. (An icosphere cannot match both counts: with 2.6k
-/// nodes it has 14.5k tets, as its interior needs more nodes than a limb-like body.) Five keys:
-/// rest, twisted +60°, rest, twisted -60°, rest, about the long axis; the bottom face held.
-fn armadillo_size() -> Body {
-    let surface = procedural::prism([1.2, 3.6, 1.2], [12, 36, 12]);
-    let opts = TetgenOptions { quality: 1.414, max_volume: 0.003, timeout: 120.0 };
-    let mesh = tetgen(&surface, &opts, Path::new("prism")).expect("tetgen");
-    let twisted = |deg: f64| procedural::twist(&mesh.positions, &Twist { axis: Axis::Y, degrees: deg, axial_scale: 1.0 });
-    let positions = vec![mesh.positions.clone(), twisted(60.0), mesh.positions.clone(), twisted(-60.0), mesh.positions.clone()];
-    let bottom = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] < 1e-3).collect::<Vec<_>>());
-    let mut scene = Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
-    scene.solver.samples = 10;
-    scene.material.damping = 0.1;
-    let keys = KeyPoses {
-        times: vec![0.0, 0.6, 1.2, 1.8, 2.4],
-        positions,
-        fixed: vec![bottom; 5],
-        fixed_velocity: vec![VertexSet::default(); 5],
-        cyclic: false,
-    };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None }
 }
 
 struct Measured {
@@ -196,10 +158,6 @@ fn measure_timing(
         reused_symbolic: reused,
     };
     (measured, stats)
-}
-
-fn load() -> String {
-    std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
 }
 
 fn main() {

@@ -6,11 +6,11 @@
 pub use crate::export::fullframe::FullFrame;
 pub use crate::export::glb::{self, Placement};
 pub use crate::export::usda::{self, UsdSettings};
-pub use crate::physics::elastic::Elastic;
+pub use crate::physics::elastic::{Elastic, Material as ElasticMaterial};
 pub use crate::physics::vibration::{natural_vibration, RestStiffness, Vibration};
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};
 pub use crate::spacetime::objective::{Evaluation, Objective, Projections};
-pub use crate::spacetime::solver::{apply_step, initial_trajectory, objective, Settings};
+pub use crate::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Log, Settings, Solved, DEFAULT_TOLERANCE, WINDOW};
 pub use crate::spacetime::timing::{ProjectionMode, TimeDerivatives, Timing, TimingSettings, TimingStep};
 pub use crate::spacetime::unknowns::{KeyConstraints, Unknowns};
 pub use crate::tetgen::{run as tetgen, TetgenOptions};

@@ -80,6 +80,29 @@ pub struct Scene {
     /// `[export]`: the files to write.
     #[serde(default)]
     pub export: Export,
+    /// `[[obstacle]]`: static obstacles the body may not enter.
+    #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<ObstacleSpec>,
+}
+
+/// One `[[obstacle]]` entry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ObstacleSpec {
+    /// The half-space behind a plane: `point` on it, `normal` pointing out of the obstacle.
+    Plane {
+        /// A point on the plane.
+        point: [f64; 3],
+        /// The outward normal (any nonzero length).
+        normal: [f64; 3],
+    },
+    /// A solid sphere.
+    Sphere {
+        /// Its centre.
+        center: [f64; 3],
+        /// Its radius (> 0).
+        radius: f64,
+    },
 }
 
 fn default_fps() -> f64 {
@@ -107,6 +130,10 @@ pub struct KeyframeSpec {
     /// The elastic rest shape: a key index (default 0) or a mesh path with the keys' topology.
     #[serde(default)]
     pub rest: Rest,
+    /// Contact keys: each listed key is duplicated at the same time (a zero-length interval),
+    /// the two sharing their pose but not their velocities, so the velocity can jump there.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub contact: Vec<usize>,
 }
 
 /// The `[tet]` table (defaults: [`Tet::default`]).
@@ -182,6 +209,16 @@ pub struct Solver {
     pub tolerance: f64,
     /// Proximal regularization time scale h: adds (1/h⁴) Σ dτ BᵀMB (0 = off).
     pub regularization: f64,
+    /// Residual samples on the intervals that begin or end at a contact.
+    pub contact_samples: usize,
+    /// Optimize the key times too.
+    pub optimize_timing: bool,
+    /// With `optimize_timing`: keep the total duration.
+    pub keep_duration: bool,
+    /// With `optimize_timing`: keys (scene indices) whose time may not move.
+    pub fixed_times: Vec<usize>,
+    /// With `optimize_timing`: the shortest interval (seconds).
+    pub min_interval: f64,
 }
 
 /// The `[embed]` table.
@@ -269,7 +306,18 @@ impl Default for Material {
 
 impl Default for Solver {
     fn default() -> Self {
-        Solver { method: Method::Spacetime, samples: 10, max_iterations: 50, tolerance: 0.01, regularization: 0.1 }
+        Solver {
+            method: Method::Spacetime,
+            samples: 10,
+            max_iterations: crate::spacetime::solver::DEFAULT_MAX_ITERATIONS,
+            tolerance: crate::spacetime::solver::DEFAULT_TOLERANCE,
+            regularization: 0.1,
+            contact_samples: 20,
+            optimize_timing: false,
+            keep_duration: false,
+            fixed_times: Vec::new(),
+            min_interval: 1e-3,
+        }
     }
 }
 
@@ -583,8 +631,10 @@ impl Scene {
         }
         self.tet.validate()?;
         self.material.validate()?;
-        self.solver.validate()?;
-        self.export.validate()
+        // A cache's key count is known only after the selection: fixed_times is checked then.
+        self.solver.validate(self.keyframes.as_ref().map(|k| k.meshes.len()))?;
+        self.export.validate()?;
+        validate_obstacles(&self.obstacles)
     }
 }
 
@@ -651,8 +701,19 @@ impl KeyframeSpec {
             if self.times[i] == self.times[i - 1] {
                 return invalid(
                     format!("[keyframes] keys {} and {i} share the time {} (a zero-length interval)", i - 1, self.times[i]),
-                    "give every key its own time; coincident collision keys are not supported yet",
+                    "give every key its own time; for a contact list the key in `contact = [k]` and it is duplicated for you",
                 );
+            }
+        }
+        for (j, &k) in self.contact.iter().enumerate() {
+            if k == 0 || k + 1 >= n {
+                return invalid(
+                    format!("[keyframes] contact = {:?} lists key {k}, but a contact needs a key before and after it (keys 1 to {})", self.contact, n.saturating_sub(2)),
+                    "list the key at which the body hits the obstacle, not the first or last",
+                );
+            }
+            if j > 0 && k <= self.contact[j - 1] {
+                return invalid(format!("[keyframes] contact = {:?} is not increasing", self.contact), "list each contact key once, in increasing order");
             }
         }
         for (what, list) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
@@ -724,18 +785,53 @@ impl Material {
 }
 
 impl Solver {
-    fn validate(&self) -> Result<()> {
+    fn validate(&self, keys: Option<usize>) -> Result<()> {
         if self.samples == 0 {
             return invalid("[solver] samples = 0".into(), "use at least 1 sample per interval (10 is typical)");
         }
+        if self.contact_samples == 0 {
+            return invalid("[solver] contact_samples = 0".into(), "use at least 1 sample per interval next to a contact (20 is typical)");
+        }
+        if !self.optimize_timing && (self.keep_duration || !self.fixed_times.is_empty()) {
+            let key = if self.keep_duration { "keep_duration" } else { "fixed_times" };
+            return invalid(format!("[solver] {key} is set but optimize_timing is false, so the key times do not move anyway"), "set optimize_timing = true, or remove the key");
+        }
+        if let Some((k, keys)) = keys.and_then(|keys| self.fixed_times.iter().find(|&&k| k >= keys).map(|&k| (k, keys))) {
+            return invalid(format!("[solver] fixed_times lists key {k}, but there are {keys} keys"), "list key indices from 0, as in [keyframes] times");
+        }
+        if !(self.min_interval.is_finite() && self.min_interval > 0.0) {
+            return invalid(format!("[solver] min_interval = {} must be positive", self.min_interval), "use a small length in seconds, e.g. 0.001");
+        }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return invalid(format!("[solver] tolerance = {} must be positive", self.tolerance), "use e.g. 0.01 (1% of the initial W)");
+            return invalid(format!("[solver] tolerance = {} must be positive", self.tolerance), "use e.g. 0.001 (W decreasing by 0.1% over the last iterations)");
         }
         if !(self.regularization.is_finite() && self.regularization >= 0.0) {
             return invalid(format!("[solver] regularization = {} must be >= 0", self.regularization), "use a time scale like 0.1, or 0 for none");
         }
         Ok(())
     }
+}
+
+/// Obstacles: finite numbers, a nonzero plane normal, a positive radius.
+fn validate_obstacles(obstacles: &[ObstacleSpec]) -> Result<()> {
+    for (i, o) in obstacles.iter().enumerate() {
+        let (finite, problem) = match o {
+            ObstacleSpec::Plane { point, normal } => {
+                let length = normal.iter().map(|x| x * x).sum::<f64>().sqrt();
+                (point.iter().chain(normal).all(|x| x.is_finite()), (length > 0.0).then_some(()).ok_or("its normal is zero"))
+            }
+            ObstacleSpec::Sphere { center, radius } => {
+                (center.iter().all(|x| x.is_finite()) && radius.is_finite(), (*radius > 0.0).then_some(()).ok_or("its radius is not positive"))
+            }
+        };
+        if !finite {
+            return invalid(format!("[[obstacle]] {i} has a non-finite number"), "give finite coordinates");
+        }
+        if let Err(p) = problem {
+            return invalid(format!("[[obstacle]] {i}: {p}"), "a plane needs a nonzero normal pointing out of the obstacle, a sphere a radius > 0");
+        }
+    }
+    Ok(())
 }
 
 impl Export {
@@ -851,6 +947,52 @@ rest = "rest.mesh"
             ])
         );
         assert_eq!(fixed[2], Selection::File { file: "tail.dmat".into(), invert: true });
+    }
+
+    #[test]
+    fn contacts_timing_and_obstacles_parse() {
+        let text = r#"
+name = "ball"
+[keyframes]
+meshes = ["a.obj", "b.obj", "c.obj"]
+times = [0.0, 0.3, 0.6]
+contact = [1]
+[solver]
+optimize_timing = true
+keep_duration = true
+fixed_times = [0]
+contact_samples = 30
+[[obstacle]]
+kind = "plane"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 1.0, 0.0]
+[[obstacle]]
+kind = "sphere"
+center = [0.0, -5.0, 0.0]
+radius = 4.0
+"#;
+        let s = Scene::parse(text).unwrap();
+        assert_eq!(s.keyframes.as_ref().unwrap().contact, vec![1]);
+        assert!(s.solver.optimize_timing && s.solver.keep_duration && s.solver.contact_samples == 30);
+        assert_eq!(s.obstacles.len(), 2);
+        assert_eq!(s.obstacles[1], ObstacleSpec::Sphere { center: [0.0, -5.0, 0.0], radius: 4.0 });
+        let back: Scene = serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
+        assert_eq!(back, s);
+        let cases = [
+            (text.replace("contact = [1]", "contact = [2]"), "needs a key before and after"),
+            (text.replace("radius = 4.0", "radius = 0.0"), "radius is not positive"),
+            (text.replace("normal = [0.0, 1.0, 0.0]", "normal = [0.0, 0.0, 0.0]"), "normal is zero"),
+            (text.replace("kind = \"plane\"", "kind = \"cone\""), "unknown variant `cone`"),
+            (text.replace("radius = 4.0", "radius = 4.0\nheight = 2.0"), "unknown field `height`"),
+            (text.replace("fixed_times = [0]", "fixed_times = [3]"), "fixed_times lists key 3"),
+            (text.replace("optimize_timing = true", "optimize_timing = false"), "keep_duration is set but optimize_timing is false"),
+            (text.replace("times = [0.0, 0.3, 0.6]", "times = [0.0, 0.3, 0.3]"), "contact = [k]"),
+        ];
+        for (text, expect) in cases {
+            let e = Scene::parse(&text).unwrap_err().to_string();
+            assert!(e.contains(expect), "expected {expect:?} in {e}");
+            assert!(e.contains("(fix: "), "{e}");
+        }
     }
 
     #[test]

@@ -88,7 +88,8 @@ pub struct Keyframes {
     pub rest_source: String,
     /// The elastic rest shape. Every pose has its vertex count.
     pub rest: Shape,
-    /// Key times in seconds, strictly increasing.
+    /// Key times in seconds, non-decreasing: a contact key and its duplicate share a time
+    /// (`[keyframes] contact`), every other key has its own.
     pub times: Vec<f64>,
     /// `poses[key][vertex]`, as read (after any procedural deformation).
     pub poses: Vec<Vec<Point>>,
@@ -108,7 +109,7 @@ pub struct Keyframes {
 /// Keyframe data per tet node: what the solver constrains and starts from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct KeyPoses {
-    /// Key times in seconds, strictly increasing.
+    /// Key times in seconds, non-decreasing (equal for the two keys of a contact).
     pub times: Vec<f64>,
     /// `positions[key][node]`: the input poses (interior nodes from a quasi-static fit).
     pub positions: Vec<Vec<Point>>,
@@ -193,6 +194,32 @@ pub struct SolverLog {
     /// gradients, when the factor would not fit in the memory budget).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub linear_solver: String,
+    /// W's relative decrease over the last iterations of the stopping rule's window.
+    #[serde(default)]
+    pub last_decrease: f64,
+    /// The predicted further decrease of W (relative to the final W) had the solve gone on,
+    /// when the last windows' decreases shrink geometrically.
+    #[serde(default)]
+    pub predicted_remaining: Option<f64>,
+    /// The key times given to the solver.
+    #[serde(default)]
+    pub input_times: Vec<f64>,
+    /// The key times of the solution: the optimized ones with `optimize_timing`, else the
+    /// input ones (the trajectory's, repeated here for the report).
+    #[serde(default)]
+    pub times: Vec<f64>,
+    /// Iterations that moved the key times (with `optimize_timing`).
+    #[serde(default)]
+    pub timing_iterations: usize,
+    /// Refactorizations of the global step for new key times.
+    #[serde(default)]
+    pub refactorizations: usize,
+    /// Node-obstacle checks held on an obstacle at the end.
+    #[serde(default)]
+    pub active_contacts: usize,
+    /// The smallest distance of a node to an obstacle over keys and frames (with obstacles).
+    #[serde(default)]
+    pub clearance: Option<f64>,
 }
 
 /// Output of `solve`: the body and its optimized node trajectory.

@@ -24,7 +24,7 @@
 //! exactly: `key_I_out` has value 0 at every key and out-slope `3 / T` at key `i`
 //! (`h10 · T · 3/T = B1`), `key_J_in` has in-slope `-3 / T` at key `i+1` (`h11 · T · (-3/T) = B2`).
 
-use super::clip::{f32x3, sparse_target, BlendShapeClip, WeightCurve};
+use super::clip::{clip_keys, f32x3, sparse_target, BlendShapeClip, WeightCurve};
 use crate::mesh::{scale, sub, Point};
 use crate::spacetime::trajectory::Trajectory;
 
@@ -39,16 +39,20 @@ impl BlendShapeClip {
         // Offsets against the f32 base, so base + offset rounds back to the key.
         let base_rounded: Vec<Point> = base.iter().map(|b| b.map(f64::from)).collect();
         let aliased = |k: usize| cyclic && k == n_keys - 1;
-        let zeros = || vec![0.0f32; n_keys];
-        let mut clip = BlendShapeClip { base, targets: Vec::new(), times: times.clone(), curves: Vec::new() };
+        // A contact's two keys (equal times, one pose) are one clip key: the pose once; the
+        // zero-length interval between them has no control points (their offsets are zero).
+        let (clip_key, clip_times) = clip_keys(times);
+        let leaves_contact = |k: usize| k > 0 && clip_key[k] == clip_key[k - 1];
+        let zeros = || vec![0.0f32; clip_times.len()];
+        let mut clip = BlendShapeClip { base, targets: Vec::new(), times: clip_times.clone(), curves: Vec::new() };
 
         for k in 0..n_keys {
             let name = if aliased(k) { 0 } else { k };
-            if k > 0 && !aliased(k) {
+            if k > 0 && !aliased(k) && !leaves_contact(k) {
                 let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| sub(*x, *b));
                 if let Some(t) = sparse_target(format!("key_{k}"), offsets) {
                     let mut values = zeros();
-                    values[k] = 1.0;
+                    values[clip_key[k]] = 1.0;
                     clip.targets.push(t);
                     clip.curves.push(WeightCurve { values, in_tangents: zeros(), out_tangents: zeros() });
                 }
@@ -62,9 +66,9 @@ impl BlendShapeClip {
                     let (mut in_t, mut out_t) = (zeros(), zeros());
                     let slope = (3.0 / length) as f32;
                     if sign > 0.0 {
-                        out_t[k] = slope;
+                        out_t[clip_key[k]] = slope;
                     } else {
-                        in_t[k] = -slope;
+                        in_t[clip_key[k]] = -slope;
                     }
                     clip.targets.push(t);
                     clip.curves.push(WeightCurve { values: zeros(), in_tangents: in_t, out_tangents: out_t });
@@ -99,6 +103,20 @@ mod tests {
 
     fn times(tr: &Trajectory) -> impl Iterator<Item = f64> + '_ {
         (0..=300).map(|k| tr.start() + (tr.end() - tr.start()) * k as f64 / 300.0)
+    }
+
+    #[test]
+    fn a_contact_is_one_clip_key() {
+        // Keys 1 and 2 are a contact: one pose, the velocity jumps from arriving to leaving.
+        let mut tr = wavy(false);
+        tr.times = vec![0.0, 0.4, 0.4, 1.5];
+        tr.positions[2] = tr.positions[1].clone();
+        let clip = BlendShapeClip::bernstein(&tr, false);
+        assert_eq!(clip.times, vec![0.0, 0.4, 1.5]);
+        assert!(clip.targets.iter().all(|t| t.name != "key_2" && t.name != "key_1_out" && t.name != "key_2_in"));
+        assert!(clip.curves.iter().flat_map(|c| c.in_tangents.iter().chain(&c.out_tangents)).all(|x| x.is_finite()));
+        let worst = times(&tr).map(|t| tr.evaluate(t).iter().zip(&clip.points_at(t)).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)).fold(0.0, f64::max);
+        assert!(worst < 1e-6, "{worst}");
     }
 
     #[test]

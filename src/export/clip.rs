@@ -71,7 +71,7 @@ pub struct BlendShapeClip {
     pub base: Vec<[f32; 3]>,
     /// The blendshapes.
     pub targets: Vec<Target>,
-    /// Key times in seconds (strictly increasing).
+    /// Key times in seconds (strictly increasing: a contact's two keys are one clip key).
     pub times: Vec<f64>,
     /// `curves[j]` drives `targets[j]`.
     pub curves: Vec<WeightCurve>,
@@ -103,6 +103,20 @@ pub fn is_cyclic(trajectory: &Trajectory) -> bool {
     same(&trajectory.positions[0], &trajectory.positions[last]) && same(&trajectory.velocities[0], &trajectory.velocities[last])
 }
 
+/// The clip keys of trajectory keys at `times`: a contact's two keys (equal times) share one.
+/// Returns the clip key of every trajectory key and the clip's (strictly increasing) times.
+pub(super) fn clip_keys(times: &[f64]) -> (Vec<usize>, Vec<f64>) {
+    let mut clip_key = Vec::with_capacity(times.len());
+    let mut clip_times: Vec<f64> = Vec::with_capacity(times.len());
+    for &t in times {
+        if clip_times.last() != Some(&t) {
+            clip_times.push(t);
+        }
+        clip_key.push(clip_times.len() - 1);
+    }
+    (clip_key, clip_times)
+}
+
 impl BlendShapeClip {
     /// The blendshape form of `trajectory` in the form `weights` names, cyclic when
     /// [`is_cyclic`] says so: the one constructor of the clip every blendshape file holds.
@@ -116,6 +130,11 @@ impl BlendShapeClip {
 
     /// The signed blendshape form of `trajectory`: `key_K` (pose) and `key_K_velocity`.
     /// `cyclic`: the last key aliases the first.
+    ///
+    /// A contact (two keys at one time, one pose, two velocities) becomes one clip key: its
+    /// pose once, the arriving key's velocity as the in-tangent and the leaving key's as the
+    /// out-tangent (glTF CUBICSPLINE keys carry both), so the clip's times stay strictly
+    /// increasing.
     pub(super) fn signed(trajectory: &Trajectory, cyclic: bool) -> Self {
         let n_keys = trajectory.key_count();
         let base_f64 = &trajectory.positions[0];
@@ -124,18 +143,22 @@ impl BlendShapeClip {
         let base_rounded: Vec<Point> = base.iter().map(|b| [b[0] as f64, b[1] as f64, b[2] as f64]).collect();
         // Keys that own their own unknowns: in a cyclic clip the last key is the first.
         let owner = |k: usize| if cyclic && k == n_keys - 1 { 0 } else { k };
+        let (clip_key, times) = clip_keys(&trajectory.times);
+        let leaves_contact = |k: usize| k > 0 && clip_key[k] == clip_key[k - 1];
+        let arrives_contact = |k: usize| k + 1 < n_keys && clip_key[k + 1] == clip_key[k];
+        let n_clip = times.len();
 
         let mut targets = Vec::new();
         let mut curves = Vec::new();
-        let zeros = || vec![0.0f32; n_keys];
+        let zeros = || vec![0.0f32; n_clip];
         for k in 1..n_keys {
-            if owner(k) != k {
+            if owner(k) != k || leaves_contact(k) {
                 continue;
             }
             let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| crate::mesh::sub(*x, *b));
             if let Some(t) = sparse_target(format!("key_{k}"), offsets) {
                 let mut values = zeros();
-                values[k] = 1.0;
+                values[clip_key[k]] = 1.0;
                 targets.push(t);
                 curves.push(WeightCurve { values, in_tangents: zeros(), out_tangents: zeros() });
             }
@@ -147,14 +170,18 @@ impl BlendShapeClip {
             if let Some(t) = sparse_target(format!("key_{k}_velocity"), trajectory.velocities[k].iter().copied()) {
                 let (mut in_t, mut out_t) = (zeros(), zeros());
                 for key in (0..n_keys).filter(|&key| owner(key) == k) {
-                    in_t[key] = 1.0;
-                    out_t[key] = 1.0;
+                    if !leaves_contact(key) {
+                        in_t[clip_key[key]] = 1.0;
+                    }
+                    if !arrives_contact(key) {
+                        out_t[clip_key[key]] = 1.0;
+                    }
                 }
                 targets.push(t);
                 curves.push(WeightCurve { values: zeros(), in_tangents: in_t, out_tangents: out_t });
             }
         }
-        BlendShapeClip { base, targets, times: trajectory.times.clone(), curves }
+        BlendShapeClip { base, targets, times, curves }
     }
 
     /// Vertices of the mesh.
@@ -240,6 +267,30 @@ mod tests {
             assert_eq!(is_cyclic(&tr), cyclic);
             let clip = BlendShapeClip::new(&tr, Weights::Signed);
             assert!(max_error(&tr, &clip) < 1e-5, "cyclic={cyclic}: {}", max_error(&tr, &clip));
+        }
+    }
+
+    #[test]
+    fn a_contact_is_one_clip_key_with_its_two_velocities_as_tangents() {
+        // Keys 1 and 2 are a contact: one pose, the velocity jumps from arriving to leaving.
+        let mut tr = wavy(false);
+        tr.times = vec![0.0, 0.4, 0.4, 1.5];
+        tr.positions[2] = tr.positions[1].clone();
+        let clip = BlendShapeClip::signed(&tr, false);
+        assert_eq!(clip.times, vec![0.0, 0.4, 1.5]);
+        assert!(clip.targets.iter().all(|t| t.name != "key_2"), "the shared pose is one target");
+        assert!(max_error(&tr, &clip) < 1e-5, "{}", max_error(&tr, &clip));
+        // Both sides of the contact: the arriving and the leaving velocity.
+        let slope = |t0: f64, t1: f64| -> Vec<Point> {
+            let (a, b) = (clip.points_at(t0), clip.points_at(t1));
+            a.iter().zip(&b).map(|(p, q)| crate::mesh::scale(crate::mesh::sub(*q, *p), 1.0 / (t1 - t0))).collect()
+        };
+        let h = 1e-4;
+        for (v, (before, after)) in slope(0.4 - h, 0.4).iter().zip(slope(0.4, 0.4 + h)).enumerate() {
+            for d in 0..3 {
+                assert!((before[d] - tr.velocities[1][v][d]).abs() < 1e-2, "arriving, vertex {v}");
+                assert!((after[d] - tr.velocities[2][v][d]).abs() < 1e-2, "leaving, vertex {v}");
+            }
         }
     }
 

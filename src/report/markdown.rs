@@ -46,6 +46,17 @@ pub fn render(report: &Report) -> String {
             sv.seconds, sv.precompute_seconds, sv.iteration_seconds, sv.unknowns
         ),
     );
+    if sv.method == crate::scene::Method::Spacetime && sv.iterations > 0 {
+        let remaining = sv.predicted_remaining.map_or("no prediction (the last two windows' decreases do not shrink)".to_string(), |r| format!("predicted remaining decrease {:.3}%", 100.0 * r));
+        push(&mut s, format!("| convergence | W fell {:.3}% over the last iterations of the stopping window; {remaining} |", 100.0 * sv.last_decrease));
+    }
+    if !sv.input_times.is_empty() && sv.times != sv.input_times {
+        let list = |t: &[f64]| t.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
+        push(&mut s, format!("| key times | optimized: {} s (input {} s; {} timing iterations, {} refactorizations) |", list(&sv.times), list(&sv.input_times), sv.timing_iterations, sv.refactorizations));
+    }
+    if let Some(c) = sv.clearance {
+        push(&mut s, format!("| obstacles | smallest node clearance {c:.3e} over keys and frames, {} node-obstacle checks held at the end |", sv.active_contacts));
+    }
     push(&mut s, format!("| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames (blendshape vs full-frame) |", report.error.max, report.error.rms, report.error.samples));
     push(
         &mut s,

@@ -10,7 +10,7 @@
 //! ```
 //!
 //! with three small dense matrices over time slots and three fixed sparse matrices over
-//! nodes. The proximal regularization `(1/h⁴) Σ dτ Bᵀ M B` adds `C_KK / h⁴` to `C_MM`
+//! nodes (`M⁻¹` in the middle of `L M⁻¹ L` skips the supports, whose rows W leaves out). The proximal regularization `(1/h⁴) Σ dτ Bᵀ M B` adds `C_KK / h⁴` to `C_MM`
 //! (in the M⁻¹ norm of W, 1/h⁴ is the weight whose units make h a time). The
 //! matrix restricted to the free unknowns is written straight into compressed columns in
 //! node-major order (rows come out sorted; no triplet sort), and the three coordinates are
@@ -184,7 +184,9 @@ fn coupling(c: &TimeCoefficients) -> Vec<(bool, bool)> {
 pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeCoefficients) -> SparseColMat<usize, f64> {
     let el = objective.elastic;
     let n = el.node_count();
-    let inv_mass: Vec<f64> = el.mass.iter().map(|m| 1.0 / m).collect();
+    // Supports' rows are not in W: the sum over the middle node of L M⁻¹ L skips them (the
+    // other two blocks only couple free nodes, which are never supports).
+    let inv_mass: Vec<f64> = el.mass.iter().zip(&objective.supports).map(|(m, &support)| if support { 0.0 } else { 1.0 / m }).collect();
     let k = el.stiffness.sandwich_diagonal(&inv_mass);
     let l = &el.stiffness;
     let s_count = coefficients.slots;

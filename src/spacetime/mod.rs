@@ -9,14 +9,20 @@
 //!   kept symbolic analysis when the key times move);
 //! - [`quasi_newton`]: L-BFGS preconditioned by the global step;
 //! - [`solver`]: the two phases of the iteration (local/global, then quasi-Newton);
-//! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step.
+//! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step;
+//! - [`obstacles`]: planes and spheres the body may not enter;
+//! - [`contact`]: the node-obstacle checks at keys and frames, linearized as constraints;
+//! - [`active_set`]: the constraints held in a step, by projection of the preconditioner.
 //!
 //! Inputs are plain: an [`Elastic`](crate::physics::elastic::Elastic) body, the key
 //! constraints and the solver [`Settings`](solver::Settings); the result is the trajectory and
 //! the solver's own [`Log`](solver::Log). The stage layer translates the scene and stage files.
 
+pub mod active_set;
+pub mod contact;
 pub mod global_step;
 pub mod objective;
+pub mod obstacles;
 pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;

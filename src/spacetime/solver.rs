@@ -1,17 +1,51 @@
-//! The spacetime projective-dynamics iteration: local step, residuals, global step, repeat.
+//! The spacetime projective-dynamics iteration: local step, residuals, global step, repeat;
+//! then quasi-Newton on the exact W, over the key times too when they are optimized.
 //!
-//! Starts from the keyframes joined with zero velocities (the hermite baseline). Each
-//! iteration evaluates W at the current trajectory with fresh projections, stops if W has
-//! settled (change below `tolerance × W₀`), and otherwise takes one step (see [`solve`]). W is
-//! recorded per iteration. It cannot grow: a step that would raise it is halved, and the solve
-//! stops where no step lowers it. A NaN is an error naming the iteration, never a result.
+//! Starts from the keyframes joined with zero velocities (the hermite baseline), moved out of
+//! any obstacle. W is recorded per iteration. It cannot grow: a step that would raise it is
+//! halved, and the solve stops where no step lowers it. A NaN is an error naming the
+//! iteration, never a result.
+//!
+//! # When it stops
+//!
+//! When W decreased by less than `tolerance × W` over the last [`WINDOW`] quasi-Newton
+//! iterations: a relative rate that does not depend on how bad the first guess was (a test
+//! against the initial W stops a solve that started far away early, and one that started
+//! close never). The log carries the decrease of that last window and a prediction of what is
+//! left: the decreases of the last two windows extrapolated as a geometric series (the
+//! iteration converges linearly there). The default tolerance is chosen by measurement (see
+//! `formats/scene.md`).
+//!
+//! # Key times
+//!
+//! With [`Settings::timing`], the quasi-Newton phase runs on the keyframe unknowns and the
+//! interval lengths together: the exact `∂W/∂T_i` comes with the exact gradient (same
+//! projection Jacobians), the initial inverse Hessian is the global step's factorization for
+//! the keys and the held-keys curvature `∂²W/∂T_i²` ([`super::timing`]) for the times, and the
+//! curvature pairs learn how the keys absorb a change of timing (the reduced curvature is far
+//! below the held-keys one: 199 vs 3219 on a free fall). So every quasi-Newton iteration is also
+//! a timing step, and the times and keys settle together. The factorization depends on the
+//! times; it is refactorized (on its kept symbolic analysis) only when an interval has moved by
+//! more than [`REFACTOR_CHANGE`] since the last factorization, and is a valid preconditioner
+//! in between (the line search keeps W from increasing whatever it is).
+//!
+//! # Obstacles
+//!
+//! With [`Settings::contacts`], every node stays outside every obstacle at every key and every
+//! frame ([`super::contact`]). The checks a step would cross join an active set held by hard
+//! constraints ([`super::active_set`]); a check leaves it when its multiplier says the
+//! obstacle would have to pull.
 
+use std::collections::BTreeSet;
 use std::time::Instant;
 
+use super::active_set::{Preconditioner, Projection, Row, RowKind};
+use super::contact::{Check, Contacts};
 use super::global_step::GlobalStep;
 use super::objective::{Evaluation, Objective};
-use super::quasi_newton::Lbfgs;
-use super::sampling::{samples, TimeSlots};
+use super::quasi_newton::{dot, Lbfgs};
+use super::sampling::{sample_counts, samples, TimeSlots};
+use super::timing::{safe_curvature, Blocks, ProjectionMode, Timing, TimingSettings};
 use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
 use crate::error::{Error, Result};
@@ -23,9 +57,12 @@ use crate::physics::elastic::Elastic;
 pub struct Settings {
     /// Residual samples per interval.
     pub samples: usize,
+    /// Residual samples on an interval that begins or ends at a contact.
+    pub contact_samples: usize,
     /// Iterations (of both phases together) before the solve gives up.
     pub max_iterations: usize,
-    /// Stop when W changes by less than `tolerance × W₀` in one iteration.
+    /// Stop when W decreased by less than `tolerance × W` over the last [`WINDOW`]
+    /// quasi-Newton iterations.
     pub tolerance: f64,
     /// Proximal time scale h (0 = off).
     pub regularization: f64,
@@ -36,7 +73,47 @@ pub struct Settings {
     /// Bytes the global step may use (its direct factor's predicted peak); past them it is
     /// solved iteratively. `None`: a fraction of the machine's available memory.
     pub max_memory: Option<u64>,
+    /// Optimize the key times too, under these constraints (`max_iterations` and `tolerance`
+    /// of [`TimingSettings`] are those of [`Timing::optimize_times`], not used here).
+    pub timing: Option<TimingSettings>,
+    /// Obstacles the nodes may not enter.
+    pub contacts: Option<Contacts>,
 }
+
+impl Settings {
+    /// The settings of an unconstrained solve with these samples and material.
+    pub fn new(samples: usize, damping: f64, gravity: Point) -> Settings {
+        Settings {
+            samples,
+            contact_samples: 2 * samples,
+            max_iterations: DEFAULT_MAX_ITERATIONS,
+            tolerance: DEFAULT_TOLERANCE,
+            regularization: 0.1,
+            damping,
+            gravity,
+            max_memory: None,
+            timing: None,
+            contacts: None,
+        }
+    }
+}
+
+/// The default of [`Settings::tolerance`] (measured: see `formats/scene.md`).
+pub const DEFAULT_TOLERANCE: f64 = 1e-3;
+/// The default of [`Settings::max_iterations`].
+pub const DEFAULT_MAX_ITERATIONS: usize = 1000;
+/// Iterations over which the stopping rule measures the decrease of W.
+pub const WINDOW: usize = 10;
+/// The local/global phase hands over to quasi-Newton when an iteration lowers W by less than
+/// this fraction of W.
+const PHASE1_SWITCH: f64 = 1e-2;
+/// Relative change of an interval since the last factorization that triggers a refactorization.
+pub const REFACTOR_CHANGE: f64 = 0.1;
+/// Largest relative change of an interval in one step.
+const MAX_INTERVAL_CHANGE: f64 = 0.5;
+/// Penetration allowed at a trial point, relative to the body's size (the linearized steps
+/// keep the active checks to second order when the times move).
+const CLEARANCE_TOLERANCE: f64 = 1e-6;
 
 /// What the iteration did.
 #[derive(Debug, Clone, PartialEq)]
@@ -61,12 +138,30 @@ pub struct Log {
     pub stop_reason: String,
     /// How the global step was solved: `direct` or `iterative` (over the memory budget).
     pub linear_solver: String,
+    /// W's relative decrease over the last [`WINDOW`] iterations when the solve stopped.
+    pub last_decrease: f64,
+    /// The predicted further decrease of W, relative to the final W, had the iteration gone on
+    /// (the last two windows' decreases extrapolated geometrically; `None` when they do not
+    /// shrink, or the solve stopped before two windows).
+    pub predicted_remaining: Option<f64>,
+    /// Quasi-Newton iterations that moved the key times.
+    pub timing_iterations: usize,
+    /// With the key times optimized: the key times after each iteration, starting with the
+    /// given ones (one entry per entry of `energy`); empty otherwise.
+    pub times: Vec<Vec<f64>>,
+    /// Numeric refactorizations of the global step for new key times.
+    pub refactorizations: usize,
+    /// Node-obstacle checks held on an obstacle at the end.
+    pub active_contacts: usize,
+    /// The smallest distance of any node to any obstacle at any check instant (none without
+    /// obstacles).
+    pub clearance: Option<f64>,
 }
 
 /// A finished solve.
 #[derive(Debug, Clone)]
 pub struct Solved {
-    /// The optimized trajectory of every node.
+    /// The optimized trajectory of every node (at the optimized times, when they are).
     pub trajectory: Trajectory,
     /// What the iteration did.
     pub log: Log,
@@ -83,15 +178,18 @@ pub fn initial_trajectory(keys: &KeyConstraints) -> Trajectory {
     Trajectory::with_zero_velocities(keys.times.clone(), positions)
 }
 
-/// The objective of `keys` on `elastic` with these settings.
+/// The objective of `keys` on `elastic` with these settings, at the keys' times.
 pub fn objective<'a>(elastic: &'a Elastic, keys: &KeyConstraints, settings: &Settings) -> Objective<'a> {
-    let slots = TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic };
+    let slots = keys.slots();
+    let counts = sample_counts(&keys.times, settings.samples, settings.contact_samples);
     Objective {
         elastic,
-        samples: samples(&keys.times, settings.samples, &slots),
+        samples: samples(&keys.times, &counts, &slots),
         slots,
         damping: settings.damping,
         gravity: settings.gravity,
+        supports: keys.supports(elastic.node_count()),
+        time_gradient: false,
     }
 }
 
@@ -107,8 +205,9 @@ pub fn baseline(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings) -
 /// Add a per-slot step to the trajectory (every key sharing a slot gets the same value).
 pub fn apply_step(tr: &mut Trajectory, slots: &TimeSlots, delta: &[Vec<Point>], scale: f64) {
     for (s, ds) in delta.iter().enumerate() {
+        let position = slots.is_position(s);
         for k in slots.keys_of(s) {
-            let target = if s % 2 == 0 { &mut tr.positions[k] } else { &mut tr.velocities[k] };
+            let target = if position { &mut tr.positions[k] } else { &mut tr.velocities[k] };
             for (x, d) in target.iter_mut().zip(ds) {
                 for c in 0..3 {
                     x[c] += scale * d[c];
@@ -121,13 +220,17 @@ pub fn apply_step(tr: &mut Trajectory, slots: &TimeSlots, delta: &[Vec<Point>], 
 /// Halvings of a step that would increase W before it is given up.
 const MAX_HALVINGS: usize = 8;
 
+/// Directions blocked at once in a row (each adding a row to the active set) before a phase
+/// gives up.
+const MAX_HOLDS: usize = 50;
+
 /// Curvature pairs kept by the quasi-Newton phase.
 const LBFGS_MEMORY: usize = 8;
 
 /// How a phase of the iteration ended.
 #[derive(Debug, Clone, PartialEq)]
 enum PhaseEnd {
-    /// W changed by less than `tolerance × W₀` in one iteration.
+    /// W settled (the relative decrease in the stopping rule's measure).
     Settled(f64),
     /// No step along the phase's direction decreased W.
     Stalled,
@@ -141,43 +244,88 @@ struct Iterate {
     eval: Evaluation,
     energy: Vec<f64>,
     halvings: usize,
+    /// Checks held on their obstacle.
+    active: BTreeSet<Check>,
+    /// Interval variables held at their minimum length.
+    at_minimum: Vec<bool>,
+    /// Quasi-Newton iterations that moved the times.
+    timing_iterations: usize,
+    refactorizations: usize,
+    /// The key times after each iteration (when they are optimized).
+    times: Vec<Vec<f64>>,
 }
 
-/// Optimize keyframe positions and velocities. `on_iteration(k, W)` reports progress.
+/// Optimize keyframe positions and velocities (and key times). `on_iteration(k, W)` reports
+/// progress.
 ///
 /// Two phases share one factorized matrix:
 ///
 /// 1. The paper's local/global step ([`Solver::local_global`]): the minimizer of the quadratic
-///    model of W with frozen projections (plus the proximal term). It is fast far from the
-///    solution but it is not a descent direction of W everywhere (its stiffness is `L`, not
-///    `∇²E`), and near its fixed point it turns W back up.
-/// 2. Once that step settles or stops decreasing W: L-BFGS on the exact W (whose gradient
-///    differentiates the projections), with the same matrix as initial inverse Hessian
-///    ([`Solver::quasi_newton`]).
+///    model of W with frozen projections (plus the proximal term, and the active contacts as
+///    hard constraints). It is fast far from the solution but it is not a descent direction of
+///    W everywhere (its stiffness is `L`, not `∇²E`), and near its fixed point it turns W back
+///    up.
+/// 2. Once an iteration lowers W by less than 1% or stops decreasing it: L-BFGS on the exact W
+///    (whose gradient differentiates the projections), with the same matrix as initial
+///    inverse Hessian ([`Solver::quasi_newton`]), over the key times too when asked.
 ///
-/// In both, a step that would increase W is halved until W decreases (the trial's local step
+/// In both, a step that would not decrease W is halved until it does (the trial's local step
 /// is the next iteration's, so an accepted step costs nothing extra). W never increases, and
-/// the regularization never moves a fixed point. The solve stops when phase 2 settles or
-/// stalls, or after `max_iterations` in all.
+/// the regularization never moves a fixed point. The solve stops when phase 2 settles
+/// (module documentation) or stalls, or after `max_iterations` in all.
 pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_iteration: &dyn Fn(usize, f64)) -> Result<Solved> {
     let start = Instant::now();
+    let blocks = settings.timing.as_ref().map(|t| Blocks::new(&keys.times, t)).transpose()?;
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
     let global = GlobalStep::within(&objective, unknowns, settings.regularization, settings.max_memory)?;
     let precompute_seconds = start.elapsed().as_secs_f64();
-    let solver = Solver { objective, global, settings, on_iteration };
+    let timing = Timing::new(elastic, keys, settings);
+    // The optimized interval lengths: every interval of positive length.
+    let mut vars = vec![None; keys.times.len() - 1];
+    let mut intervals = Vec::new();
+    if blocks.is_some() {
+        for (i, var) in vars.iter_mut().enumerate() {
+            if keys.times[i + 1] > keys.times[i] {
+                *var = Some(intervals.len());
+                intervals.push(i);
+            }
+        }
+    }
+    let lower: Vec<f64> = intervals.iter().map(|&i| settings.timing.as_ref().map_or(0.0, |t| t.min_interval.min(keys.times[i + 1] - keys.times[i]))).collect();
+    let size = crate::mesh::bbox_diagonal(&elastic.rest);
+    let mut solver = Solver {
+        timing,
+        global,
+        settings,
+        on_iteration,
+        blocks,
+        vars,
+        intervals,
+        lower,
+        curvature: Vec::new(),
+        factored_times: keys.times.clone(),
+        clearance_tolerance: CLEARANCE_TOLERANCE * size,
+    };
 
     let t_iterations = Instant::now();
-    let tr = initial_trajectory(keys);
+    let mut tr = initial_trajectory(keys);
+    let mut active = BTreeSet::new();
+    if let Some(contacts) = &settings.contacts {
+        solver.make_feasible(contacts, &mut tr, &mut active)?;
+    }
     let eval = solver.evaluate(&tr, 0, false)?;
     on_iteration(0, eval.value);
-    let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0 };
+    let at_minimum = vec![false; solver.intervals.len()];
+    let times = if solver.blocks.is_some() { vec![tr.times.clone()] } else { Vec::new() };
+    let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0, active, at_minimum, timing_iterations: 0, refactorizations: 0, times };
     let (converged, stop_reason) = solver.iterate(&mut it)?;
     let iterations = it.energy.len() - 1;
     let iteration_time = t_iterations.elapsed().as_secs_f64();
+    let (last_decrease, predicted_remaining) = prediction(&it.energy);
+    let clearance = settings.contacts.as_ref().map(|c| c.clearance(&c.snapshot(&it.tr, &solver.timing.slots)));
     let log = Log {
         iterations,
-        energy: it.energy,
         seconds: start.elapsed().as_secs_f64(),
         precompute_seconds,
         iteration_seconds: iteration_time / (iterations + 1) as f64,
@@ -186,23 +334,81 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
         converged,
         stop_reason,
         linear_solver: solver.global.stats.linear_solver.to_string(),
+        last_decrease,
+        predicted_remaining,
+        timing_iterations: it.timing_iterations,
+        times: it.times,
+        refactorizations: it.refactorizations,
+        active_contacts: it.active.len(),
+        clearance,
+        energy: it.energy,
     };
     Ok(Solved { trajectory: it.tr, log })
 }
 
-/// The objective and the factorized global step of one solve.
+/// The relative decrease of W over the last window, and the geometric extrapolation of the
+/// last two windows' decreases (module documentation).
+fn prediction(energy: &[f64]) -> (f64, Option<f64>) {
+    let k = energy.len() - 1;
+    let w = energy[k];
+    if w <= 0.0 || k == 0 {
+        return (0.0, None);
+    }
+    let window = WINDOW.min(k);
+    let last = energy[k - window] - w;
+    if k < 2 * WINDOW {
+        return (last / w, None);
+    }
+    let before = energy[k - 2 * WINDOW] - energy[k - WINDOW];
+    let ratio = last / before;
+    let remaining = (before > 0.0 && ratio < 1.0).then(|| last * ratio / (1.0 - ratio) / w);
+    (last / w, remaining)
+}
+
+/// The objective, the factorized global step and the constraints of one solve.
 struct Solver<'a> {
-    objective: Objective<'a>,
+    timing: Timing<'a>,
     global: GlobalStep,
     settings: &'a Settings,
     on_iteration: &'a dyn Fn(usize, f64),
+    /// The fixed-sum blocks of intervals, when the times are optimized.
+    blocks: Option<Blocks>,
+    /// `vars[i]`: the variable of interval `i`, if its length is optimized.
+    vars: Vec<Option<usize>>,
+    /// The interval of each variable.
+    intervals: Vec<usize>,
+    /// The smallest length of each variable.
+    lower: Vec<f64>,
+    /// `D_T`: the inverse held-keys curvature of each variable.
+    curvature: Vec<f64>,
+    /// The key times the global step was last factorized at.
+    factored_times: Vec<f64>,
+    /// Penetration allowed at a trial point (absolute).
+    clearance_tolerance: f64,
 }
 
-impl Solver<'_> {
-    /// W at `tr` with fresh projections (and the exact gradient when `exact`); a non-finite W
+/// A step of both kinds of variables: the keyframe unknowns (flat, three per unknown) and the
+/// interval variables.
+fn split(z: &[f64], unknowns: usize) -> (&[f64], &[f64]) {
+    z.split_at(3 * unknowns)
+}
+
+impl<'a> Solver<'a> {
+    fn objective(&self, times: &[f64]) -> Objective<'a> {
+        let mut o = self.timing.objective(times);
+        o.time_gradient = self.blocks.is_some();
+        o
+    }
+
+    fn unknown_count(&self) -> usize {
+        self.global.unknowns().count()
+    }
+
+    /// W at `tr` with fresh projections (and the exact gradients when `exact`); a non-finite W
     /// is an error naming the iteration.
     fn evaluate(&self, tr: &Trajectory, iteration: usize, exact: bool) -> Result<Evaluation> {
-        let eval = self.objective.evaluate(tr, &self.objective.local_step(tr, exact));
+        let objective = self.objective(&tr.times);
+        let eval = objective.evaluate(tr, &objective.local_step(tr, exact));
         if !eval.value.is_finite() {
             return Err(Error::general(
                 format!("the spacetime energy W became {} at iteration {iteration}", eval.value),
@@ -212,58 +418,164 @@ impl Solver<'_> {
         Ok(eval)
     }
 
-    /// The relative change of W in the last iteration, if the phase that began at iteration
-    /// `since` has taken one and it is below the tolerance.
-    fn settled(&self, energy: &[f64], since: usize) -> Option<f64> {
-        let k = energy.len();
-        (k >= since + 2).then(|| (energy[k - 2] - energy[k - 1]).abs() / energy[0]).filter(|c| *c < self.settings.tolerance)
+    /// The joint gradient of an exact evaluation: the free unknowns' (flat), then the interval
+    /// variables'.
+    fn joint_gradient(&self, eval: &Evaluation, times: bool) -> Vec<f64> {
+        let g = self.global.gather(eval.exact_gradient.as_ref().expect("exact phase"));
+        let mut z: Vec<f64> = g.as_flattened().to_vec();
+        if let Some(t) = eval.time_gradient.as_ref().filter(|_| times) {
+            z.extend(self.intervals.iter().map(|&i| t[i]));
+        }
+        z
     }
 
     fn budget_left(&self, it: &Iterate) -> bool {
         it.energy.len() <= self.settings.max_iterations
     }
 
-    /// Take `delta` (per slot) from the current iterate, halving until W decreases; the scale
-    /// of the accepted step, if any.
-    fn line_search(&self, it: &mut Iterate, delta: &[Vec<Point>], exact: bool) -> Result<Option<f64>> {
-        let w = *it.energy.last().expect("initial value");
-        let mut scale = 1.0;
-        for halving in 0..=MAX_HALVINGS {
-            let mut trial = it.tr.clone();
-            apply_step(&mut trial, &self.objective.slots, delta, scale);
-            let trial_eval = self.evaluate(&trial, it.energy.len(), exact)?;
-            if trial_eval.value <= w {
-                it.halvings += halving;
-                it.tr = trial;
-                it.eval = trial_eval;
-                (self.on_iteration)(it.energy.len(), it.eval.value);
-                it.energy.push(it.eval.value);
-                return Ok(Some(scale));
+    /// The rows held in a step: the fixed sums of interval blocks, the intervals at their
+    /// minimum, and the active contacts (linearized at the current iterate; with `times`, the
+    /// contacts' dependence on the interval lengths too).
+    fn rows(&self, it: &Iterate, times: bool) -> Vec<Row> {
+        let mut rows = Vec::new();
+        if times {
+            if let Some(blocks) = &self.blocks {
+                for (block, fixed_sum) in &blocks.blocks {
+                    if *fixed_sum && !block.is_empty() {
+                        let t = block.iter().filter_map(|&i| self.vars[i]).map(|j| (j, 1.0)).collect();
+                        rows.push(Row { kind: RowKind::Sum, u: Vec::new(), normal: [0.0; 3], t });
+                    }
+                }
             }
-            scale *= 0.5;
+            for (j, _) in it.at_minimum.iter().enumerate().filter(|(_, &b)| b) {
+                rows.push(Row { kind: RowKind::Bound(j), u: Vec::new(), normal: [0.0; 3], t: vec![(j, 1.0)] });
+            }
         }
-        it.halvings += MAX_HALVINGS;
-        Ok(None)
+        if let Some(contacts) = &self.settings.contacts {
+            let no_times = vec![None; self.vars.len()];
+            let vars = if times { &self.vars } else { &no_times };
+            for (index, &check) in it.active.iter().enumerate() {
+                if let Some((row, _)) = contacts.row(check, &it.tr, self.global.unknowns(), vars, RowKind::Contact(index)) {
+                    rows.push(row);
+                }
+            }
+        }
+        rows
+    }
+
+    /// The step preconditioner restricted to the rows of `it` (with the times when `times`).
+    fn projection(&self, it: &Iterate, times: bool) -> Projection {
+        let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+        let d_t: &[f64] = if times { &self.curvature } else { &[] };
+        Projection::new(self.rows(it, times), &Preconditioner { unknowns: self.unknown_count(), solve: &solve, times: d_t })
+    }
+
+    fn preconditioner<'s>(&'s self, solve: &'s dyn Fn(&mut [Point]), times: bool) -> Preconditioner<'s> {
+        Preconditioner { unknowns: self.unknown_count(), solve, times: if times { &self.curvature } else { &[] } }
+    }
+
+    /// Release the inequality rows whose multiplier (for the gradient `g`) is negative: the
+    /// objective pulls away from them. Returns whether any was released. Checks in `keep`
+    /// (just blocked) stay one more iteration.
+    fn release(&self, it: &mut Iterate, projection: &Projection, lambda: &[f64], keep: Option<Check>) -> bool {
+        let checks: Vec<Check> = it.active.iter().copied().collect();
+        let mut released = false;
+        let scale = lambda.iter().fold(0.0f64, |m, l| m.max(l.abs()));
+        for (row, &l) in projection.rows.iter().zip(lambda) {
+            if !(row.kind.is_inequality() && l < -1e-12 * scale) {
+                continue;
+            }
+            match row.kind {
+                RowKind::Contact(index) if Some(checks[index]) != keep => {
+                    it.active.remove(&checks[index]);
+                    released = true;
+                }
+                RowKind::Bound(j) => {
+                    it.at_minimum[j] = false;
+                    released = true;
+                }
+                _ => {}
+            }
+        }
+        released
+    }
+
+    /// Move the initial guess out of the obstacles: the smallest step (in the global step's
+    /// metric) that puts every penetrating node on the surface, repeated while the step
+    /// pushes others in. Held positions inside an obstacle are an error.
+    fn make_feasible(&self, contacts: &Contacts, tr: &mut Trajectory, active: &mut BTreeSet<Check>) -> Result<()> {
+        let unknowns = self.global.unknowns();
+        let no_times = vec![None; self.vars.len()];
+        for _ in 0..20 {
+            let snap = contacts.snapshot(tr, &self.timing.slots);
+            let inside: Vec<(Check, f64)> = contacts.each(&snap).filter(|(_, _, d)| *d < -0.5 * self.clearance_tolerance).map(|(c, _, d)| (c, d)).collect();
+            if inside.is_empty() {
+                return Ok(());
+            }
+            for &(check, d) in &inside {
+                if contacts.row(check, tr, unknowns, &no_times, RowKind::Sum).is_none() {
+                    return Err(Error::general(
+                        format!("node {} is inside obstacle {} by {:.4e} at {:?}, and it cannot move there (its position and the velocities around it are held)", check.node, check.obstacle, -d, check.at),
+                        "move that keyframe out of the obstacle, or free its vertices at that key (`fixed`)",
+                    ));
+                }
+                active.insert(check);
+            }
+            let mut rows = Vec::new();
+            let mut targets = Vec::new();
+            for (index, &check) in active.iter().enumerate() {
+                if let Some((row, d)) = contacts.row(check, tr, unknowns, &no_times, RowKind::Contact(index)) {
+                    rows.push(row);
+                    targets.push(-d.min(0.0));
+                }
+            }
+            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let h0 = self.preconditioner(&solve, false);
+            let projection = Projection::new(rows, &h0);
+            let kept: Vec<f64> = projection.rows.iter().map(|r| match r.kind {
+                RowKind::Contact(index) => targets[index],
+                _ => 0.0,
+            }).collect();
+            let step = projection.correction(&kept, 3 * self.unknown_count());
+            let (u, _) = split(&step, self.unknown_count());
+            let points: Vec<Point> = u.as_chunks::<3>().0.to_vec();
+            apply_step(tr, &self.timing.slots, &self.global.scatter(&points), 1.0);
+        }
+        Err(Error::general(
+            "the keyframes cannot be moved out of the obstacles: every correction pushes other nodes in",
+            "check that the obstacles leave room for the body at every key",
+        ))
     }
 
     /// Both phases, or none when there is nothing to optimize: whether the solve converged,
     /// and why it stopped.
-    fn iterate(&self, it: &mut Iterate) -> Result<(bool, String)> {
-        if self.global.unknowns().count() == 0 {
+    fn iterate(&mut self, it: &mut Iterate) -> Result<(bool, String)> {
+        if self.unknown_count() == 0 && self.intervals.is_empty() {
             return Ok((true, "nothing to optimize: every keyframe position and velocity is fixed".to_string()));
         }
         if it.energy[0] == 0.0 {
             return Ok((true, "W is zero: the keyframes are already physically exact".to_string()));
         }
-        let phase1 = self.local_global(it)?;
+        let phase1 = if self.unknown_count() > 0 { self.local_global(it)? } else { PhaseEnd::Stalled };
         let local_global_iterations = it.energy.len() - 1;
-        let phase2 = if phase1 == PhaseEnd::OutOfIterations { PhaseEnd::OutOfIterations } else { self.quasi_newton(it)? };
-        let phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
+        let mut phase2 = if phase1 == PhaseEnd::OutOfIterations { PhaseEnd::OutOfIterations } else { self.quasi_newton(it, false)? };
+        if self.blocks.is_some() && phase2 != PhaseEnd::OutOfIterations {
+            // The keys first settle at the given times, then keys and times move together: only
+            // at settled keys is the held-keys time gradient the gradient of the reduced W (the
+            // W of the best keys for those times, part 1's measurement); far from them it
+            // mostly measures how bad the first guess is.
+            phase2 = self.quasi_newton(it, true)?;
+        }
+        let mut phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
+        if self.blocks.is_some() {
+            phases += &format!(", {} moving the key times, {} refactorizations", it.timing_iterations, it.refactorizations);
+        }
         let tolerance = self.settings.tolerance;
         Ok(match phase2 {
-            PhaseEnd::Settled(change) => {
-                (true, format!("W changed by {change:.3e} of its initial value, below the tolerance {tolerance} ({phases})"))
-            }
+            PhaseEnd::Settled(change) => (
+                true,
+                format!("W decreased by {change:.3e} of itself over the last {WINDOW} iterations, below the tolerance {tolerance} ({phases})"),
+            ),
             PhaseEnd::Stalled => (true, format!("W is stationary: no step along its quasi-Newton direction decreases it ({phases})")),
             PhaseEnd::OutOfIterations => {
                 (false, format!("stopped after max_iterations = {} before W settled ({phases})", self.settings.max_iterations))
@@ -271,55 +583,281 @@ impl Solver<'_> {
         })
     }
 
-    /// Phase 1: the paper's local/global step, while it decreases W.
+    /// Phase 1: the paper's local/global step (with the active contacts held), while it
+    /// decreases W by at least [`PHASE1_SWITCH`] of W per iteration.
     fn local_global(&self, it: &mut Iterate) -> Result<PhaseEnd> {
+        let (mut blocked, mut holds) = (None, 0);
         loop {
-            if let Some(change) = self.settled(&it.energy, 0) {
-                return Ok(PhaseEnd::Settled(change));
-            }
             if !self.budget_left(it) {
                 return Ok(PhaseEnd::OutOfIterations);
             }
-            let delta = self.global.step(&it.eval.gradient);
-            if self.line_search(it, &delta, false)?.is_none() {
-                return Ok(PhaseEnd::Stalled);
+            let mut d: Vec<f64> = self.global.gather(&it.eval.gradient).as_flattened().to_vec();
+            let mut projection = self.projection(it, false);
+            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let h0 = self.preconditioner(&solve, false);
+            let g = d.clone();
+            let lambda = projection.apply(&mut d, &h0);
+            if self.release(it, &projection, &lambda, blocked) {
+                projection = self.projection(it, false);
+                d.clone_from(&g);
+                projection.apply(&mut d, &h0);
+            }
+            d.iter_mut().for_each(|x| *x = -*x);
+            let w = *it.energy.last().expect("initial W");
+            let step = match self.line_search(it, &d, false, 1.0)? {
+                Outcome::Taken(step) => step,
+                Outcome::Held(stop) => {
+                    blocked = held_check(stop);
+                    holds += 1;
+                    if holds > MAX_HOLDS {
+                        return Ok(PhaseEnd::Stalled);
+                    }
+                    continue;
+                }
+                Outcome::Failed => return Ok(PhaseEnd::Stalled),
+            };
+            holds = 0;
+            blocked = step.blocked;
+            let w_new = *it.energy.last().expect("accepted");
+            if (w - w_new) < PHASE1_SWITCH * w_new {
+                return Ok(PhaseEnd::Settled((w - w_new) / w_new));
             }
         }
     }
 
-    /// Phase 2: L-BFGS on the exact W, preconditioned by the global step's matrix.
-    fn quasi_newton(&self, it: &mut Iterate) -> Result<PhaseEnd> {
-        let global = &self.global;
+    /// Phase 2: L-BFGS on the exact W (and the key times), preconditioned by the global
+    /// step's matrix and the held-keys time curvature, restricted to the active rows.
+    fn quasi_newton(&mut self, it: &mut Iterate, times: bool) -> Result<PhaseEnd> {
         it.eval = self.evaluate(&it.tr, it.energy.len(), true)?;
+        if times {
+            self.update_curvature(&it.tr, &it.eval);
+        }
         let since = it.energy.len() - 1;
         let mut lbfgs = Lbfgs::new(LBFGS_MEMORY);
-        let exact_gradient = |it: &Iterate| global.gather(it.eval.exact_gradient.as_ref().expect("exact phase"));
-        let mut g = exact_gradient(it);
+        let mut g = self.joint_gradient(&it.eval, times);
+        let (mut blocked, mut holds) = (None, 0);
         loop {
-            if let Some(change) = self.settled(&it.energy, since) {
-                return Ok(PhaseEnd::Settled(change));
+            let k = it.energy.len() - 1;
+            if k >= since + WINDOW {
+                let w = it.energy[k];
+                let change = (it.energy[k - WINDOW] - w) / w;
+                if change <= self.settings.tolerance {
+                    return Ok(PhaseEnd::Settled(change));
+                }
             }
             if !self.budget_left(it) {
                 return Ok(PhaseEnd::OutOfIterations);
             }
-            let mut d = lbfgs.direction(&g, |x| global.apply_inverse(x));
-            let mut accepted = self.line_search(it, &global.scatter(&d), true)?;
-            if accepted.is_none() && !lbfgs.is_empty() {
+            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let h0 = self.preconditioner(&solve, times);
+            let mut projection = self.projection(it, times);
+            if projection.rows.iter().any(|r| r.kind.is_inequality()) {
+                let mut pg = g.clone();
+                let lambda = projection.apply(&mut pg, &h0);
+                if self.release(it, &projection, &lambda, blocked) {
+                    projection = self.projection(it, times);
+                }
+            }
+            let precondition = |q: &mut [f64]| {
+                projection.apply(q, &h0);
+            };
+            let mut d = lbfgs.direction(&g, precondition);
+            // Not a descent direction (or NaN): start over from the preconditioned gradient.
+            if dot(&g, &d).partial_cmp(&0.0) != Some(std::cmp::Ordering::Less) {
+                lbfgs.clear();
+                d = lbfgs.direction(&g, precondition);
+            }
+            let mut outcome = self.line_search(it, &d, true, 1.0)?;
+            if matches!(outcome, Outcome::Failed) && !lbfgs.is_empty() {
                 // Restart from the preconditioned gradient.
                 lbfgs.clear();
-                d = lbfgs.direction(&g, |x| global.apply_inverse(x));
-                accepted = self.line_search(it, &global.scatter(&d), true)?;
+                d = lbfgs.direction(&g, precondition);
+                outcome = self.line_search(it, &d, true, 1.0)?;
             }
-            let Some(scale) = accepted else { return Ok(PhaseEnd::Stalled) };
-            // The step taken is `scale d`; the gradient change is measured.
-            let g_new = exact_gradient(it);
-            let step = d.iter().map(|v| crate::mesh::scale(*v, scale)).collect();
-            lbfgs.push(step, difference(&g_new, &g));
+            let step = match outcome {
+                Outcome::Taken(step) => step,
+                Outcome::Held(stop) => {
+                    blocked = held_check(stop);
+                    lbfgs.clear();
+                    holds += 1;
+                    if holds > MAX_HOLDS {
+                        return Ok(PhaseEnd::Stalled);
+                    }
+                    continue;
+                }
+                Outcome::Failed => return Ok(PhaseEnd::Stalled),
+            };
+            holds = 0;
+            blocked = step.blocked;
+            if step.added {
+                // The new row shrinks the subspace the curvature pairs live in.
+                lbfgs.clear();
+            }
+            let g_new = self.joint_gradient(&it.eval, times);
+            let s: Vec<f64> = d.iter().map(|v| v * step.scale).collect();
+            let y: Vec<f64> = g_new.iter().zip(&g).map(|(a, b)| a - b).collect();
+            lbfgs.push(s, y);
             g = g_new;
+            if times && step.moved_times {
+                it.timing_iterations += 1;
+                let moved = it.tr.times.windows(2).zip(self.factored_times.windows(2)).any(|(a, b)| {
+                    let (now, then) = (a[1] - a[0], b[1] - b[0]);
+                    then > 0.0 && ((now - then) / then).abs() > REFACTOR_CHANGE
+                });
+                if moved {
+                    self.global.retime(&self.objective(&it.tr.times), self.settings.regularization)?;
+                    self.factored_times.clone_from(&it.tr.times);
+                    self.update_curvature(&it.tr, &it.eval);
+                    it.refactorizations += 1;
+                }
+            }
+        }
+    }
+
+    /// `D_T` from the held-keys curvature of W at `tr` (made positive where it is not).
+    fn update_curvature(&mut self, tr: &Trajectory, eval: &Evaluation) {
+        let d = self.timing.derivatives(tr, ProjectionMode::Fresh);
+        let gradient = eval.time_gradient.as_ref().expect("time gradient");
+        let lengths: Vec<f64> = tr.times.windows(2).map(|w| w[1] - w[0]).collect();
+        let h = safe_curvature(gradient, &d.curvature, &lengths);
+        self.curvature = self.intervals.iter().map(|&i| 1.0 / h[i]).collect();
+    }
+
+    /// Take the step `d` (flat unknowns, then interval variables when `times`) from the
+    /// current iterate, halving until W decreases and every check stays outside; the accepted
+    /// step, if any. The first trial is `limit`, or less where an interval would change by more
+    /// than half or pass its minimum, or a check would enter an obstacle: the interval or check
+    /// that stops it joins the active set if the step is taken whole.
+    fn line_search(&self, it: &mut Iterate, d: &[f64], exact: bool, limit: f64) -> Result<Outcome> {
+        let nu = self.unknown_count();
+        let (du, dt_vars) = split(d, nu);
+        let du_points: Vec<Point> = du.as_chunks::<3>().0.to_vec();
+        let du_slots = self.global.scatter(&du_points);
+        let mut dt = vec![0.0; it.tr.times.len() - 1];
+        for (j, &i) in self.intervals.iter().enumerate().take(dt_vars.len()) {
+            dt[i] = dt_vars[j];
+        }
+        let moves_times = dt.iter().any(|&x| x != 0.0);
+        // Caps: interval changes and minimum lengths.
+        let mut scale = limit;
+        let mut stop: Option<Stop> = None;
+        for (j, &i) in self.intervals.iter().enumerate().take(dt_vars.len()) {
+            let (len, step) = (it.tr.times[i + 1] - it.tr.times[i], dt_vars[j]);
+            if step == 0.0 {
+                continue;
+            }
+            scale = scale.min(MAX_INTERVAL_CHANGE * len / step.abs());
+            if step < 0.0 {
+                let to_bound = (len - self.lower[j]).max(0.0) / -step;
+                if to_bound < scale {
+                    scale = to_bound;
+                    stop = Some(Stop::Bound(j));
+                }
+            }
+        }
+        // Contacts: the first check the step would push in.
+        let contacts = self.settings.contacts.as_ref();
+        if let Some(contacts) = contacts {
+            let snap = contacts.snapshot(&it.tr, &self.timing.slots);
+            let mut direction = Trajectory { times: it.tr.times.clone(), positions: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()], velocities: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()] };
+            apply_step(&mut direction, &self.timing.slots, &du_slots, 1.0);
+            let motion = contacts.motion(&snap, &it.tr, &direction, &dt);
+            let active = |c: Check| it.active.contains(&c);
+            if let Some((alpha, check)) = contacts.blocking(&snap, &motion, &active, scale) {
+                scale = alpha;
+                stop = Some(Stop::Contact(check));
+            }
+        }
+        if scale <= 0.0 {
+            // Blocked at once: hold what blocks, and let the next direction go around it.
+            return Ok(if self.hold(it, stop) { Outcome::Held(stop) } else { Outcome::Failed });
+        }
+        let w = *it.energy.last().expect("initial value");
+        let first = scale;
+        for halving in 0..=MAX_HALVINGS {
+            let mut trial = it.tr.clone();
+            apply_step(&mut trial, &self.timing.slots, &du_slots, scale);
+            if moves_times {
+                let blocks = self.blocks.as_ref().expect("times are optimized");
+                trial.times = blocks.times(&it.tr.times, &dt, scale);
+            }
+            if let Some(contacts) = contacts {
+                let clearance = contacts.clearance(&contacts.snapshot(&trial, &self.timing.slots));
+                if clearance < -self.clearance_tolerance {
+                    scale *= 0.5;
+                    continue;
+                }
+            }
+            let trial_eval = self.evaluate(&trial, it.energy.len(), exact)?;
+            // Strictly lower: a step that changes nothing is no progress (W is stationary).
+            if trial_eval.value < w {
+                it.halvings += halving;
+                it.tr = trial;
+                it.eval = trial_eval;
+                (self.on_iteration)(it.energy.len(), it.eval.value);
+                it.energy.push(it.eval.value);
+                if self.blocks.is_some() {
+                    it.times.push(it.tr.times.clone());
+                }
+                let whole = scale == first;
+                let blocked = if whole { stop } else { None };
+                let added = whole && self.hold(it, blocked);
+                let check = match blocked {
+                    Some(Stop::Contact(c)) => Some(c),
+                    _ => None,
+                };
+                return Ok(Outcome::Taken(Accepted { scale, blocked: check, added, moved_times: moves_times }));
+            }
+            scale *= 0.5;
+        }
+        it.halvings += MAX_HALVINGS;
+        Ok(Outcome::Failed)
+    }
+
+    /// Add what stopped a step to the active set; whether anything was added.
+    fn hold(&self, it: &mut Iterate, stop: Option<Stop>) -> bool {
+        match stop {
+            Some(Stop::Bound(j)) => !std::mem::replace(&mut it.at_minimum[j], true),
+            Some(Stop::Contact(c)) => it.active.insert(c),
+            None => false,
         }
     }
 }
 
-fn difference(a: &[Point], b: &[Point]) -> Vec<Point> {
-    a.iter().zip(b).map(|(x, y)| crate::mesh::sub(*x, *y)).collect()
+/// The check in a stop, if it is one.
+fn held_check(stop: Option<Stop>) -> Option<Check> {
+    match stop {
+        Some(Stop::Contact(c)) => Some(c),
+        _ => None,
+    }
 }
+
+/// What stopped a step short of its full length.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stop {
+    Bound(usize),
+    Contact(Check),
+}
+
+/// What a line search did.
+enum Outcome {
+    /// A step was taken.
+    Taken(Accepted),
+    /// No step: what blocks the direction at once joined the active set.
+    Held(Option<Stop>),
+    /// No step decreases W.
+    Failed,
+}
+
+/// An accepted step.
+struct Accepted {
+    /// The fraction of the direction taken.
+    scale: f64,
+    /// The check that stopped it, now held.
+    blocked: Option<Check>,
+    /// Whether a row joined the active set.
+    added: bool,
+    /// Whether the step moved the key times.
+    moved_times: bool,
+}
+

@@ -24,7 +24,7 @@ pub(super) fn from_mask(mask: &[bool]) -> Nodes {
 }
 
 pub(super) fn settings() -> Settings {
-    Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3], max_memory: None }
+    Settings { max_iterations: 400, tolerance: 1e-13, ..Settings::new(6, 0.0, [0.0; 3]) }
 }
 
 pub(super) fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<Nodes>, cyclic: bool) -> KeyConstraints {
@@ -107,13 +107,24 @@ fn rigid_motion_costs_no_elastic_energy() {
     assert!((a.elastic - b.elastic).abs() < 1e-10 * a.elastic && (a.value - b.value).abs() < 1e-10 * a.value);
 }
 
+/// The nodes of the cube's bottom face (y = 0).
+fn bottom(rest: &[Point]) -> Nodes {
+    from_mask(&rest.iter().map(|p| p[1] == 0.0).collect::<Vec<_>>())
+}
+
 /// Largest relative difference between `gradient` and central differences of `w` over every
-/// slot of every 4th node of the wobbly cube (damped, with gravity, open or cyclic).
-fn check_gradient(cyclic: bool, exact: bool) -> f64 {
+/// slot of every 4th node of the wobbly cube (damped, with gravity, open or cyclic; with
+/// `supports`, the bottom face held in position and velocity at every key).
+fn check_gradient(cyclic: bool, exact: bool, supports: bool) -> f64 {
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let tr = wobbly(&mesh.positions, cyclic);
-    let k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], cyclic);
+    let mut k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], cyclic);
+    if supports {
+        k.fixed = vec![bottom(&mesh.positions); 4];
+        k.fixed_velocity = k.fixed.clone();
+        assert_eq!(k.supports(el.node_count()).iter().filter(|&&s| s).count(), 9);
+    }
     let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], ..settings() };
     let obj = objective(&el, &k, &s);
     let p = obj.local_step(&tr, exact);
@@ -144,19 +155,56 @@ fn check_gradient(cyclic: bool, exact: bool) -> f64 {
 #[test]
 fn gradient_matches_finite_differences() {
     // The global step's model: W with the projections held fixed.
-    for cyclic in [false, true] {
-        let worst = check_gradient(cyclic, false);
-        assert!(worst < 1e-6, "cyclic={cyclic}: relative gradient error {worst:e}");
+    for (cyclic, supports) in [(false, false), (true, false), (false, true)] {
+        let worst = check_gradient(cyclic, false, supports);
+        assert!(worst < 1e-6, "cyclic={cyclic}, supports={supports}: relative gradient error {worst:e}");
     }
 }
 
 #[test]
 fn exact_gradient_matches_finite_differences_of_w() {
     // W itself: fresh projections at every evaluation.
-    for cyclic in [false, true] {
-        let worst = check_gradient(cyclic, true);
-        assert!(worst < 1e-6, "cyclic={cyclic}: relative exact-gradient error {worst:e}");
+    for (cyclic, supports) in [(false, false), (true, false), (true, true)] {
+        let worst = check_gradient(cyclic, true, supports);
+        assert!(worst < 1e-6, "cyclic={cyclic}, supports={supports}: relative exact-gradient error {worst:e}");
     }
+}
+
+#[test]
+fn supports_are_left_out_of_w() {
+    // W with supports = W without them minus the supports' rows, computed here by hand:
+    // f_a = m_a (ẍ_a - g) + (L x - J p)_a at every sample.
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let n = el.node_count();
+    let tr = wobbly(&mesh.positions, false);
+    let held = bottom(&mesh.positions);
+    let mut k = keys(tr.times.clone(), tr.positions.clone(), vec![held.clone(); 4], false);
+    let s = Settings { damping: 0.3, gravity: [0.0, -9.81, 0.0], ..settings() };
+    let positions_only = objective(&el, &k, &s);
+    assert!(positions_only.supports.iter().all(|&x| !x), "positions held, velocities free: no support");
+    k.fixed_velocity = vec![held.clone(); 4];
+    let with = objective(&el, &k, &s);
+    let p = with.local_step(&tr, false);
+    let (w_with, w_without) = (with.evaluate(&tr, &p).value, positions_only.evaluate(&tr, &p).value);
+    let mut rows = 0.0;
+    for (sample, targets) in with.samples.iter().zip(&p.targets) {
+        let (x, acc) = (tr.evaluate(sample.time), tr.acceleration(sample.time));
+        let vel = tr.velocity(sample.time);
+        let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        el.stiffness.mul_points(&x, &mut lx);
+        el.apply_j(targets, &mut jp);
+        for &a in &held {
+            let a = a as usize;
+            let m = el.mass[a];
+            for d in 0..3 {
+                let f = m * (acc[a][d] + 0.3 * vel[a][d] - s.gravity[d]) + lx[a][d] - jp[a][d];
+                rows += 0.5 * sample.weight * f * f / m;
+            }
+        }
+    }
+    assert!(rows > 1e-3 * w_without, "the held nodes carry a reaction: {rows} of {w_without}");
+    assert!((w_with - (w_without - rows)).abs() < 1e-10 * w_without, "{w_with} vs {w_without} - {rows}");
 }
 
 #[test]
@@ -166,11 +214,14 @@ fn normal_matrix_is_the_hessian_of_w() {
     let el = Elastic::new(&mesh, &material()).unwrap();
     let n = mesh.positions.len();
     let tr = wobbly(&mesh.positions, true);
-    let mut fixed = vec![Nodes::default(); 4];
-    fixed[1] = from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
-    let k = keys(tr.times.clone(), tr.positions.clone(), fixed, true);
+    let mut fixed = vec![bottom(&mesh.positions); 4];
+    fixed[1] = from_mask(&(0..n).map(|a| a % 3 == 0 || mesh.positions[a][1] == 0.0).collect::<Vec<_>>());
+    let mut k = keys(tr.times.clone(), tr.positions.clone(), fixed, true);
+    // The bottom face is a support: W and the matrix leave its rows out.
+    k.fixed_velocity = vec![bottom(&mesh.positions); 4];
     let s = Settings { damping: 0.4, ..settings() };
     let obj = objective(&el, &k, &s);
+    assert!(obj.supports.iter().any(|&x| x));
     let unknowns = Unknowns::new(&k, n);
     let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 0.0));
     let p = obj.local_step(&tr, false);

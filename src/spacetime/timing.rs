@@ -69,9 +69,9 @@
 use rayon::prelude::*;
 
 use super::objective::{Objective, Projections};
-use super::sampling::{samples, Sample, TimeSlots};
+use super::sampling::{sample_counts, samples, Sample, TimeSlots};
 use super::solver::Settings;
-use super::trajectory::Trajectory;
+use super::trajectory::{length_derivative, Trajectory};
 use super::unknowns::KeyConstraints;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
@@ -81,24 +81,21 @@ use crate::physics::mat3::Mat3;
 use crate::physics::projection_curvature::project_along_svd;
 use crate::physics::svd3::svd3_batch;
 
-/// Powers of `T` in the Hermite weights of `(x_i, v_i, x_{i+1}, v_{i+1})`.
-const POS_POWER: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
-const VEL_POWER: [f64; 4] = [-1.0, 0.0, -1.0, 0.0];
-const ACC_POWER: [f64; 4] = [-2.0, -1.0, -2.0, -1.0];
-
 /// The spacetime objective as a function of the key times.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct Timing<'a> {
     /// The body.
     pub elastic: &'a Elastic,
-    /// The keys' time slots (a loop's last key is its first).
+    /// The keys' time slots (a loop's last key is its first, a contact's keys share a pose).
     pub slots: TimeSlots,
-    /// Samples per interval of positive length.
-    pub per_interval: usize,
+    /// Samples on each interval (contacts have none whatever their count).
+    pub per_interval: Vec<usize>,
     /// Rayleigh mass damping α.
     pub damping: f64,
     /// Gravitational acceleration.
     pub gravity: Point,
+    /// Nodes whose residual W leaves out (see [`Objective::supports`]).
+    pub supports: Vec<bool>,
 }
 
 /// Which projections the derivatives hold.
@@ -173,18 +170,26 @@ impl<'a> Timing<'a> {
     pub fn new(elastic: &'a Elastic, keys: &KeyConstraints, settings: &Settings) -> Timing<'a> {
         Timing {
             elastic,
-            slots: TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic },
-            per_interval: settings.samples,
+            slots: keys.slots(),
+            per_interval: sample_counts(&keys.times, settings.samples, settings.contact_samples),
             damping: settings.damping,
             gravity: settings.gravity,
+            supports: keys.supports(elastic.node_count()),
         }
     }
 
     /// The objective at key times `times`: samples on every interval of positive length
     /// (zero-length intervals have none).
     pub fn objective(&self, times: &[f64]) -> Objective<'a> {
-        let samples = samples(times, self.per_interval, &self.slots).into_iter().filter(|s| s.weight > 0.0).collect();
-        Objective { elastic: self.elastic, samples, slots: self.slots, damping: self.damping, gravity: self.gravity }
+        Objective {
+            elastic: self.elastic,
+            samples: samples(times, &self.per_interval, &self.slots),
+            slots: self.slots.clone(),
+            damping: self.damping,
+            gravity: self.gravity,
+            supports: self.supports.clone(),
+            time_gradient: false,
+        }
     }
 
     /// W at `tr` (at its own times) with fresh projections.
@@ -219,15 +224,12 @@ impl<'a> Timing<'a> {
         let t = tr.times[i + 1] - tr.times[i];
         let b = &s.basis;
         let alpha = self.damping;
-        let (mut pos, mut pos_t, mut c, mut c_t, mut c_tt) = ([0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]);
-        for j in 0..4 {
-            let (pp, pv, pa) = (POS_POWER[j], VEL_POWER[j], ACC_POWER[j]);
-            pos[j] = b.pos[j];
-            pos_t[j] = pp / t * b.pos[j];
-            c[j] = b.acc[j] + alpha * b.vel[j];
-            c_t[j] = (pa * b.acc[j] + alpha * pv * b.vel[j]) / t;
-            c_tt[j] = (pa * (pa - 1.0) * b.acc[j] + alpha * pv * (pv - 1.0) * b.vel[j]) / (t * t);
-        }
+        let (d1, d2) = (length_derivative(b, t, 1), length_derivative(b, t, 2));
+        let pos = b.pos;
+        let pos_t = d1.pos;
+        let c: [f64; 4] = std::array::from_fn(|j| b.acc[j] + alpha * b.vel[j]);
+        let c_t: [f64; 4] = std::array::from_fn(|j| d1.acc[j] + alpha * d1.vel[j]);
+        let c_tt: [f64; 4] = std::array::from_fn(|j| d2.acc[j] + alpha * d2.vel[j]);
         let u = [&tr.positions[i], &tr.velocities[i], &tr.positions[i + 1], &tr.velocities[i + 1]];
         let combine = |w: &[f64; 4]| -> Vec<Point> {
             (0..n).map(|a| [0, 1, 2].map(|d| w[0] * u[0][a][d] + w[1] * u[1][a][d] + w[2] * u[2][a][d] + w[3] * u[3][a][d])).collect()
@@ -271,7 +273,7 @@ impl<'a> Timing<'a> {
         }
         let g = self.gravity;
         let (mut ff, mut ftf, mut ftft, mut fttf) = (0.0, 0.0, 0.0, 0.0);
-        for a in 0..n {
+        for a in (0..n).filter(|&a| !self.supports[a]) {
             let m = el.mass[a];
             for d in 0..3 {
                 let f = m * (acc[a][d] - g[d]) + lx[a][d] - jp[a][d];
@@ -357,7 +359,7 @@ impl<'a> Timing<'a> {
 /// that turns the Newton step into a gradient step changing the interval by
 /// [`GRADIENT_STEP`] of its length `t` (floored at 1e-6 of the largest gradient, so an
 /// interval with no gradient and no curvature is not thrown far by a block's multiplier).
-fn safe_curvature(gradient: &[f64], curvature: &[f64], t: &[f64]) -> Vec<f64> {
+pub(super) fn safe_curvature(gradient: &[f64], curvature: &[f64], t: &[f64]) -> Vec<f64> {
     let floor = gradient.iter().fold(0.0f64, |m, g| m.max(g.abs())).max(f64::MIN_POSITIVE) * 1e-6;
     (0..gradient.len())
         .map(|i| {
@@ -372,15 +374,15 @@ fn safe_curvature(gradient: &[f64], curvature: &[f64], t: &[f64]) -> Vec<f64> {
 
 /// The intervals grouped by the fixed key times (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
-struct Blocks {
+pub(super) struct Blocks {
     /// Keys whose time is held: key 0, `fixed_times`, and the last key with `keep_duration`.
     anchored: Vec<bool>,
     /// Movable intervals (positive length) per block, and whether the block's sum is fixed.
-    blocks: Vec<(Vec<usize>, bool)>,
+    pub(super) blocks: Vec<(Vec<usize>, bool)>,
 }
 
 impl Blocks {
-    fn new(times: &[f64], settings: &TimingSettings) -> Result<Blocks> {
+    pub(super) fn new(times: &[f64], settings: &TimingSettings) -> Result<Blocks> {
         let keys = times.len();
         if !(settings.min_interval > 0.0 && settings.min_interval.is_finite()) {
             return Err(Error::general(
@@ -468,7 +470,7 @@ impl Blocks {
     /// Key times after the step `scale × step` on the interval lengths: each key is the
     /// previous one plus its interval, except anchored keys, which keep their time exactly
     /// (so a fixed sum holds to the bit, the last interval of a block absorbing roundoff).
-    fn times(&self, times: &[f64], step: &[f64], scale: f64) -> Vec<f64> {
+    pub(super) fn times(&self, times: &[f64], step: &[f64], scale: f64) -> Vec<f64> {
         let mut out = times.to_vec();
         for k in 1..times.len() {
             if !self.anchored[k] {

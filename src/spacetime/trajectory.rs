@@ -56,8 +56,30 @@ pub fn hermite_weights(theta: f64, t_len: f64) -> SlotWeights {
     }
 }
 
-/// The interval of strictly increasing key `times` (at least two) containing `t`, clamped to
-/// the key range, and the local parameter `θ` in it: at a key, the interval it starts.
+/// Powers of `T` in the weights of `(x_i, v_i, x_{i+1}, v_{i+1})` (see [`hermite_weights`]):
+/// every weight is a constant times `T^p`, so at fixed `θ` its derivative in `T` is `p / T`
+/// times itself.
+const POS_POWER: [f64; 4] = [0.0, 1.0, 0.0, 1.0];
+const VEL_POWER: [f64; 4] = [-1.0, 0.0, -1.0, 0.0];
+const ACC_POWER: [f64; 4] = [-2.0, -1.0, -2.0, -1.0];
+
+/// The first (`order = 1`) or second (`order = 2`) derivative of the weights `w` of an
+/// interval of length `t_len` with respect to that length, at fixed `θ` (the instant moves with
+/// the interval).
+pub fn length_derivative(w: &SlotWeights, t_len: f64, order: u32) -> SlotWeights {
+    let d = |weights: &[f64; 4], powers: &[f64; 4]| -> [f64; 4] {
+        std::array::from_fn(|j| {
+            let p = powers[j];
+            let factor = if order == 1 { p / t_len } else { p * (p - 1.0) / (t_len * t_len) };
+            factor * weights[j]
+        })
+    };
+    SlotWeights { pos: d(&w.pos, &POS_POWER), vel: d(&w.vel, &VEL_POWER), acc: d(&w.acc, &ACC_POWER) }
+}
+
+/// The interval of non-decreasing key `times` (at least two) containing `t`, clamped to
+/// the key range, and the local parameter `θ` in it: at a key, the interval it starts (never a
+/// zero-length interval: at a contact, the interval after it).
 pub fn locate(times: &[f64], t: f64) -> (usize, f64) {
     let n = times.len();
     let t = t.clamp(times[0], times[n - 1]);
@@ -71,7 +93,9 @@ pub fn locate(times: &[f64], t: f64) -> (usize, f64) {
 /// Keyframe positions and velocities of every vertex, on a shared set of key times.
 ///
 /// Invariants: `positions.len() == velocities.len() == times.len() >= 2`, every key has the same
-/// vertex count, and `times` is strictly increasing.
+/// vertex count, and `times` is non-decreasing: two equal consecutive times are a contact, two
+/// keys with the same positions and separate velocities (the velocity jumps there), never at
+/// the first or last key and never two in a row.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Trajectory {
     /// Key times in seconds.
@@ -241,6 +265,29 @@ mod tests {
                 assert!((fd_acc - b.acc[j]).abs() < 1e-7, "acc slot {j} at {s}");
             }
         }
+    }
+
+    #[test]
+    fn length_derivatives_match_finite_differences() {
+        let (theta, t, h) = (0.3, 0.7, 1e-5);
+        let (a, b, c) = (hermite_weights(theta, t - h), hermite_weights(theta, t), hermite_weights(theta, t + h));
+        let (d1, d2) = (length_derivative(&b, t, 1), length_derivative(&b, t, 2));
+        for (k, (x, y, z)) in [(a.pos, b.pos, c.pos), (a.vel, b.vel, c.vel), (a.acc, b.acc, c.acc)].into_iter().enumerate() {
+            let (e1, e2) = ([d1.pos, d1.vel, d1.acc][k], [d2.pos, d2.vel, d2.acc][k]);
+            for j in 0..4 {
+                assert!(((z[j] - x[j]) / (2.0 * h) - e1[j]).abs() < 1e-6 * (1.0 + e1[j].abs()), "order 1, kind {k}, slot {j}");
+                assert!(((z[j] - 2.0 * y[j] + x[j]) / (h * h) - e2[j]).abs() < 1e-3 * (1.0 + e2[j].abs()), "order 2, kind {k}, slot {j}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_contact_is_located_after_it() {
+        let tr = one_vertex(vec![0.0, 0.5, 0.5, 1.0], vec![0.0, 1.0, 1.0, 0.0], vec![2.0, 1.0, -1.0, -2.0]);
+        assert_eq!(tr.locate(0.5), (2, 0.0));
+        assert_eq!(tr.locate(0.4).0, 0);
+        assert_eq!(tr.velocity(0.5)[0][0], -1.0, "the velocity leaving the contact");
+        assert!((tr.velocity(0.5 - 1e-9)[0][0] - 1.0).abs() < 1e-6, "the velocity arriving");
     }
 
     #[test]

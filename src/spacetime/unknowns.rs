@@ -12,8 +12,11 @@ use crate::mesh::Point;
 /// The keyframes a trajectory is solved for: key times, the input poses (where the solve
 /// starts), the node positions and velocities each key prescribes, and whether it loops.
 ///
-/// Invariants: at least two strictly increasing `times`; one pose and one index list of each
-/// kind per key; every pose has the body's node count; index lists are sorted node indices.
+/// Invariants: at least two non-decreasing `times`, where two equal consecutive times are a
+/// contact (the two keys share their pose, not their velocities; never two contacts in a row,
+/// nor at the first or last key); one pose and one index list of each kind per key, equal for
+/// the two keys of a contact; every pose has the body's node count; index lists are sorted node
+/// indices.
 #[derive(Debug, Clone, PartialEq)]
 pub struct KeyConstraints {
     /// Key times in seconds.
@@ -26,6 +29,29 @@ pub struct KeyConstraints {
     pub fixed_velocity: Vec<Vec<u32>>,
     /// The last key is the first: the animation loops.
     pub cyclic: bool,
+}
+
+impl KeyConstraints {
+    /// The time slots of these keys (contacts and loops alias slots).
+    pub fn slots(&self) -> TimeSlots {
+        TimeSlots::new(&self.times, self.cyclic)
+    }
+
+    /// Per node, whether its whole trajectory is prescribed: position and velocity held at
+    /// every key. Its residual is then the force the support exerts on it (a reaction), not a
+    /// dynamics error, and W leaves it out (see [`super::objective`]).
+    pub fn supports(&self, nodes: usize) -> Vec<bool> {
+        let mut count = vec![0usize; nodes];
+        for (fixed, velocity) in self.fixed.iter().zip(&self.fixed_velocity) {
+            for &a in fixed {
+                count[a as usize] += 1;
+            }
+            for &a in velocity {
+                count[a as usize] += 1;
+            }
+        }
+        count.iter().map(|&c| c == 2 * self.times.len()).collect()
+    }
 }
 
 /// The free keyframe values of every node and their place in the global vector.
@@ -46,10 +72,10 @@ impl Unknowns {
     /// Free unknowns of `keys`: a slot is fixed for a node if any key sharing that slot fixes
     /// it (a loop's last key adds its masks to the first key's).
     pub fn new(keys: &KeyConstraints, nodes: usize) -> Unknowns {
-        let slots = TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic };
+        let slots = keys.slots();
         let s_count = slots.count();
         let mut fixed = vec![false; nodes * s_count];
-        for k in 0..slots.keys {
+        for k in 0..slots.keys() {
             for &a in &keys.fixed[k] {
                 fixed[a as usize * s_count + slots.position(k)] = true;
             }
@@ -82,7 +108,7 @@ impl Unknowns {
     /// null space that only regularization removes.
     pub fn any_position_fixed(&self) -> bool {
         let s_count = self.slots.count();
-        (0..self.nodes).any(|a| (0..s_count).step_by(2).any(|s| self.get(a, s).is_none()))
+        (0..s_count).filter(|&s| self.slots.is_position(s)).any(|s| (0..self.nodes).any(|a| self.get(a, s).is_none()))
     }
 
     /// Global index of slot `s` of `node`, if free.

@@ -109,8 +109,15 @@ fn check(animation: &Animation) -> Result<()> {
             tr.velocities.len()
         ));
     }
-    if let Some(k) = tr.times.windows(2).position(|w| w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less)) {
-        return bad(format!("key times are not increasing at key {}", k + 1));
+    // Non-decreasing; two equal times are a contact (one pose, two velocities), never at the
+    // first or last key, never two in a row.
+    let last = tr.key_count() - 1;
+    for k in 0..last {
+        let (a, b) = (tr.times[k], tr.times[k + 1]);
+        let contact = a == b && k > 0 && k + 1 < last && tr.times[k - 1] < a && b < tr.times[k + 2] && tr.positions[k] == tr.positions[k + 1];
+        if !(a < b || contact) {
+            return bad(format!("key times are not increasing at key {} (equal times are a contact only between other keys, with one pose)", k + 1));
+        }
     }
     for (what, keys) in [("positions", &tr.positions), ("velocities", &tr.velocities)] {
         for (k, key) in keys.iter().enumerate() {

@@ -1,6 +1,8 @@
 //! The `import` stage: read the scene's keyframe meshes, check they share one topology,
 //! apply procedural deformations, orient the rest shape, and resolve the per-key vertex
-//! selections (the scene's `fixed` and `fixed_velocity`) into sets.
+//! selections (the scene's `fixed` and `fixed_velocity`) into sets. A contact key
+//! (`contact = [k]`) is duplicated here, so every later stage sees the contact as what it is:
+//! two keys at the same time.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -152,12 +154,21 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         }
         None => None,
     };
+    // A contact key is duplicated at its own time: the two share the pose and the masks (the
+    // solver aliases their positions), not the velocities.
+    let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);
+    for &k in keys.contact.iter().rev() {
+        times.insert(k + 1, times[k]);
+        poses.insert(k + 1, poses[k].clone());
+        fixed.insert(k + 1, fixed[k].clone());
+        fixed_velocity.insert(k + 1, fixed_velocity[k].clone());
+    }
     Ok(Keyframes {
         scene: scene.clone(),
         rest_source: rest_source.display().to_string(),
         rest,
-        times: keys.times.clone(),
-        poses: meshes.poses,
+        times,
+        poses,
         fixed,
         fixed_velocity,
         cyclic: keys.cyclic,

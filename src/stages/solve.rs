@@ -4,16 +4,19 @@
 //!   still evaluated, so reports compare methods on one scale.
 //! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
 //!
-//! The scene's `[solver]` and `[material]` become the solver's [`Settings`] and the body's
-//! elastic material here; the body's keyframes become its [`KeyConstraints`].
+//! The scene's `[solver]`, `[material]` and `[[obstacle]]` become the solver's [`Settings`] and
+//! the body's elastic material here; the body's keyframes become its [`KeyConstraints`].
 
 use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::physics::elastic::Elastic;
 use crate::progress::Progress;
-use crate::scene::{Method, Scene};
+use crate::scene::{Method, ObstacleSpec, Scene};
+use crate::spacetime::contact::Contacts;
+use crate::spacetime::obstacles::Obstacle;
 use crate::spacetime::solver::{self, Settings};
+use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
 use crate::stage::{Body, KeyPoses, Solution, SolverLog};
 
@@ -51,6 +54,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
     let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
     let settings = Settings { max_memory, ..settings(scene) };
     let keys = key_constraints(&body.keys);
+    let input_times = keys.times.clone();
     let (trajectory, log) = match scene.solver.method {
         Method::Hermite => {
             let start = Instant::now();
@@ -67,6 +71,14 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 converged: true,
                 stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
                 linear_solver: String::new(),
+                last_decrease: 0.0,
+                predicted_remaining: None,
+                times: input_times.clone(),
+                input_times,
+                timing_iterations: 0,
+                refactorizations: 0,
+                active_contacts: 0,
+                clearance: None,
             };
             (trajectory, log)
         }
@@ -90,6 +102,14 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 converged: l.converged,
                 stop_reason: l.stop_reason,
                 linear_solver: l.linear_solver,
+                last_decrease: l.last_decrease,
+                predicted_remaining: l.predicted_remaining,
+                times: solved.trajectory.times.clone(),
+                input_times,
+                timing_iterations: l.timing_iterations,
+                refactorizations: l.refactorizations,
+                active_contacts: l.active_contacts,
+                clearance: l.clearance,
             };
             (solved.trajectory, log)
         }
@@ -116,20 +136,52 @@ fn solve_fit(body: Body) -> Result<Solution> {
         converged: true,
         stop_reason: "fit: linear least squares, solved exactly".into(),
         linear_solver: String::new(),
+        last_decrease: 0.0,
+        predicted_remaining: None,
+        input_times: body.keys.times.clone(),
+        times: body.keys.times.clone(),
+        timing_iterations: 0,
+        refactorizations: 0,
+        active_contacts: 0,
+        clearance: None,
     };
     Ok(Solution { body, trajectory, log })
 }
 
-/// The solver settings of a scene (`[solver]`, and the damping and gravity of `[material]`).
+/// The solver settings of a scene (`[solver]`, the damping and gravity of `[material]`, the
+/// obstacles checked at every frame of `fps`). `fixed_times` index the scene's keys; a contact
+/// key's duplicate is inserted after it, so later keys shift by the contacts before them.
 pub(crate) fn settings(scene: &Scene) -> Settings {
+    let s = &scene.solver;
+    // A cache scene has no contact keys.
+    let contacts: &[usize] = scene.keyframes.as_ref().map_or(&[], |k| &k.contact);
+    let body_key = |k: usize| k + contacts.iter().filter(|&&c| c < k).count();
     Settings {
-        samples: scene.solver.samples,
-        max_iterations: scene.solver.max_iterations,
-        tolerance: scene.solver.tolerance,
-        regularization: scene.solver.regularization,
+        samples: s.samples,
+        contact_samples: s.contact_samples,
+        max_iterations: s.max_iterations,
+        tolerance: s.tolerance,
+        regularization: s.regularization,
         damping: scene.material.damping,
         gravity: scene.material.gravity,
         max_memory: None,
+        timing: s.optimize_timing.then(|| TimingSettings {
+            min_interval: s.min_interval,
+            keep_duration: s.keep_duration,
+            fixed_times: s.fixed_times.iter().map(|&k| body_key(k)).collect(),
+            ..TimingSettings::default()
+        }),
+        contacts: (!scene.obstacles.is_empty()).then(|| Contacts {
+            obstacles: scene
+                .obstacles
+                .iter()
+                .map(|o| match *o {
+                    ObstacleSpec::Plane { point, normal } => Obstacle::plane(point, normal),
+                    ObstacleSpec::Sphere { center, radius } => Obstacle::Sphere { center, radius },
+                })
+                .collect(),
+            frame_rate: scene.fps,
+        }),
     }
 }
 

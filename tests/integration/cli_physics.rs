@@ -8,7 +8,7 @@ use blendsim::Trajectory;
 use crate::common::cli::{read_json, run, TempDir};
 
 /// MEDIT text of a cube `[0,1]³` split into `n³` cells of 6 tets, its nodes moved by `place`.
-fn cube_medit(n: usize, place: impl Fn(Point) -> Point) -> String {
+pub(crate) fn cube_medit(n: usize, place: impl Fn(Point) -> Point) -> String {
     let idx = |i: usize, j: usize, k: usize| i * (n + 1) * (n + 1) + j * (n + 1) + k + 1;
     let mut s = String::from("MeshVersionFormatted 1\nDimension 3\n");
     s += &format!("Vertices\n{}\n", (n + 1).pow(3));

@@ -17,6 +17,7 @@ mod cli_interrupt;
 mod cli_output;
 mod cli_physics;
 mod cli_stages;
+mod cli_timing;
 mod export_formats;
 mod fixtures;
 mod paper_scenes;

@@ -44,7 +44,7 @@ fn table(damping: f64, gravity: Point, cyclic: bool, frozen: bool) -> Vec<Row> {
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let tr = wobbly(&mesh.positions, cyclic);
-    let timing = Timing { elastic: &el, slots: TimeSlots { keys: 4, cyclic }, per_interval: 5, damping, gravity };
+    let timing = Timing { damping, gravity, ..plain_timing(&el, &tr.times, cyclic, 5) };
     let p = timing.objective(&tr.times).local_step(&tr, false);
     let d = timing.derivatives(&tr, if frozen { ProjectionMode::Frozen(&p) } else { ProjectionMode::Fresh });
     let case = format!(
@@ -95,6 +95,32 @@ fn derivatives_match_finite_differences() {
 }
 
 #[test]
+fn the_objective_gives_the_same_time_gradient() {
+    // The solver takes ∂W/∂T from the objective's exact evaluation (the projection Jacobians
+    // of its local step); it must be the fresh derivative above, with supports and contacts.
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let supports: Vec<bool> = mesh.positions.iter().map(|p| p[1] == 0.0).collect();
+    for (tr, cyclic) in [(wobbly(&mesh.positions, true), true), (contact_trajectory(&mesh.positions), false)] {
+        for damping in [0.0, 2.5] {
+            let timing = Timing { damping, gravity: [0.3, -9.81, 0.0], supports: supports.clone(), ..plain_timing(&el, &tr.times, cyclic, 4) };
+            let d = timing.derivatives(&tr, ProjectionMode::Fresh);
+            let mut objective = timing.objective(&tr.times);
+            objective.time_gradient = true;
+            let e = objective.evaluate(&tr, &objective.local_step(&tr, true));
+            assert!(relative(e.value, d.value) < 1e-12);
+            let g = e.time_gradient.expect("asked for");
+            for (i, (a, b)) in g.iter().zip(&d.gradient).enumerate() {
+                assert!(relative(*a, *b) < 1e-9 || (a - b).abs() < 1e-12 * d.value, "interval {i}: {a} vs {b}");
+            }
+            // And the supports' rows are out of both: W changes when they are counted.
+            let counted = Timing { supports: vec![false; el.node_count()], ..timing.clone() };
+            assert!(relative(counted.energy(&tr), d.value) > 1e-6);
+        }
+    }
+}
+
+#[test]
 fn frozen_projections_do_not_give_the_derivative_of_w() {
     // The envelope argument does not apply: the projections minimize the elastic energy, not
     // W. The frozen-projection derivative misses -J DP[dF(x_T)] in f_T.
@@ -109,8 +135,21 @@ fn frozen_projections_do_not_give_the_derivative_of_w() {
     }
 }
 
+/// The timing problem of `times` with `samples` per interval, no damping, no gravity, no
+/// supports.
+fn plain_timing<'a>(el: &'a Elastic, times: &[f64], cyclic: bool, samples: usize) -> Timing<'a> {
+    Timing {
+        elastic: el,
+        slots: TimeSlots::new(times, cyclic),
+        per_interval: vec![samples; times.len() - 1],
+        damping: 0.0,
+        gravity: [0.0; 3],
+        supports: vec![false; el.node_count()],
+    }
+}
+
 fn wobbly_timing(el: &Elastic, cyclic: bool) -> Timing<'_> {
-    Timing { elastic: el, slots: TimeSlots { keys: 4, cyclic }, per_interval: 5, damping: 0.5, gravity: [0.0, -9.81, 0.0] }
+    Timing { damping: 0.5, gravity: [0.0, -9.81, 0.0], ..plain_timing(el, &[0.0, 0.3, 0.8, 1.1], cyclic, 5) }
 }
 
 fn lengths(times: &[f64]) -> Vec<f64> {
@@ -196,9 +235,9 @@ fn zero_length_intervals_have_no_samples_and_stay_zero() {
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let tr = contact_trajectory(&mesh.positions);
-    let timing = Timing { slots: TimeSlots { keys: 5, cyclic: false }, ..wobbly_timing(&el, false) };
+    let timing = Timing { damping: 0.5, gravity: [0.0, -9.81, 0.0], ..plain_timing(&el, &tr.times, false, 5) };
     let objective = timing.objective(&tr.times);
-    assert_eq!(objective.samples.len(), 3 * timing.per_interval);
+    assert_eq!(objective.samples.len(), 3 * timing.per_interval[0]);
     assert!(objective.samples.iter().all(|s| s.interval != 2 && s.weight > 0.0 && s.basis.acc.iter().all(|a| a.is_finite())));
     let d = timing.derivatives(&tr, ProjectionMode::Fresh);
     assert_eq!((d.gradient[2], d.curvature[2]), (0.0, 0.0));
@@ -304,13 +343,7 @@ fn alternate(
     let (mut times, mut energy) = (vec![keys.times.clone()], Vec::new());
     for _ in 0..rounds {
         let solved = crate::spacetime::solver::solve(el, &keys, settings, &|_, _| {}).unwrap();
-        let t = Timing {
-            elastic: el,
-            slots: TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic },
-            per_interval: settings.samples,
-            damping: settings.damping,
-            gravity: settings.gravity,
-        };
+        let t = Timing::new(el, &keys, settings);
         let step = t.optimize_times(&solved.trajectory, timing).unwrap();
         energy.push((step.energy[0], *step.energy.last().unwrap()));
         keys.times = step.times;
@@ -381,7 +414,7 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
         k.times[1] = t1;
         crate::spacetime::solver::solve(&el, &k, &settings, &|_, _| {}).unwrap()
     };
-    let timing = Timing { elastic: &el, slots: TimeSlots { keys: 3, cyclic: false }, per_interval: 6, damping: 0.0, gravity: g };
+    let timing = Timing { gravity: g, ..plain_timing(&el, &keys.times, false, 6) };
     let d = timing.derivatives(&solve_at(0.62).trajectory, ProjectionMode::Fresh);
     // Moving key 1 lengthens interval 0 and shortens interval 1.
     let (held_gradient, held_curvature) = (d.gradient[0] - d.gradient[1], d.curvature[0] + d.curvature[1]);
@@ -390,4 +423,32 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
     println!("dW/dt1: held {held_gradient:.6e}, reduced (FD) {fd1:.6e}; d2W/dt1^2: held {held_curvature:.4e}, reduced (FD) {fd2:.4e}");
     assert!(relative(held_gradient, fd1) < 1e-4, "{held_gradient} vs {fd1}");
     assert!(fd2 > 0.0 && fd2 < 0.1 * held_curvature);
+}
+
+/// `solve` with the key times optimized under `timing`.
+fn solve_timed(el: &Elastic, keys: &KeyConstraints, settings: &crate::spacetime::solver::Settings, timing: TimingSettings) -> crate::spacetime::solver::Solved {
+    let settings = crate::spacetime::solver::Settings { timing: Some(timing), ..settings.clone() };
+    crate::spacetime::solver::solve(el, keys, &settings, &|_, _| {}).unwrap()
+}
+
+#[test]
+fn the_solver_moves_a_free_fall_key_to_the_parabola() {
+    // The free fall above, solved with the key times optimized: every quasi-Newton iteration
+    // moves the times and the keys together, and the curvature pairs learn how much the keys
+    // absorb (the alternation above needs hundreds of rounds at 3% per round).
+    let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
+    let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
+    let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
+    let settings = crate::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
+    let solved = solve_timed(&el, &keys, &settings, TimingSettings { keep_duration: true, ..TimingSettings::default() });
+    let (t, log) = (&solved.trajectory.times, &solved.log);
+    println!("t1 = {:.8}, {} timing iterations of {}, {} refactorizations, W {:.3e} -> {:.3e}: {}", t[1], log.timing_iterations, log.iterations, log.refactorizations, log.energy[0], log.energy.last().unwrap(), log.stop_reason);
+    assert!((t[1] - 0.5).abs() < 1e-4, "t1 = {}", t[1]);
+    assert_eq!(t[2], 1.0, "the duration is kept to the bit");
+    assert!(log.energy.windows(2).all(|p| p[1] <= p[0]), "W never increases");
+    // Iterations until |t1 - 0.5| < 1e-4 (the error is 0.12 at the start).
+    let within = log.times.iter().position(|t| (t[1] - 0.5).abs() < 1e-4).unwrap();
+    println!("t1 within 1e-4 of 0.5 after {within} iterations ({} of them quasi-Newton); t1 history {:?}", within - (log.iterations - log.timing_iterations), log.times.iter().map(|t| t[1]).collect::<Vec<_>>());
+    assert!(within - (log.iterations - log.timing_iterations) <= 25, "{within} iterations");
+    assert!(*log.energy.last().unwrap() < 1e-10 * log.energy[0]);
 }
