@@ -19,6 +19,7 @@ pub mod embed;
 pub mod error;
 pub mod export;
 pub mod import;
+pub mod massspring;
 pub mod mesh;
 pub mod output;
 pub mod physics;

@@ -1,0 +1,468 @@
+//! The equilibrium of a spring network by Newton's method (Ma et al. 2012, eqs. 3-4): solve
+//! `H dx = -∇E` with the sparse stiffness `H`, step along `dx` with a backtracking line
+//! search on the energy, and stop when the largest vertex move `max_v |dx_v|` is below a
+//! tolerance (a length: the caller scales it by the mesh size).
+//!
+//! - Stiffness: the exact spring blocks of [`super::energy`], with the transverse stiffness
+//!   of compressed springs clamped at zero ([`Definiteness::Clamped`]) while the iterates are
+//!   far from equilibrium, so that `H` is positive semi-definite and `dx` a descent direction.
+//!   Once a full Newton step was accepted and was shorter than `exact_below`, the next
+//!   iterations use the exact `H` (quadratic convergence at a stable equilibrium, where the
+//!   exact `H` is positive definite); if its Cholesky factorization fails (not positive
+//!   definite), that iteration falls back to the clamped one. Exact steps that stop shrinking
+//!   close to the tolerance end the solve too (the rounding floor: see
+//!   [`NewtonReport::at_rounding_floor`]). A clamped `H` that is singular
+//!   (a vertex free to turn about its only spring, say) is shifted by a small multiple of the
+//!   identity, growing until it factors; [`NewtonReport::regularized`] counts how often.
+//! - Boundary conditions: fixed vertices keep their positions. Their rows and columns of `H`
+//!   become the identity and their gradient entries zero (the paper's Dirichlet replacement),
+//!   so the matrix pattern never changes: one symbolic factorization serves every iteration,
+//!   every blend and every set of held collision vertices.
+//! - Ordering: the vertex graph (3 unknowns per vertex kept together) by geometric nested
+//!   dissection or minimum degree, whichever predicts fewer flops, postordered.
+//!
+//! All sums run in a fixed order, and the factorization is faer's (deterministic for a given
+//! thread count), so the same inputs give the same bytes.
+
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Mat, Par};
+
+use super::energy::{spring_hessian, Definiteness, SpringSystem};
+use super::springs::Springs;
+use crate::error::{Error, Result};
+use crate::mesh::{norm, Point};
+use crate::physics::cholesky::{Cholesky, Ordering};
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
+
+/// Predicted factorization flops above which faer factorizes on all threads (as the spacetime
+/// global step measured: parallel supernodal factorization pays off only for large fronts).
+const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
+
+/// When to stop and when to trust the exact Hessian.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonSettings {
+    /// Stop when the largest vertex move of a Newton step is at most this length.
+    pub tolerance: f64,
+    /// Newton iterations (factorizations) at most.
+    pub max_iterations: usize,
+    /// Use the exact Hessian after a full step shorter than this length.
+    pub exact_below: f64,
+}
+
+/// How a solve went.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct NewtonReport {
+    /// Newton iterations (each one assembly, one or more factorizations, one solve).
+    pub iterations: usize,
+    /// Iterations whose step came from the exact Hessian.
+    pub exact_iterations: usize,
+    /// Exact factorizations that failed (not positive definite) and were redone clamped.
+    pub exact_failures: usize,
+    /// Iterations whose clamped Hessian needed a diagonal shift to factor.
+    pub regularized: usize,
+    /// Step halvings of the line search, summed over the iterations.
+    pub halvings: usize,
+    /// Largest vertex move of the last Newton step (before the line search scaled it).
+    pub last_step: f64,
+    /// Energy at the returned positions.
+    pub energy: f64,
+    /// The last step was at most the tolerance, or stalled at the rounding floor.
+    pub converged: bool,
+    /// Converged by stalling: exact Newton steps stopped shrinking within `FLOOR_FACTOR` of the
+    /// tolerance, which is where rounding in the forces (sums of terms that cancel at
+    /// equilibrium) limits the accuracy of the step.
+    pub at_rounding_floor: bool,
+}
+
+/// An exact Newton step that does not halve the previous one and is within this factor of the
+/// tolerance is rounding noise: the iterates are as accurate as the arithmetic allows.
+const FLOOR_FACTOR: f64 = 1e3;
+
+/// The stiffness pattern of a spring network, its fill-reducing order and symbolic Cholesky
+/// factorization, reused by every solve on that network.
+pub struct Newton {
+    vertex_count: usize,
+    /// Lower triangle, compressed columns, unknown `3 v + c` for coordinate `c` of vertex `v`.
+    col_ptr: Vec<usize>,
+    /// The matrix, values overwritten by every assembly (its pattern never changes).
+    a: SparseColMat<usize, f64>,
+    /// Per spring `[i, j]`: the offset of `j` among the later neighbours of `i` (the position of
+    /// block `(j, i)` in the columns of `i`).
+    block_offset: Vec<usize>,
+    cholesky: Cholesky,
+    /// The ordering chosen and its predicted flops.
+    pub ordering: &'static str,
+    pub predicted_flops: f64,
+    // Work arrays.
+    gradient: Vec<Point>,
+    trial: Vec<Point>,
+    rhs: Mat<f64>,
+}
+
+impl Newton {
+    /// Analyse the network: pattern, order (from the vertex `coords`, e.g. target 0) and
+    /// symbolic factorization.
+    pub fn new(springs: &Springs, coords: &[Point]) -> Newton {
+        let n = springs.vertex_count;
+        assert_eq!(coords.len(), n);
+        // Later neighbours of every vertex, in spring order (springs are sorted by ends).
+        let mut later = vec![0usize; n];
+        let mut block_offset = Vec::with_capacity(springs.len());
+        for &[i, _] in &springs.ends {
+            block_offset.push(later[i as usize]);
+            later[i as usize] += 1;
+        }
+        let mut col_ptr = Vec::with_capacity(3 * n + 1);
+        col_ptr.push(0);
+        for v in 0..n {
+            for c in 0..3 {
+                col_ptr.push(col_ptr.last().unwrap() + (3 - c) + 3 * later[v]);
+            }
+        }
+        let mut row_idx = vec![0usize; *col_ptr.last().unwrap()];
+        let mut fill = col_ptr.clone();
+        for v in 0..n {
+            for c in 0..3 {
+                for r in c..3 {
+                    row_idx[fill[3 * v + c]] = 3 * v + r;
+                    fill[3 * v + c] += 1;
+                }
+            }
+        }
+        for &[i, j] in &springs.ends {
+            for c in 0..3 {
+                for r in 0..3 {
+                    row_idx[fill[3 * i as usize + c]] = 3 * j as usize + r;
+                    fill[3 * i as usize + c] += 1;
+                }
+            }
+        }
+        // Order the vertex graph.
+        let adjacency = springs.adjacency();
+        let mut xadj = vec![0usize];
+        let mut adj = Vec::new();
+        for list in &adjacency {
+            adj.extend_from_slice(list);
+            xadj.push(adj.len());
+        }
+        let graph = Graph { xadj, adj };
+        let weights = vec![3usize; n];
+        let dissection = nested_dissection(&graph, coords);
+        let degree = minimum_degree(&graph);
+        let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+        let (order, ordering, cost) = if cost_nd.flops <= cost_md.flops {
+            (dissection, "nested dissection (vertices)", cost_nd)
+        } else {
+            (degree, "minimum degree (vertices)", cost_md)
+        };
+        let block_start: Vec<usize> = (0..=n).map(|v| 3 * v).collect();
+        let perm = expand(&postorder(&graph, &order), &block_start);
+        let par = if cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
+        // The symbolic analysis needs values only to finish the first numeric factorization:
+        // the identity on the full pattern.
+        let mut values = vec![0.0; row_idx.len()];
+        for u in 0..3 * n {
+            values[col_ptr[u]] = 1.0;
+        }
+        // The pattern is sorted and in bounds by construction; the checked constructor verifies.
+        let a = SparseColMat::new(SymbolicSparseColMat::new_checked(3 * n, 3 * n, col_ptr.clone(), None, row_idx), values);
+        let cholesky = Cholesky::factor(&a, &Ordering::Custom(perm), par).expect("the identity is positive definite");
+        Newton {
+            vertex_count: n,
+            col_ptr,
+            a,
+            block_offset,
+            cholesky,
+            ordering,
+            predicted_flops: cost.flops,
+            gradient: vec![[0.0; 3]; n],
+            trial: vec![[0.0; 3]; n],
+            rhs: Mat::zeros(3 * n, 1),
+        }
+    }
+
+    /// Entries stored in the Cholesky factor.
+    pub fn factor_nnz(&self) -> usize {
+        self.cholesky.factor_nnz()
+    }
+
+    /// Entries of the lower triangle of the stiffness matrix.
+    pub fn matrix_nnz(&self) -> usize {
+        self.a.val().len()
+    }
+
+    /// Move the free vertices of `x` to an equilibrium of `system` (which must be the network
+    /// this was built for); vertices with `fixed[v]` stay where they are. Fails only when the
+    /// network is singular beyond repair or the iterates stop being finite.
+    pub fn solve(&mut self, system: &SpringSystem, x: &mut [Point], fixed: &[bool], settings: &NewtonSettings) -> Result<NewtonReport> {
+        assert_eq!(system.ends.len(), self.block_offset.len(), "the network this solver was built for");
+        assert!(x.len() == self.vertex_count && fixed.len() == self.vertex_count);
+        let mut report = NewtonReport::default();
+        let mut energy = system.energy(x);
+        let mut exact = false;
+        let mut previous_step = f64::INFINITY;
+        for _ in 0..settings.max_iterations {
+            let mut gradient = std::mem::take(&mut self.gradient);
+            system.gradient(x, &mut gradient);
+            for (g, &f) in gradient.iter_mut().zip(fixed) {
+                if f {
+                    *g = [0.0; 3];
+                }
+            }
+            // Factor H: exact if trusted and positive definite, else clamped, else shifted.
+            let mut used = if exact { Definiteness::Exact } else { Definiteness::Clamped };
+            self.assemble(system, x, fixed, used);
+            if used == Definiteness::Exact && self.cholesky.refactor(&self.a).is_err() {
+                report.exact_failures += 1;
+                used = Definiteness::Clamped;
+                self.assemble(system, x, fixed, used);
+            }
+            if used == Definiteness::Clamped && self.cholesky.refactor(&self.a).is_err() {
+                self.factor_shifted(fixed)?;
+                report.regularized += 1;
+            }
+            if used == Definiteness::Exact {
+                report.exact_iterations += 1;
+            }
+            // dx = -H⁻¹ g.
+            for v in 0..self.vertex_count {
+                for c in 0..3 {
+                    self.rhs[(3 * v + c, 0)] = -gradient[v][c];
+                }
+            }
+            self.cholesky.solve_in_place(self.rhs.as_mut());
+            let dx = |v: usize, rhs: &Mat<f64>| [rhs[(3 * v, 0)], rhs[(3 * v + 1, 0)], rhs[(3 * v + 2, 0)]];
+            let mut step: f64 = 0.0;
+            let mut slope = 0.0;
+            for v in 0..self.vertex_count {
+                let d = dx(v, &self.rhs);
+                step = step.max(norm(d));
+                slope += gradient[v][0] * d[0] + gradient[v][1] * d[1] + gradient[v][2] * d[2];
+            }
+            self.gradient = gradient;
+            report.iterations += 1;
+            report.last_step = step;
+            if !step.is_finite() {
+                return Err(Error::general(
+                    "the mass-spring equilibrium diverged (a Newton step is not finite)",
+                    "check the targets for coincident or degenerate vertices, and that the fixed vertices or anchor hold the body",
+                ));
+            }
+            let stalled = used == Definiteness::Exact && step <= FLOOR_FACTOR * settings.tolerance && step > 0.5 * previous_step;
+            previous_step = step;
+            if step <= settings.tolerance || stalled {
+                for v in 0..self.vertex_count {
+                    let d = dx(v, &self.rhs);
+                    for c in 0..3 {
+                        x[v][c] += d[c];
+                    }
+                }
+                energy = system.energy(x);
+                report.converged = true;
+                report.at_rounding_floor = step > settings.tolerance;
+                break;
+            }
+            // Backtracking (Armijo) on the energy. Near the solution the decrease falls below
+            // the rounding of E (a sum of nonnegative terms): allow that much slack.
+            let slack = 16.0 * f64::EPSILON * energy;
+            let mut s = 1.0;
+            let mut accepted = false;
+            for _ in 0..60 {
+                for v in 0..self.vertex_count {
+                    let d = dx(v, &self.rhs);
+                    self.trial[v] = [x[v][0] + s * d[0], x[v][1] + s * d[1], x[v][2] + s * d[2]];
+                }
+                let e = system.energy(&self.trial);
+                if e <= energy + 1e-4 * s * slope + slack {
+                    x.copy_from_slice(&self.trial);
+                    energy = e;
+                    accepted = true;
+                    break;
+                }
+                s *= 0.5;
+                report.halvings += 1;
+            }
+            if !accepted {
+                // No decrease along a descent direction: the energy is flat to rounding here.
+                break;
+            }
+            exact = s == 1.0 && step < settings.exact_below;
+        }
+        report.energy = energy;
+        Ok(report)
+    }
+
+    /// Minimize `Σ k_q/2 |x_i - x_j|²` over the free vertices (every rest length 0): the
+    /// harmonic extension of the fixed vertices' values, weighted by the spring constants.
+    /// Used on displacement fields to start solves in a nearby pose.
+    pub fn harmonic(&mut self, ends: &[[u32; 2]], stiffness: &[f64], x: &mut [Point], fixed: &[bool]) -> Result<()> {
+        let zero = vec![0.0; ends.len()];
+        let system = SpringSystem { ends, rest: &zero, stiffness };
+        // The energy is quadratic: one Newton step is exact; the second confirms it.
+        let settings = NewtonSettings { tolerance: 0.0, max_iterations: 1, exact_below: 0.0 };
+        self.solve(&system, x, fixed, &settings).map(|_| ())
+    }
+
+    /// The lower triangle of `H` (or its clamped form) with identity rows for fixed vertices.
+    fn assemble(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], definiteness: Definiteness) {
+        let (cp, values) = (&self.col_ptr, self.a.val_mut());
+        values.fill(0.0);
+        for (q, &[i, j]) in system.ends.iter().enumerate() {
+            let (i, j) = (i as usize, j as usize);
+            let (fi, fj) = (fixed[i], fixed[j]);
+            if fi && fj {
+                continue;
+            }
+            let d = crate::mesh::sub(x[i], x[j]);
+            let h = spring_hessian(d, system.rest[q], system.stiffness[q], definiteness);
+            for c in 0..3 {
+                for r in c..3 {
+                    if !fi {
+                        values[cp[3 * i + c] + (r - c)] += h[r][c];
+                    }
+                    if !fj {
+                        values[cp[3 * j + c] + (r - c)] += h[r][c];
+                    }
+                }
+                if !fi && !fj {
+                    let start = cp[3 * i + c] + (3 - c) + 3 * self.block_offset[q];
+                    for r in 0..3 {
+                        values[start + r] = -h[r][c];
+                    }
+                }
+            }
+        }
+        for v in 0..self.vertex_count {
+            if fixed[v] {
+                for c in 0..3 {
+                    values[cp[3 * v + c]] = 1.0;
+                }
+            }
+        }
+    }
+
+    /// Factor `H + μ I` (free rows) for growing `μ`, starting from a tiny fraction of the
+    /// largest diagonal entry.
+    fn factor_shifted(&mut self, fixed: &[bool]) -> Result<()> {
+        let diagonal_max = (0..3 * self.vertex_count).map(|u| self.a.val()[self.col_ptr[u]].abs()).fold(0.0, f64::max);
+        let mut shift = 1e-12 * diagonal_max.max(f64::MIN_POSITIVE);
+        for _ in 0..8 {
+            for v in (0..self.vertex_count).filter(|&v| !fixed[v]) {
+                for c in 0..3 {
+                    self.a.val_mut()[self.col_ptr[3 * v + c]] += shift;
+                }
+            }
+            if self.cholesky.refactor(&self.a).is_ok() {
+                return Ok(());
+            }
+            shift *= 100.0;
+        }
+        Err(Error::general(
+            "the mass-spring stiffness matrix cannot be factorized even with a diagonal shift",
+            "check the targets for non-finite or coincident vertices",
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::massspring::energy::Definiteness;
+    use crate::massspring::springs::{Bending, Springs};
+    use crate::massspring::testing::Rng;
+    use crate::mesh::sub;
+    use crate::procedural::icosphere;
+
+    #[test]
+    fn assembled_matrix_is_the_hessian_with_identity_rows_for_fixed_vertices() {
+        let sphere = icosphere(1);
+        let n = sphere.positions.len();
+        let springs = Springs::build(n, &sphere.triangles, &[], Bending::Hinge);
+        let mut rng = Rng::new(1);
+        let x: Vec<Point> = sphere.positions.iter().map(|p| p.map(|c| c + rng.uniform(-0.1, 0.1))).collect();
+        let rest: Vec<f64> = springs.lengths(&sphere.positions);
+        let stiffness: Vec<f64> = rest.iter().map(|r| 1.0 / r).collect();
+        let sys = SpringSystem { ends: &springs.ends, rest: &rest, stiffness: &stiffness };
+        let mut newton = Newton::new(&springs, &sphere.positions);
+        let fixed: Vec<bool> = (0..n).map(|v| v % 5 == 0).collect();
+        for definiteness in [Definiteness::Exact, Definiteness::Clamped] {
+            newton.assemble(&sys, &x, &fixed, definiteness);
+            let a = &newton.a;
+            // Dense lower triangle -> full symmetric matrix.
+            let mut dense = vec![vec![0.0; 3 * n]; 3 * n];
+            let (cp, ri) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
+            for c in 0..3 * n {
+                for k in cp[c]..cp[c + 1] {
+                    dense[ri[k]][c] = a.val()[k];
+                    dense[c][ri[k]] = a.val()[k];
+                }
+            }
+            let mut e = vec![[0.0; 3]; n];
+            let mut hv = vec![[0.0; 3]; n];
+            for v in 0..n {
+                for c in 0..3 {
+                    e.fill([0.0; 3]);
+                    e[v][c] = 1.0;
+                    sys.hessian_apply(&x, &e, definiteness, &mut hv);
+                    for w in 0..n {
+                        for r in 0..3 {
+                            let expected = if fixed[v] || fixed[w] { if (v, c) == (w, r) { 1.0 } else { 0.0 } } else { hv[w][r] };
+                            assert!((dense[3 * w + r][3 * v + c] - expected).abs() < 1e-12, "({w},{r}),({v},{c})");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn equilibrium_has_zero_force_on_free_vertices_and_keeps_fixed_ones() {
+        // A sphere whose springs grow towards the top (incompatible rest lengths, as in a
+        // blend): Newton finds a point where the free vertices feel no force.
+        let sphere = icosphere(2);
+        let n = sphere.positions.len();
+        let springs = Springs::build(n, &sphere.triangles, &[], Bending::Hinge);
+        let rest: Vec<f64> = springs
+            .ends
+            .iter()
+            .zip(springs.lengths(&sphere.positions))
+            .map(|(&[i, j], r)| r * (1.0 + 0.1 * (sphere.positions[i as usize][2] + sphere.positions[j as usize][2])))
+            .collect();
+        let stiffness: Vec<f64> = rest.iter().map(|r| 1.0 / r).collect();
+        let sys = SpringSystem { ends: &springs.ends, rest: &rest, stiffness: &stiffness };
+        let fixed: Vec<bool> = sphere.positions.iter().map(|p| p[2] < -0.8).collect();
+        let mut x = sphere.positions.clone();
+        let mut newton = Newton::new(&springs, &sphere.positions);
+        let settings = NewtonSettings { tolerance: 1e-12, max_iterations: 100, exact_below: 1e-2 };
+        let report = newton.solve(&sys, &mut x, &fixed, &settings).unwrap();
+        assert!(report.converged, "{report:?}");
+        assert!(report.exact_iterations > 0, "the exact Hessian is used near the end: {report:?}");
+        let mut g = vec![[0.0; 3]; n];
+        sys.gradient(&x, &mut g);
+        for v in 0..n {
+            if fixed[v] {
+                assert_eq!(x[v], sphere.positions[v]);
+            } else {
+                assert!(norm(g[v]) < 1e-10, "vertex {v}: {:?}", g[v]);
+            }
+        }
+        assert!(report.energy < sys.energy(&sphere.positions));
+    }
+
+    #[test]
+    fn harmonic_extension_of_a_constant_is_that_constant() {
+        // A translation of the held vertices extends to the same translation of all (with any
+        // spring weights), in one factorization.
+        let sphere = icosphere(2);
+        let n = sphere.positions.len();
+        let springs = Springs::build(n, &sphere.triangles, &[], Bending::None);
+        let stiffness: Vec<f64> = springs.lengths(&sphere.positions).iter().map(|r| 1.0 / r).collect();
+        let fixed: Vec<bool> = (0..n).map(|v| v % 7 == 0).collect();
+        let mut u: Vec<Point> = (0..n).map(|v| if fixed[v] { [0.3, -1.0, 2.0] } else { [0.0; 3] }).collect();
+        let mut newton = Newton::new(&springs, &sphere.positions);
+        newton.harmonic(&springs.ends, &stiffness, &mut u, &fixed).unwrap();
+        for p in &u {
+            assert!(norm(sub(*p, [0.3, -1.0, 2.0])) < 1e-12, "{p:?}");
+        }
+    }
+}
