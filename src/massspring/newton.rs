@@ -6,14 +6,23 @@
 //! - Stiffness: the exact spring blocks of [`super::energy`], with the transverse stiffness
 //!   of compressed springs clamped at zero ([`Definiteness::Clamped`]) while the iterates are
 //!   far from equilibrium, so that `H` is positive semi-definite and `dx` a descent direction.
-//!   Once a full Newton step was accepted and was shorter than `exact_below`, the next
-//!   iterations use the exact `H` (quadratic convergence at a stable equilibrium, where the
-//!   exact `H` is positive definite); if its Cholesky factorization fails (not positive
-//!   definite), that iteration falls back to the clamped one. Exact steps that stop shrinking
-//!   close to the tolerance end the solve too (the rounding floor: see
-//!   [`NewtonReport::at_rounding_floor`]). A clamped `H` that is singular
+//!   Once a full Newton step was accepted and was shorter than `exact_below` (or from the
+//!   start, for a predicted start), the iterations use the exact `H` (quadratic convergence
+//!   at a stable equilibrium, where the exact `H` is positive definite); where it is not (its
+//!   factorization fails, conjugate gradients meet negative curvature, or the step is not a
+//!   descent direction), that iteration uses the clamped one. A clamped `H` that is singular
 //!   (a vertex free to turn about its only spring, say) is shifted by a small multiple of the
-//!   identity, growing until it factors; [`NewtonReport::regularized`] counts how often.
+//!   identity, growing until it factors; [`NewtonReport::regularized`] counts how often. Exact
+//!   steps that stop shrinking close to the tolerance end the solve too (the rounding floor:
+//!   see [`NewtonReport::at_rounding_floor`]).
+//! - Linear solves: conjugate gradients on the current `H`, preconditioned by the sparse
+//!   Cholesky factorization (faer) of a recent `H`, to a relative residual (the forcing term
+//!   of inexact Newton). With a factorization of the current `H` that is a direct solve; the
+//!   caller refactorizes at each new start point ([`Newton::refresh`]) and the solver when
+//!   CG needed many iterations, so the following iterations, whose `H` differs little, cost
+//!   a few triangular solves each instead of a factorization (measured on the Man-size
+//!   benchmark: a factorization costs about ten solves, and each step of a warm-started
+//!   sequence takes one factorization and about nine CG iterations).
 //! - Boundary conditions: fixed vertices keep their positions. Their rows and columns of `H`
 //!   become the identity and their gradient entries zero (the paper's Dirichlet replacement),
 //!   so the matrix pattern never changes: one symbolic factorization serves every iteration,
@@ -21,8 +30,9 @@
 //! - Ordering: the vertex graph (3 unknowns per vertex kept together) by geometric nested
 //!   dissection or minimum degree, whichever predicts fewer flops, postordered.
 //!
-//! All sums run in a fixed order, and the factorization is faer's (deterministic for a given
-//! thread count), so the same inputs give the same bytes.
+//! All sums run in a fixed order, every decision depends on counts, never on timings, and the
+//! factorization is faer's (deterministic for a given thread count), so the same inputs give
+//! the same bytes.
 
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Mat, Par};
@@ -43,23 +53,34 @@ const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
 pub struct NewtonSettings {
     /// Stop when the largest vertex move of a Newton step is at most this length.
     pub tolerance: f64,
-    /// Newton iterations (factorizations) at most.
+    /// Newton iterations at most.
     pub max_iterations: usize,
     /// Use the exact Hessian after a full step shorter than this length.
     pub exact_below: f64,
+    /// Use the exact Hessian from the first iteration (a start known to be close, such as a
+    /// predicted one).
+    pub start_exact: bool,
+    /// Relative residual at which the linear solves stop (the forcing term of inexact Newton:
+    /// the error of a step shrinks at least by this factor, on top of Newton's quadratic rate).
+    pub forcing: f64,
 }
 
 /// How a solve went.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct NewtonReport {
-    /// Newton iterations (each one assembly, one or more factorizations, one solve).
+    /// Newton iterations (each one assembly and one linear solve).
     pub iterations: usize,
     /// Iterations whose step came from the exact Hessian.
     pub exact_iterations: usize,
-    /// Exact factorizations that failed (not positive definite) and were redone clamped.
+    /// Exact Hessians found indefinite (by the factorization or by conjugate gradients), whose
+    /// iteration then used the clamped one.
     pub exact_failures: usize,
-    /// Iterations whose clamped Hessian needed a diagonal shift to factor.
+    /// Numeric factorizations that needed a diagonal shift to succeed.
     pub regularized: usize,
+    /// Numeric factorizations (including failed attempts).
+    pub factorizations: usize,
+    /// Preconditioned conjugate-gradient iterations (one triangular solve pair each).
+    pub cg_iterations: usize,
     /// Step halvings of the line search, summed over the iterations.
     pub halvings: usize,
     /// Largest vertex move of the last Newton step (before the line search scaled it).
@@ -72,17 +93,64 @@ pub struct NewtonReport {
     /// tolerance, which is where rounding in the forces (sums of terms that cancel at
     /// equilibrium) limits the accuracy of the step.
     pub at_rounding_floor: bool,
+    /// Seconds in numeric factorizations, in triangular solves, and in the rest (assembly,
+    /// gradients, energies, matrix-vector products).
+    pub factor_seconds: f64,
+    pub solve_seconds: f64,
+    pub seconds: f64,
+}
+
+impl NewtonReport {
+    /// Add the work of another solve (counts and times; the outcome fields are `other`'s).
+    pub fn absorb(&mut self, other: &NewtonReport) {
+        self.iterations += other.iterations;
+        self.exact_iterations += other.exact_iterations;
+        self.exact_failures += other.exact_failures;
+        self.regularized += other.regularized;
+        self.factorizations += other.factorizations;
+        self.cg_iterations += other.cg_iterations;
+        self.halvings += other.halvings;
+        self.factor_seconds += other.factor_seconds;
+        self.solve_seconds += other.solve_seconds;
+        self.seconds += other.seconds;
+        self.last_step = other.last_step;
+        self.energy = other.energy;
+        self.converged = other.converged;
+        self.at_rounding_floor = other.at_rounding_floor;
+    }
 }
 
 /// An exact Newton step that does not halve the previous one and is within this factor of the
 /// tolerance is rounding noise: the iterates are as accurate as the arithmetic allows.
-const FLOOR_FACTOR: f64 = 1e3;
+const FLOOR_FACTOR: f64 = 1e2;
+
+/// Conjugate-gradient iterations before the preconditioner is refreshed and the solve redone.
+const CG_MAX: usize = 40;
+
+/// A solve that needed more iterations than this refreshes the factorization before the next.
+const CG_REFRESH: usize = 12;
+
+/// How a preconditioned conjugate-gradient solve ended.
+enum Cg {
+    Converged(usize),
+    NegativeCurvature,
+    NotConverged,
+}
 
 /// The stiffness pattern of a spring network, its fill-reducing order and symbolic Cholesky
 /// factorization, reused by every solve on that network.
+///
+/// Linear solves: preconditioned conjugate gradients on the current stiffness, preconditioned
+/// by the Cholesky factorization of a recent one (refactorized when CG needs many iterations,
+/// or detects negative curvature in a clamped matrix). With the factorization of the current
+/// matrix this is a direct solve (one CG iteration); along a sequence of nearby equilibria
+/// (Newton iterations, warm-started blends) the factorization of an earlier stiffness keeps CG
+/// to a few iterations, each a pair of triangular solves, several times cheaper than a numeric
+/// factorization.
 pub struct Newton {
     vertex_count: usize,
-    /// Lower triangle, compressed columns, unknown `3 v + c` for coordinate `c` of vertex `v`.
+    /// Lower triangle, compressed columns, unknown `3 v + c` for coordinate `c` of vertex `v`
+    /// (a copy of the matrix's column pointers, for slot arithmetic while values are mutated).
     col_ptr: Vec<usize>,
     /// The matrix, values overwritten by every assembly (its pattern never changes).
     a: SparseColMat<usize, f64>,
@@ -90,13 +158,23 @@ pub struct Newton {
     /// block `(j, i)` in the columns of `i`).
     block_offset: Vec<usize>,
     cholesky: Cholesky,
+    /// The factor holds a stiffness of this network (at first it holds the identity).
+    factored: bool,
+    /// Refactorize before the next solve.
+    stale: bool,
     /// The ordering chosen and its predicted flops.
     pub ordering: &'static str,
     pub predicted_flops: f64,
     // Work arrays.
     gradient: Vec<Point>,
     trial: Vec<Point>,
-    rhs: Mat<f64>,
+    buffer: Mat<f64>,
+    rhs: Vec<f64>,
+    dx: Vec<f64>,
+    r: Vec<f64>,
+    z: Vec<f64>,
+    p: Vec<f64>,
+    hp: Vec<f64>,
 }
 
 impl Newton {
@@ -173,12 +251,26 @@ impl Newton {
             a,
             block_offset,
             cholesky,
+            factored: false,
+            stale: false,
             ordering,
             predicted_flops: cost.flops,
             gradient: vec![[0.0; 3]; n],
             trial: vec![[0.0; 3]; n],
-            rhs: Mat::zeros(3 * n, 1),
+            buffer: Mat::zeros(3 * n, 1),
+            rhs: vec![0.0; 3 * n],
+            dx: vec![0.0; 3 * n],
+            r: vec![0.0; 3 * n],
+            z: vec![0.0; 3 * n],
+            p: vec![0.0; 3 * n],
+            hp: vec![0.0; 3 * n],
         }
+    }
+
+    /// Factorize again at the next linear solve (a new start point: the stiffness there is
+    /// the one the following iterations are near).
+    pub fn refresh(&mut self) {
+        self.stale = true;
     }
 
     /// Entries stored in the Cholesky factor.
@@ -195,51 +287,36 @@ impl Newton {
     /// this was built for); vertices with `fixed[v]` stay where they are. Fails only when the
     /// network is singular beyond repair or the iterates stop being finite.
     pub fn solve(&mut self, system: &SpringSystem, x: &mut [Point], fixed: &[bool], settings: &NewtonSettings) -> Result<NewtonReport> {
+        let start = std::time::Instant::now();
         assert_eq!(system.ends.len(), self.block_offset.len(), "the network this solver was built for");
         assert!(x.len() == self.vertex_count && fixed.len() == self.vertex_count);
+        let n = self.vertex_count;
         let mut report = NewtonReport::default();
         let mut energy = system.energy(x);
-        let mut exact = false;
+        let mut exact = settings.start_exact;
         let mut previous_step = f64::INFINITY;
         for _ in 0..settings.max_iterations {
             let mut gradient = std::mem::take(&mut self.gradient);
             system.gradient(x, &mut gradient);
-            for (g, &f) in gradient.iter_mut().zip(fixed) {
-                if f {
-                    *g = [0.0; 3];
+            for v in 0..n {
+                for c in 0..3 {
+                    self.rhs[3 * v + c] = if fixed[v] { 0.0 } else { -gradient[v][c] };
                 }
             }
-            // Factor H: exact if trusted and positive definite, else clamped, else shifted.
-            let mut used = if exact { Definiteness::Exact } else { Definiteness::Clamped };
-            self.assemble(system, x, fixed, used);
-            if used == Definiteness::Exact && self.cholesky.refactor(&self.a).is_err() {
-                report.exact_failures += 1;
-                used = Definiteness::Clamped;
-                self.assemble(system, x, fixed, used);
-            }
-            if used == Definiteness::Clamped && self.cholesky.refactor(&self.a).is_err() {
-                self.factor_shifted(fixed)?;
-                report.regularized += 1;
-            }
+            self.gradient = gradient;
+            let used = self.direction(system, x, fixed, exact, settings.forcing, &mut report)?;
             if used == Definiteness::Exact {
                 report.exact_iterations += 1;
             }
-            // dx = -H⁻¹ g.
-            for v in 0..self.vertex_count {
-                for c in 0..3 {
-                    self.rhs[(3 * v + c, 0)] = -gradient[v][c];
-                }
-            }
-            self.cholesky.solve_in_place(self.rhs.as_mut());
-            let dx = |v: usize, rhs: &Mat<f64>| [rhs[(3 * v, 0)], rhs[(3 * v + 1, 0)], rhs[(3 * v + 2, 0)]];
+            let dx = &self.dx;
             let mut step: f64 = 0.0;
             let mut slope = 0.0;
-            for v in 0..self.vertex_count {
-                let d = dx(v, &self.rhs);
-                step = step.max(norm(d));
-                slope += gradient[v][0] * d[0] + gradient[v][1] * d[1] + gradient[v][2] * d[2];
+            for v in 0..n {
+                step = step.max(norm([dx[3 * v], dx[3 * v + 1], dx[3 * v + 2]]));
             }
-            self.gradient = gradient;
+            for u in 0..3 * n {
+                slope -= self.rhs[u] * dx[u];
+            }
             report.iterations += 1;
             report.last_step = step;
             if !step.is_finite() {
@@ -251,10 +328,9 @@ impl Newton {
             let stalled = used == Definiteness::Exact && step <= FLOOR_FACTOR * settings.tolerance && step > 0.5 * previous_step;
             previous_step = step;
             if step <= settings.tolerance || stalled {
-                for v in 0..self.vertex_count {
-                    let d = dx(v, &self.rhs);
+                for v in 0..n {
                     for c in 0..3 {
-                        x[v][c] += d[c];
+                        x[v][c] += dx[3 * v + c];
                     }
                 }
                 energy = system.energy(x);
@@ -268,9 +344,8 @@ impl Newton {
             let mut s = 1.0;
             let mut accepted = false;
             for _ in 0..60 {
-                for v in 0..self.vertex_count {
-                    let d = dx(v, &self.rhs);
-                    self.trial[v] = [x[v][0] + s * d[0], x[v][1] + s * d[1], x[v][2] + s * d[2]];
+                for v in 0..n {
+                    self.trial[v] = std::array::from_fn(|c| x[v][c] + s * dx[3 * v + c]);
                 }
                 let e = system.energy(&self.trial);
                 if e <= energy + 1e-4 * s * slope + slack {
@@ -289,6 +364,29 @@ impl Newton {
             exact = s == 1.0 && step < settings.exact_below;
         }
         report.energy = energy;
+        report.seconds = start.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// Solve `H d = b` on the free vertices for the stiffness `H` at `x` (exact where it is
+    /// positive definite there, else clamped), with `b` given per vertex in `rhs` and replaced
+    /// by `d` (fixed vertices get 0). The tangent of a family of equilibria uses this.
+    pub fn linear_solve(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], rhs: &mut [Point], tolerance: f64) -> Result<NewtonReport> {
+        let start = std::time::Instant::now();
+        let mut report = NewtonReport::default();
+        for v in 0..self.vertex_count {
+            for c in 0..3 {
+                self.rhs[3 * v + c] = if fixed[v] { 0.0 } else { rhs[v][c] };
+            }
+        }
+        let used = self.direction(system, x, fixed, true, tolerance, &mut report)?;
+        if used == Definiteness::Exact {
+            report.exact_iterations += 1;
+        }
+        for v in 0..self.vertex_count {
+            rhs[v] = std::array::from_fn(|c| self.dx[3 * v + c]);
+        }
+        report.seconds = start.elapsed().as_secs_f64();
         Ok(report)
     }
 
@@ -298,9 +396,127 @@ impl Newton {
     pub fn harmonic(&mut self, ends: &[[u32; 2]], stiffness: &[f64], x: &mut [Point], fixed: &[bool]) -> Result<()> {
         let zero = vec![0.0; ends.len()];
         let system = SpringSystem { ends, rest: &zero, stiffness };
-        // The energy is quadratic: one Newton step is exact; the second confirms it.
-        let settings = NewtonSettings { tolerance: 0.0, max_iterations: 1, exact_below: 0.0 };
+        // The energy is quadratic: one Newton step is exact (to the CG tolerance).
+        let settings = NewtonSettings { tolerance: 0.0, max_iterations: 1, exact_below: 0.0, start_exact: true, forcing: 1e-10 };
         self.solve(&system, x, fixed, &settings).map(|_| ())
+    }
+
+    /// `dx = H⁻¹ rhs` on the free unknowns, `H` exact when `exact` and positive definite, else
+    /// clamped. Returns the matrix used.
+    fn direction(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], exact: bool, tolerance: f64, report: &mut NewtonReport) -> Result<Definiteness> {
+        let mut used = if exact { Definiteness::Exact } else { Definiteness::Clamped };
+        self.assemble(system, x, fixed, used);
+        if !self.factored || self.stale {
+            self.refactor(system, x, fixed, &mut used, report)?;
+        }
+        let mut fresh = false;
+        for _ in 0..4 {
+            match self.cg(fixed, tolerance, if fresh { 4 * CG_MAX } else { CG_MAX }, report) {
+                Cg::Converged(k) => {
+                    self.stale = k > CG_REFRESH;
+                    // A positive definite H gives a descent direction; an exact H that CG found
+                    // no negative curvature in may still be indefinite: check.
+                    let descent: f64 = self.rhs.iter().zip(&self.dx).map(|(b, d)| b * d).sum();
+                    if used == Definiteness::Exact && !(descent > 0.0) {
+                        report.exact_failures += 1;
+                        used = Definiteness::Clamped;
+                        self.assemble(system, x, fixed, used);
+                        continue;
+                    }
+                    return Ok(used);
+                }
+                Cg::NegativeCurvature if used == Definiteness::Exact => {
+                    report.exact_failures += 1;
+                    used = Definiteness::Clamped;
+                    self.assemble(system, x, fixed, used);
+                }
+                Cg::NegativeCurvature | Cg::NotConverged => {
+                    self.refactor(system, x, fixed, &mut used, report)?;
+                    fresh = true;
+                }
+            }
+        }
+        Err(Error::general(
+            "the mass-spring stiffness system could not be solved (conjugate gradients failed with a fresh factorization)",
+            "check the targets for non-finite, coincident or degenerate vertices",
+        ))
+    }
+
+    /// Factorize the assembled matrix: as is if positive definite; an exact one that is not is
+    /// reassembled clamped; a clamped one that is not is shifted.
+    fn refactor(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], used: &mut Definiteness, report: &mut NewtonReport) -> Result<()> {
+        let start = std::time::Instant::now();
+        report.factorizations += 1;
+        let mut ok = self.cholesky.refactor(&self.a).is_ok();
+        if !ok && *used == Definiteness::Exact {
+            report.exact_failures += 1;
+            *used = Definiteness::Clamped;
+            self.assemble(system, x, fixed, *used);
+            report.factorizations += 1;
+            ok = self.cholesky.refactor(&self.a).is_ok();
+        }
+        if !ok {
+            report.regularized += 1;
+            report.factorizations += self.factor_shifted(fixed)?;
+        }
+        self.factored = true;
+        self.stale = false;
+        report.factor_seconds += start.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Preconditioned conjugate gradients for `A dx = rhs` from `dx = 0`, the preconditioner
+    /// being the current factorization with fixed unknowns projected out.
+    fn cg(&mut self, fixed: &[bool], tolerance: f64, max: usize, report: &mut NewtonReport) -> Cg {
+        let m = 3 * self.vertex_count;
+        self.dx.fill(0.0);
+        self.r.copy_from_slice(&self.rhs);
+        let norm_b = dot(&self.rhs, &self.rhs).sqrt();
+        if norm_b == 0.0 {
+            return Cg::Converged(0);
+        }
+        self.precondition(fixed, report);
+        self.p.copy_from_slice(&self.z);
+        let mut rz = dot(&self.r, &self.z);
+        for k in 1..=max {
+            report.cg_iterations += 1;
+            symmetric_product(&self.a, &self.p, &mut self.hp);
+            let php = dot(&self.p, &self.hp);
+            if !(php > 0.0) {
+                return Cg::NegativeCurvature;
+            }
+            let alpha = rz / php;
+            for u in 0..m {
+                self.dx[u] += alpha * self.p[u];
+                self.r[u] -= alpha * self.hp[u];
+            }
+            if dot(&self.r, &self.r).sqrt() <= tolerance * norm_b {
+                return Cg::Converged(k);
+            }
+            self.precondition(fixed, report);
+            let rz_next = dot(&self.r, &self.z);
+            let beta = rz_next / rz;
+            rz = rz_next;
+            for u in 0..m {
+                self.p[u] = self.z[u] + beta * self.p[u];
+            }
+        }
+        Cg::NotConverged
+    }
+
+    /// `z = P⁻¹ r` with the fixed unknowns zeroed (so the iterates never move them).
+    fn precondition(&mut self, fixed: &[bool], report: &mut NewtonReport) {
+        let start = std::time::Instant::now();
+        for (u, &r) in self.r.iter().enumerate() {
+            self.buffer[(u, 0)] = r;
+        }
+        self.cholesky.solve_in_place(self.buffer.as_mut());
+        for v in 0..self.vertex_count {
+            for c in 0..3 {
+                self.z[3 * v + c] = if fixed[v] { 0.0 } else { self.buffer[(3 * v + c, 0)] };
+            }
+        }
+        report.solve_seconds += start.elapsed().as_secs_f64();
     }
 
     /// The lower triangle of `H` (or its clamped form) with identity rows for fixed vertices.
@@ -342,18 +558,18 @@ impl Newton {
     }
 
     /// Factor `H + μ I` (free rows) for growing `μ`, starting from a tiny fraction of the
-    /// largest diagonal entry.
-    fn factor_shifted(&mut self, fixed: &[bool]) -> Result<()> {
+    /// largest diagonal entry. Returns the factorizations it took.
+    fn factor_shifted(&mut self, fixed: &[bool]) -> Result<usize> {
         let diagonal_max = (0..3 * self.vertex_count).map(|u| self.a.val()[self.col_ptr[u]].abs()).fold(0.0, f64::max);
         let mut shift = 1e-12 * diagonal_max.max(f64::MIN_POSITIVE);
-        for _ in 0..8 {
+        for attempt in 1..=8 {
             for v in (0..self.vertex_count).filter(|&v| !fixed[v]) {
                 for c in 0..3 {
                     self.a.val_mut()[self.col_ptr[3 * v + c]] += shift;
                 }
             }
             if self.cholesky.refactor(&self.a).is_ok() {
-                return Ok(());
+                return Ok(attempt);
             }
             shift *= 100.0;
         }
@@ -361,6 +577,28 @@ impl Newton {
             "the mass-spring stiffness matrix cannot be factorized even with a diagonal shift",
             "check the targets for non-finite or coincident vertices",
         ))
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// `y = A x` for a symmetric `A` stored as its lower triangle.
+fn symmetric_product(a: &SparseColMat<usize, f64>, x: &[f64], y: &mut [f64]) {
+    let (cp, ri, val) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    y.fill(0.0);
+    for c in 0..x.len() {
+        let xc = x[c];
+        let mut acc = 0.0;
+        for k in cp[c]..cp[c + 1] {
+            let (r, v) = (ri[k], val[k]);
+            y[r] += v * xc;
+            if r != c {
+                acc += v * x[r];
+            }
+        }
+        y[c] += acc;
     }
 }
 
@@ -433,7 +671,7 @@ mod tests {
         let fixed: Vec<bool> = sphere.positions.iter().map(|p| p[2] < -0.8).collect();
         let mut x = sphere.positions.clone();
         let mut newton = Newton::new(&springs, &sphere.positions);
-        let settings = NewtonSettings { tolerance: 1e-12, max_iterations: 100, exact_below: 1e-2 };
+        let settings = NewtonSettings { tolerance: 1e-12, max_iterations: 100, exact_below: 1e-2, start_exact: false, forcing: 1e-8 };
         let report = newton.solve(&sys, &mut x, &fixed, &settings).unwrap();
         assert!(report.converged, "{report:?}");
         assert!(report.exact_iterations > 0, "the exact Hessian is used near the end: {report:?}");
