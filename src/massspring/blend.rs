@@ -53,6 +53,11 @@ use crate::mesh::{bbox_diagonal, norm, sub, Point, TetMesh};
 /// per step, 1e-3 10.3 with the same Newton iterations, 1e-2 13.6 (more Newton iterations).
 const FORCING: f64 = 1e-3;
 
+/// Relative residual of the tangent solve. The predictor's error in the soft modes (parts
+/// turning about the anchor) is the solve's error amplified by the condition number: on the
+/// Man-size benchmark 1e-3 left one more Newton iteration per step than 1e-6 (4 vs 3).
+const TANGENT_FORCING: f64 = 1e-6;
+
 /// The shapes to blend: one mesh in several poses.
 #[derive(Debug, Clone, Copy)]
 pub struct Targets<'a> {
@@ -105,7 +110,7 @@ impl Default for Settings {
     fn default() -> Settings {
         Settings {
             bending: Bending::TwoRing,
-            tolerance: 1e-8,
+            tolerance: 1e-7,
             max_iterations: 100,
             exact_below: 1e-2,
             anchor_stiffness: 1e3,
@@ -201,7 +206,7 @@ pub struct MassSpring {
     /// The bounding-box diagonal of target 0's surface: the unit of the relative settings.
     size: f64,
     newton: Newton,
-    warm: Option<(Vec<f64>, Vec<Point>)>,
+    warm: Option<Warm>,
     summary: ModelSummary,
 }
 
@@ -434,13 +439,28 @@ impl MassSpring {
         let warm = self.warm.take();
         let is_warm = warm.is_some();
         let mut predictor = NewtonReport::default();
-        let started: Option<Vec<Point>> = match warm {
-            Some((previous_weights, previous)) => {
-                let tangent = self.tangent(&previous_weights, &previous, weights, &blended_rest, &mut predictor)?;
-                Some((0..n).map(|v| std::array::from_fn(|c| previous[v][c] + tangent[v][c])).collect())
+        let started: Option<Vec<Point>> = match &warm {
+            Some(Warm { weights: previous_weights, solution: previous, before }) => {
+                let tangent = self.tangent(previous_weights, previous, weights, &blended_rest, &mut predictor)?;
+                let mut y: Vec<Point> = (0..n).map(|v| std::array::from_fn(|c| previous[v][c] + tangent[v][c])).collect();
+                // Second order along a line of weights: the quadratic through the equilibrium
+                // before, with the tangent at the previous one.
+                if let Some((earlier_weights, earlier)) = before {
+                    if let Some(h) = back_step(earlier_weights, previous_weights, weights) {
+                        for v in 0..n {
+                            for c in 0..3 {
+                                y[v][c] += (earlier[v][c] - previous[v][c] + h * tangent[v][c]) / (h * h);
+                            }
+                        }
+                    }
+                }
+                Some(y)
             }
             None => None,
         };
+        // The Newton iterations stay near the start point: a factorization there serves them
+        // all (the tangent above used the previous one, made near the previous equilibrium).
+        self.newton.refresh();
         let stiffness: Vec<f64> = blended_rest.iter().zip(&self.stiffness_scale).map(|(r, s)| s / r).collect();
         let system = SpringSystem { ends: &self.springs.ends, rest: &blended_rest, stiffness: &stiffness };
         let frame = Rigid::blend(&self.frames, weights);
@@ -465,8 +485,6 @@ impl MassSpring {
             start_exact: is_warm,
             forcing: FORCING,
         };
-        // Factorize at the start point: the iterations stay near it.
-        self.newton.refresh();
         let mut held = Vec::new();
         let mut fixed = self.fixed.clone();
         let mut solves = Vec::new();
@@ -522,7 +540,8 @@ impl MassSpring {
             seconds: start.elapsed().as_secs_f64(),
         };
         let positions = y.iter().map(|&p| frame.apply(p)).collect();
-        self.warm = Some((weights.to_vec(), y));
+        let before = warm.map(|w| (w.weights, w.solution));
+        self.warm = Some(Warm { weights: weights.to_vec(), solution: y, before });
         Ok(Blend { positions, surface_count: self.surface_count, report })
     }
 
@@ -560,7 +579,7 @@ impl MassSpring {
         for r in rhs.iter_mut() {
             *r = r.map(|c| -c);
         }
-        report.absorb(&self.newton.linear_solve(&system, previous, &self.fixed, &mut rhs, FORCING)?);
+        report.absorb(&self.newton.linear_solve(&system, previous, &self.fixed, &mut rhs, TANGENT_FORCING)?);
         for v in (0..n).filter(|&v| self.fixed[v]) {
             rhs[v] = moved[v];
         }
@@ -571,6 +590,29 @@ impl MassSpring {
     pub fn blend_batch(&mut self, weights: &[Vec<f64>], obstacles: &[Obstacle]) -> Result<Vec<Blend>> {
         weights.iter().map(|w| self.blend(w, obstacles)).collect()
     }
+}
+
+/// The previous blend (in the solving frame) and the one before it, to start the next from.
+struct Warm {
+    weights: Vec<f64>,
+    solution: Vec<Point>,
+    before: Option<(Vec<f64>, Vec<Point>)>,
+}
+
+/// `h` such that `previous - earlier = h (next - previous)` when the three weight vectors lie on
+/// one line in that order, with `h` between 1/4 and 4 (a step of comparable size): then the
+/// equilibria at `earlier` and `previous` and the tangent at `previous` define a quadratic
+/// predictor of the next one.
+fn back_step(earlier: &[f64], previous: &[f64], next: &[f64]) -> Option<f64> {
+    let d: Vec<f64> = next.iter().zip(previous).map(|(a, b)| a - b).collect();
+    let back: Vec<f64> = previous.iter().zip(earlier).map(|(a, b)| a - b).collect();
+    let dd: f64 = d.iter().map(|x| x * x).sum();
+    if dd == 0.0 {
+        return None;
+    }
+    let h = back.iter().zip(&d).map(|(a, b)| a * b).sum::<f64>() / dd;
+    let off: f64 = back.iter().zip(&d).map(|(a, b)| (a - h * b).powi(2)).sum::<f64>().sqrt();
+    (off <= 1e-9 * dd.sqrt() * h.abs() && (0.25..=4.0).contains(&h)).then_some(h)
 }
 
 /// The linear blend `Σ_j w_j x^j` of vertex positions (the baseline mass-spring improves on).

@@ -6,7 +6,8 @@
 //! target. A new vertex is the midpoint of its edge in every target: each target keeps its
 //! exact piecewise-linear shape and all targets keep one topology. New vertices are appended
 //! after the input's, so vertex `v < n` is still input vertex `v`. Run this before
-//! tetrahedralizing; TetGen's `-a` (maximum volume) bounds the interior edges.
+//! tetrahedralizing; TetGen's `-a` (maximum volume, see [`regular_tet_volume`]) bounds the
+//! interior edges.
 
 use std::collections::{BTreeMap, BinaryHeap};
 
@@ -84,6 +85,12 @@ pub fn split_long_edges(surface: &[Vec<Point>], triangles: &[[u32; 3]], max_rati
         }
     }
     Refined { surface, triangles, parents }
+}
+
+/// The volume of a regular tetrahedron with edges of length `edge`: as TetGen's maximum tet
+/// volume (`-a`), it keeps interior edges near `edge` (with a quality bound such as `-q1.414`).
+pub fn regular_tet_volume(edge: f64) -> f64 {
+    edge.powi(3) / (6.0 * std::f64::consts::SQRT_2)
 }
 
 fn length(surface: &[Vec<Point>], [a, b]: [u32; 2]) -> f64 {

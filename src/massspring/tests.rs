@@ -254,3 +254,35 @@ fn bad_input_is_refused_with_a_fix() {
     let settings = Settings { tolerance: 0.0, ..Settings::default() };
     assert!(MassSpring::new(&t, &Boundary::Anchor(None), &settings).err().unwrap().to_string().contains("tolerance = 0 is not a positive number"));
 }
+
+#[test]
+fn refinement_before_tetgen_leaves_no_spring_much_longer_than_the_median() {
+    use super::refine::{median_edge, regular_tet_volume, split_long_edges};
+    // A bar whose long faces are single quads: edges 8x the short ones.
+    let coarse = prism([0.25, 2.0, 0.25], [2, 1, 2]);
+    let targets = vec![coarse.positions.clone(), bend(&coarse.positions, 2.0, 60f64.to_radians(), 0.125)];
+    let refined = split_long_edges(&targets, &coarse.triangles, 1.5);
+    let median = median_edge(&refined.surface, &refined.triangles);
+    let surface = TriMesh { positions: refined.surface[0].clone(), triangles: refined.triangles.clone() };
+    let options = TetgenOptions { quality: 1.414, max_volume: regular_tet_volume(1.5 * median), timeout: 60.0 };
+    let body = tetrahedralize(&surface, &options, Path::new("refined bar")).unwrap();
+    let t = Targets { surface: &refined.surface, triangles: &refined.triangles, body: Some(&body), body_poses: None };
+    let settings = Settings { bending: Bending::None, ..Settings::default() };
+    let mut model = MassSpring::new(&t, &Boundary::Anchor(None), &settings).unwrap();
+    let (springs, rest) = (model.springs().clone(), model.rest_lengths(0).to_vec());
+    let longest = |kind: SpringKind| (0..springs.len()).filter(|&q| springs.kinds[q] == kind).map(|q| rest[q]).fold(0.0, f64::max);
+    eprintln!(
+        "refined: {} -> {} surface vertices, median edge {median:.3}, longest structure {:.3}, internal {:.3}; summary {:?}",
+        coarse.positions.len(),
+        refined.surface[0].len(),
+        longest(SpringKind::Structure),
+        longest(SpringKind::Internal),
+        model.summary().longest_over_median
+    );
+    assert!(longest(SpringKind::Structure) <= 1.5 * median + 1e-12);
+    assert!(longest(SpringKind::Internal) <= 3.0 * median, "interior edges stay within a small multiple of the median");
+    let shape = model.blend(&[0.5, 0.5], &[]).unwrap();
+    // The input's vertices come first, in their order; the blend covers the refined surface.
+    assert_eq!(refined.surface[0][..coarse.positions.len()], coarse.positions[..]);
+    assert_eq!(shape.surface().len(), refined.surface[0].len());
+}
