@@ -29,11 +29,14 @@
 //! solver tolerance move to its surface and are held there, and the equilibrium is recomputed,
 //! until none penetrates. Interior and anchor vertices are never held.
 //!
-//! Successive blends start from the previous one's solution plus the change of the linear
-//! blend between the two weights (a first-order predictor; exact for fixed vertices), so a
-//! sequence of nearby weights costs a few Newton iterations each ([`MassSpring::blend_batch`]).
-//! Results depend on that start only to the solver tolerance, and the same sequence of calls
-//! gives the same bytes.
+//! Successive blends start from the previous equilibrium moved along the tangent of the family
+//! of equilibria (one linear solve: how the equilibrium moves when the rest lengths and the
+//! fixed vertices change), plus a second-order term when the last three weight vectors lie on
+//! one line (the quadratic through the equilibrium before). A sequence of nearby weights
+//! ([`MassSpring::blend_batch`], the in-betweens of an interval) then costs about two Newton
+//! iterations per blend. A first blend, or one after [`MassSpring::reset_warm_start`], starts
+//! from the linear blend (in the anchor's frame). Results depend on the start only to the
+//! solver tolerance, and the same sequence of calls gives the same bytes.
 
 use std::time::Instant;
 
@@ -89,6 +92,7 @@ pub enum Boundary {
 /// target 0's surface.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
+    /// Bending springs (default: the 2-ring, as the paper).
     pub bending: Bending,
     /// Newton stops when no vertex moves more than this (relative) in a step.
     pub tolerance: f64,
@@ -546,10 +550,11 @@ impl MassSpring {
     }
 
     /// The first-order change of the equilibrium `previous` (for `previous_weights`) when the
-    /// weights become `weights`: with `g(y, r̄) = 0` on the free vertices, `H dy = -(∂g/∂r̄ dr̄
-    /// + H_FB dy_B)` where `dy_B` is the move of the fixed vertices. Since `g_i = Σ_q s_q (l_q /
-    /// r̄_q - 1) u_q` (with `k_q = s_q / r̄_q`), `∂g_i/∂r̄_q = -s_q d_q / r̄_q²`. One linear solve,
-    /// preconditioned by the factorization of the previous blend's last iterations.
+    /// weights become `weights`. With `g(y, r̄) = 0` on the free vertices,
+    /// `H dy = -(∂g/∂r̄ dr̄ + H_FB dy_B)`, where `dy_B` is the move of the fixed vertices; since
+    /// `g_i = Σ_q s_q (l_q / r̄_q - 1) u_q` (with `k_q = s_q / r̄_q`),
+    /// `∂g_i/∂r̄_q = -s_q d_q / r̄_q²`. One linear solve, preconditioned by the factorization made
+    /// at the previous blend's start.
     fn tangent(&mut self, previous_weights: &[f64], previous: &[Point], weights: &[f64], rest: &[f64], report: &mut NewtonReport) -> Result<Vec<Point>> {
         let n = self.springs.vertex_count;
         let old_rest: Vec<f64> = (0..self.springs.len()).map(|q| blend_scalar(previous_weights, |j| self.rest[j][q])).collect();
@@ -660,7 +665,7 @@ fn check_settings(s: &Settings) -> Result<()> {
         ("weight_tolerance", s.weight_tolerance),
     ];
     for (name, value) in positive {
-        if !(value > 0.0 && value.is_finite()) {
+        if value.is_nan() || value <= 0.0 || value.is_infinite() {
             return Err(Error::general(format!("mass-spring setting {name} = {value} is not a positive number"), format!("set {name} > 0")));
         }
     }
@@ -733,7 +738,7 @@ fn check_targets(t: &Targets) -> Result<usize> {
 }
 
 fn check_rest_lengths(springs: &Springs, rest: &[f64], target: usize) -> Result<()> {
-    if let Some(q) = rest.iter().position(|&r| !(r > 0.0)) {
+    if let Some(q) = rest.iter().position(|&r| r.is_nan() || r <= 0.0) {
         let [i, j] = springs.ends[q];
         return Err(Error::general(
             format!("vertices {i} and {j} coincide in target {target}, so the spring between them has no rest length"),

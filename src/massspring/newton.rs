@@ -34,7 +34,7 @@
 //! factorization is faer's (deterministic for a given thread count), so the same inputs give
 //! the same bytes.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering};
@@ -421,7 +421,7 @@ impl Newton {
                     // A positive definite H gives a descent direction; an exact H that CG found
                     // no negative curvature in may still be indefinite: check.
                     let descent: f64 = self.rhs.iter().zip(&self.dx).map(|(b, d)| b * d).sum();
-                    if used == Definiteness::Exact && !(descent > 0.0) {
+                    if used == Definiteness::Exact && (descent.is_nan() || descent <= 0.0) {
                         report.exact_failures += 1;
                         used = Definiteness::Clamped;
                         self.assemble(system, x, fixed, used);
@@ -486,7 +486,7 @@ impl Newton {
             report.cg_iterations += 1;
             symmetric_product(&self.a, &self.p, &mut self.hp);
             let php = dot(&self.p, &self.hp);
-            if !(php > 0.0) {
+            if php.is_nan() || php <= 0.0 {
                 return Cg::NegativeCurvature;
             }
             let alpha = rz / php;
@@ -596,6 +596,9 @@ struct Factor {
     precision: Precision,
     rhs_single: Mat<f32>,
     rhs_double: Mat<f64>,
+    /// Work space of the numeric factorizations and solves, kept between calls (the
+    /// factorization's can be tens of megabytes).
+    memory: MemBuffer,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -624,6 +627,10 @@ impl Factor {
             precision: Precision::Single,
             rhs_single: Mat::zeros(n, 1),
             rhs_double: Mat::zeros(n, 1),
+            memory: MemBuffer::new(StackReq::any_of(&[
+                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+                symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+            ])),
             symbolic,
             par,
         }
@@ -639,7 +646,7 @@ impl Factor {
             *s = d as f32;
         }
         let single = SparseColMatRef::new(a.symbolic(), &self.matrix_single);
-        if numeric(&self.symbolic, &mut self.single, single, self.par) {
+        if numeric(&self.symbolic, &mut self.single, single, self.par, &mut self.memory) {
             self.precision = Precision::Single;
             return true;
         }
@@ -647,16 +654,12 @@ impl Factor {
             self.double = vec![0.0; self.symbolic.len_val()];
         }
         self.precision = Precision::Double;
-        numeric(&self.symbolic, &mut self.double, a.as_ref(), self.par)
+        numeric(&self.symbolic, &mut self.double, a.as_ref(), self.par, &mut self.memory)
     }
 
     /// `z = A⁻¹ r` with the current factor.
     fn solve(&mut self, r: &[f64], z: &mut [f64]) {
-        let mut mem = MemBuffer::new(match self.precision {
-            Precision::Single => self.symbolic.solve_in_place_scratch::<f32>(1, Par::Seq),
-            Precision::Double => self.symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-        });
-        let stack = MemStack::new(&mut mem);
+        let stack = MemStack::new(&mut self.memory);
         match self.precision {
             Precision::Single => {
                 for (u, &v) in r.iter().enumerate() {
@@ -681,13 +684,12 @@ impl Factor {
 }
 
 /// One numeric LLᵀ factorization into `values`; false when not positive definite.
-fn numeric<T: faer::traits::ComplexField>(symbolic: &SymbolicCholesky<usize>, values: &mut [T], a: SparseColMatRef<'_, usize, T>, par: Par) -> bool
+fn numeric<T: faer::traits::ComplexField>(symbolic: &SymbolicCholesky<usize>, values: &mut [T], a: SparseColMatRef<'_, usize, T>, par: Par, memory: &mut MemBuffer) -> bool
 where
     T::Real: Default,
 {
-    let mut mem = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<T>(par, Default::default()));
     symbolic
-        .factorize_numeric_llt(values, a, Side::Lower, LltRegularization::default(), par, MemStack::new(&mut mem), Default::default())
+        .factorize_numeric_llt(values, a, Side::Lower, LltRegularization::default(), par, MemStack::new(memory), Default::default())
         .is_ok()
 }
 

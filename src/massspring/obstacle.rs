@@ -21,7 +21,7 @@ impl Obstacle {
         match *self {
             Obstacle::Plane { point, normal } => {
                 let length = norm(normal);
-                if !finite(&point) || !finite(&normal) || !(length > 0.0) {
+                if !finite(&point) || !finite(&normal) || length == 0.0 {
                     return Err(Error::general(
                         format!("{name}: a plane needs a finite point and a nonzero normal, got point {point:?}, normal {normal:?}"),
                         "give the plane as point = [x, y, z] on it and normal = [nx, ny, nz] pointing to the free side",
@@ -30,7 +30,7 @@ impl Obstacle {
                 Ok(Obstacle::Plane { point, normal: scale(normal, 1.0 / length) })
             }
             Obstacle::Sphere { center, radius } => {
-                if !finite(&center) || !(radius > 0.0 && radius.is_finite()) {
+                if !(finite(&center) && radius > 0.0 && radius.is_finite()) {
                     return Err(Error::general(
                         format!("{name}: a sphere needs a finite center and a positive radius, got center {center:?}, radius {radius}"),
                         "give the sphere as center = [x, y, z] and radius > 0",

@@ -149,7 +149,7 @@ mod tests {
     #[test]
     fn an_even_mesh_is_left_alone() {
         let b = prism([1.0; 3], [3, 3, 3]);
-        let r = split_long_edges(&[b.positions.clone()], &b.triangles, 2.0);
+        let r = split_long_edges(std::slice::from_ref(&b.positions), &b.triangles, 2.0);
         assert!(r.parents.is_empty());
         assert_eq!(r.triangles, b.triangles);
     }

@@ -207,7 +207,7 @@ impl Rigid {
         // det M < 0. The rotation is determined when the two largest singular values are
         // nonzero (the points span a plane).
         let scale = svd.sigma[0].abs();
-        if !(svd.sigma[1].abs() > 1e-12 * scale) {
+        if svd.sigma[1].is_nan() || svd.sigma[1].abs() <= 1e-12 * scale {
             return None;
         }
         let r = mat3::mul_transpose(&svd.u, &svd.v);

@@ -28,6 +28,15 @@ pub enum SpringKind {
 }
 
 /// Which surface vertex pairs two edges apart get a bending spring.
+///
+/// The default is [`Bending::TwoRing`], the paper's definition. Measured: on the bent bar of
+/// the tests (with a body) hinge and 2-ring springs give the same in-between volume (99.95%
+/// vs 99.94% of rest) and edge-length error (0.016% vs 0.020% rms); the 2-ring is the structure
+/// whose spring counts match the paper's Table I (8 to 11 springs per vertex with internal
+/// springs; hinges give at most about 7.7); and its extra fill is small next to the
+/// interior's (Hand-size body: 35.3 vs 34.2 G flops per factorization). Without a body,
+/// some bending springs are needed: with none, the fine surface-only bar took 80-100 Newton
+/// iterations or failed to converge, with either kind 10-60.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Bending {

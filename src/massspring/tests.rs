@@ -10,10 +10,10 @@ use crate::mesh::{norm, sub, Point, TetMesh, TriMesh};
 use crate::procedural::prism;
 use crate::tetgen::{tetrahedralize, TetgenOptions};
 
-/// A 0.25 x 2 x 0.25 bar along +y, and its TetGen body.
+/// A 0.25 x 2 x 0.25 bar along +y, and its TetGen body (35 interior nodes).
 fn bar() -> (TriMesh, TetMesh) {
     let surface = prism([0.25, 2.0, 0.25], [2, 16, 2]);
-    let options = TetgenOptions { quality: 1.414, max_volume: 0.002, timeout: 60.0 };
+    let options = TetgenOptions { quality: 1.414, max_volume: 0.0003, timeout: 60.0 };
     let body = tetrahedralize(&surface, &options, Path::new("bar")).expect("tetgen (apt-get install tetgen)");
     (surface, body)
 }
@@ -146,11 +146,13 @@ fn a_sphere_pushed_into_the_blend_holds_only_surface_vertices_and_none_stays_ins
         crate::mesh::scale(d, 1.0 / norm(d))
     };
     let touch = crate::mesh::scale(crate::mesh::add(p, q), 0.5);
+    // Deep enough to reach past the centre line, so interior nodes are inside it too.
     let radius = 0.3;
-    let center = crate::mesh::add(touch, crate::mesh::scale(outward, radius - 0.08));
+    let center = crate::mesh::add(touch, crate::mesh::scale(outward, radius - 0.2));
     let sphere = Obstacle::Sphere { center, radius };
     let inside_before = free.surface().iter().filter(|x| sphere.signed_distance(**x) < 0.0).count();
-    assert!(inside_before > 3, "the sphere starts inside the shape: {inside_before} vertices");
+    let interior_before = free.positions[surface.positions.len()..].iter().filter(|x| sphere.signed_distance(**x) < 0.0).count();
+    assert!(inside_before > 3 && interior_before > 0, "the sphere starts inside the shape: {inside_before} surface, {interior_before} interior vertices");
     model.reset_warm_start();
     let shape = model.blend(&[0.5, 0.5], &[sphere]).unwrap();
     let tolerance = Settings::default().tolerance * size(&targets[0]);
@@ -162,7 +164,7 @@ fn a_sphere_pushed_into_the_blend_holds_only_surface_vertices_and_none_stays_ins
     assert!(shape.report.held.iter().all(|v| on_surface.contains(v)), "only surface vertices are held");
     let interior_inside = shape.positions[surface.positions.len()..].iter().filter(|x| sphere.signed_distance(**x) < 0.0).count();
     eprintln!(
-        "sphere: {inside_before} surface vertices inside before, {} held in {} rounds, {} interior nodes left inside (allowed)",
+        "sphere: {inside_before} surface and {interior_before} interior vertices inside before, {} held in {} rounds, {} interior nodes left inside (allowed)",
         shape.report.held.len(),
         shape.report.solves.len(),
         interior_inside
