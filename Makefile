@@ -17,12 +17,13 @@ USD_CORE := usd-core==26.11
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium bench batch clean
+.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium bench bench-cache batch clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
+	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
 	@echo "make test-deps / build / clean"
 
@@ -77,6 +78,14 @@ test: test-deps
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"
 	$(CARGO) bench --locked --bench solver
+	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
+	$(CARGO) bench --locked --bench cache
+
+# Peak memory is measured with GNU time (Debian package `time`).
+bench-cache: deps-usd
+	@command -v /usr/bin/time >/dev/null 2>&1 || { echo "==> installing GNU time (apt-get)"; $(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq time; }
+	@echo "==> vertex-cache benchmark (streaming readers and writers; mind the load average printed with it)"
+	$(CARGO) bench --locked --bench cache_io
 
 SCENE_NAMES := $(basename $(notdir $(wildcard $(SCENES)/*.toml)))
 batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)

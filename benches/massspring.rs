@@ -29,9 +29,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::time::Instant;
 
-use blendsim::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
+use blendsim::internals::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
+use blendsim::internals::{tetgen, TetgenOptions};
 use blendsim::mesh::{Point, TetMesh, TriMesh};
-use blendsim::tetgen;
+
 
 struct Row {
     name: &'static str,
@@ -192,8 +193,8 @@ fn main() {
     println!("|---|---|---|---:|---:|---:|---:|---|---:|---:|---:|---|");
     for row in ROWS.iter().filter(|r| filter.as_deref().is_none_or(|f| r.name.to_lowercase().contains(&f.to_lowercase()))) {
         let surface = figure(row.boxes, row.cells, 0.1);
-        let options = tetgen::TetgenOptions { quality: row.quality, max_volume: row.max_volume, timeout: 300.0 };
-        let body: TetMesh = tetgen::tetrahedralize(&surface, &options, Path::new(row.name)).expect("tetgen");
+        let options = TetgenOptions { quality: row.quality, max_volume: row.max_volume, timeout: 300.0 };
+        let body: TetMesh = tetgen(&surface, &options, Path::new(row.name)).expect("tetgen");
         let bent = bend(&surface.positions, row.along, row.towards, row.start, row.length, std::f64::consts::FRAC_PI_2, row.line);
         let targets = vec![surface.positions.clone(), bent];
         let t = Targets { surface: &targets, triangles: &surface.triangles, body: Some(&body), body_poses: None };

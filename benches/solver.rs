@@ -2,22 +2,31 @@
 //! per-iteration time (local step + residuals + global step) of the spacetime solver, per
 //! scene, beside the paper's figures (20-thread i7-14700KF). Medians of repeated runs.
 //!
-//! `cargo bench --bench solver` (or `make bench`). The machine's load average is printed with
+//! A second table times the keyframe timing optimization: one timing round (exact T
+//! derivatives with fresh projections, a Newton step with its line search on W) and the
+//! rebuild of the global step for the new times, numeric refactorization on the kept
+//! symbolic analysis against a fresh factorization.
+//!
+//! `cargo bench --bench solver` (or `make bench`); `cargo bench --bench solver -- TWIST DINO`
+//! runs only the named scenes. The machine's load average is printed with
 //! every row: on a shared machine the timings are only as good as that number.
 
 use std::path::Path;
 use std::time::Instant;
 
-use blendsim::physics::elastic::Elastic;
+use blendsim::internals::{apply_step, initial_trajectory, objective, solver_inputs, tetgen, GlobalStep, TetgenOptions, Unknowns};
+use blendsim::internals::{Elastic, GlobalStats, KeyConstraints, ProjectionMode, Settings, Timing, TimingSettings};
+use blendsim::Trajectory;
+use blendsim::mesh::Axis;
+use blendsim::procedural::{self, Twist};
 use blendsim::progress::Progress;
-use blendsim::scene::{Axis, SceneFile, Twist};
-use blendsim::spacetime::global_step::GlobalStep;
-use blendsim::spacetime::solver::{self, apply_step, initial_trajectory, Settings};
-use blendsim::spacetime::unknowns::Unknowns;
+use blendsim::scene::{Scene, SceneFile};
 use blendsim::stage::{Body, KeyPoses, VertexSet};
-use blendsim::{import, procedural, tetgen, tetrahedralize};
+use blendsim::stages::Bake;
 
 struct Paper {
+    /// The "timing optimization" column of Table 1 (s per iteration).
+    timing: f64,
     verts: usize,
     tets: usize,
     keys: usize,
@@ -33,8 +42,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn scene_body(path: &str) -> Body {
     let scene = SceneFile::load(Path::new(env!("CARGO_MANIFEST_DIR")).join(path).as_path()).expect("scene loads");
-    let keys = import::import(&scene).expect("import");
-    tetrahedralize::tetrahedralize(&keys, &Progress::hidden()).expect("tetrahedralize")
+    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
 }
 
 /// ARMADILLO-size: a closed surface tetrahedralized by TetGen to the paper's ARMADILLO counts
@@ -44,12 +52,12 @@ fn scene_body(path: &str) -> Body {
 /// rest, twisted +60°, rest, twisted -60°, rest, about the long axis; the bottom face held.
 fn armadillo_size() -> Body {
     let surface = procedural::prism([1.2, 3.6, 1.2], [12, 36, 12]);
-    let opts = tetgen::TetgenOptions { quality: 1.414, max_volume: 0.003, timeout: 120.0 };
-    let mesh = tetgen::tetrahedralize(&surface, &opts, Path::new("prism")).expect("tetgen");
+    let opts = TetgenOptions { quality: 1.414, max_volume: 0.003, timeout: 120.0 };
+    let mesh = tetgen(&surface, &opts, Path::new("prism")).expect("tetgen");
     let twisted = |deg: f64| procedural::twist(&mesh.positions, &Twist { axis: Axis::Y, degrees: deg, axial_scale: 1.0 });
     let positions = vec![mesh.positions.clone(), twisted(60.0), mesh.positions.clone(), twisted(-60.0), mesh.positions.clone()];
     let bottom = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] < 1e-3).collect::<Vec<_>>());
-    let mut scene = blendsim::scene::Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
+    let mut scene = Scene::parse("name = \"armadillo-size\"\n[keyframes]\nmeshes = [\"a\", \"b\"]\ntimes = [0, 1]\n").unwrap();
     scene.solver.samples = 10;
     scene.material.damping = 0.1;
     let keys = KeyPoses {
@@ -59,7 +67,6 @@ fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    let surface = blendsim::mesh::TriMesh { positions: surface.positions, triangles: surface.triangles };
     Body { scene, mesh, keys, surface }
 }
 
@@ -76,23 +83,39 @@ struct Measured {
     ordering: &'static str,
     /// Phase 2 of the solver: local step with projection Jacobians, exact gradient, one solve.
     exact_iteration: f64,
+    timing: TimingMeasured,
+}
+
+struct TimingMeasured {
+    /// Exact dW/dT and d2W/dT2 with fresh projections.
+    derivatives: f64,
+    /// W at new times: samples, local step, residuals.
+    energy: f64,
+    /// One Newton iteration of the timing step (derivatives, step, line search).
+    round: f64,
+    /// The global step rebuilt for new times: assembly + numeric refactorization.
+    retime: f64,
+    /// ... of which the numeric refactorization.
+    refactor: f64,
+    /// A fresh factorization for comparison: ordering, symbolic analysis and numeric.
+    fresh_factor: f64,
+    reused_symbolic: bool,
 }
 
 fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
-    let settings = Settings::from_scene(&body.scene);
     let mut pre = Vec::new();
     let mut last = None;
     for _ in 0..repeats {
         let t = Instant::now();
-        let elastic = Elastic::new(&body.mesh, &body.scene.material).unwrap();
-        let objective = solver::objective(&elastic, &body.keys, &settings);
-        let global = GlobalStep::new(&objective, Unknowns::new(&body.keys, elastic.node_count()), settings.regularization).unwrap();
+        let (elastic, keys, settings) = solver_inputs(body).unwrap();
+        let objective = objective(&elastic, &keys, &settings);
+        let global = GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).unwrap();
         pre.push(t.elapsed().as_secs_f64());
-        last = Some((elastic, global));
+        last = Some((elastic, keys, settings, global));
     }
-    let (elastic, global) = last.unwrap();
-    let objective = solver::objective(&elastic, &body.keys, &settings);
-    let mut tr = initial_trajectory(&body.keys);
+    let (elastic, keys, settings, global) = last.unwrap();
+    let objective = objective(&elastic, &keys, &settings);
+    let mut tr = initial_trajectory(&keys);
     let (mut it, mut loc, mut glo) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..iterations {
         let t = Instant::now();
@@ -114,8 +137,9 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
         global.apply_inverse(&mut g);
         exact.push(t.elapsed().as_secs_f64());
     }
-    let s = global.stats;
+    let (timing, s) = measure_timing(&elastic, &keys, &settings, &tr, global, repeats);
     Measured {
+        timing,
         ordering: s.ordering,
         exact_iteration: median(exact),
         precompute: median(pre),
@@ -130,6 +154,50 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
     }
 }
 
+/// A timing round and a retime at the trajectory `tr`; `global` is retimed in place.
+fn measure_timing(
+    elastic: &Elastic,
+    keys: &KeyConstraints,
+    settings: &Settings,
+    tr: &Trajectory,
+    mut global: GlobalStep,
+    repeats: usize,
+) -> (TimingMeasured, GlobalStats) {
+    let timing = Timing::new(elastic, keys, settings);
+    let (mut derivatives, mut energy, mut round) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut retime, mut refactor, mut reused) = (Vec::new(), Vec::new(), true);
+    let one_newton = TimingSettings { max_iterations: 1, tolerance: 0.0, ..TimingSettings::default() };
+    for k in 0..repeats {
+        let t = Instant::now();
+        let _ = timing.derivatives(tr, ProjectionMode::Fresh);
+        derivatives.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let _ = timing.energy(tr);
+        energy.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let step = timing.optimize_times(tr, &one_newton).expect("timing step");
+        round.push(t.elapsed().as_secs_f64());
+        // Alternate between two sets of times so every rebuild changes the values.
+        let times: Vec<f64> = if k % 2 == 0 { step.times.clone() } else { tr.times.clone() };
+        let t = Instant::now();
+        let r = global.retime(&timing.objective(&times), settings.regularization).expect("retime");
+        retime.push(t.elapsed().as_secs_f64());
+        refactor.push(r.factor_seconds);
+        reused &= r.reused_symbolic;
+    }
+    let stats = global.stats;
+    let measured = TimingMeasured {
+        derivatives: median(derivatives),
+        energy: median(energy),
+        round: median(round),
+        retime: median(retime),
+        refactor: median(refactor),
+        fresh_factor: stats.factor_seconds,
+        reused_symbolic: reused,
+    };
+    (measured, stats)
+}
+
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
 }
@@ -137,16 +205,18 @@ fn load() -> String {
 fn main() {
     type Case = (&'static str, Box<dyn Fn() -> Body>, Paper);
     let cases: Vec<Case> = vec![
-        ("STRETCH", Box::new(|| scene_body("fixtures/paper/stretch.toml")), Paper { verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 }),
-        ("TWIST", Box::new(|| scene_body("fixtures/paper/twist.toml")), Paper { verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 }),
-        ("DINO", Box::new(|| scene_body("fixtures/paper/dino.toml")), Paper { verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 }),
-        ("ARMADILLO-size", Box::new(armadillo_size), Paper { verts: 2598, tets: 10024, keys: 5, samples: 40, precompute: 3.073, iteration: 0.100 }),
+        ("STRETCH", Box::new(|| scene_body("fixtures/paper/stretch.toml")), Paper { timing: 0.023, verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 }),
+        ("TWIST", Box::new(|| scene_body("fixtures/paper/twist.toml")), Paper { timing: 0.016, verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 }),
+        ("DINO", Box::new(|| scene_body("fixtures/paper/dino.toml")), Paper { timing: 0.023, verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 }),
+        ("ARMADILLO-size", Box::new(armadillo_size), Paper { timing: 0.246, verts: 2598, tets: 10024, keys: 5, samples: 40, precompute: 3.073, iteration: 0.100 }),
     ];
     println!("machine: {} threads, load average {}", rayon::current_num_threads(), load());
     println!();
     println!("| scene | nodes | tets | keys | samples | unknowns/coord | nnz(A) | nnz(L) | precompute s (paper) | iteration s (paper) | local s | global s | assemble s | factor s | exact-gradient iteration s | ordering | load |");
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|");
-    for (name, make, paper) in &cases {
+    let mut timing_rows = Vec::new();
+    let only: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
+    for (name, make, paper) in cases.iter().filter(|c| only.is_empty() || only.iter().any(|o| o == c.0)) {
         let body = make();
         let samples = body.scene.solver.samples * (body.keys.times.len() - 1);
         let big = body.mesh.tets.len() > 5000;
@@ -157,6 +227,19 @@ fn main() {
             m.unknowns, m.matrix_nnz as f64 / 1e6, m.factor_nnz as f64 / 1e6, m.precompute, paper.precompute, m.iteration, paper.iteration,
             m.local, m.global, m.assemble, m.factor, m.exact_iteration, m.ordering, load()
         );
+        let t = &m.timing;
+        timing_rows.push(format!(
+            "| {name} | {:.4} ({:.3}) | {:.4} | {:.4} | {:.4} | {:.4} | {:.3} | {:.1}x | {} | {} |",
+            t.round, paper.timing, t.derivatives, t.energy, t.retime, t.refactor, t.fresh_factor, t.fresh_factor / t.refactor, if t.reused_symbolic { "yes" } else { "no" }, load()
+        ));
+    }
+    println!();
+    println!("Timing optimization: one Newton iteration of the timing step, and the global step rebuilt for the new times");
+    println!();
+    println!("| scene | timing round s (paper) | T derivatives s | W evaluation s | retime s | of which refactor s | fresh factorization s | fresh / refactor | symbolic reused | load |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---|---|");
+    for row in timing_rows {
+        println!("{row}");
     }
     println!();
     println!("load average after: {}", load());

@@ -7,8 +7,10 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+/// The result of every fallible operation of the toolchain.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// A problem a user can fix: the file, what is wrong, and the fix (see the module documentation).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Error {
     /// The file the problem is in (input, output, or external program), when there is one.

@@ -35,6 +35,30 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     result
 }
 
+/// Write `path` atomically from a closure that fills a temporary file beside it (streamed, or
+/// by an external tool), then rename it into place; on error the temporary is removed.
+/// The temporary keeps `path`'s extension (`.NAME.tmp-ID.usdc`): tools that pick a format by
+/// extension write the right one.
+pub fn write_atomic_with(path: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::in_file(dir, "output folder does not exist", "create the folder first, or choose another output path"));
+    }
+    let name = path.file_name().ok_or_else(|| Error::in_file(path, "is not a file path", "give a file name"))?.to_string_lossy();
+    let tmp = match name.rsplit_once('.') {
+        Some((stem, ext)) if !stem.is_empty() => dir.join(format!(".{stem}.tmp-{}.{ext}", unique_suffix())),
+        _ => dir.join(format!(".{name}.tmp-{}", unique_suffix())),
+    };
+    let result = fill(&tmp).and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, &e, "move the finished file into place")));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
 /// Files for one output folder, kept out of sight until the whole run has succeeded.
 #[derive(Debug)]
 pub struct Staging {
@@ -134,6 +158,26 @@ mod tests {
         write_atomic(&f, b"two").unwrap();
         assert_eq!(std::fs::read(&f).unwrap(), b"two");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn atomic_write_with_keeps_the_extension_and_cleans_up_on_error() {
+        let d = scratch("atomic-with");
+        let f = d.join("a.usdc");
+        write_atomic_with(&f, |tmp| {
+            assert!(tmp.to_string_lossy().ends_with(".usdc") && tmp.parent() == Some(d.as_path()), "{}", tmp.display());
+            std::fs::write(tmp, b"one").map_err(|e| Error::io(tmp, &e, "write"))
+        })
+        .unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"one");
+        let e = write_atomic_with(&f, |tmp| {
+            std::fs::write(tmp, b"half").unwrap();
+            Err(Error::general("failed midway", "none"))
+        });
+        assert!(e.is_err());
+        assert_eq!(std::fs::read(&f).unwrap(), b"one", "the old file stays");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no temporary left");
         std::fs::remove_dir_all(&d).unwrap();
     }
 

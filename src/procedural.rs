@@ -3,8 +3,29 @@
 
 use std::collections::HashMap;
 
-use crate::mesh::{bounds, norm, scale, Point, TriMesh};
-use crate::scene::Twist;
+use serde::{Deserialize, Serialize};
+
+use crate::mesh::{norm, scale, Axis, Bounds, Point, TriMesh};
+
+/// A procedural twist of a keyframe mesh about an axis through its bounding-box centre: the
+/// rotation angle grows linearly from 0 at the low end of the box to `degrees` at the high end,
+/// and the axial coordinate is scaled by `axial_scale` about the low end. The scene file's
+/// `twist` table (see `formats/scene.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Twist {
+    /// The axis the mesh turns about.
+    pub axis: Axis,
+    /// The turn at the high end of the box, right-handed about +axis.
+    pub degrees: f64,
+    /// Scale of the axial coordinate about the low end (default 1).
+    #[serde(default = "one")]
+    pub axial_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
 
 /// A closed box surface `[0,size]` with `divisions` segments per axis, outward wound.
 ///
@@ -129,7 +150,10 @@ pub fn icosphere(subdivisions: usize) -> TriMesh {
 /// coordinate becomes lo + `axial_scale`·(p_a − lo). Points with no extent along the axis
 /// do not turn.
 pub fn twist(points: &[Point], twist: &Twist) -> Vec<Point> {
-    let Some((lo, hi)) = bounds(points) else { return Vec::new() };
+    let Bounds { lo, hi } = Bounds::of(points);
+    if points.is_empty() {
+        return Vec::new();
+    }
     let a = twist.axis.index();
     // (b, c, a) is right-handed: turning b towards c is a positive rotation about a.
     let (b, c) = ((a + 1) % 3, (a + 2) % 3);
@@ -153,10 +177,9 @@ pub fn twist(points: &[Point], twist: &Twist) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::medit::tests::paper_asset;
     use crate::mesh::surface::{enclosed_volume, open_edges, orient_outward};
     use crate::mesh::{medit, obj, sub};
-    use crate::scene::Axis;
+    use crate::testing::paper_asset;
 
     fn assert_closed_outward(mesh: &TriMesh) {
         assert!(open_edges(mesh).is_empty(), "closed");
@@ -172,7 +195,7 @@ mod tests {
         assert_eq!((mesh.positions.len(), mesh.triangles.len()), (4 * 10 * 4 - 2 * 8 * 2, 4 * (27 + 27 + 9)));
         assert_closed_outward(&mesh);
         assert!((enclosed_volume(&mesh.positions, &mesh.triangles) - 3.0).abs() < 1e-12);
-        assert_eq!(bounds(&mesh.positions), Some(([0.0; 3], [1.0, 3.0, 1.0])));
+        assert_eq!(Bounds::of(&mesh.positions), Bounds { lo: [0.0; 3], hi: [1.0, 3.0, 1.0] });
         assert_eq!(mesh, prism([1.0, 3.0, 1.0], [3, 9, 3]), "deterministic");
         let cube = prism([2.0; 3], [1, 1, 1]);
         assert_eq!((cube.positions.len(), cube.triangles.len()), (8, 12));

@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+/// Where progress goes: stderr when visible, nowhere otherwise.
 #[derive(Debug, Clone)]
 pub struct Progress {
     visible: bool,

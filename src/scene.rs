@@ -11,11 +11,15 @@ use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+pub use crate::mesh::Axis;
+pub use crate::procedural::Twist;
 
 /// A parsed, validated scene and the folder its relative paths resolve against.
 #[derive(Debug, Clone)]
 pub struct SceneFile {
+    /// Where the scene was read from.
     pub path: PathBuf,
+    /// Its content.
     pub scene: Scene,
 }
 
@@ -38,30 +42,44 @@ impl SceneFile {
     }
 }
 
+/// A scene: what to bake and how, one field per table of the file.
+///
+/// Invariants once parsed ([`Scene::parse`]): every value is in range (see `formats/scene.md`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
     /// Stem of every output file.
     pub name: String,
     /// Full-frame rate, and the USD weight sample rate (frames per second).
-    #[serde(default = "defaults::fps")]
+    #[serde(default = "default_fps")]
     pub fps: f64,
-    pub keyframes: Keyframes,
+    /// `[keyframes]`: the keyframe meshes, their times and constraints.
+    pub keyframes: KeyframeSpec,
+    /// `[tet]`: TetGen's settings.
     #[serde(default)]
     pub tet: Tet,
+    /// `[material]`: the body's physics.
     #[serde(default)]
     pub material: Material,
+    /// `[solver]`: the method and its settings.
     #[serde(default)]
     pub solver: Solver,
+    /// `[embed]`: the surface carried on the body.
     #[serde(default)]
     pub embed: Embed,
+    /// `[export]`: the files to write.
     #[serde(default)]
     pub export: Export,
 }
 
+fn default_fps() -> f64 {
+    60.0
+}
+
+/// The `[keyframes]` table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Keyframes {
+pub struct KeyframeSpec {
     /// One mesh per key: a path, or `{ mesh = PATH, twist = {...} }` for a procedurally
     /// deformed copy.
     pub meshes: Vec<KeyMesh>,
@@ -81,40 +99,35 @@ pub struct Keyframes {
     pub rest: Rest,
 }
 
+/// The `[tet]` table (defaults: [`Tet::default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Tet {
-    /// TetGen `-q` radius-edge ratio bound.
-    #[serde(default = "defaults::quality")]
+    /// TetGen `-q` radius-edge ratio bound (0 = no quality refinement).
     pub quality: f64,
     /// TetGen `-a` maximum tet volume; 0 means no bound.
-    #[serde(default)]
     pub max_volume: f64,
     /// Seconds TetGen may run before it is stopped.
-    #[serde(default = "defaults::tetgen_timeout")]
     pub timeout: f64,
 }
 
+/// The `[material]` table (defaults: [`Material::default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Material {
     /// Strain (as-rigid-as-possible) constraint weight per unit rest volume.
-    #[serde(default = "defaults::stiffness")]
     pub stiffness: f64,
     /// Volume-preservation constraint weight per unit rest volume.
-    #[serde(default = "defaults::stiffness")]
     pub volume: f64,
     /// Mass per unit rest volume (lumped to the nodes).
-    #[serde(default = "defaults::density")]
     pub density: f64,
     /// Rayleigh mass damping: D = damping * M (per second).
-    #[serde(default = "defaults::damping")]
     pub damping: f64,
     /// Gravitational acceleration (units per second squared), applied as M g.
-    #[serde(default)]
     pub gravity: [f64; 3],
 }
 
+/// How the trajectory is made (`[solver] method`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
@@ -133,24 +146,23 @@ impl fmt::Display for Method {
     }
 }
 
+/// The `[solver]` table (defaults: [`Solver::default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Solver {
-    #[serde(default = "defaults::method")]
+    /// The method.
     pub method: Method,
     /// Sample points per interval at which the residual force is evaluated.
-    #[serde(default = "defaults::samples")]
     pub samples: usize,
-    #[serde(default = "defaults::max_iterations")]
+    /// Iterations before the solver stops unconverged.
     pub max_iterations: usize,
     /// Stop when W changes by less than `tolerance` times its initial value.
-    #[serde(default = "defaults::tolerance")]
     pub tolerance: f64,
     /// Proximal regularization time scale h: adds (1/h⁴) Σ dτ BᵀMB (0 = off).
-    #[serde(default = "defaults::regularization")]
     pub regularization: f64,
 }
 
+/// The `[embed]` table.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Embed {
@@ -160,15 +172,20 @@ pub struct Embed {
     pub surface: Option<String>,
 }
 
+/// An output file format (`[export] formats`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Format {
+    /// USD, text.
     Usda,
+    /// USD, binary crate (converted by usd-core).
     Usdc,
+    /// Binary glTF.
     Glb,
 }
 
 impl Format {
+    /// The file extension.
     pub fn extension(self) -> &'static str {
         match self {
             Format::Usda => "usda",
@@ -184,156 +201,69 @@ impl fmt::Display for Format {
     }
 }
 
+/// The `[export]` table (defaults: [`Export::default`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Export {
-    #[serde(default = "defaults::formats")]
+    /// The formats to write, each as blendshapes (and full-frame when `full_frame`).
     pub formats: Vec<Format>,
     /// Also write the full-frame versions (one pose per frame) for comparison.
-    #[serde(default = "defaults::yes")]
     pub full_frame: bool,
     /// The scene's up axis, "y" or "z" (USD `upAxis`; glTF files are rotated to y-up).
-    #[serde(default = "defaults::up_axis")]
     pub up_axis: Axis,
     /// Scene units in meters (USD `metersPerUnit`; glTF files are scaled to meters).
-    #[serde(default = "defaults::one")]
     pub meters_per_unit: f64,
 }
 
-mod defaults {
-    use super::{Format, Method};
-    pub fn fps() -> f64 {
-        60.0
-    }
-    pub fn quality() -> f64 {
-        1.414
-    }
-    pub fn tetgen_timeout() -> f64 {
-        120.0
-    }
-    pub fn stiffness() -> f64 {
-        70.0
-    }
-    pub fn density() -> f64 {
-        1.0
-    }
-    pub fn damping() -> f64 {
-        0.1
-    }
-    pub fn method() -> Method {
-        Method::Spacetime
-    }
-    pub fn samples() -> usize {
-        10
-    }
-    pub fn max_iterations() -> usize {
-        50
-    }
-    pub fn tolerance() -> f64 {
-        0.01
-    }
-    pub fn regularization() -> f64 {
-        0.1
-    }
-    pub fn formats() -> Vec<Format> {
-        vec![Format::Usda, Format::Glb]
-    }
-    pub fn yes() -> bool {
-        true
-    }
-    pub fn up_axis() -> super::Axis {
-        super::Axis::Y
-    }
-    pub fn one() -> f64 {
-        1.0
-    }
-}
+// The defaults of every table, written once: `#[serde(default)]` fills a missing key from these.
 
 impl Default for Tet {
     fn default() -> Self {
-        Tet { quality: defaults::quality(), max_volume: 0.0, timeout: defaults::tetgen_timeout() }
+        Tet { quality: 1.414, max_volume: 0.0, timeout: 120.0 }
     }
 }
 
 impl Default for Material {
     fn default() -> Self {
-        Material {
-            stiffness: defaults::stiffness(),
-            volume: defaults::stiffness(),
-            density: defaults::density(),
-            damping: defaults::damping(),
-            gravity: [0.0; 3],
-        }
+        Material { stiffness: 70.0, volume: 70.0, density: 1.0, damping: 0.1, gravity: [0.0; 3] }
     }
 }
 
 impl Default for Solver {
     fn default() -> Self {
-        Solver {
-            method: defaults::method(),
-            samples: defaults::samples(),
-            max_iterations: defaults::max_iterations(),
-            tolerance: defaults::tolerance(),
-            regularization: defaults::regularization(),
-        }
+        Solver { method: Method::Spacetime, samples: 10, max_iterations: 50, tolerance: 0.01, regularization: 0.1 }
     }
 }
 
 impl Default for Export {
     fn default() -> Self {
-        Export {
-            formats: defaults::formats(),
-            full_frame: true,
-            up_axis: defaults::up_axis(),
-            meters_per_unit: defaults::one(),
-        }
+        Export { formats: vec![Format::Usda, Format::Glb], full_frame: true, up_axis: Axis::Y, meters_per_unit: 1.0 }
     }
-}
-
-/// Coordinate axis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Axis {
-    X,
-    Y,
-    Z,
-}
-
-impl Axis {
-    pub fn index(self) -> usize {
-        self as usize
-    }
-}
-
-/// A procedural twist of a keyframe mesh about an axis through its bounding-box centre: the
-/// rotation angle grows linearly from 0 at the low end of the box to `degrees` at the high end,
-/// and the axial coordinate is scaled by `axial_scale` about the low end.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Twist {
-    pub axis: Axis,
-    pub degrees: f64,
-    #[serde(default = "defaults::one")]
-    pub axial_scale: f64,
 }
 
 /// One keyframe mesh: a file, optionally deformed procedurally.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum KeyMesh {
+    /// A mesh file, as written in the scene.
     Path(String),
+    /// `{ mesh = PATH, twist = {...} }`.
     Deformed(DeformedMesh),
 }
 
+/// A mesh file and the deformation applied to it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DeformedMesh {
+    /// The mesh file, as written in the scene.
     pub mesh: String,
+    /// A twist about an axis.
     #[serde(default)]
     pub twist: Option<Twist>,
 }
 
 impl KeyMesh {
+    /// The mesh file, as written in the scene.
     pub fn path(&self) -> &str {
         match self {
             KeyMesh::Path(p) => p,
@@ -341,6 +271,7 @@ impl KeyMesh {
         }
     }
 
+    /// The deformation, if any.
     pub fn twist(&self) -> Option<&Twist> {
         match self {
             KeyMesh::Path(_) => None,
@@ -353,7 +284,9 @@ impl KeyMesh {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Rest {
+    /// The pose of this key.
     Key(usize),
+    /// A mesh file with the keys' topology.
     Mesh(String),
 }
 
@@ -374,10 +307,29 @@ impl Default for Rest {
 /// - a list of the above: their union.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Selection {
+    /// Every vertex.
     All,
+    /// No vertex.
     None,
-    File { file: String, invert: bool },
-    Slab { axis: Axis, min: Option<f64>, max: Option<f64>, invert: bool },
+    /// The vertices a selection file lists (see [`crate::mesh::selection`]), or the others.
+    File {
+        /// The file, as written in the scene.
+        file: String,
+        /// Select the vertices the file does not list.
+        invert: bool,
+    },
+    /// The vertices whose rest coordinate on `axis` is in `[min, max]`, or the others.
+    Slab {
+        /// The coordinate tested.
+        axis: Axis,
+        /// Lower bound (none: unbounded).
+        min: Option<f64>,
+        /// Upper bound (none: unbounded).
+        max: Option<f64>,
+        /// Select the vertices outside the slab.
+        invert: bool,
+    },
+    /// The union of the listed selections.
     Union(Vec<Selection>),
 }
 
@@ -533,108 +485,141 @@ impl Scene {
         Ok(scene)
     }
 
+    /// Every table's values in range, checked table by table in file order (the first problem
+    /// is reported).
     fn validate(&self) -> Result<()> {
-        let bad = |problem: String, fix: &str| Err(Error::general(problem, fix));
         if self.name.is_empty() || self.name.contains(['/', '\\']) || self.name.starts_with('.') {
-            return bad(format!("name {:?} cannot be a file stem", self.name), "use letters, digits, '-' and '_'");
+            return invalid(format!("name {:?} cannot be a file stem", self.name), "use letters, digits, '-' and '_'");
         }
         if !(self.fps.is_finite() && self.fps > 0.0) {
-            return bad(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
+            return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
         }
-        let k = &self.keyframes;
-        let n = k.meshes.len();
+        self.keyframes.validate()?;
+        self.tet.validate()?;
+        self.material.validate()?;
+        self.solver.validate()?;
+        self.export.validate()
+    }
+}
+
+/// A scene error: the problem and its fix (the caller adds the file).
+fn invalid(problem: String, fix: &str) -> Result<()> {
+    Err(Error::general(problem, fix))
+}
+
+impl KeyframeSpec {
+    fn validate(&self) -> Result<()> {
+        let n = self.meshes.len();
         if n < 2 {
-            return bad(format!("[keyframes] has {n} mesh(es)"), "give at least two keyframe meshes");
+            return invalid(format!("[keyframes] has {n} mesh(es)"), "give at least two keyframe meshes");
         }
-        if k.times.len() != n {
-            return bad(
-                format!("[keyframes] has {n} meshes but {} times", k.times.len()),
-                "give one time per mesh",
-            );
+        if self.times.len() != n {
+            return invalid(format!("[keyframes] has {n} meshes but {} times", self.times.len()), "give one time per mesh");
         }
-        if let Some(i) = k.times.iter().position(|t| !t.is_finite()) {
-            return bad(format!("[keyframes] times[{i}] is not a number"), "use seconds, e.g. 0.5");
+        if let Some(i) = self.times.iter().position(|t| !t.is_finite()) {
+            return invalid(format!("[keyframes] times[{i}] is not a number"), "use seconds, e.g. 0.5");
         }
         for i in 1..n {
-            if k.times[i] < k.times[i - 1] {
-                return bad(
-                    format!("[keyframes] times decrease at key {i} ({} after {})", k.times[i], k.times[i - 1]),
+            if self.times[i] < self.times[i - 1] {
+                return invalid(
+                    format!("[keyframes] times decrease at key {i} ({} after {})", self.times[i], self.times[i - 1]),
                     "list keyframe times in increasing order",
                 );
             }
-            if k.times[i] == k.times[i - 1] {
-                return bad(
-                    format!("[keyframes] keys {} and {i} share the time {} (a zero-length interval)", i - 1, k.times[i]),
+            if self.times[i] == self.times[i - 1] {
+                return invalid(
+                    format!("[keyframes] keys {} and {i} share the time {} (a zero-length interval)", i - 1, self.times[i]),
                     "give every key its own time; coincident collision keys are not supported yet",
                 );
             }
         }
-        for (what, list) in [("fixed", &k.fixed), ("fixed_velocity", &k.fixed_velocity)] {
+        for (what, list) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
             if let Some(list) = list {
                 if list.len() != n {
-                    return bad(
+                    return invalid(
                         format!("[keyframes] {what} has {} entries for {n} keys", list.len()),
                         "give one entry per key (\"all\", \"none\", a file, or a table)",
                     );
                 }
             }
         }
-        if let Rest::Key(r) = k.rest {
+        if let Rest::Key(r) = self.rest {
             if r >= n {
-                return bad(format!("[keyframes] rest = {r} but there are {n} keys"), "use a key index from 0");
+                return invalid(format!("[keyframes] rest = {r} but there are {n} keys"), "use a key index from 0");
             }
         }
-        if k.cyclic && n < 3 {
-            return bad(
+        if self.cyclic && n < 3 {
+            return invalid(
                 "[keyframes] cyclic = true needs at least 3 keys (the last repeats the first)".into(),
                 "add an in-between key, or set cyclic = false",
             );
         }
-        let t = &self.tet;
-        if !(t.quality.is_finite() && t.quality >= 1.0) && t.quality != 0.0 {
-            return bad(format!("[tet] quality = {} must be >= 1 (or 0 for none)", t.quality), "TetGen needs a radius-edge bound like 1.414");
+        Ok(())
+    }
+}
+
+impl Tet {
+    fn validate(&self) -> Result<()> {
+        if !(self.quality.is_finite() && self.quality >= 1.0) && self.quality != 0.0 {
+            return invalid(format!("[tet] quality = {} must be >= 1 (or 0 for none)", self.quality), "TetGen needs a radius-edge bound like 1.414");
         }
-        if !(t.max_volume.is_finite() && t.max_volume >= 0.0) {
-            return bad(format!("[tet] max_volume = {} must be >= 0", t.max_volume), "use 0 for no bound");
+        if !(self.max_volume.is_finite() && self.max_volume >= 0.0) {
+            return invalid(format!("[tet] max_volume = {} must be >= 0", self.max_volume), "use 0 for no bound");
         }
-        if !(t.timeout.is_finite() && t.timeout > 0.0) {
-            return bad(format!("[tet] timeout = {} must be positive", t.timeout), "give seconds, e.g. 120");
+        if !(self.timeout.is_finite() && self.timeout > 0.0) {
+            return invalid(format!("[tet] timeout = {} must be positive", self.timeout), "give seconds, e.g. 120");
         }
-        let m = &self.material;
+        Ok(())
+    }
+}
+
+impl Material {
+    fn validate(&self) -> Result<()> {
         for (key, v, min_ok) in [
-            ("stiffness", m.stiffness, m.stiffness >= 0.0),
-            ("volume", m.volume, m.volume >= 0.0),
-            ("density", m.density, m.density > 0.0),
-            ("damping", m.damping, m.damping >= 0.0),
+            ("stiffness", self.stiffness, self.stiffness >= 0.0),
+            ("volume", self.volume, self.volume >= 0.0),
+            ("density", self.density, self.density > 0.0),
+            ("damping", self.damping, self.damping >= 0.0),
         ] {
             if !(v.is_finite() && min_ok) {
-                return bad(format!("[material] {key} = {v} is out of range"), "use a finite, non-negative value (density > 0)");
+                return invalid(format!("[material] {key} = {v} is out of range"), "use a finite, non-negative value (density > 0)");
             }
         }
-        if m.stiffness + m.volume <= 0.0 {
-            return bad("[material] stiffness and volume are both 0".into(), "give the body some stiffness");
+        if self.stiffness + self.volume <= 0.0 {
+            return invalid("[material] stiffness and volume are both 0".into(), "give the body some stiffness");
         }
-        if m.gravity.iter().any(|g| !g.is_finite()) {
-            return bad("[material] gravity has a non-finite component".into(), "use e.g. [0.0, -9.81, 0.0]");
+        if self.gravity.iter().any(|g| !g.is_finite()) {
+            return invalid("[material] gravity has a non-finite component".into(), "use e.g. [0.0, -9.81, 0.0]");
         }
-        let s = &self.solver;
-        if s.samples == 0 {
-            return bad("[solver] samples = 0".into(), "use at least 1 sample per interval (10 is typical)");
+        Ok(())
+    }
+}
+
+impl Solver {
+    fn validate(&self) -> Result<()> {
+        if self.samples == 0 {
+            return invalid("[solver] samples = 0".into(), "use at least 1 sample per interval (10 is typical)");
         }
-        if !(s.tolerance.is_finite() && s.tolerance > 0.0) {
-            return bad(format!("[solver] tolerance = {} must be positive", s.tolerance), "use e.g. 0.01 (1% of the initial W)");
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return invalid(format!("[solver] tolerance = {} must be positive", self.tolerance), "use e.g. 0.01 (1% of the initial W)");
         }
-        if !(s.regularization.is_finite() && s.regularization >= 0.0) {
-            return bad(format!("[solver] regularization = {} must be >= 0", s.regularization), "use a time scale like 0.1, or 0 for none");
+        if !(self.regularization.is_finite() && self.regularization >= 0.0) {
+            return invalid(format!("[solver] regularization = {} must be >= 0", self.regularization), "use a time scale like 0.1, or 0 for none");
         }
-        if self.export.up_axis == Axis::X {
-            return bad("[export] up_axis = \"x\"".into(), "USD and glTF support \"y\" or \"z\" up");
+        Ok(())
+    }
+}
+
+impl Export {
+    fn validate(&self) -> Result<()> {
+        if self.up_axis == Axis::X {
+            return invalid("[export] up_axis = \"x\"".into(), "USD and glTF support \"y\" or \"z\" up");
         }
-        if !(self.export.meters_per_unit.is_finite() && self.export.meters_per_unit > 0.0) {
-            return bad(format!("[export] meters_per_unit = {} must be positive", self.export.meters_per_unit), "use 1.0 for meters, 0.01 for centimeters");
+        if !(self.meters_per_unit.is_finite() && self.meters_per_unit > 0.0) {
+            return invalid(format!("[export] meters_per_unit = {} must be positive", self.meters_per_unit), "use 1.0 for meters, 0.01 for centimeters");
         }
-        if self.export.formats.is_empty() {
-            return bad("[export] formats is empty".into(), "list at least one of \"usda\", \"usdc\", \"glb\"");
+        if self.formats.is_empty() {
+            return invalid("[export] formats is empty".into(), "list at least one of \"usda\", \"usdc\", \"glb\"");
         }
         Ok(())
     }
@@ -659,6 +644,15 @@ times = [0.0, 0.5]
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
         assert_eq!(s.keyframes.rest, Rest::Key(0));
+    }
+
+    #[test]
+    fn a_partial_table_takes_the_other_defaults() {
+        let s = Scene::parse(&(MINIMAL.to_string() + "[material]\nstiffness = 5.0\n[solver]\nsamples = 3\n[tet]\n")).unwrap();
+        assert_eq!(s.material, Material { stiffness: 5.0, ..Material::default() });
+        assert_eq!(s.solver, Solver { samples: 3, ..Solver::default() });
+        assert_eq!((&s.tet, &s.export), (&Tet::default(), &Export::default()));
+        assert_eq!(s.material.volume, 70.0, "the volume weight does not follow the strain weight");
     }
 
     #[test]

@@ -26,14 +26,17 @@ use crate::spacetime::trajectory::Trajectory;
 pub struct VertexSet(Vec<u32>);
 
 impl VertexSet {
+    /// The indices where `mask` is true.
     pub fn from_mask(mask: &[bool]) -> Self {
         VertexSet(mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| i as u32).collect())
     }
 
+    /// Every index below `n`.
     pub fn all(n: usize) -> Self {
         VertexSet((0..n as u32).collect())
     }
 
+    /// A mask over `n` vertices.
     pub fn to_mask(&self, n: usize) -> Vec<bool> {
         let mut m = vec![false; n];
         for &i in &self.0 {
@@ -42,18 +45,22 @@ impl VertexSet {
         m
     }
 
+    /// Whether `i` is in the set.
     pub fn contains(&self, i: u32) -> bool {
         self.0.binary_search(&i).is_ok()
     }
 
+    /// Number of indices.
     pub fn len(&self) -> usize {
         self.0.len()
     }
 
+    /// Whether the set is empty.
     pub fn is_empty(&self) -> bool {
         self.0.is_empty()
     }
 
+    /// The indices, increasing.
     pub fn indices(&self) -> &[u32] {
         &self.0
     }
@@ -63,18 +70,22 @@ impl VertexSet {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum Shape {
+    /// A closed surface, tetrahedralized by TetGen.
     Surface(TriMesh),
+    /// A tet mesh, simulated as it is.
     Volume(TetMesh),
 }
 
 /// Output of `import`: keyframe poses on one topology, with their constraints.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Keyframes {
+    /// The scene, carried along so later stages need no scene file.
     pub scene: Scene,
     /// The file the rest shape came from, as a path from where `import` ran (for messages).
     pub rest_source: String,
     /// The elastic rest shape. Every pose has its vertex count.
     pub rest: Shape,
+    /// Key times in seconds, strictly increasing.
     pub times: Vec<f64>,
     /// `poses[key][vertex]`, as read (after any procedural deformation).
     pub poses: Vec<Vec<Point>>,
@@ -82,6 +93,7 @@ pub struct Keyframes {
     pub fixed: Vec<VertexSet>,
     /// Per key, vertices whose velocity is prescribed (to zero).
     pub fixed_velocity: Vec<VertexSet>,
+    /// The last key is the first: the animation loops.
     pub cyclic: bool,
     /// A separate surface to embed and export, in the rest pose (`[embed] surface`).
     pub display: Option<TriMesh>,
@@ -90,20 +102,26 @@ pub struct Keyframes {
 /// Keyframe data per tet node: what the solver constrains and starts from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct KeyPoses {
+    /// Key times in seconds, strictly increasing.
     pub times: Vec<f64>,
     /// `positions[key][node]`: the input poses (interior nodes from a quasi-static fit).
     pub positions: Vec<Vec<Point>>,
+    /// Per key, nodes whose position is prescribed (added interior nodes are free).
     pub fixed: Vec<VertexSet>,
+    /// Per key, nodes whose velocity is prescribed (to zero).
     pub fixed_velocity: Vec<VertexSet>,
+    /// The last key is the first: the animation loops.
     pub cyclic: bool,
 }
 
 /// Output of `tetrahedralize`: the simulation body, its keyframes, and the surface to export.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Body {
+    /// The scene.
     pub scene: Scene,
     /// Rest pose, every tet positively oriented.
     pub mesh: TetMesh,
+    /// The keyframes of every node.
     pub keys: KeyPoses,
     /// The surface that is exported, in the rest pose, outward oriented, with no unused
     /// vertices. It is embedded in `mesh`.
@@ -113,7 +131,9 @@ pub struct Body {
 /// What the solver did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SolverLog {
+    /// The method that made the trajectory.
     pub method: Method,
+    /// Iterations taken (0 for `hermite`).
     pub iterations: usize,
     /// W after each iteration, starting with the initial guess (the hermite baseline).
     pub energy: Vec<f64>,
@@ -127,6 +147,7 @@ pub struct SolverLog {
     pub unknowns: usize,
     /// Steps halved because the full step would have increased W.
     pub halvings: usize,
+    /// Whether W settled within the iteration budget (always for `hermite`).
     pub converged: bool,
     /// Why the iteration stopped, in words.
     pub stop_reason: String,
@@ -135,25 +156,35 @@ pub struct SolverLog {
 /// Output of `solve`: the body and its optimized node trajectory.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Solution {
+    /// The body (its scene records the method used).
     pub body: Body,
+    /// The trajectory of every node.
     pub trajectory: Trajectory,
+    /// What the solver did.
     pub log: SolverLog,
 }
 
 /// Sizes of the problem, for the report.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {
+    /// Vertices of the exported surface.
     pub vertices: usize,
+    /// Triangles of the exported surface.
     pub faces: usize,
+    /// Nodes of the simulated body.
     pub tet_nodes: usize,
+    /// Tets of the simulated body.
     pub tets: usize,
+    /// Keyframes.
     pub keyframes: usize,
 }
 
 /// Output of `embed`: the exported surface and its exact trajectory.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Animation {
+    /// The scene.
     pub scene: Scene,
+    /// Sizes of the problem.
     pub counts: Counts,
     /// The surface in the rest pose.
     pub mesh: TriMesh,
@@ -161,13 +192,17 @@ pub struct Animation {
     pub trajectory: Trajectory,
     /// The input keyframe poses carried by the same embedding, `[key][vertex]`.
     pub input_keys: Vec<Vec<Point>>,
+    /// What the solver did.
     pub log: SolverLog,
 }
 
+/// The two forms of the animation in the files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum OutputKind {
+    /// Blendshapes and weight curves (`NAME.EXT`).
     Blendshape,
+    /// One pose per frame (`NAME.full.EXT`), for comparison.
     FullFrame,
 }
 
@@ -176,14 +211,18 @@ pub enum OutputKind {
 pub struct OutputFile {
     /// File name inside the output folder.
     pub path: String,
+    /// Which form of the animation it holds.
     pub kind: OutputKind,
+    /// Its format.
     pub format: Format,
+    /// Its size.
     pub bytes: u64,
 }
 
 /// Output of `export` (beside the files): what was written.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Outputs {
+    /// The files, blendshapes first, then full-frame, each in the order usda, usdc, glb.
     pub files: Vec<OutputFile>,
 }
 

@@ -30,6 +30,7 @@ use crate::mesh::surface::open_edges;
 use crate::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
 use crate::mesh::{bbox_diagonal, cross, norm, sub, Point, TetMesh, TriMesh};
 
+/// TetGen's switches and time bound.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TetgenOptions {
     /// `-q` radius-edge bound; 0 = no quality refinement.
@@ -41,13 +42,13 @@ pub struct TetgenOptions {
 }
 
 /// Tetrahedralize a closed surface. `source` is the file the surface came from (for errors).
-pub fn tetrahedralize(surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<TetMesh> {
+pub fn run(surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<TetMesh> {
     let program = std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into());
-    tetrahedralize_with(&program, surface, options, source)
+    run_with(&program, surface, options, source)
 }
 
-/// [`tetrahedralize`] with an explicit TetGen binary (tests use it instead of the variable).
-pub(crate) fn tetrahedralize_with(
+/// [`run`] with an explicit TetGen binary (tests use it instead of the variable).
+pub(crate) fn run_with(
     program: &OsStr,
     surface: &TriMesh,
     options: &TetgenOptions,
@@ -65,7 +66,7 @@ pub(crate) fn tetrahedralize_with(
         WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
     let input = dir.path.join(INPUT);
     std::fs::write(&input, write_smesh(surface)).map_err(|e| Error::io(&input, &e, "write the TetGen input"))?;
-    let run = run(program, &switches(options), &dir.path, timeout, source)?;
+    let run = run_process(program, &switches(options), &dir.path, timeout, source)?;
     if !run.status.success() {
         return Err(diagnose_failure(program, surface, &run, &dir.path, timeout, source));
     }
@@ -218,7 +219,7 @@ fn diagnose_failure(
     timeout: Duration,
     source: &Path,
 ) -> Error {
-    let pairs = run(program, "-dz", dir, timeout, source)
+    let pairs = run_process(program, "-dz", dir, timeout, source)
         .map(|check| intersecting_pairs(&check.stdout, surface.triangles.len()))
         .unwrap_or_default();
     if let Some(&(s, t)) = pairs.first() {
@@ -293,7 +294,7 @@ struct Finished {
 }
 
 /// Run `program switches surface.smesh` in `dir`, killing it after `timeout`.
-fn run(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, source: &Path) -> Result<Finished> {
+fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, source: &Path) -> Result<Finished> {
     let mut child = Command::new(program)
         .args([switches, INPUT])
         .current_dir(dir)
@@ -388,7 +389,7 @@ impl Drop for WorkDir {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::medit::tests::paper_asset;
+    use crate::testing::paper_asset;
     use crate::mesh::surface::{boundary, enclosed_volume};
     use crate::mesh::{obj, scale};
     use crate::procedural::{icosphere, prism};
@@ -400,7 +401,7 @@ mod tests {
     }
 
     fn failure(surface: &TriMesh, options: &TetgenOptions, program: &str) -> String {
-        let e = tetrahedralize_with(program.as_ref(), surface, options, Path::new("keys/k0.obj"))
+        let e = run_with(program.as_ref(), surface, options, Path::new("keys/k0.obj"))
             .expect_err("the run must fail");
         let s = e.to_string();
         assert!(s.starts_with("keys/k0.obj: ") && s.contains(" (fix: ") && !s.contains('\n'), "{s}");
@@ -437,10 +438,10 @@ mod tests {
     #[test]
     fn prism_and_icosphere_keep_their_surface() {
         let box_surface = prism([1.0, 3.0, 1.0], [3, 9, 3]);
-        let mesh = tetrahedralize(&box_surface, &options(1.414, 0.0), Path::new("prism.obj")).unwrap();
+        let mesh = run(&box_surface, &options(1.414, 0.0), Path::new("prism.obj")).unwrap();
         assert_faithful(&box_surface, &mesh);
         let sphere = icosphere(2);
-        let mesh = tetrahedralize_with(TETGEN.as_ref(), &sphere, &options(1.414, 0.01), Path::new("s.obj")).unwrap();
+        let mesh = run_with(TETGEN.as_ref(), &sphere, &options(1.414, 0.01), Path::new("s.obj")).unwrap();
         assert!(mesh.positions.len() > sphere.positions.len(), "refinement adds interior nodes");
         assert_faithful(&sphere, &mesh);
     }
@@ -449,7 +450,7 @@ mod tests {
     fn paper_rectangular_prism_keeps_its_interior_points_as_nodes() {
         let Some(path) = paper_asset("stretch3d/rectangular_prism.obj") else { return };
         let surface = obj::read(&path).unwrap();
-        let mesh = tetrahedralize_with(TETGEN.as_ref(), &surface, &options(0.0, 0.0), &path).unwrap();
+        let mesh = run_with(TETGEN.as_ref(), &surface, &options(0.0, 0.0), &path).unwrap();
         assert_eq!(mesh.positions, surface.positions, "the 252 unused interior points are nodes, no Steiner points");
         let mut used = vec![false; mesh.positions.len()];
         mesh.tets.iter().flatten().for_each(|&v| used[v as usize] = true);

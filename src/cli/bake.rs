@@ -4,9 +4,9 @@ use std::time::Instant;
 use blendsim::output::Staging;
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
-use blendsim::{embed, export, import, report, solve, tetrahedralize, Result};
+use blendsim::{stages, Result};
 
-use super::solve::MethodArg;
+use super::MethodArg;
 
 /// Bake a scene: import, tetrahedralize, solve, embed, export and report in one process.
 ///
@@ -27,20 +27,10 @@ pub struct Args {
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    let mut scene = SceneFile::load(&args.scene)?;
-    if let Some(m) = args.method {
-        scene.scene.solver.method = m.into();
-    }
+    let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
     let mut staging = Staging::new(&args.out)?;
-    let keys = import::import(&scene)?;
-    let body = tetrahedralize::tetrahedralize(&keys, progress)?;
-    let solution = solve::solve(&body, progress)?;
-    let animation = embed::embed(&solution)?;
-    let outputs = export::export(&animation, &mut staging)?;
-    let r = report::report(&animation, &outputs);
-    staging.write("report.json", &r.to_json())?;
-    staging.write("report.md", r.to_markdown().as_bytes())?;
+    let r = stages::bake(&scene, args.method.map(Into::into), &mut staging, progress)?;
     staging.commit()?;
     if !quiet {
         let best = r.ratios.iter().map(|(f, x)| format!("{f} {x:.1}x")).collect::<Vec<_>>().join(", ");

@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Solution};
-use blendsim::{embed, Result};
+use blendsim::{stages, Result};
 
 /// Carry the exported surface on the solved tet trajectory and write the animation stage file.
 ///
@@ -19,5 +19,5 @@ pub struct Args {
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let solution: Solution = stage::read(&args.solution)?;
-    stage::write(&args.output, &embed::embed(&solution)?)
+    stage::write(&args.output, &stages::embed(&solution)?)
 }

@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use blendsim::output::Staging;
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation};
-use blendsim::{export, Result};
+use blendsim::{stages, Result};
 
 /// Write the blendshape and full-frame animation files into --out.
 ///
@@ -24,7 +24,7 @@ pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let mut staging = Staging::new(&args.out)?;
     let bar = progress.stage("export");
-    let outputs = export::export(&animation, &mut staging)?;
+    let outputs = stages::export(&animation, &mut staging)?;
     staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;
     bar.finish_and_clear();
     staging.commit()

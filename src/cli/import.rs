@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
-use blendsim::{import, stage, Result};
+use blendsim::{stage, stages, Result};
 
 /// Read a scene's keyframe meshes and write the keyframes stage file.
 ///
@@ -19,5 +19,5 @@ pub struct Args {
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
-    stage::write(&args.output, &import::import(&scene)?)
+    stage::write(&args.output, &stages::import(&scene)?)
 }

@@ -14,6 +14,7 @@ mod tetrahedralize;
 use std::process::ExitCode;
 
 use blendsim::progress::Progress;
+use blendsim::scene::Method;
 use clap::{Parser, Subcommand};
 
 /// Turn keyframe meshes into compact, physically plausible blendshape animation for USD and
@@ -49,6 +50,22 @@ enum Command {
     Export(export::Args),
     Report(report::Args),
     Bake(bake::Args),
+}
+
+/// `--method`, for `solve` and `bake`: overrides the scene's `[solver] method`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum MethodArg {
+    Hermite,
+    Spacetime,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Hermite => Method::Hermite,
+            MethodArg::Spacetime => Method::Spacetime,
+        }
+    }
 }
 
 pub fn main() -> ExitCode {

@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use blendsim::output::Staging;
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation, Outputs};
-use blendsim::{report, Result};
+use blendsim::{stages, Result};
 
 /// Write report.json and report.md into --out.
 ///
@@ -24,9 +24,8 @@ pub struct Args {
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let outputs: Outputs = stage::read(&args.outputs)?;
-    let r = report::report(&animation, &outputs);
+    let report = stages::report(&animation, &outputs);
     let mut staging = Staging::new(&args.out)?;
-    staging.write("report.json", &r.to_json())?;
-    staging.write("report.md", r.to_markdown().as_bytes())?;
+    report.write(&mut staging)?;
     staging.commit()
 }

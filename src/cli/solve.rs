@@ -1,9 +1,10 @@
 use std::path::PathBuf;
 
 use blendsim::progress::Progress;
-use blendsim::scene::Method;
 use blendsim::stage::{self, Body};
-use blendsim::{solve, Result};
+use blendsim::{stages, Result};
+
+use super::MethodArg;
 
 /// Optimize the keyframe trajectory of a body and write the solution stage file.
 ///
@@ -21,25 +22,7 @@ pub struct Args {
     method: Option<MethodArg>,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum MethodArg {
-    Hermite,
-    Spacetime,
-}
-
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Method {
-        match m {
-            MethodArg::Hermite => Method::Hermite,
-            MethodArg::Spacetime => Method::Spacetime,
-        }
-    }
-}
-
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
-    let mut body: Body = stage::read(&args.body)?;
-    if let Some(m) = args.method {
-        body.scene.solver.method = m.into();
-    }
-    stage::write(&args.output, &solve::solve(&body, progress)?)
+    let body: Body = stage::read(&args.body)?;
+    stage::write(&args.output, &stages::solve(&body, args.method.map(Into::into), progress)?)
 }

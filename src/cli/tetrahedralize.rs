@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Keyframes};
-use blendsim::{tetrahedralize, Result};
+use blendsim::{stages, Result};
 
 /// Turn keyframes into a simulation body (tet mesh and per-node keyframe poses).
 ///
@@ -19,5 +19,5 @@ pub struct Args {
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let keys: Keyframes = stage::read(&args.keyframes)?;
-    stage::write(&args.output, &tetrahedralize::tetrahedralize(&keys, progress)?)
+    stage::write(&args.output, &stages::tetrahedralize(&keys, progress)?)
 }

@@ -9,57 +9,10 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use crate::mesh::Point;
+use crate::mesh::{Bounds, Point};
 
 /// Leaves hold at most this many items.
 pub(super) const LEAF_SIZE: usize = 4;
-
-/// A closed axis-aligned box.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Aabb {
-    pub lo: Point,
-    pub hi: Point,
-}
-
-impl Aabb {
-    /// The smallest box holding all `points` (which must not be empty).
-    pub fn around(points: &[Point]) -> Aabb {
-        let (&first, rest) = points.split_first().expect("a box around no points");
-        rest.iter().fold(Aabb { lo: first, hi: first }, |b, &p| b.union(Aabb { lo: p, hi: p }))
-    }
-
-    pub fn union(self, other: Aabb) -> Aabb {
-        Aabb {
-            lo: std::array::from_fn(|d| self.lo[d].min(other.lo[d])),
-            hi: std::array::from_fn(|d| self.hi[d].max(other.hi[d])),
-        }
-    }
-
-    /// The box grown by `pad` on every side.
-    pub fn padded(self, pad: f64) -> Aabb {
-        Aabb { lo: self.lo.map(|c| c - pad), hi: self.hi.map(|c| c + pad) }
-    }
-
-    pub fn center(&self) -> Point {
-        std::array::from_fn(|d| 0.5 * (self.lo[d] + self.hi[d]))
-    }
-
-    pub fn contains(&self, p: Point) -> bool {
-        (0..3).all(|d| self.lo[d] <= p[d] && p[d] <= self.hi[d])
-    }
-
-    /// Euclidean distance from `p` to the box (0 when inside): a lower bound on the distance
-    /// to anything the box holds.
-    pub fn distance(&self, p: Point) -> f64 {
-        (0..3)
-            .map(|d| {
-                let gap = (self.lo[d] - p[d]).max(p[d] - self.hi[d]).max(0.0);
-                gap * gap
-            })
-            .sum::<f64>()
-            .sqrt()
-    }
-}
 
 #[derive(Debug, Clone, Copy)]
 enum Kind {
@@ -76,7 +29,7 @@ enum Kind {
 
 #[derive(Debug, Clone)]
 struct Node {
-    bounds: Aabb,
+    bounds: Bounds,
     kind: Kind,
 }
 
@@ -87,7 +40,7 @@ pub(super) struct Bvh {
     /// Item ids (indices into the boxes given to `build`) in leaf order.
     items: Vec<u32>,
     /// `item_bounds[k]` is the box of `items[k]`.
-    item_bounds: Vec<Aabb>,
+    item_bounds: Vec<Bounds>,
 }
 
 /// Reusable traversal buffers, one per worker thread.
@@ -128,9 +81,9 @@ impl Eq for Queued {}
 impl Bvh {
     /// Build the hierarchy over `boxes`; item `i` is `boxes[i]`. Deterministic: the median
     /// split orders centers by coordinate, then by item id.
-    pub fn build(boxes: &[Aabb]) -> Bvh {
+    pub fn build(boxes: &[Bounds]) -> Bvh {
         let count = u32::try_from(boxes.len()).expect("more than u32::MAX items");
-        let centers: Vec<Point> = boxes.iter().map(Aabb::center).collect();
+        let centers: Vec<Point> = boxes.iter().map(Bounds::center).collect();
         let mut items: Vec<u32> = (0..count).collect();
         let mut nodes = Vec::new();
         if !items.is_empty() {
@@ -217,13 +170,13 @@ impl Bvh {
 /// Build the subtree over `items` (which occupy `offset..` in the final item order), push its
 /// nodes (children first) and return the index of its root.
 fn build_node(
-    boxes: &[Aabb],
+    boxes: &[Bounds],
     centers: &[Point],
     items: &mut [u32],
     offset: usize,
     nodes: &mut Vec<Node>,
 ) -> u32 {
-    let bounds = items.iter().map(|&i| boxes[i as usize]).reduce(Aabb::union).expect("no items");
+    let bounds = items.iter().map(|&i| boxes[i as usize]).reduce(Bounds::union).expect("no items");
     let kind = if items.len() <= LEAF_SIZE {
         Kind::Leaf { first: offset as u32, end: (offset + items.len()) as u32 }
     } else {
@@ -231,9 +184,9 @@ fn build_node(
             .iter()
             .map(|&i| {
                 let c = centers[i as usize];
-                Aabb { lo: c, hi: c }
+                Bounds { lo: c, hi: c }
             })
-            .reduce(Aabb::union)
+            .reduce(Bounds::union)
             .expect("no items");
         let extent: [f64; 3] = std::array::from_fn(|d| spread.hi[d] - spread.lo[d]);
         // Longest axis, the first one on ties.
@@ -256,7 +209,7 @@ mod tests {
     use super::*;
 
     /// Deterministic pseudo-random boxes of assorted sizes.
-    fn boxes(count: usize) -> Vec<Aabb> {
+    fn boxes(count: usize) -> Vec<Bounds> {
         let mut state = 0x9e37_79b9_7f4a_7c15_u64;
         let mut next = move || {
             state = state
@@ -268,7 +221,7 @@ mod tests {
             .map(|_| {
                 let c: Point = [next() * 10.0, next() * 10.0, next() * 3.0];
                 let h: Point = [next(), next(), next()];
-                Aabb {
+                Bounds {
                     lo: std::array::from_fn(|d| c[d] - h[d]),
                     hi: std::array::from_fn(|d| c[d] + h[d]),
                 }
@@ -276,7 +229,7 @@ mod tests {
             .collect()
     }
 
-    fn contains_box(outer: &Aabb, inner: &Aabb) -> bool {
+    fn contains_box(outer: &Bounds, inner: &Bounds) -> bool {
         (0..3).all(|d| outer.lo[d] <= inner.lo[d] && inner.hi[d] <= outer.hi[d])
     }
 

@@ -48,8 +48,8 @@ mod bvh;
 
 use rayon::prelude::*;
 
-use crate::mesh::{bounds, cross, dot, norm, sub, Point, TetMesh};
-use bvh::{Aabb, Bvh};
+use crate::mesh::{cross, dot, norm, sub, Bounds, Point, TetMesh};
+use bvh::Bvh;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct Binding {
@@ -135,10 +135,10 @@ impl<'a> Locator<'a> {
         // box size (<= scale). The other half of the pad covers rounding, and keeps box
         // distances below the computed tet distances.
         let pad = 8.0 * EPS * length_scale(mesh);
-        let boxes: Vec<Aabb> = (0..mesh.tets.len())
+        let boxes: Vec<Bounds> = (0..mesh.tets.len())
             .map(|t| {
                 let (_, corners) = tet_at(mesh, t as u32);
-                Aabb::around(&corners).padded(pad)
+                Bounds::of(&corners).padded(pad)
             })
             .collect();
         Locator { mesh, bvh: Bvh::build(&boxes) }
@@ -191,10 +191,12 @@ impl<'a> Locator<'a> {
 /// The length rounding errors are relative to: the bounding-box diagonal plus the largest
 /// coordinate magnitude (0 for a mesh without vertices).
 fn length_scale(mesh: &TetMesh) -> f64 {
-    bounds(&mesh.positions).map_or(0.0, |(lo, hi)| {
-        let largest = lo.iter().chain(&hi).fold(0.0_f64, |m, c| m.max(c.abs()));
-        norm(sub(hi, lo)) + largest
-    })
+    let bounds = Bounds::of(&mesh.positions);
+    if bounds.is_empty() {
+        return 0.0;
+    }
+    let largest = bounds.lo.iter().chain(&bounds.hi).fold(0.0_f64, |m, c| m.max(c.abs()));
+    bounds.diagonal() + largest
 }
 
 fn tet_at(mesh: &TetMesh, t: u32) -> ([u32; 4], [Point; 4]) {
@@ -331,28 +333,6 @@ fn closest_on_triangle(p: Point, [a, b, c]: [Point; 3]) -> [f64; 3] {
     w.map(|x| x / s)
 }
 
-/// The `embed` stage: carry the body's exported surface on the solved node trajectory. The
-/// input keyframes are carried by the same binding, so reports compare like with like.
-pub fn embed(solution: &crate::stage::Solution) -> crate::error::Result<crate::stage::Animation> {
-    let body = &solution.body;
-    let binding = Binding::compute(&body.mesh, &body.surface.positions);
-    let carry = |nodes: &[Point]| binding.apply(&body.mesh, nodes);
-    Ok(crate::stage::Animation {
-        scene: body.scene.clone(),
-        counts: crate::stage::Counts {
-            vertices: body.surface.positions.len(),
-            faces: body.surface.triangles.len(),
-            tet_nodes: body.mesh.positions.len(),
-            tets: body.mesh.tets.len(),
-            keyframes: body.keys.times.len(),
-        },
-        mesh: body.surface.clone(),
-        trajectory: solution.trajectory.map_linear(carry),
-        input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
-        log: solution.log.clone(),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -477,7 +457,7 @@ mod tests {
         for _ in 0..total * 3 / 7 {
             points.push(combine(corners(mesh, rng.index(n) as u32), rng.weights()));
         }
-        let (lo, hi) = bounds(&mesh.positions).unwrap();
+        let Bounds { lo, hi } = Bounds::of(&mesh.positions);
         let margin = 0.3 * norm(sub(hi, lo));
         for _ in 0..total / 50 {
             points.push(rng.point(lo.map(|c| c - 10.0 * margin), hi.map(|c| c + 10.0 * margin)));
@@ -715,7 +695,7 @@ mod tests {
         let mut rng = Rng(5);
         let points: Vec<Point> =
             std::iter::repeat_with(|| rng.point(lo.map(|c| c - 1.0), hi.map(|c| c + 1.0)))
-                .filter(|p| !Aabb { lo, hi }.contains(*p))
+                .filter(|p| !Bounds { lo, hi }.contains(*p))
                 .take(5000)
                 .collect();
         let binding = Binding::compute(&mesh, &points);

@@ -16,10 +16,14 @@
 //!
 //! Targets whose offsets are all zero (a key equal to the base, a velocity fixed to zero) are
 //! dropped; in a cyclic clip the last key aliases the first, so its velocity curve gets slope
-//! 1 at both ends and it has no pose target of its own.
+//! 1 at both ends and it has no pose target of its own. Whether a clip is cyclic is decided
+//! here, from the data ([`is_cyclic`]), for every writer and for the report alike.
+//!
+//! The weight curves are evaluated with the trajectory's own Hermite basis and interval lookup
+//! (`spacetime::trajectory::hermite_weights` and `locate`).
 
 use crate::mesh::Point;
-use crate::spacetime::trajectory::Trajectory;
+use crate::spacetime::trajectory::{hermite_weights, locate, Trajectory};
 
 /// One blendshape: a named set of vertex offsets.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,15 +40,20 @@ pub struct Target {
 /// weight per second.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WeightCurve {
+    /// The weight at each key.
     pub values: Vec<f32>,
+    /// The slope arriving at each key.
     pub in_tangents: Vec<f32>,
+    /// The slope leaving each key.
     pub out_tangents: Vec<f32>,
 }
 
 /// A blendshape animation: base points, targets, and one weight curve per target.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BlendShapeClip {
+    /// The first key's positions: the mesh's points with every weight zero.
     pub base: Vec<[f32; 3]>,
+    /// The blendshapes.
     pub targets: Vec<Target>,
     /// Key times in seconds (strictly increasing).
     pub times: Vec<f64>,
@@ -69,9 +78,23 @@ fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<T
     (!indices.is_empty()).then_some(Target { name, indices, offsets: values })
 }
 
+/// Whether the clip of `trajectory` is cyclic: its last key repeats the first (positions and
+/// velocities, in the f32 the files hold), so it saves that key's targets. Decided from the
+/// data, not the scene's `cyclic` flag: the cyclic form is exact exactly when the keys alias.
+pub fn is_cyclic(trajectory: &Trajectory) -> bool {
+    let same = |a: &[[f64; 3]], b: &[[f64; 3]]| a.iter().zip(b).all(|(p, q)| p.map(|x| x as f32) == q.map(|x| x as f32));
+    let last = trajectory.key_count() - 1;
+    same(&trajectory.positions[0], &trajectory.positions[last]) && same(&trajectory.velocities[0], &trajectory.velocities[last])
+}
+
 impl BlendShapeClip {
-    /// The blendshape form of `trajectory`. `cyclic` says the last key aliases the first.
-    pub fn from_trajectory(trajectory: &Trajectory, cyclic: bool) -> Self {
+    /// The blendshape form of `trajectory`, cyclic when [`is_cyclic`] says so.
+    pub fn from_trajectory(trajectory: &Trajectory) -> Self {
+        Self::with_layout(trajectory, is_cyclic(trajectory))
+    }
+
+    /// The blendshape form of `trajectory`; `cyclic`: the last key aliases the first.
+    fn with_layout(trajectory: &Trajectory, cyclic: bool) -> Self {
         let n_keys = trajectory.key_count();
         let base_f64 = &trajectory.positions[0];
         let base: Vec<[f32; 3]> = base_f64.iter().map(|&p| f32x3(p)).collect();
@@ -112,6 +135,7 @@ impl BlendShapeClip {
         BlendShapeClip { base, targets, times: trajectory.times.clone(), curves }
     }
 
+    /// Vertices of the mesh.
     pub fn vertex_count(&self) -> usize {
         self.base.len()
     }
@@ -119,20 +143,15 @@ impl BlendShapeClip {
     /// Every target's weight at time `t` (clamped to the key range), by cubic Hermite
     /// interpolation of the curves, as glTF defines CUBICSPLINE.
     pub fn weights_at(&self, t: f64) -> Vec<f64> {
-        let n = self.times.len();
-        let t = t.clamp(self.times[0], self.times[n - 1]);
-        let i = self.times[..n - 1].partition_point(|&s| s <= t).saturating_sub(1);
-        let len = self.times[i + 1] - self.times[i];
-        let s = (t - self.times[i]) / len;
-        let (s2, s3) = (s * s, s * s * s);
-        let (h00, h10, h01, h11) = (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, -2.0 * s3 + 3.0 * s2, s3 - s2);
+        let (i, theta) = locate(&self.times, t);
+        let w = hermite_weights(theta, self.times[i + 1] - self.times[i]).pos;
         self.curves
             .iter()
             .map(|c| {
-                h00 * c.values[i] as f64
-                    + h10 * len * c.out_tangents[i] as f64
-                    + h01 * c.values[i + 1] as f64
-                    + h11 * len * c.in_tangents[i + 1] as f64
+                w[0] * c.values[i] as f64
+                    + w[1] * c.out_tangents[i] as f64
+                    + w[2] * c.values[i + 1] as f64
+                    + w[3] * c.in_tangents[i + 1] as f64
             })
             .collect()
     }
@@ -196,7 +215,8 @@ mod tests {
     fn clip_reproduces_the_trajectory() {
         for cyclic in [false, true] {
             let tr = wavy(cyclic);
-            let clip = BlendShapeClip::from_trajectory(&tr, cyclic);
+            assert_eq!(is_cyclic(&tr), cyclic);
+            let clip = BlendShapeClip::from_trajectory(&tr);
             assert!(max_error(&tr, &clip) < 1e-5, "cyclic={cyclic}: {}", max_error(&tr, &clip));
         }
     }
@@ -204,11 +224,36 @@ mod tests {
     #[test]
     fn zero_targets_are_dropped_and_sparse_ones_are_sparse() {
         let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
-        let clip = BlendShapeClip::from_trajectory(&tr, true);
+        let clip = BlendShapeClip::from_trajectory(&tr);
         // Key 2 aliases key 0 (cyclic), velocities are zero: only pose_1 remains, moving vertex 1.
         assert_eq!(clip.targets.len(), 1);
         assert_eq!(clip.targets[0].name, "pose_1");
         assert_eq!(clip.targets[0].indices, vec![1]);
         assert!(max_error(&tr, &clip) < 1e-6);
+    }
+
+    #[test]
+    fn aliasing_keys_are_detected_in_f32() {
+        let key = |x: f64| vec![[x, 0.0, 0.0]];
+        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![key(0.1), key(1.0), key(0.1 + 1e-12)]);
+        assert!(is_cyclic(&tr));
+        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![key(0.1), key(1.0), key(0.1 + 1e-6)]);
+        assert!(!is_cyclic(&tr));
+    }
+
+    #[test]
+    fn weights_follow_the_trajectory_basis_at_and_between_keys() {
+        let tr = wavy(false);
+        let clip = BlendShapeClip::from_trajectory(&tr);
+        for (k, &t) in tr.times.iter().enumerate() {
+            let w = clip.weights_at(t);
+            for (target, wj) in clip.targets.iter().zip(&w) {
+                let expected = if target.name == format!("pose_{k}") { 1.0 } else { 0.0 };
+                assert_eq!(*wj, expected, "{} at key {k}", target.name);
+            }
+        }
+        // Outside the key range the weights hold the end values.
+        assert_eq!(clip.weights_at(-1.0), clip.weights_at(0.0));
+        assert_eq!(clip.weights_at(9.0), clip.weights_at(1.5));
     }
 }

@@ -5,6 +5,7 @@
 
 use crate::spacetime::trajectory::Trajectory;
 
+/// An animation as a vertex cache: every vertex at every frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FullFrame {
     /// Frame numbers (USD time codes at `fps`).

@@ -1,172 +1,21 @@
-//! Writers of the animation files (helper-owned, except `clip`).
+//! Writers of the animation files, and the two forms they write.
 //!
-//! Contract of [`export`]: build the [`clip::BlendShapeClip`] (blendshapes) and the
-//! [`fullframe::FullFrame`] (one pose per frame) from the animation, and stage, for each
-//! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
-//! `NAME.full.EXT` (full-frame). `usdc` is converted from the staged `.usda` by usd-core.
-//! Returns the list of staged files with their sizes.
+//! - [`clip`]: the blendshape form of a Hermite trajectory (base, targets, weight curves);
+//! - [`fullframe`]: one pose per frame (what a vertex cache holds);
+//! - [`usda`] (written natively), [`usdc`] (converted by usd-core), [`glb`]: the files.
 //!
-//! The layouts are specified in `formats/usd.md` and `formats/gltf.md`.
+//! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
+//! gets is decided by the export stage (`crate::stages::export`).
 
 pub mod clip;
 pub mod fullframe;
-pub mod gltf;
+pub mod glb;
 pub mod usda;
 pub mod usdc;
-
-use crate::error::{Error, Result};
-use crate::output::Staging;
-use crate::scene::{Axis, Format};
-use crate::spacetime::trajectory::Trajectory;
-use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
-
-use clip::BlendShapeClip;
-use fullframe::FullFrame;
-
-/// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
-/// in the order usda, usdc, glb, whatever order the scene file gives.
-pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
-    check(animation)?;
-    let scene = &animation.scene;
-    let trajectory = &animation.trajectory;
-    let triangles = &animation.mesh.triangles;
-    let mut formats = scene.export.formats.clone();
-    formats.sort();
-    formats.dedup();
-    let usd = usda::UsdSettings {
-        name: usda::prim_name(&scene.name),
-        fps: scene.fps,
-        up_axis: if scene.export.up_axis == Axis::Z { 'Z' } else { 'Y' },
-        meters_per_unit: scene.export.meters_per_unit,
-    };
-    let placement = gltf::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
-
-    let clip = BlendShapeClip::from_trajectory(trajectory, keys_alias(trajectory));
-    let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
-    let mut forms = vec![(OutputKind::Blendshape, String::new())];
-    if full.is_some() {
-        forms.push((OutputKind::FullFrame, ".full".into()));
-    }
-
-    let mut files = Vec::new();
-    for (kind, suffix) in forms {
-        let stem = format!("{}{suffix}", scene.name);
-        let usda_text = || match (&kind, &full) {
-            (OutputKind::FullFrame, Some(full)) => usda::full_frame(full, triangles, &usd),
-            _ => usda::blendshapes(&clip, triangles, &usd),
-        };
-        for &format in &formats {
-            let name = format!("{stem}.{}", format.extension());
-            match format {
-                Format::Usda => staging.write(&name, usda_text().as_bytes())?,
-                Format::Usdc => {
-                    // Formats are sorted, so a requested .usda is already staged; otherwise a
-                    // hidden one is written for the conversion and not recorded as an output.
-                    let source = if formats.contains(&Format::Usda) {
-                        format!("{stem}.usda")
-                    } else {
-                        let temporary = format!(".{stem}.for-usdc.usda");
-                        let path = staging.path(&temporary);
-                        std::fs::write(&path, usda_text()).map_err(|e| Error::io(&path, &e, "write a temporary .usda"))?;
-                        temporary
-                    };
-                    // Errors name the file the user asked for, not its staging path.
-                    let converted = usdc::convert(&staging.path(&source), &staging.path(&name))
-                        .map_err(|e| Error { path: Some(staging.final_path(&name)), ..e });
-                    if source.starts_with('.') {
-                        let _ = std::fs::remove_file(staging.path(&source));
-                    }
-                    converted?;
-                    staging.record(&name);
-                }
-                Format::Glb => {
-                    let bytes = match (&kind, &full) {
-                        (OutputKind::FullFrame, Some(full)) => gltf::full_frame(full, triangles, &scene.name, placement),
-                        _ => gltf::blendshapes(&clip, triangles, &scene.name, placement),
-                    };
-                    staging.write(&name, &bytes)?;
-                }
-            }
-            files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
-        }
-    }
-    Ok(Outputs { files })
-}
 
 /// Whether a target moving `moved` of `vertices` vertices is smaller stored sparse (an index of
 /// `index_bytes` plus 12 bytes of offset per moved vertex) than dense (12 bytes per vertex).
 /// With 4-byte indices (USD's `int[] pointIndices`) that is "moves fewer than 3/4".
 pub(crate) fn sparse_is_smaller(moved: usize, vertices: usize, index_bytes: usize) -> bool {
     moved * (index_bytes + 12) < vertices * 12
-}
-
-/// Whether the last key repeats the first (in the f32 the files hold), so the clip can treat
-/// it as cyclic and save a target. Decided from the data, not the scene flag: the cyclic
-/// form is exact exactly when the keys alias.
-fn keys_alias(trajectory: &Trajectory) -> bool {
-    let same = |a: &[[f64; 3]], b: &[[f64; 3]]| a.iter().zip(b).all(|(p, q)| p.map(|x| x as f32) == q.map(|x| x as f32));
-    let last = trajectory.key_count() - 1;
-    same(&trajectory.positions[0], &trajectory.positions[last]) && same(&trajectory.velocities[0], &trajectory.velocities[last])
-}
-
-/// The invariants the writers rely on; an animation file that breaks them was not written by
-/// `blendsim embed` (or was edited).
-fn check(animation: &Animation) -> Result<()> {
-    const FIX: &str = "re-run `blendsim embed` to rewrite the animation file";
-    let bad = |problem: String| Err(Error::general(format!("cannot export: the animation {problem}"), FIX));
-    let tr = &animation.trajectory;
-    let n = animation.mesh.positions.len();
-    if tr.key_count() < 2 || tr.positions.len() != tr.key_count() || tr.velocities.len() != tr.key_count() {
-        return bad(format!(
-            "has {} key times, {} key poses and {} key velocities (need the same number, at least 2)",
-            tr.key_count(),
-            tr.positions.len(),
-            tr.velocities.len()
-        ));
-    }
-    if let Some(k) = tr.times.windows(2).position(|w| w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less)) {
-        return bad(format!("key times are not increasing at key {}", k + 1));
-    }
-    for (what, keys) in [("positions", &tr.positions), ("velocities", &tr.velocities)] {
-        for (k, key) in keys.iter().enumerate() {
-            if key.len() != n {
-                return bad(format!("key {k} has {} {what} but the mesh has {n} vertices", key.len()));
-            }
-            if let Some(v) = key.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-                return bad(format!("has a non-finite {what} value at key {k}, vertex {v}"));
-            }
-        }
-    }
-    if tr.frames(animation.scene.fps).is_empty() {
-        return Err(Error::general(
-            format!(
-                "cannot export: the animation runs from {} s to {} s, between two frames at {} fps",
-                tr.start(),
-                tr.end(),
-                animation.scene.fps
-            ),
-            "give the keys a time range that contains a frame, or raise fps",
-        ));
-    }
-    if animation.mesh.triangles.is_empty() {
-        return bad("mesh has no triangles".into());
-    }
-    if let Some(t) = animation.mesh.triangles.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
-        return bad(format!("mesh triangle {t} uses a vertex index beyond its {n} vertices"));
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn aliasing_keys_are_detected_in_f32() {
-        let key = |x: f64| vec![[x, 0.0, 0.0]];
-        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![key(0.1), key(1.0), key(0.1 + 1e-12)]);
-        assert!(keys_alias(&tr));
-        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![key(0.1), key(1.0), key(0.1 + 1e-6)]);
-        assert!(!keys_alias(&tr));
-    }
 }

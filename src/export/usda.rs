@@ -8,6 +8,7 @@ use std::fmt::Write;
 
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
+use crate::mesh::Bounds;
 use crate::spacetime::trajectory::frames_between;
 
 /// Stage-level settings shared by both USD files.
@@ -15,9 +16,11 @@ use crate::spacetime::trajectory::frames_between;
 pub struct UsdSettings {
     /// Prim-safe name of the asset (used for the SkelRoot / mesh names).
     pub name: String,
+    /// Frames per second (`timeCodesPerSecond`).
     pub fps: f64,
     /// "Y" or "Z".
     pub up_axis: char,
+    /// Scene units in meters (`metersPerUnit`).
     pub meters_per_unit: f64,
 }
 
@@ -50,15 +53,12 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
 
     // The SkelRoot's extent bounds the whole animation, so culling never clips a deformed pose.
     let weights: Vec<Vec<f64>> = frames.iter().map(|&(_, t)| clip.weights_at(t)).collect();
-    let mut lo_hi = extent(&clip.base);
+    let mut bounds = Bounds::of_f32(&clip.base);
     for w in &weights {
         let posed: Vec<[f32; 3]> = clip.points_with_weights(w).iter().map(|p| p.map(|x| x as f32)).collect();
-        let e = extent(&posed);
-        for d in 0..3 {
-            lo_hi[0][d] = lo_hi[0][d].min(e[0][d]);
-            lo_hi[1][d] = lo_hi[1][d].max(e[1][d]);
-        }
+        bounds = bounds.union(Bounds::of_f32(&posed));
     }
+    let lo_hi = bounds.to_f32();
     let names = || clip.targets.iter().map(|t| t.name.as_str());
 
     let _ = writeln!(out, "def SkelRoot \"{root}\"\n{{");
@@ -131,7 +131,7 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], settings: &UsdSett
     out
 }
 
-fn header(s: &UsdSettings, start: i64, end: i64) -> String {
+pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
     format!(
         "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"blendsim {version}\"\n    endTimeCode = {end}\n    \
          framesPerSecond = {fps}\n    metersPerUnit = {mpu}\n    startTimeCode = {start}\n    \
@@ -146,22 +146,15 @@ fn header(s: &UsdSettings, start: i64, end: i64) -> String {
 
 /// Triangles as USD faces; our triangles are counter-clockwise seen from outside, which is
 /// USD's `rightHanded` orientation.
-fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
+pub(crate) fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
     push_attr(out, 8, "int[] faceVertexCounts", |o| push_list(o, triangles.iter(), |o, _| o.push('3')));
     push_attr(out, 8, "int[] faceVertexIndices", |o| push_ints(o, triangles.iter().flatten().copied()));
     out.push_str("        uniform token orientation = \"rightHanded\"\n");
 }
 
 /// `[(lo), (hi)]` of a point set (zeros when empty).
-fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
-    let Some(first) = points.first() else { return [[0.0; 3]; 2] };
-    points.iter().fold([*first, *first], |[mut lo, mut hi], p| {
-        for d in 0..3 {
-            lo[d] = lo[d].min(p[d]);
-            hi[d] = hi[d].max(p[d]);
-        }
-        [lo, hi]
-    })
+pub(crate) fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
+    Bounds::of_f32(points).to_f32()
 }
 
 /// `INDENT DECLARATION = VALUE\n`.
@@ -194,7 +187,7 @@ fn push_tokens<'a>(out: &mut String, items: impl Iterator<Item = &'a str>) {
     });
 }
 
-fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
+pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
     push_list(out, items, |o, p| {
         o.push('(');
         push_f32(o, p[0]);

@@ -156,7 +156,9 @@ pub struct Blend {
     /// Every vertex: the surface's (first [`Blend::surface_count`]), then the body's interior
     /// nodes, then the anchor points.
     pub positions: Vec<Point>,
+    /// How many of [`Blend::positions`] are surface vertices.
     pub surface_count: usize,
+    /// How the equilibrium was found.
     pub report: BlendReport,
 }
 

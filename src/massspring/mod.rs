@@ -17,7 +17,7 @@
 //! its own settings; it knows nothing of scene or stage files.
 //!
 //! ```no_run
-//! use blendsim::massspring::{Boundary, MassSpring, Settings, Targets};
+//! use blendsim::internals::massspring::{Boundary, MassSpring, Settings, Targets};
 //! # fn shapes() -> (Vec<Vec<[f64; 3]>>, Vec<[u32; 3]>) { unimplemented!() }
 //! let (surface, triangles) = shapes();
 //! let targets = Targets { surface: &surface, triangles: &triangles, body: None, body_poses: None };

@@ -8,7 +8,7 @@ use super::*;
 use crate::mesh::surface::enclosed_volume;
 use crate::mesh::{norm, sub, Point, TetMesh, TriMesh};
 use crate::procedural::prism;
-use crate::tetgen::{tetrahedralize, TetgenOptions};
+use crate::tetgen::{run as tetrahedralize, TetgenOptions};
 
 /// A 0.25 x 2 x 0.25 bar along +y, and its TetGen body (35 interior nodes).
 fn bar() -> (TriMesh, TetMesh) {

@@ -199,27 +199,10 @@ fn tet_row((line_no, tokens): &Line, row: usize) -> Result<([i64; 4], usize, usi
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use std::path::PathBuf;
-
+mod tests {
     use super::*;
-    use crate::mesh::bounds;
-
-    /// A file of the paper's scenes under `../shared/assets/paper`, or `None` (with a note)
-    /// when it is missing outside CI. With `CI=true` a missing asset fails the test.
-    pub(crate) fn paper_asset(rel: &str) -> Option<PathBuf> {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/assets/paper").join(rel);
-        if path.is_file() {
-            return Some(path);
-        }
-        assert!(
-            std::env::var("CI").as_deref() != Ok("true"),
-            "test asset {} is missing (required when CI=true)",
-            path.display()
-        );
-        eprintln!("skipped: test asset {} is missing", path.display());
-        None
-    }
+    use crate::testing::paper_asset;
+    use crate::mesh::Bounds;
 
     const TWO_TETS: &str = "\
 MeshVersionFormatted 1
@@ -323,7 +306,7 @@ End
         assert_eq!(raw.tets, mesh.tets);
         assert!((0..2400).all(|t| mesh.signed_volume_at(&mesh.positions, t) > 0.0));
         assert!((mesh.volume_at(&mesh.positions) - 1.6 * 3.0 * 1.0).abs() < 1e-12);
-        assert_eq!(bounds(&mesh.positions), Some(([-0.8, 0.0, -0.5], [0.8, 3.0, 0.5])));
+        assert_eq!(Bounds::of(&mesh.positions), Bounds { lo: [-0.8, 0.0, -0.5], hi: [0.8, 3.0, 0.5] });
     }
 
     #[test]
@@ -347,7 +330,7 @@ End
         for (path, y_range) in [(p1, (-3.0, 3.0)), (p2, (0.8, 3.0))] {
             let key = read(&path).unwrap();
             assert_eq!(sorted(&key), sorted(&rest), "{}", path.display());
-            let (lo, hi) = bounds(&key.positions).unwrap();
+            let Bounds { lo, hi } = Bounds::of(&key.positions);
             assert!((lo[1] - y_range.0).abs() < 1e-9 && (hi[1] - y_range.1).abs() < 1e-9, "{lo:?} {hi:?}");
         }
     }

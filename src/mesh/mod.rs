@@ -3,17 +3,24 @@
 //! - [`TriMesh`]: a triangle surface (OBJ keyframes, the exported surface).
 //! - [`TetMesh`]: a tetrahedral body (MEDIT `.mesh`, TetGen `.node`/`.ele`), every tet with
 //!   positive signed volume once loaded.
+//! - [`Point`] and its vector helpers, [`Bounds`] (axis-aligned boxes), [`Axis`].
+//! - Files: [`obj`], [`medit`], [`tetgen_io`] (and the `.smesh` TetGen reads), [`selection`]
+//!   (vertex index and `.dmat` files); [`surface`] operations (boundary, winding, volume).
 //!
 //! Readers keep the vertex order of the file: per-vertex masks in scene files index it.
 
+pub mod bounds;
 pub mod medit;
 pub mod obj;
+pub mod selection;
 pub mod surface;
 pub mod tetgen_io;
 
 use std::path::Path;
 
 use crate::error::{Error, Result};
+
+pub use bounds::Bounds;
 
 /// A point or vector in 3D.
 pub type Point = [f64; 3];
@@ -22,7 +29,9 @@ pub type Point = [f64; 3];
 /// (they are kept so vertex indices match the file they came from).
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct TriMesh {
+    /// Vertex positions, in file order.
     pub positions: Vec<Point>,
+    /// Vertex indices of each triangle, counter-clockwise seen from the front.
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -30,18 +39,23 @@ pub struct TriMesh {
 /// `det[b-a, c-a, d-a] / 6 > 0`, and every index is in range.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct TetMesh {
+    /// Node positions, in file order.
     pub positions: Vec<Point>,
+    /// Node indices of each tet.
     pub tets: Vec<[u32; 4]>,
 }
 
 /// What a keyframe file holds: a surface to tetrahedralize, or a ready tet mesh.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MeshFile {
+    /// An OBJ surface.
     Surface(TriMesh),
+    /// A MEDIT or TetGen tet mesh.
     Volume(TetMesh),
 }
 
 impl MeshFile {
+    /// The vertex (or node) positions.
     pub fn positions(&self) -> &[Point] {
         match self {
             MeshFile::Surface(m) => &m.positions,
@@ -66,48 +80,61 @@ pub fn read(path: &Path) -> Result<MeshFile> {
     }
 }
 
-/// Axis-aligned bounds of a point set; `None` when empty.
-pub fn bounds(points: &[Point]) -> Option<(Point, Point)> {
-    let first = *points.first()?;
-    Some(points.iter().fold((first, first), |(mut lo, mut hi), p| {
-        for d in 0..3 {
-            lo[d] = lo[d].min(p[d]);
-            hi[d] = hi[d].max(p[d]);
-        }
-        (lo, hi)
-    }))
-}
-
 /// Length of the bounding-box diagonal (0 for an empty set): the scale errors are reported in.
 pub fn bbox_diagonal(points: &[Point]) -> f64 {
-    bounds(points).map_or(0.0, |(lo, hi)| norm(sub(hi, lo)))
+    Bounds::of(points).diagonal()
 }
 
+/// A coordinate axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// The first coordinate.
+    X,
+    /// The second coordinate.
+    Y,
+    /// The third coordinate.
+    Z,
+}
+
+impl Axis {
+    /// The coordinate's index in a [`Point`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// `a - b`.
 #[inline]
 pub fn sub(a: Point, b: Point) -> Point {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
+/// `a + b`.
 #[inline]
 pub fn add(a: Point, b: Point) -> Point {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
+/// `s a`.
 #[inline]
 pub fn scale(a: Point, s: f64) -> Point {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
+/// `a · b`.
 #[inline]
 pub fn dot(a: Point, b: Point) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// `a × b`.
 #[inline]
 pub fn cross(a: Point, b: Point) -> Point {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
+/// `|a|`.
 #[inline]
 pub fn norm(a: Point) -> f64 {
     dot(a, a).sqrt()

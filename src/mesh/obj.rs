@@ -133,7 +133,7 @@ pub fn write(mesh: &TriMesh) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::medit::tests::paper_asset;
+    use crate::testing::paper_asset;
 
     fn parse_err(text: &str) -> String {
         let e = parse(text).expect_err("malformed OBJ must not parse");

@@ -172,7 +172,7 @@ fn same_winding(s: [u32; 3], t: [u32; 3]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::medit::tests::paper_asset;
+    use crate::testing::paper_asset;
     use crate::mesh::{medit, obj};
     use crate::procedural;
 

@@ -20,13 +20,26 @@ use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
 use super::projection::{project_batch, project_with_jacobian_batch, volume_preserving, ProjectionJacobian};
-use super::svd3::{svd3, BATCH};
+use super::lanes::BATCH;
+use super::svd3::svd3;
 use crate::error::{Error, Result};
 use crate::mesh::{Point, TetMesh};
-use crate::scene::Material;
 
+/// The elastic constants of a body, per unit rest volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    /// Strain (as-rigid-as-possible) constraint weight `k_strain`.
+    pub stiffness: f64,
+    /// Volume-preservation constraint weight `k_volume`.
+    pub volume: f64,
+    /// Mass density, lumped to the nodes.
+    pub density: f64,
+}
+
+/// A tet body ready for projective dynamics (see the module documentation).
 #[derive(Debug, Clone)]
 pub struct Elastic {
+    /// Node indices of each tet (positively oriented at rest).
     pub tets: Vec<[u32; 4]>,
     /// Rest positions of the nodes (used to order the global solves geometrically).
     pub rest: Vec<Point>,
@@ -36,7 +49,9 @@ pub struct Elastic {
     pub volumes: Vec<f64>,
     /// Constraint weight `w_e = V_e (k_strain + k_volume)`.
     pub weights: Vec<f64>,
+    /// Strain constraint weight per unit rest volume.
     pub k_strain: f64,
+    /// Volume constraint weight per unit rest volume.
     pub k_volume: f64,
     /// Lumped nodal masses `m_a = Σ_e ρ V_e / 4`.
     pub mass: Vec<f64>,
@@ -128,10 +143,12 @@ impl Elastic {
         })
     }
 
+    /// Nodes of the body.
     pub fn node_count(&self) -> usize {
         self.mass.len()
     }
 
+    /// Tets of the body.
     pub fn tet_count(&self) -> usize {
         self.tets.len()
     }
@@ -300,47 +317,13 @@ impl Elastic {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
     use crate::physics::projection::project_with_jacobian;
-    use crate::mesh::TetMesh;
-
-    /// A cube [0,1]³ split into `n³` cells of 6 tets each (Kuhn triangulation, positive).
-    pub(crate) fn cube_mesh(n: usize) -> TetMesh {
-        let idx = |i: usize, j: usize, k: usize| (i * (n + 1) * (n + 1) + j * (n + 1) + k) as u32;
-        let mut positions = Vec::new();
-        for i in 0..=n {
-            for j in 0..=n {
-                for k in 0..=n {
-                    positions.push([i as f64 / n as f64, j as f64 / n as f64, k as f64 / n as f64]);
-                }
-            }
-        }
-        let mut tets = Vec::new();
-        for i in 0..n {
-            for j in 0..n {
-                for k in 0..n {
-                    let c = |d: [usize; 3]| idx(i + d[0], j + d[1], k + d[2]);
-                    // The 6 monotone paths from corner 000 to 111.
-                    for perm in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
-                        let mut p = [0usize; 3];
-                        let mut verts = vec![c(p)];
-                        for &axis in &perm {
-                            p[axis] = 1;
-                            verts.push(c(p));
-                        }
-                        tets.push([verts[0], verts[1], verts[2], verts[3]]);
-                    }
-                }
-            }
-        }
-        let mut m = TetMesh { positions, tets };
-        m.orient_positive();
-        m
-    }
+    use crate::testing::cube_mesh;
 
     fn material() -> Material {
-        Material { stiffness: 70.0, volume: 30.0, density: 2.0, damping: 0.0, gravity: [0.0; 3] }
+        Material { stiffness: 70.0, volume: 30.0, density: 2.0 }
     }
 
     fn rotate(p: Point, angle: f64) -> Point {

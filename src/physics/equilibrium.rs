@@ -10,7 +10,8 @@
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Mat, Par};
 
-use super::cholesky::{Cholesky, Ordering};
+use super::cholesky::Cholesky;
+use super::ordering::FillOrdering;
 use super::elastic::Elastic;
 use super::mat3::Mat3;
 use crate::error::{Error, Result};
@@ -63,7 +64,7 @@ impl<'a> Equilibrium<'a> {
             }
             let n = free_nodes.len();
             let a = SparseColMat::new(SymbolicSparseColMat::new_checked(n, n, col_ptr, None, rows), vals);
-            Some(Cholesky::factor(&a, &Ordering::Amd, Par::Seq).map_err(|_| {
+            Some(Cholesky::factor(&a, &FillOrdering::Amd, Par::Seq).map_err(|_| {
                 Error::general(
                     "some interior nodes are not connected to any pinned surface node",
                     "check the tet mesh for loose pieces (every component needs surface vertices)",
@@ -122,11 +123,11 @@ impl<'a> Equilibrium<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::elastic::tests::cube_mesh;
-    use crate::scene::Material;
+    use crate::physics::elastic::Material;
+    use crate::testing::cube_mesh;
 
     fn material() -> Material {
-        Material { stiffness: 70.0, volume: 70.0, density: 1.0, damping: 0.0, gravity: [0.0; 3] }
+        Material { stiffness: 70.0, volume: 70.0, density: 1.0 }
     }
 
     fn boundary_mask(mesh: &crate::mesh::TetMesh) -> Vec<bool> {

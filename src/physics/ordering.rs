@@ -18,7 +18,7 @@
 //! [`predicted_cost`] compares orders in milliseconds from a symbolic factorization of the node
 //! graph with node weights (slots per node); [`postorder`] renumbers an order along its
 //! elimination tree so that subtrees are contiguous; [`expand`] turns a node order into an
-//! order of the unknowns.
+//! order of the unknowns, the [`FillOrdering`] the Cholesky factorization is given.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::amd;
@@ -30,6 +30,16 @@ use faer::Side;
 use super::mat3::Mat3;
 use super::svd3::svd3;
 use crate::mesh::Point;
+
+/// A fill-reducing ordering of a symmetric matrix's rows and columns, as the Cholesky
+/// factorization takes it.
+#[derive(Debug, Clone)]
+pub enum FillOrdering {
+    /// faer's approximate minimum degree.
+    Amd,
+    /// `perm[i]` = original index of the i-th pivot.
+    Custom(Vec<usize>),
+}
 
 /// An undirected graph without self loops in compressed adjacency form.
 #[derive(Debug, Clone, PartialEq)]

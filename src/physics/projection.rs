@@ -11,7 +11,8 @@
 use super::mat3::Mat3;
 #[cfg(doc)]
 use super::mat3::scaled_product;
-use super::svd3::{lane, svd_lanes, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
+use super::lanes::{lane, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
+use super::svd3::svd_lanes;
 
 /// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`](super::svd3::svd3):
 /// `σ1 >= σ2 >= |σ3|`, `σ3` possibly negative for an inverted element).
@@ -142,7 +143,8 @@ fn collapse_shortest_axis(sigma: [f64; 3]) -> [f64; 3] {
 }
 
 /// Projection target of one element: `r R + (1 - r) D` for deformation gradient `f` and
-/// strain share `r` in [0, 1].
+/// strain share `r` in [0, 1]. (The definition [`project_batch`] is tested against.)
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn project(f: &Mat3, strain_share: f64) -> Mat3 {
     let p = project_lanes::<1>(&to_lanes(&[*f]), strain_share);
     lane(&p, 0)
@@ -244,7 +246,9 @@ impl ProjectionJacobian {
     }
 }
 
-/// [`project`] and its derivative at `f`.
+/// [`project`] and its derivative at `f`. (The definition [`project_with_jacobian_batch`] is
+/// tested against.)
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn project_with_jacobian(f: &Mat3, strain_share: f64) -> (Mat3, ProjectionJacobian) {
     let (p, j) = project_with_jacobian_lanes::<1>(&to_lanes(&[*f]), strain_share);
     (lane(&p, 0), jacobian_lane(&j, 0))
@@ -321,7 +325,7 @@ fn project_with_jacobian_lanes<const N: usize>(f: &M3<N>, strain_share: f64) -> 
 mod tests {
     use super::*;
     use crate::physics::mat3::{det, distance, mul, mul_transpose, IDENTITY};
-    use crate::physics::svd3::tests::Rng;
+    use crate::testing::Rng;
 
     fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
         (0..3).map(|i| (a[i] - b[i]).powi(2)).sum()

@@ -10,220 +10,24 @@
 //! small eigenvalues).
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
-//! ~370 ns), so the local step decomposes [`BATCH`] matrices at once ([`svd3_batch`]): the same
-//! code runs on lanes (`[f64; N]` arithmetic that the compiler turns into SIMD, AVX-512 or AVX2
-//! chosen at run time), every branch a per-lane select and the Jacobi sweeps continuing until
-//! the slowest lane has converged while converged lanes stay frozen. Each lane does exactly the
-//! operations [`svd3`] does on its own (which is the same code with one lane; no fused
-//! multiply-adds are ever generated), so a matrix gets the same bytes whichever path and batch
-//! it goes through.
+//! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
+//! ([`svd_lanes`]): the same code runs on lanes ([`super::lanes`]: `[f64; N]` arithmetic that
+//! the compiler turns into SIMD, AVX-512 or AVX2 chosen at run time), every branch a per-lane
+//! select and the Jacobi sweeps continuing until the slowest lane has converged while converged
+//! lanes stay frozen. Each lane does exactly the operations [`svd3`] does on its own (which is
+//! the same code with one lane; no fused multiply-adds are ever generated), so a matrix gets the
+//! same bytes whichever path and batch it goes through.
 
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
-
+use super::lanes::{cross, det, dot, lane, mul_lanes, select3, to_lanes, Lanes, Mask, M3, V3};
+use super::lanes::{with_widest_simd, BATCH};
 use super::mat3::Mat3;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
+/// `F = U diag(sigma) Vᵀ`, see the module documentation.
 pub struct Svd3 {
     pub u: Mat3,
     pub sigma: [f64; 3],
     pub v: Mat3,
-}
-
-/// Matrices per call of the batched kernels.
-pub const BATCH: usize = 16;
-
-/// `N` lanes of `f64`, combined lane by lane.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Lanes<const N: usize>(pub [f64; N]);
-
-/// `N` lane conditions.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Mask<const N: usize>(pub [bool; N]);
-
-macro_rules! lane_op {
-    ($trait:ident, $method:ident, $op:tt) => {
-        impl<const N: usize> $trait for Lanes<N> {
-            type Output = Lanes<N>;
-            #[inline(always)]
-            fn $method(self, b: Lanes<N>) -> Lanes<N> {
-                let mut o = self.0;
-                for l in 0..N {
-                    o[l] = self.0[l] $op b.0[l];
-                }
-                Lanes(o)
-            }
-        }
-    };
-}
-lane_op!(Add, add, +);
-lane_op!(Sub, sub, -);
-lane_op!(Mul, mul, *);
-lane_op!(Div, div, /);
-
-impl<const N: usize> Neg for Lanes<N> {
-    type Output = Lanes<N>;
-    #[inline(always)]
-    fn neg(self) -> Lanes<N> {
-        let mut o = self.0;
-        for v in o.iter_mut() {
-            *v = -*v;
-        }
-        Lanes(o)
-    }
-}
-
-/// A lane-wise method from a `f64` one (written out, not through a closure: closures are not
-/// reliably inlined into the SIMD-compiled callers).
-macro_rules! lane_fn {
-    ($name:ident, $f:expr) => {
-        #[inline(always)]
-        pub fn $name(self) -> Self {
-            let mut o = self.0;
-            for v in o.iter_mut() {
-                *v = $f(*v);
-            }
-            Lanes(o)
-        }
-    };
-}
-
-macro_rules! lane_cmp {
-    ($method:ident, $op:tt) => {
-        #[inline(always)]
-        pub fn $method(self, b: Lanes<N>) -> Mask<N> {
-            let mut m = [false; N];
-            for l in 0..N {
-                m[l] = self.0[l] $op b.0[l];
-            }
-            Mask(m)
-        }
-    };
-}
-
-impl<const N: usize> Lanes<N> {
-    #[inline(always)]
-    pub fn splat(x: f64) -> Self {
-        Lanes([x; N])
-    }
-
-    lane_fn!(sqrt, f64::sqrt);
-    lane_fn!(abs, f64::abs);
-    // `±1` and `±1e-12` with the sign of each lane.
-    lane_fn!(sign, |x: f64| 1f64.copysign(x));
-    lane_fn!(tiny_with_sign, |x: f64| 1e-12f64.copysign(x));
-
-    #[inline(always)]
-    pub fn max(self, b: Self) -> Self {
-        let mut o = self.0;
-        for l in 0..N {
-            o[l] = o[l].max(b.0[l]);
-        }
-        Lanes(o)
-    }
-
-    /// `self` where `m`, else `other`.
-    #[inline(always)]
-    pub fn select(m: Mask<N>, a: Self, b: Self) -> Self {
-        let mut o = b.0;
-        for l in 0..N {
-            if m.0[l] {
-                o[l] = a.0[l];
-            }
-        }
-        Lanes(o)
-    }
-
-    lane_cmp!(lt, <);
-    lane_cmp!(le, <=);
-    lane_cmp!(gt, >);
-    lane_cmp!(eq, ==);
-}
-
-impl<const N: usize> Mask<N> {
-    #[inline(always)]
-    pub fn splat(b: bool) -> Self {
-        Mask([b; N])
-    }
-
-    #[inline(always)]
-    pub fn any(self) -> bool {
-        self.0.iter().any(|&b| b)
-    }
-}
-
-impl<const N: usize> BitAnd for Mask<N> {
-    type Output = Mask<N>;
-    #[inline(always)]
-    fn bitand(self, b: Mask<N>) -> Mask<N> {
-        let mut m = self.0;
-        for l in 0..N {
-            m[l] &= b.0[l];
-        }
-        Mask(m)
-    }
-}
-
-impl<const N: usize> BitOr for Mask<N> {
-    type Output = Mask<N>;
-    #[inline(always)]
-    fn bitor(self, b: Mask<N>) -> Mask<N> {
-        let mut m = self.0;
-        for l in 0..N {
-            m[l] |= b.0[l];
-        }
-        Mask(m)
-    }
-}
-
-impl<const N: usize> Not for Mask<N> {
-    type Output = Mask<N>;
-    #[inline(always)]
-    fn not(self) -> Mask<N> {
-        let mut m = self.0;
-        for l in 0..N {
-            m[l] = !m[l];
-        }
-        Mask(m)
-    }
-}
-
-/// A 3-vector of lanes.
-pub(crate) type V3<const N: usize> = [Lanes<N>; 3];
-/// A row-major 3x3 matrix of lanes.
-pub(crate) type M3<const N: usize> = [[Lanes<N>; 3]; 3];
-
-#[inline(always)]
-fn dot<const N: usize>(a: V3<N>, b: V3<N>) -> Lanes<N> {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline(always)]
-fn cross<const N: usize>(a: V3<N>, b: V3<N>) -> V3<N> {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-#[inline(always)]
-fn select3<const N: usize>(m: Mask<N>, a: V3<N>, b: V3<N>) -> V3<N> {
-    [Lanes::select(m, a[0], b[0]), Lanes::select(m, a[1], b[1]), Lanes::select(m, a[2], b[2])]
-}
-
-/// `a b` for lane matrices (the same sums as [`super::mat3::mul`]).
-#[inline(always)]
-pub(crate) fn mul_lanes<const N: usize>(a: &M3<N>, b: &M3<N>) -> M3<N> {
-    let z = Lanes::splat(0.0);
-    let mut c = [[z; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    c
-}
-
-#[inline(always)]
-fn det<const N: usize>(a: &M3<N>) -> Lanes<N> {
-    a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
 }
 
 /// A unit vector orthogonal to the unit vector `a` (cross with the axis least aligned with a).
@@ -336,87 +140,27 @@ pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
     (u, [s1, Lanes::select(full, s2, Lanes::splat(0.0)), s3], v)
 }
 
-/// Lane matrices from `N` row-major matrices.
-#[inline(always)]
-pub(crate) fn to_lanes<const N: usize>(f: &[Mat3; N]) -> M3<N> {
-    let z = Lanes::splat(0.0);
-    let mut m = [[z; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            for l in 0..N {
-                m[i][j].0[l] = f[l][i][j];
-            }
-        }
-    }
-    m
-}
-
-/// Lane `l` of a lane matrix.
-#[inline(always)]
-pub(crate) fn lane<const N: usize>(m: &M3<N>, l: usize) -> Mat3 {
-    [[m[0][0].0[l], m[0][1].0[l], m[0][2].0[l]], [m[1][0].0[l], m[1][1].0[l], m[1][2].0[l]], [m[2][0].0[l], m[2][1].0[l], m[2][2].0[l]]]
-}
-
 /// Signed SVD of `f` (see the module documentation).
 pub fn svd3(f: &Mat3) -> Svd3 {
     let (u, sigma, v) = svd_lanes::<1>(&to_lanes(&[*f]));
     Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
 }
 
-/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by lane).
+/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by
+/// lane). The local step runs [`svd_lanes`] inside its own batched kernels; this entry point is
+/// for the timing derivatives, which need the decompositions themselves.
 pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
     let (u, sigma, v) = dispatch_svd(&to_lanes(f));
     std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })
 }
 
-/// Run `$body` (an expression using lane arithmetic) compiled for the widest vector extension
-/// the CPU has: the lanes become AVX-512 or AVX2 registers; the arithmetic is the same.
-macro_rules! with_widest_simd {
-    ($name:ident, fn($($arg:ident: $ty:ty),*) -> $ret:ty $body:block) => {
-        #[inline(always)]
-        fn $name($($arg: $ty),*) -> $ret {
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx512f")]
-                unsafe fn avx512($($arg: $ty),*) -> $ret $body
-                #[target_feature(enable = "avx2")]
-                unsafe fn avx2($($arg: $ty),*) -> $ret $body
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the CPU supports AVX-512F (checked).
-                    return unsafe { avx512($($arg),*) };
-                }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU supports AVX2 (checked).
-                    return unsafe { avx2($($arg),*) };
-                }
-            }
-            $body
-        }
-    };
-}
-#[allow(unused_imports)]
-pub(crate) use with_widest_simd;
-
 with_widest_simd!(dispatch_svd, fn(f: &M3<BATCH>) -> (M3<BATCH>, V3<BATCH>, M3<BATCH>) { svd_lanes(f) });
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
     use crate::physics::mat3::{det, distance, mul, mul_transpose, scaled_product, transpose, IDENTITY};
-
-    /// A small deterministic generator for test matrices (xorshift).
-    pub(crate) struct Rng(pub u64);
-    impl Rng {
-        pub fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        }
-        pub fn mat(&mut self) -> Mat3 {
-            [[self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()]]
-        }
-    }
+    use crate::testing::Rng;
 
     fn check(f: &Mat3) {
         let s = svd3(f);

@@ -35,8 +35,8 @@ use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
-use crate::physics::cholesky::{Cholesky, Ordering};
-use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, Graph};
+use crate::physics::cholesky::Cholesky;
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -79,17 +79,39 @@ pub struct GlobalStats {
     pub matrix_nnz: usize,
     /// Stored entries of the Cholesky factor.
     pub factor_nnz: usize,
-    /// The fill-reducing ordering that was used (see [`fill_reducing_order`]).
+    /// The fill-reducing ordering that was used (see `fill_reducing_order`).
     pub ordering: &'static str,
+    /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,
     /// Ordering, symbolic analysis and numeric factorization.
     pub factor_seconds: f64,
 }
 
+/// The normal matrix of the free unknowns, factorized: solves the global step.
 pub struct GlobalStep {
     unknowns: Unknowns,
+    /// None when there are no unknowns.
     cholesky: Option<Cholesky>,
+    /// Which time-slot pairs the matrix couples ([`coupling`]): the matrix pattern depends on
+    /// the time coefficients only through this, so equal couplings mean equal patterns.
+    coupling: Vec<(bool, bool)>,
+    /// What the precomputation built.
     pub stats: GlobalStats,
+}
+
+/// How [`GlobalStep::retime`] rebuilt the factorization.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Retimed {
+    pub assemble_seconds: f64,
+    pub factor_seconds: f64,
+    /// Numeric refactorization on the kept symbolic analysis (false: a fresh factorization,
+    /// because a time coefficient cancelled exactly and the pattern changed).
+    pub reused_symbolic: bool,
+}
+
+/// Per slot pair: whether the mass block and the stiffness blocks are present in [`assemble`].
+fn coupling(c: &TimeCoefficients) -> Vec<(bool, bool)> {
+    (0..c.slots * c.slots).map(|at| (c.mm[at] != 0.0, c.ml[at] != 0.0 || c.kk[at] != 0.0)).collect()
 }
 
 /// Lower triangle of the normal matrix restricted to the free unknowns.
@@ -222,7 +244,7 @@ impl GlobalStep {
         if dim == 0 {
             let stats =
                 GlobalStats { unknowns: 0, matrix_nnz: 0, factor_nnz: 0, ordering: "none", assemble_seconds: 0.0, factor_seconds: 0.0 };
-            return Ok(GlobalStep { unknowns, cholesky: None, stats });
+            return Ok(GlobalStep { unknowns, cholesky: None, coupling: coupling(&coefficients), stats });
         }
         let a = assemble(objective, &unknowns, &coefficients);
         let assemble_seconds = t0.elapsed().as_secs_f64();
@@ -230,7 +252,7 @@ impl GlobalStep {
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
         // faer's parallel supernodal factorization pays off only for large fronts.
         let par = if order.cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
-        let cholesky = Cholesky::factor(&a, &Ordering::Custom(order.perm), par).map_err(|_| {
+        let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
@@ -244,9 +266,35 @@ impl GlobalStep {
             assemble_seconds,
             factor_seconds: t1.elapsed().as_secs_f64(),
         };
-        Ok(GlobalStep { unknowns, cholesky: Some(cholesky), stats })
+        Ok(GlobalStep { unknowns, cholesky: Some(cholesky), coupling: coupling(&coefficients), stats })
     }
 
+    /// Rebuild for new key times, `objective` holding the samples at those times: the time
+    /// coefficients and the matrix values change, the pattern does not (unless a coefficient
+    /// cancels exactly), so the factor is recomputed numerically on the kept ordering and
+    /// symbolic analysis. With a changed pattern it falls back to [`GlobalStep::new`].
+    pub fn retime(&mut self, objective: &Objective, regularization: f64) -> Result<Retimed> {
+        let t0 = std::time::Instant::now();
+        let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        let coefficients = TimeCoefficients::new(objective, proximal);
+        let Some(cholesky) = self.cholesky.as_mut().filter(|_| coupling(&coefficients) == self.coupling) else {
+            *self = GlobalStep::new(objective, self.unknowns.clone(), regularization)?;
+            let s = self.stats;
+            return Ok(Retimed { assemble_seconds: s.assemble_seconds, factor_seconds: s.factor_seconds, reused_symbolic: false });
+        };
+        let a = assemble(objective, &self.unknowns, &coefficients);
+        let assemble_seconds = t0.elapsed().as_secs_f64();
+        let t1 = std::time::Instant::now();
+        cholesky.refactor(&a).map_err(|_| {
+            Error::general(
+                "the spacetime system became singular at the new key times",
+                "keep [solver] regularization > 0, or raise the minimum interval length",
+            )
+        })?;
+        Ok(Retimed { assemble_seconds, factor_seconds: t1.elapsed().as_secs_f64(), reused_symbolic: true })
+    }
+
+    /// The free unknowns and their order.
     pub fn unknowns(&self) -> &Unknowns {
         &self.unknowns
     }

@@ -33,23 +33,38 @@ use crate::physics::projection::ProjectionJacobian;
 /// their Jacobians (for the exact gradient).
 #[derive(Debug, Clone)]
 pub struct Projections {
+    /// `targets[sample][tet]`.
     pub targets: Vec<Vec<Mat3>>,
+    /// `jacobians[sample][tet]`, when asked for.
     pub jacobians: Option<Vec<Vec<ProjectionJacobian>>>,
 }
 
 /// The quantities the objective needs besides the trajectory.
 pub struct Objective<'a> {
+    /// The body.
     pub elastic: &'a Elastic,
+    /// Where the residual is sampled.
     pub samples: Vec<Sample>,
+    /// The time slots of the unknowns.
     pub slots: TimeSlots,
     /// Rayleigh mass damping α (D = α M).
     pub damping: f64,
+    /// Gravitational acceleration g.
     pub gravity: Point,
 }
 
-/// One sample's residual `f`, its weighted W and elastic W, and (with Jacobians) the
-/// correction `J DP[dF(M⁻¹ f)]` of the exact gradient.
-type SampleResidual = (Vec<Point>, f64, f64, Option<Vec<Point>>);
+/// One sample's residual and what it contributes to W.
+struct Residual {
+    /// `f = M (ẍ + α ẋ - g) + L x - J p` at every node.
+    force: Vec<Point>,
+    /// `dτ ½ |f|²_{M⁻¹}`.
+    w: f64,
+    /// `dτ ½ |L x - J p|²_{M⁻¹}`.
+    w_elastic: f64,
+    /// `J DP[dF(M⁻¹ f)]`, the exact gradient's correction (when the projections came with
+    /// their Jacobians).
+    correction: Option<Vec<Point>>,
+}
 
 /// W and its gradient at one trajectory.
 #[derive(Debug, Clone)]
@@ -135,14 +150,24 @@ impl<'a> Objective<'a> {
         Projections { targets, jacobians }
     }
 
-    /// W, its elastic part, and its gradient with the projections held at `p`.
+    /// W, its elastic part, and its gradient with the projections held at `p` (and the exact
+    /// gradient when `p` has the projection Jacobians).
     pub fn evaluate(&self, tr: &Trajectory, p: &Projections) -> Evaluation {
+        let residuals = self.residuals(tr, p);
+        let value = residuals.iter().map(|r| r.w).sum();
+        let elastic = residuals.iter().map(|r| r.w_elastic).sum();
+        let gradient = self.model_gradient(&residuals);
+        let exact_gradient = p.jacobians.as_ref().map(|_| self.exact_gradient(&gradient, &residuals));
+        Evaluation { value, elastic, gradient, exact_gradient }
+    }
+
+    /// The residual of every sample, with the projections held at `p`.
+    fn residuals(&self, tr: &Trajectory, p: &Projections) -> Vec<Residual> {
         let el = self.elastic;
         let n = el.node_count();
         let g = self.gravity;
         // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
-        let per_sample: Vec<SampleResidual> = self
-            .samples
+        self.samples
             .par_iter()
             .enumerate()
             .map(|(k, s)| {
@@ -174,18 +199,22 @@ impl<'a> Objective<'a> {
                     el.apply_j_sequential_with(|e| jac[k][e].apply(&el.deformation_gradient(e, &u)), &mut z);
                     z
                 });
-                (f, 0.5 * s.weight * w, 0.5 * s.weight * w_el, correction)
+                Residual { force: f, w: 0.5 * s.weight * w, w_elastic: 0.5 * s.weight * w_el, correction }
             })
-            .collect();
-        let value = per_sample.iter().map(|r| r.1).sum();
-        let elastic = per_sample.iter().map(|r| r.2).sum();
+            .collect()
+    }
 
-        // Gradient per slot: F^c + L M⁻¹ F^l, each slot's sums taken in sample order.
-        let gradient = (0..self.slots.count())
+    /// The gradient of the global step's model per slot: `F^c + L M⁻¹ F^l`, each slot's sums
+    /// taken in sample order.
+    fn model_gradient(&self, residuals: &[Residual]) -> Vec<Vec<Point>> {
+        let el = self.elastic;
+        let n = el.node_count();
+        (0..self.slots.count())
             .into_par_iter()
             .map(|slot| {
                 let (mut fc, mut fl) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                for (s, (f, _, _, _)) in self.samples.iter().zip(&per_sample) {
+                for (s, r) in self.samples.iter().zip(residuals) {
+                    let f = &r.force;
                     let (cs, ls) = self.slot_coefficients(s, slot);
                     if cs == 0.0 && ls == 0.0 {
                         continue;
@@ -202,28 +231,29 @@ impl<'a> Objective<'a> {
                 el.stiffness.mul_points_sequential(&fl, &mut lfl);
                 fc.iter().zip(&lfl).map(|(a, b)| crate::mesh::add(*a, *b)).collect::<Vec<Point>>()
             })
-            .collect::<Vec<_>>();
-        let exact_gradient = p.jacobians.as_ref().map(|_| {
-            (0..self.slots.count())
-                .into_par_iter()
-                .map(|slot| {
-                    let mut g = gradient[slot].clone();
-                    for (s, (_, _, _, z)) in self.samples.iter().zip(&per_sample) {
-                        let (_, l) = self.slot_coefficients(s, slot);
-                        if l == 0.0 {
-                            continue;
-                        }
-                        let z = z.as_ref().expect("computed with the Jacobians");
-                        for (ga, za) in g.iter_mut().zip(z) {
-                            for d in 0..3 {
-                                ga[d] -= s.weight * l * za[d];
-                            }
+            .collect()
+    }
+
+    /// The exact gradient per slot: the model's, minus `Σ_s dτ_s l_σ J DP_s[dF(M⁻¹ f_s)]`.
+    fn exact_gradient(&self, gradient: &[Vec<Point>], residuals: &[Residual]) -> Vec<Vec<Point>> {
+        (0..self.slots.count())
+            .into_par_iter()
+            .map(|slot| {
+                let mut g = gradient[slot].clone();
+                for (s, r) in self.samples.iter().zip(residuals) {
+                    let (_, l) = self.slot_coefficients(s, slot);
+                    if l == 0.0 {
+                        continue;
+                    }
+                    let z = r.correction.as_ref().expect("computed with the Jacobians");
+                    for (ga, za) in g.iter_mut().zip(z) {
+                        for d in 0..3 {
+                            ga[d] -= s.weight * l * za[d];
                         }
                     }
-                    g
-                })
-                .collect()
-        });
-        Evaluation { value, elastic, gradient, exact_gradient }
+                }
+                g
+            })
+            .collect()
     }
 }

@@ -3,25 +3,33 @@
 use super::global_step::{assemble, TimeCoefficients};
 use super::solver::{apply_step, objective, solve, Settings};
 use super::trajectory::Trajectory;
-use super::unknowns::Unknowns;
+use super::unknowns::{KeyConstraints, Unknowns};
 use crate::mesh::{add, norm, sub, Point};
-use crate::physics::elastic::tests::cube_mesh;
-use crate::physics::elastic::Elastic;
-use crate::physics::svd3::tests::Rng;
-use crate::scene::Material;
-use crate::stage::{KeyPoses, VertexSet};
+use crate::physics::elastic::{Elastic, Material};
+use crate::testing::{cube_mesh, Rng};
 
-fn material() -> Material {
-    Material { stiffness: 70.0, volume: 70.0, density: 1.0, damping: 0.0, gravity: [0.0; 3] }
+pub(super) fn material() -> Material {
+    Material { stiffness: 70.0, volume: 70.0, density: 1.0 }
 }
 
-fn settings() -> Settings {
+/// Node index lists.
+pub(super) type Nodes = Vec<u32>;
+
+pub(super) fn all(n: usize) -> Nodes {
+    (0..n as u32).collect()
+}
+
+pub(super) fn from_mask(mask: &[bool]) -> Nodes {
+    (0..mask.len() as u32).filter(|&i| mask[i as usize]).collect()
+}
+
+pub(super) fn settings() -> Settings {
     Settings { samples: 6, max_iterations: 400, tolerance: 1e-13, regularization: 0.1, damping: 0.0, gravity: [0.0; 3] }
 }
 
-fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<VertexSet>, cyclic: bool) -> KeyPoses {
+pub(super) fn keys(times: Vec<f64>, positions: Vec<Vec<Point>>, fixed: Vec<Nodes>, cyclic: bool) -> KeyConstraints {
     let n = times.len();
-    KeyPoses { times, positions, fixed, fixed_velocity: vec![VertexSet::default(); n], cyclic }
+    KeyConstraints { times, positions, fixed, fixed_velocity: vec![Nodes::default(); n], cyclic }
 }
 
 fn rotate_y(p: Point, angle: f64) -> Point {
@@ -30,7 +38,7 @@ fn rotate_y(p: Point, angle: f64) -> Point {
 }
 
 /// A non-rigid, non-trivial trajectory on a cube: stretched, sheared and twisted keys.
-fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
+pub(super) fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
     let mut rng = Rng(42);
     let shapes: Vec<Vec<Point>> = (0..4)
         .map(|k| {
@@ -57,7 +65,7 @@ fn free_fall_is_an_exact_parabola() {
     let el = Elastic::new(&mesh, &material()).unwrap();
     let n = mesh.positions.len();
     let g = [0.0, -9.81, 0.0];
-    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![VertexSet::all(n), VertexSet::default()], false);
+    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![all(n), Nodes::default()], false);
     // The proximal weight (1/h⁴) balances inertia (~36/T⁴) at h ~ T/2.5.
     let s = Settings { gravity: g, regularization: 0.5, ..settings() };
     let solved = solve(&el, &k, &s, &|_, _| {}).unwrap();
@@ -79,7 +87,7 @@ fn rigid_motion_costs_no_elastic_energy() {
     let n = mesh.positions.len();
     // The same rigid placement at every key, at rest: W = 0 and its elastic part = 0.
     let placed: Vec<Point> = mesh.positions.iter().map(|&p| add(rotate_y(p, 2.0), [1.0, -3.0, 0.5])).collect();
-    let k = keys(vec![0.0, 0.5, 1.2], vec![placed.clone(); 3], vec![VertexSet::all(n); 3], false);
+    let k = keys(vec![0.0, 0.5, 1.2], vec![placed.clone(); 3], vec![all(n); 3], false);
     let tr = Trajectory::with_zero_velocities(k.times.clone(), k.positions.clone());
     let obj = objective(&el, &k, &settings());
     let e = obj.evaluate(&tr, &obj.local_step(&tr, false));
@@ -92,7 +100,7 @@ fn rigid_motion_costs_no_elastic_energy() {
         positions: tr.positions.iter().map(|p| p.iter().map(|&x| add(rotate_y(x, 0.7), [5.0, 1.0, -2.0])).collect()).collect(),
         velocities: tr.velocities.iter().map(|v| v.iter().map(|&x| rotate_y(x, 0.7)).collect()).collect(),
     };
-    let k4 = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], false);
+    let k4 = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], false);
     let obj = objective(&el, &k4, &settings());
     let (a, b) = (obj.evaluate(&tr, &obj.local_step(&tr, false)), obj.evaluate(&moved, &obj.local_step(&moved, false)));
     assert!(a.elastic > 1e-3, "the wobbly trajectory is elastic: {}", a.elastic);
@@ -105,7 +113,7 @@ fn check_gradient(cyclic: bool, exact: bool) -> f64 {
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let tr = wobbly(&mesh.positions, cyclic);
-    let k = keys(tr.times.clone(), tr.positions.clone(), vec![VertexSet::default(); 4], cyclic);
+    let k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], cyclic);
     let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], ..settings() };
     let obj = objective(&el, &k, &s);
     let p = obj.local_step(&tr, exact);
@@ -158,8 +166,8 @@ fn normal_matrix_is_the_hessian_of_w() {
     let el = Elastic::new(&mesh, &material()).unwrap();
     let n = mesh.positions.len();
     let tr = wobbly(&mesh.positions, true);
-    let mut fixed = vec![VertexSet::default(); 4];
-    fixed[1] = VertexSet::from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
+    let mut fixed = vec![Nodes::default(); 4];
+    fixed[1] = from_mask(&(0..n).map(|a| a % 3 == 0).collect::<Vec<_>>());
     let k = keys(tr.times.clone(), tr.positions.clone(), fixed, true);
     let s = Settings { damping: 0.4, ..settings() };
     let obj = objective(&el, &k, &s);
@@ -211,14 +219,14 @@ fn normal_matrix_is_the_hessian_of_w() {
 }
 
 /// A small scene with a free middle key: top and bottom held at every key.
-fn bending_scene(cyclic: bool) -> (Elastic, KeyPoses) {
+fn bending_scene(cyclic: bool) -> (Elastic, KeyConstraints) {
     bending_scene_with(cyclic, 0.3, &material())
 }
 
-fn bending_scene_with(cyclic: bool, amplitude: f64, material: &Material) -> (Elastic, KeyPoses) {
+fn bending_scene_with(cyclic: bool, amplitude: f64, material: &Material) -> (Elastic, KeyConstraints) {
     let mesh = cube_mesh(2);
     let el = Elastic::new(&mesh, material).unwrap();
-    let ends = VertexSet::from_mask(&mesh.positions.iter().map(|p| p[1] == 0.0 || p[1] == 1.0).collect::<Vec<_>>());
+    let ends = from_mask(&mesh.positions.iter().map(|p| p[1] == 0.0 || p[1] == 1.0).collect::<Vec<_>>());
     let bent: Vec<Point> = mesh.positions.iter().map(|&p| [p[0] + amplitude * (std::f64::consts::PI * p[1]).sin(), p[1], p[2]]).collect();
     let poses = vec![mesh.positions.clone(), bent, mesh.positions.clone()];
     (el, keys(vec![0.0, 0.4, 0.8], poses, vec![ends; 3], cyclic))
@@ -230,7 +238,7 @@ fn masks_are_respected_and_loops_close() {
     let solved = solve(&el, &k, &Settings { tolerance: 1e-3, ..settings() }, &|_, _| {}).unwrap();
     let tr = &solved.trajectory;
     for key in 0..3 {
-        for &a in k.fixed[key].indices() {
+        for &a in &k.fixed[key] {
             assert_eq!(tr.positions[key][a as usize], k.positions[key][a as usize], "fixed position moved");
         }
     }
@@ -247,7 +255,7 @@ fn regularization_does_not_move_the_fixed_point() {
     let soft = Material { stiffness: 1e-9, volume: 1e-9, ..material() };
     let (el, mut k) = bending_scene_with(false, 0.3, &soft);
     let n = el.node_count();
-    k.fixed = vec![VertexSet::all(n), k.fixed[1].clone(), VertexSet::all(n)];
+    k.fixed = vec![all(n), k.fixed[1].clone(), all(n)];
     let s = Settings { gravity: [0.0, -9.81, 0.0], tolerance: 1e-15, max_iterations: 3000, ..settings() };
     let solve_with = |h: f64| solve(&el, &k, &Settings { regularization: h, ..s.clone() }, &|_, _| {}).unwrap();
     let (a, b, c) = (solve_with(0.0), solve_with(0.15), solve_with(0.5));
@@ -284,7 +292,7 @@ fn w_never_increases_and_goes_past_the_local_global_stall() {
 fn singular_system_is_a_clear_error() {
     let mesh = cube_mesh(1);
     let el = Elastic::new(&mesh, &material()).unwrap();
-    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(); 2], vec![VertexSet::default(); 2], false);
+    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(); 2], vec![Nodes::default(); 2], false);
     let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("singular") && e.contains("regularization"), "{e}");
 }

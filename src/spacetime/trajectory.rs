@@ -20,8 +20,11 @@ use crate::mesh::Point;
 /// `position = Σ_j pos[j] * unknown_j` directly.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlotWeights {
+    /// Weights in the position.
     pub pos: [f64; 4],
+    /// Weights in the velocity (per second).
     pub vel: [f64; 4],
+    /// Weights in the acceleration (per second squared).
     pub acc: [f64; 4],
 }
 
@@ -53,6 +56,18 @@ pub fn hermite_weights(theta: f64, t_len: f64) -> SlotWeights {
     }
 }
 
+/// The interval of strictly increasing key `times` (at least two) containing `t`, clamped to
+/// the key range, and the local parameter `θ` in it: at a key, the interval it starts.
+pub fn locate(times: &[f64], t: f64) -> (usize, f64) {
+    let n = times.len();
+    let t = t.clamp(times[0], times[n - 1]);
+    // Last interval whose start is <= t.
+    let i = times[..n - 1].partition_point(|&s| s <= t).saturating_sub(1);
+    let len = times[i + 1] - times[i];
+    let theta = if len > 0.0 { ((t - times[i]) / len).clamp(0.0, 1.0) } else { 0.0 };
+    (i, theta)
+}
+
 /// Keyframe positions and velocities of every vertex, on a shared set of key times.
 ///
 /// Invariants: `positions.len() == velocities.len() == times.len() >= 2`, every key has the same
@@ -74,35 +89,35 @@ impl Trajectory {
         Trajectory { times, positions, velocities }
     }
 
+    /// Number of keys.
     pub fn key_count(&self) -> usize {
         self.times.len()
     }
 
+    /// Vertices per key.
     pub fn vertex_count(&self) -> usize {
         self.positions.first().map_or(0, Vec::len)
     }
 
+    /// Time of the first key.
     pub fn start(&self) -> f64 {
         self.times[0]
     }
 
+    /// Time of the last key.
     pub fn end(&self) -> f64 {
         *self.times.last().expect("a trajectory has keys")
     }
 
+    /// Seconds from the first key to the last.
     pub fn duration(&self) -> f64 {
         self.end() - self.start()
     }
 
-    /// The interval containing `t` (clamped to the key range) and the local parameter in it.
+    /// The interval containing `t` (clamped to the key range) and the local parameter in it:
+    /// at a key, the interval it starts.
     pub fn locate(&self, t: f64) -> (usize, f64) {
-        let n = self.times.len();
-        let t = t.clamp(self.start(), self.end());
-        // Last interval whose start is <= t.
-        let i = self.times[..n - 1].partition_point(|&s| s <= t).saturating_sub(1);
-        let len = self.times[i + 1] - self.times[i];
-        let theta = if len > 0.0 { ((t - self.times[i]) / len).clamp(0.0, 1.0) } else { 0.0 };
-        (i, theta)
+        locate(&self.times, t)
     }
 
     /// Positions of all vertices at time `t` (held constant outside the key range).

@@ -7,11 +7,33 @@
 //! one system).
 
 use super::sampling::TimeSlots;
-use crate::stage::KeyPoses;
+use crate::mesh::Point;
 
+/// The keyframes a trajectory is solved for: key times, the input poses (where the solve
+/// starts), the node positions and velocities each key prescribes, and whether it loops.
+///
+/// Invariants: at least two strictly increasing `times`; one pose and one index list of each
+/// kind per key; every pose has the body's node count; index lists are sorted node indices.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyConstraints {
+    /// Key times in seconds.
+    pub times: Vec<f64>,
+    /// `positions[key][node]`: the input poses.
+    pub positions: Vec<Vec<Point>>,
+    /// Per key, the nodes whose position is prescribed (kept at its input value).
+    pub fixed: Vec<Vec<u32>>,
+    /// Per key, the nodes whose velocity is prescribed (kept at zero).
+    pub fixed_velocity: Vec<Vec<u32>>,
+    /// The last key is the first: the animation loops.
+    pub cyclic: bool,
+}
+
+/// The free keyframe values of every node and their place in the global vector.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Unknowns {
+    /// The time slots of the keys.
     pub slots: TimeSlots,
+    /// Nodes of the body.
     pub nodes: usize,
     /// `index[node * slot_count + slot]`, `u32::MAX` when fixed.
     index: Vec<u32>,
@@ -23,15 +45,15 @@ const FIXED: u32 = u32::MAX;
 impl Unknowns {
     /// Free unknowns of `keys`: a slot is fixed for a node if any key sharing that slot fixes
     /// it (a loop's last key adds its masks to the first key's).
-    pub fn new(keys: &KeyPoses, nodes: usize) -> Unknowns {
+    pub fn new(keys: &KeyConstraints, nodes: usize) -> Unknowns {
         let slots = TimeSlots { keys: keys.times.len(), cyclic: keys.cyclic };
         let s_count = slots.count();
         let mut fixed = vec![false; nodes * s_count];
         for k in 0..slots.keys {
-            for &a in keys.fixed[k].indices() {
+            for &a in &keys.fixed[k] {
                 fixed[a as usize * s_count + slots.position(k)] = true;
             }
-            for &a in keys.fixed_velocity[k].indices() {
+            for &a in &keys.fixed_velocity[k] {
                 fixed[a as usize * s_count + slots.velocity(k)] = true;
             }
         }

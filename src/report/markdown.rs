@@ -1,0 +1,107 @@
+//! `report.md`: the report as Markdown tables.
+
+use super::Report;
+use crate::stage::OutputKind;
+
+/// The report as Markdown tables: a person reads it in a terminal or a merge request.
+pub fn render(report: &Report) -> String {
+    let mut s = String::new();
+    let push = |s: &mut String, line: String| {
+        s.push_str(&line);
+        s.push('\n');
+    };
+    push(&mut s, format!("# blendsim report: {}\n", report.scene));
+    push(&mut s, "| | |".into());
+    push(&mut s, "|---|---|".into());
+    push(&mut s, format!("| surface | {} vertices, {} triangles |", report.vertices, report.faces));
+    push(&mut s, format!("| body | {} tet nodes, {} tets |", report.tet_nodes, report.tets));
+    push(&mut s, format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames));
+    let sv = &report.solver;
+    let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));
+    let change = if w0 > 0.0 { format!(" ({:+.1}%)", 100.0 * (w1 - w0) / w0) } else { String::new() };
+    push(
+        &mut s,
+        format!(
+            "| solver | {}, {} iterations, W {:.4e} -> {:.4e}{change}, {} |",
+            sv.method,
+            sv.iterations,
+            w0,
+            w1,
+            if sv.converged { "converged" } else { "not converged" }
+        ),
+    );
+    push(
+        &mut s,
+        format!(
+            "| time | {:.3} s (precompute {:.3} s, {:.4} s per iteration, {} unknowns per coordinate) |",
+            sv.seconds, sv.precompute_seconds, sv.iteration_seconds, sv.unknowns
+        ),
+    );
+    push(&mut s, format!("| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames (blendshape vs full-frame) |", report.error.max, report.error.rms, report.error.samples));
+    push(
+        &mut s,
+        format!(
+            "| keyframes | moved up to {:.2e} (rms {:.2e}) of the bbox diagonal from the input |",
+            report.keyframe_deviation.max, report.keyframe_deviation.rms
+        ),
+    );
+    if let Some(v) = &report.volume {
+        push(
+            &mut s,
+            format!(
+                "| volume | {:.1}% to {:.1}% of rest, in-between loss {:.1}% (hermite baseline: {:.1}% to {:.1}%, loss {:.1}%) |",
+                100.0 * v.animation.min,
+                100.0 * v.animation.max,
+                100.0 * v.animation.in_between_loss,
+                100.0 * v.hermite.min,
+                100.0 * v.hermite.max,
+                100.0 * v.hermite.in_between_loss
+            ),
+        );
+    }
+    push(&mut s, String::new());
+    push(&mut s, "| format | full-frame | blendshape | smaller by |".into());
+    push(&mut s, "|---|---:|---:|---:|".into());
+    for (format, ratio) in &report.ratios {
+        let size = |kind| report.outputs.iter().find(|f| f.format == *format && f.kind == kind).map_or(0, |f| f.bytes);
+        push(
+            &mut s,
+            format!("| {format} | {} | {} | {ratio:.1}x |", human_bytes(size(OutputKind::FullFrame)), human_bytes(size(OutputKind::Blendshape))),
+        );
+    }
+    push(&mut s, String::new());
+    push(&mut s, "| file | kind | bytes |".into());
+    push(&mut s, "|---|---|---:|".into());
+    for f in &report.outputs {
+        let kind = match f.kind {
+            OutputKind::Blendshape => "blendshape",
+            OutputKind::FullFrame => "full-frame",
+        };
+        push(&mut s, format!("| {} | {kind} | {} |", f.path, f.bytes));
+    }
+    s
+}
+
+/// `1.2 MB`, `45.3 KB`, `812 B` (decimal units, as file managers show).
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    if b >= 1e6 {
+        format!("{:.1} MB", b / 1e6)
+    } else if b >= 1e3 {
+        format!("{:.1} KB", b / 1e3)
+    } else {
+        format!("{bytes} B")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn human_sizes() {
+        assert_eq!(human_bytes(812), "812 B");
+        assert_eq!(human_bytes(45_300), "45.3 KB");
+        assert_eq!(human_bytes(8_600_000), "8.6 MB");
+    }
+}

@@ -1,0 +1,32 @@
+//! The `embed` stage: carry the body's exported surface on the solved node trajectory.
+//!
+//! The surface is bound to the rest tet mesh by barycentric coordinates (`embed::Binding`: the
+//! closest tet for points outside). The binding is linear, so the Hermite trajectory is carried
+//! exactly, not resampled. The input keyframes are carried by the same binding, so reports
+//! compare like with like.
+
+use crate::embed::Binding;
+use crate::error::Result;
+use crate::mesh::Point;
+use crate::stage::{Animation, Counts, Solution};
+
+/// The exported surface's animation.
+pub fn embed(solution: &Solution) -> Result<Animation> {
+    let body = &solution.body;
+    let binding = Binding::compute(&body.mesh, &body.surface.positions);
+    let carry = |nodes: &[Point]| binding.apply(&body.mesh, nodes);
+    Ok(Animation {
+        scene: body.scene.clone(),
+        counts: Counts {
+            vertices: body.surface.positions.len(),
+            faces: body.surface.triangles.len(),
+            tet_nodes: body.mesh.positions.len(),
+            tets: body.mesh.tets.len(),
+            keyframes: body.keys.times.len(),
+        },
+        mesh: body.surface.clone(),
+        trajectory: solution.trajectory.map_linear(carry),
+        input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
+        log: solution.log.clone(),
+    })
+}

@@ -1,0 +1,241 @@
+//! The `import` stage: read the scene's keyframe meshes, check they share one topology,
+//! apply procedural deformations, orient the rest shape, and resolve the per-key vertex
+//! selections (the scene's `fixed` and `fixed_velocity`) into sets.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::mesh::{self, surface, MeshFile, Point, TetMesh, TriMesh};
+use crate::scene::{Rest, SceneFile, Selection};
+use crate::stage::{Keyframes, Shape, VertexSet};
+
+/// Meshes read once per path (scenes often repeat the rest mesh).
+#[derive(Default)]
+struct MeshCache(HashMap<PathBuf, MeshFile>);
+
+impl MeshCache {
+    fn get(&mut self, path: &Path) -> Result<&MeshFile> {
+        if !self.0.contains_key(path) {
+            let m = mesh::read(path)?;
+            self.0.insert(path.to_path_buf(), m);
+        }
+        Ok(&self.0[path])
+    }
+}
+
+/// Topology of a keyframe file, compared between keys. Tets are compared as vertex sets,
+/// since readers may reorder a tet's vertices to orient it.
+#[derive(PartialEq)]
+enum Topology {
+    Surface(Vec<[u32; 3]>),
+    Volume(Vec<[u32; 4]>),
+}
+
+impl Topology {
+    fn of(m: &MeshFile) -> Topology {
+        match m {
+            MeshFile::Surface(s) => Topology::Surface(s.triangles.clone()),
+            MeshFile::Volume(v) => Topology::Volume(
+                v.tets
+                    .iter()
+                    .map(|t| {
+                        let mut s = *t;
+                        s.sort_unstable();
+                        s
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    fn describe(&self) -> (&'static str, usize, &'static str) {
+        match self {
+            Topology::Surface(t) => ("surface", t.len(), "triangles"),
+            Topology::Volume(t) => ("tet mesh", t.len(), "tets"),
+        }
+    }
+}
+
+/// Check that `other` (from `other_path`) has the topology of `first` (from `first_path`).
+fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &MeshFile, &Topology)) -> Result<()> {
+    let (fp, fm, ft) = first;
+    let (op, om, ot) = other;
+    let fix = "every keyframe must be the same mesh with moved vertices: export it from the same object without remeshing";
+    let (f_kind, f_count, f_what) = ft.describe();
+    let (o_kind, o_count, o_what) = ot.describe();
+    if f_kind != o_kind {
+        return Err(Error::in_file(op, format!("is a {o_kind} but {} is a {f_kind}", fp.display()), "give every keyframe the same kind of file"));
+    }
+    if fm.positions().len() != om.positions().len() {
+        return Err(Error::in_file(
+            op,
+            format!("has {} vertices but {} has {}", om.positions().len(), fp.display(), fm.positions().len()),
+            fix,
+        ));
+    }
+    if f_count != o_count {
+        return Err(Error::in_file(op, format!("has {o_count} {o_what} but {} has {f_count} {f_what}", fp.display()), fix));
+    }
+    if ft != ot {
+        return Err(Error::in_file(op, format!("has the same counts as {} but its {o_what} connect different vertices", fp.display()), fix));
+    }
+    Ok(())
+}
+
+/// Vertices selected by `selection`, over `rest` positions.
+fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
+    let n = rest.len();
+    Ok(match selection {
+        Selection::All => vec![true; n],
+        Selection::None => vec![false; n],
+        Selection::File { file, invert } => {
+            let path = scene.resolve(file);
+            let mut mask = mesh::selection::read(&path, n)?;
+            if *invert {
+                mask.iter_mut().for_each(|m| *m = !*m);
+            }
+            mask
+        }
+        Selection::Slab { axis, min, max, invert } => rest
+            .iter()
+            .map(|p| {
+                let c = p[axis.index()];
+                let inside = min.is_none_or(|lo| c >= lo) && max.is_none_or(|hi| c <= hi);
+                inside != *invert
+            })
+            .collect(),
+        Selection::Union(items) => {
+            let mut mask = vec![false; n];
+            for item in items {
+                for (m, s) in mask.iter_mut().zip(resolve_selection(item, scene, rest)?) {
+                    *m |= s;
+                }
+            }
+            mask
+        }
+    })
+}
+
+/// Read and check the keyframes of a scene.
+pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
+    let scene = &scene_file.scene;
+    let keys = &scene.keyframes;
+    let mut meshes = KeyMeshes::read(scene_file)?;
+    let (rest, rest_source) = meshes.rest_shape(scene_file)?;
+    let rest_points = match &rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
+        (0..meshes.poses.len())
+            .map(|k| {
+                let sel = list.as_ref().map_or(&default, |l| &l[k]);
+                resolve_selection(sel, scene_file, rest_points).map(|m| VertexSet::from_mask(&m))
+            })
+            .collect()
+    };
+    let fixed = masks(&keys.fixed, Selection::All)?;
+    let fixed_velocity = masks(&keys.fixed_velocity, Selection::None)?;
+    if keys.cyclic {
+        meshes.check_loop(rest_points)?;
+    }
+    let display = match &scene.embed.surface {
+        Some(p) => {
+            let mut s = mesh::obj::read(&scene_file.resolve(p))?;
+            surface::orient_outward(&mut s);
+            Some(s)
+        }
+        None => None,
+    };
+    Ok(Keyframes {
+        scene: scene.clone(),
+        rest_source: rest_source.display().to_string(),
+        rest,
+        times: keys.times.clone(),
+        poses: meshes.poses,
+        fixed,
+        fixed_velocity,
+        cyclic: keys.cyclic,
+        display,
+    })
+}
+
+/// The keyframe meshes of a scene, read and checked against the first.
+struct KeyMeshes {
+    cache: MeshCache,
+    /// Resolved path of every key's mesh.
+    paths: Vec<PathBuf>,
+    first: MeshFile,
+    first_topology: Topology,
+    /// `poses[key][vertex]`, after any procedural deformation.
+    poses: Vec<Vec<Point>>,
+}
+
+impl KeyMeshes {
+    /// Read every key's mesh (each file once), check it has the first one's topology, and
+    /// deform it as the scene says.
+    fn read(scene_file: &SceneFile) -> Result<KeyMeshes> {
+        let keys = &scene_file.scene.keyframes;
+        let mut cache = MeshCache::default();
+        let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
+        let first = cache.get(&paths[0])?.clone();
+        let first_topology = Topology::of(&first);
+        let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
+        for (k, key) in keys.meshes.iter().enumerate() {
+            let m = cache.get(&paths[k])?;
+            if k > 0 {
+                check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
+            }
+            let positions = match key.twist() {
+                Some(t) => crate::procedural::twist(m.positions(), t),
+                None => m.positions().to_vec(),
+            };
+            poses.push(positions);
+        }
+        Ok(KeyMeshes { cache, paths, first, first_topology, poses })
+    }
+
+    /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came
+    /// from.
+    fn rest_shape(&mut self, scene_file: &SceneFile) -> Result<(Shape, PathBuf)> {
+        let (rest_positions, rest_source) = match &scene_file.scene.keyframes.rest {
+            Rest::Key(r) => (self.poses[*r].clone(), self.paths[*r].clone()),
+            Rest::Mesh(p) => {
+                let path = scene_file.resolve(p);
+                let m = self.cache.get(&path)?;
+                check_same_topology((&self.paths[0], &self.first, &self.first_topology), (&path, m, &Topology::of(m)))?;
+                (m.positions().to_vec(), path)
+            }
+        };
+        debug_assert!(self.poses.iter().all(|p| p.len() == rest_positions.len()));
+        let rest = match &self.first {
+            MeshFile::Surface(s) => {
+                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone() };
+                surface::orient_outward(&mut rest);
+                Shape::Surface(rest)
+            }
+            MeshFile::Volume(v) => {
+                let mut rest = TetMesh { positions: rest_positions, tets: v.tets.clone() };
+                rest.orient_positive();
+                Shape::Volume(rest)
+            }
+        };
+        Ok((rest, rest_source))
+    }
+
+    /// A loop's last key must repeat the first (to 1e-9 of the rest size).
+    fn check_loop(&self, rest_points: &[Point]) -> Result<()> {
+        let (poses, paths) = (&self.poses, &self.paths);
+        let last = poses.len() - 1;
+        let gap = poses[0].iter().zip(&poses[last]).map(|(a, b)| mesh::norm(mesh::sub(*a, *b))).fold(0.0, f64::max);
+        if gap > 1e-9 * mesh::bbox_diagonal(rest_points).max(f64::MIN_POSITIVE) {
+            return Err(Error::in_file(
+                &paths[last],
+                format!("cyclic = true, but the last keyframe differs from the first ({}) by up to {gap:.4e}", paths[0].display()),
+                "repeat the first keyframe's mesh as the last key of a loop",
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,44 @@
+//! The chain, one stage per file: each stage is one function from the stage data before it to
+//! the stage data after it (the types of [`crate::stage`], which the CLI writes between
+//! subcommands), and [`bake()`] runs them all in order.
+//!
+//! ```text
+//! SceneFile -> import -> Keyframes -> tetrahedralize -> Body -> solve -> Solution
+//!           -> embed -> Animation -> export -> (files, Outputs) -> report -> Report
+//! ```
+//!
+//! - [`import()`]: read the keyframe meshes, check one topology, resolve the vertex selections;
+//! - [`tetrahedralize()`]: TetGen for surface keyframes, interior nodes posed by a quasi-static fit;
+//! - [`solve()`]: the node trajectory (spacetime projective dynamics, or the hermite baseline);
+//! - [`embed()`]: the exported surface carried on it by a barycentric binding;
+//! - [`export()`]: the blendshape and full-frame files;
+//! - [`report()`]: sizes, fidelity, volume and the solver's history.
+//!
+//! This layer is the only one that reads the scene and the stage data: it translates them into
+//! the plain inputs of the algorithms (meshes, an elastic material, key constraints, solver
+//! settings) and their results back into stage data. No algorithm module knows the scene file
+//! or the stage files.
+
+pub mod bake;
+pub mod embed;
+pub mod export;
+pub mod import;
+pub mod report;
+pub mod solve;
+pub mod tetrahedralize;
+
+pub use bake::{bake, Bake};
+pub use embed::embed;
+pub use export::export;
+pub use import::import;
+pub use report::report;
+pub use solve::solve;
+pub use tetrahedralize::tetrahedralize;
+
+use crate::physics::elastic;
+use crate::scene;
+
+/// The elastic constants of the scene's `[material]`.
+pub(crate) fn elastic_material(material: &scene::Material) -> elastic::Material {
+    elastic::Material { stiffness: material.stiffness, volume: material.volume, density: material.density }
+}

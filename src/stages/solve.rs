@@ -1,0 +1,96 @@
+//! The `solve` stage: the node trajectory of the body, by the scene's method.
+//!
+//! - `hermite`: the keyframes joined with zero velocities (the geometric baseline); its W is
+//!   still evaluated, so reports compare methods on one scale.
+//! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
+//!
+//! The scene's `[solver]` and `[material]` become the solver's [`Settings`] and the body's
+//! elastic material here; the body's keyframes become its [`KeyConstraints`].
+
+use std::time::Instant;
+
+use crate::error::Result;
+use crate::physics::elastic::Elastic;
+use crate::progress::Progress;
+use crate::scene::{Method, Scene};
+use crate::spacetime::solver::{self, Settings};
+use crate::spacetime::unknowns::KeyConstraints;
+use crate::stage::{Body, KeyPoses, Solution, SolverLog};
+
+/// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
+/// the solution's scene records the method used.
+pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result<Solution> {
+    let mut body = body.clone();
+    if let Some(m) = method {
+        body.scene.solver.method = m;
+    }
+    let scene = &body.scene;
+    let elastic = Elastic::new(&body.mesh, &super::elastic_material(&scene.material))?;
+    let settings = settings(scene);
+    let keys = key_constraints(&body.keys);
+    let (trajectory, log) = match scene.solver.method {
+        Method::Hermite => {
+            let start = Instant::now();
+            let (trajectory, w) = solver::baseline(&elastic, &keys, &settings);
+            let log = SolverLog {
+                method: Method::Hermite,
+                iterations: 0,
+                energy: vec![w],
+                seconds: start.elapsed().as_secs_f64(),
+                precompute_seconds: 0.0,
+                iteration_seconds: 0.0,
+                unknowns: 0,
+                halvings: 0,
+                converged: true,
+                stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
+            };
+            (trajectory, log)
+        }
+        Method::Spacetime => {
+            let bar = progress.bar(scene.solver.max_iterations as u64, "solve: spacetime");
+            let solved = solver::solve(&elastic, &keys, &settings, &|k, w| {
+                bar.set_position(k as u64);
+                bar.set_message(format!("solve: spacetime W = {w:.4e}"));
+            })?;
+            bar.finish_and_clear();
+            let l = solved.log;
+            let log = SolverLog {
+                method: Method::Spacetime,
+                iterations: l.iterations,
+                energy: l.energy,
+                seconds: l.seconds,
+                precompute_seconds: l.precompute_seconds,
+                iteration_seconds: l.iteration_seconds,
+                unknowns: l.unknowns,
+                halvings: l.halvings,
+                converged: l.converged,
+                stop_reason: l.stop_reason,
+            };
+            (solved.trajectory, log)
+        }
+    };
+    Ok(Solution { body, trajectory, log })
+}
+
+/// The solver settings of a scene (`[solver]`, and the damping and gravity of `[material]`).
+pub(crate) fn settings(scene: &Scene) -> Settings {
+    Settings {
+        samples: scene.solver.samples,
+        max_iterations: scene.solver.max_iterations,
+        tolerance: scene.solver.tolerance,
+        regularization: scene.solver.regularization,
+        damping: scene.material.damping,
+        gravity: scene.material.gravity,
+    }
+}
+
+/// The solver's view of the body's keyframes.
+pub(crate) fn key_constraints(keys: &KeyPoses) -> KeyConstraints {
+    KeyConstraints {
+        times: keys.times.clone(),
+        positions: keys.positions.clone(),
+        fixed: keys.fixed.iter().map(|s| s.indices().to_vec()).collect(),
+        fixed_velocity: keys.fixed_velocity.iter().map(|s| s.indices().to_vec()).collect(),
+        cyclic: keys.cyclic,
+    }
+}

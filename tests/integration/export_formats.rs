@@ -1,0 +1,243 @@
+//! `export` end to end: synthetic animations go through `stages::export`, and every file it
+//! writes is opened by the reference tools (usd-core, the Khronos glTF validator, three.js,
+//! Chromium) and evaluated against our own evaluation of the same animation.
+
+use std::collections::BTreeSet;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+use blendsim::clip::BlendShapeClip;
+use blendsim::mesh::Point;
+use blendsim::output::Staging;
+use blendsim::procedural::prism as box_mesh;
+use blendsim::scene::Format;
+use blendsim::stage::{Animation, OutputKind, Outputs};
+use blendsim::stages::export;
+
+use crate::common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
+use crate::common::{animation, sample_motion, scratch};
+
+/// A twist about the box's vertical (y) axis: the angle grows with height above `from` (a
+/// fraction of the height) and with `s(t)`; `ds` is `s'(t)`. Returns the position and its
+/// exact velocity.
+fn twist(
+    size: [f64; 3],
+    degrees: f64,
+    from: f64,
+    s: impl Fn(f64) -> f64,
+    ds: impl Fn(f64) -> f64,
+) -> impl Fn(Point, f64) -> (Point, Point) {
+    move |p, t| {
+        let reach = ((p[1] / size[1] - from) / (1.0 - from)).max(0.0);
+        let amount = degrees.to_radians() * reach;
+        let (theta, dtheta) = (amount * s(t), amount * ds(t));
+        let (x, z) = (p[0] - size[0] / 2.0, p[2] - size[2] / 2.0);
+        let (sin, cos) = theta.sin_cos();
+        // A little vertical breathing too, so y moves as well.
+        let lift = 0.1 * reach * s(t);
+        let position = [size[0] / 2.0 + x * cos - z * sin, p[1] + lift, size[2] / 2.0 + x * sin + z * cos];
+        let velocity = [-(x * sin + z * cos) * dtheta, 0.1 * reach * ds(t), (x * cos - z * sin) * dtheta];
+        (position, velocity)
+    }
+}
+
+const SIZE: [f64; 3] = [1.0, 2.0, 1.0];
+
+/// The twisting box: four uneven keys over 2 s, real velocities, y up in meters.
+fn twisting_box(formats: &str) -> Animation {
+    let mesh = box_mesh(SIZE, [4, 8, 4]);
+    let w = PI / 2.4;
+    let tr = sample_motion(&mesh.positions, &[0.0, 0.6, 1.3, 2.0], twist(SIZE, 120.0, 0.0, |t| (w * t).sin(), |t| w * (w * t).cos()));
+    animation("twist-box", 60.0, mesh, tr, false, &format!("formats = {formats}"))
+}
+
+/// One full twist back and forth in 1 s; the last key repeats the first exactly. Z up, in
+/// centimeters, at 24 fps.
+fn cyclic_box(formats: &str) -> Animation {
+    let mesh = box_mesh(SIZE, [3, 6, 3]);
+    let w = 2.0 * PI;
+    let mut tr = sample_motion(&mesh.positions, &[0.0, 0.3, 0.65, 1.0], twist(SIZE, 60.0, 0.0, |t| (w * t).sin(), |t| w * (w * t).cos()));
+    let last = tr.key_count() - 1;
+    tr.positions[last] = tr.positions[0].clone();
+    tr.velocities[last] = tr.velocities[0].clone();
+    animation("cyclic", 24.0, mesh, tr, true, &format!("formats = {formats}\nup_axis = \"z\"\nmeters_per_unit = 0.01"))
+}
+
+/// Only the top quarter of the box moves, so every target is sparse. Keys start at 0.5 s.
+fn waving_top(formats: &str) -> Animation {
+    let mesh = box_mesh(SIZE, [4, 8, 4]);
+    let tr = sample_motion(&mesh.positions, &[0.5, 1.0, 1.75], twist(SIZE, 90.0, 0.75, |t| (3.0 * t).sin(), |t| 3.0 * (3.0 * t).cos()));
+    animation("waving_top", 30.0, mesh, tr, false, &format!("formats = {formats}"))
+}
+
+/// Nothing moves: zero targets.
+fn still_box(formats: &str) -> Animation {
+    let mesh = box_mesh(SIZE, [2, 2, 2]);
+    let tr = sample_motion(&mesh.positions, &[0.0, 1.0], |p, _| (p, [0.0; 3]));
+    animation("still", 60.0, mesh, tr, false, &format!("formats = {formats}"))
+}
+
+fn export_to(anim: &Animation, dir: &Path) -> Outputs {
+    let mut staging = Staging::new(dir).unwrap();
+    let outputs = export(anim, &mut staging).unwrap();
+    staging.commit().unwrap();
+    outputs
+}
+
+/// Export, then check every file with the independent checkers against our own evaluation:
+/// the blendshape clip's exact curves (glTF) or its per-frame samples (USD), the trajectory
+/// at frames for full-frame files. Returns the output folder and the outputs.
+fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
+    let dir = scratch(&anim.scene.name).join("out");
+    let outputs = export_to(anim, &dir);
+    let listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
+    let on_disk: BTreeSet<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(listed, on_disk, "the folder holds exactly the listed files");
+    crate::common::verify::check_outputs(&dir, anim, &outputs.files);
+    (dir, outputs)
+}
+
+fn names(outputs: &Outputs) -> Vec<&str> {
+    outputs.files.iter().map(|f| f.path.as_str()).collect()
+}
+
+#[test]
+fn twisting_box_in_every_format() {
+    let (_, outputs) = export_and_check(&twisting_box("[\"glb\", \"usdc\", \"usda\"]"));
+    assert_eq!(
+        names(&outputs),
+        ["twist-box.usda", "twist-box.usdc", "twist-box.glb", "twist-box.full.usda", "twist-box.full.usdc", "twist-box.full.glb"]
+    );
+}
+
+#[test]
+fn cyclic_z_up_centimeters_without_usda() {
+    let (_, outputs) = export_and_check(&cyclic_box("[\"usdc\", \"glb\"]"));
+    // The .usda the usdc was converted from is not an output and is not left behind.
+    assert_eq!(names(&outputs), ["cyclic.usdc", "cyclic.glb", "cyclic.full.usdc", "cyclic.full.glb"]);
+}
+
+#[test]
+fn sparse_targets_stay_sparse() {
+    let anim = waving_top("[\"usda\", \"glb\"]");
+    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
+    let n = clip.vertex_count();
+    assert!(clip.targets.iter().all(|t| 4 * t.indices.len() < 3 * n), "the test needs sparse targets");
+    let (dir, _) = export_and_check(&anim);
+    let usda = std::fs::read_to_string(dir.join("waving_top.usda")).unwrap();
+    assert_eq!(usda.matches("uniform int[] pointIndices").count(), clip.targets.len(), "every BlendShape is sparse");
+    // The USD file starts at the first key's frame.
+    assert!(usda.contains("    startTimeCode = 15\n") && usda.contains("    endTimeCode = 52\n"), "{}", &usda[..400]);
+}
+
+#[test]
+fn a_static_animation_still_validates() {
+    let anim = still_box("[\"usda\", \"usdc\", \"glb\"]");
+    assert!(BlendShapeClip::from_trajectory(&anim.trajectory).targets.is_empty());
+    export_and_check(&anim);
+}
+
+#[test]
+fn export_is_deterministic() {
+    let anim = cyclic_box("[\"usda\", \"usdc\", \"glb\"]");
+    let (a, b) = (scratch("det-a").join("out"), scratch("det-b").join("out"));
+    let (oa, ob) = (export_to(&anim, &a), export_to(&anim, &b));
+    assert_eq!(oa, ob);
+    for f in &oa.files {
+        assert!(std::fs::read(a.join(&f.path)).unwrap() == std::fs::read(b.join(&f.path)).unwrap(), "{} differs between runs", f.path);
+    }
+}
+
+#[test]
+fn blendshapes_are_smaller_than_full_frame() {
+    // About 1,000 vertices, 2 s at 60 fps.
+    let mesh = box_mesh(SIZE, [10, 20, 10]);
+    let w = PI / 2.4;
+    let tr = sample_motion(&mesh.positions, &[0.0, 0.7, 1.4, 2.0], twist(SIZE, 120.0, 0.0, |t| (w * t).sin(), |t| w * (w * t).cos()));
+    let anim = animation("sizes", 60.0, mesh, tr, false, "formats = [\"usda\", \"usdc\", \"glb\"]");
+    let outputs = export_to(&anim, &scratch("sizes").join("out"));
+    let size = |kind: OutputKind, format: Format| outputs.files.iter().find(|f| f.kind == kind && f.format == format).unwrap().bytes;
+    for format in [Format::Usda, Format::Usdc, Format::Glb] {
+        let (blend, full) = (size(OutputKind::Blendshape, format), size(OutputKind::FullFrame, format));
+        eprintln!("{format}: blendshapes {blend} bytes, full-frame {full} bytes ({:.1}x smaller)", full as f64 / blend as f64);
+        assert!(blend * 5 < full, "{format}: blendshapes {blend} bytes should be far smaller than full-frame {full} bytes");
+    }
+}
+
+#[test]
+fn renders_and_moves_in_chromium() {
+    let anim = twisting_box("[\"glb\"]");
+    let mut anim = anim;
+    anim.scene.export.full_frame = false;
+    let dir = scratch("render");
+    let outputs = export_to(&anim, &dir.join("out"));
+    assert_eq!(names(&outputs), ["twist-box.glb"]);
+    let summary = render_glb(&dir.join("out/twist-box.glb"), &dir.join("png"), Some([0.0, 1.0]));
+    eprintln!("{summary}");
+    assert_eq!(summary["ok"], true, "{summary}");
+    for png in summary["screenshots"].as_array().unwrap() {
+        let bytes = std::fs::read(png.as_str().unwrap()).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG");
+    }
+}
+
+#[test]
+fn a_broken_animation_is_a_one_line_error_and_stages_nothing() {
+    let mut anim = still_box("[\"usda\", \"glb\"]");
+    anim.trajectory.positions[1].pop();
+    let dir = scratch("broken");
+    let mut staging = Staging::new(&dir.join("out")).unwrap();
+    let e = export(&anim, &mut staging).unwrap_err().to_string();
+    assert!(e.contains("key 1 has 25 positions but the mesh has 26 vertices"), "{e}");
+    assert!(e.contains("(fix: re-run `blendsim embed`"), "{e}");
+    assert!(!e.contains('\n'));
+    drop(staging);
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+
+    // Keys from 10 ms to 15 ms hold no frame at 60 fps.
+    let mut anim = still_box("[\"usda\"]");
+    anim.trajectory.times = vec![0.010, 0.015];
+    let mut staging = Staging::new(&dir.join("out")).unwrap();
+    let e = export(&anim, &mut staging).unwrap_err().to_string();
+    assert!(e.contains("between two frames at 60 fps (fix: "), "{e}");
+}
+
+/// The checkers are not vacuous: wrong points, a Skeleton without SkelBindingAPI and a wrong
+/// channel path all fail.
+#[test]
+fn checkers_reject_wrong_points_and_broken_files() {
+    let anim = twisting_box("[\"usda\", \"glb\"]");
+    let mut anim = anim;
+    anim.scene.export.full_frame = false;
+    let dir = scratch("negative").join("out");
+    export_to(&anim, &dir);
+    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
+    let frames: Vec<f64> = anim.trajectory.frames(60.0).iter().map(|f| f.1).collect();
+    // Expected one frame late.
+    let late = Expected::at(&frames, 60.0, |t| clip.points_at(t + 1.0 / 60.0));
+    let e = try_check_usd(&dir.join("twist-box.usda"), &late, false).unwrap_err();
+    assert!(e.contains("max error"), "{e}");
+    let e = try_check_glb(&dir.join("twist-box.glb"), &late).unwrap_err();
+    assert!(e.contains("max error"), "{e}");
+
+    let right = Expected::at(&frames, 60.0, |t| clip.points_at(t));
+    let usda = std::fs::read_to_string(dir.join("twist-box.usda")).unwrap();
+    let skeleton = usda.find("def Skeleton").unwrap();
+    let broken = format!(
+        "{}{}",
+        &usda[..skeleton],
+        usda[skeleton..].replacen("(\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n", "", 1)
+    );
+    std::fs::write(dir.join("broken.usda"), broken).unwrap();
+    let e = try_check_usd(&dir.join("broken.usda"), &right, false).unwrap_err();
+    assert!(e.contains("MissingSkelBindingAPI"), "{e}");
+
+    let glb = std::fs::read(dir.join("twist-box.glb")).unwrap();
+    let at = glb.windows(16).position(|w| w == b"\"path\":\"weights\"").unwrap();
+    let mut broken = glb.clone();
+    broken[at..at + 16].copy_from_slice(b"\"path\":\"weightz\"");
+    std::fs::write(dir.join("broken.glb"), broken).unwrap();
+    let e = try_check_glb(&dir.join("broken.glb"), &right).unwrap_err();
+    assert!(e.contains("VALUE_NOT_IN_LIST"), "{e}");
+}

@@ -1,0 +1,17 @@
+//! The integration tests, one test binary: `cargo test --release --test integration`, or one
+//! module of it with a filter (`cargo test --release --test integration cli_stages::`).
+//!
+//! The CLI as a user (or a Makefile) runs it, and every file it writes opened by the
+//! independent tools (usd-core, the Khronos glTF validator, three.js in Chromium). Shared
+//! helpers are in [`common`].
+
+mod common;
+
+mod cache_fit;
+mod cli_errors;
+mod cli_physics;
+mod cli_stages;
+mod export_formats;
+mod fixtures;
+mod paper_scenes;
+mod render_demo;
