@@ -4,6 +4,7 @@
 //! problem and the fix); 2 usage errors (from clap).
 
 mod bake;
+mod blend;
 mod embed;
 mod export;
 mod import;
@@ -30,7 +31,8 @@ use clap::{Parser, Subcommand};
 ///   blendsim export animation.json --out DIR
 ///   blendsim report animation.json --outputs DIR/NAME.outputs.json --out DIR
 ///
-/// `blendsim bake SCENE.toml --out DIR` runs them all in one process.
+/// `blendsim bake SCENE.toml --out DIR` runs them all in one process; `blendsim blend`
+/// blends target meshes with mass-spring blendshapes.
 #[derive(Parser)]
 #[command(name = "blendsim", version, about, long_about, verbatim_doc_comment, propagate_version = true)]
 struct Cli {
@@ -50,6 +52,7 @@ enum Command {
     Export(export::Args),
     Report(report::Args),
     Bake(bake::Args),
+    Blend(blend::Args),
 }
 
 /// `--method`, for `solve` and `bake`: overrides the scene's `[solver] method`.
@@ -57,6 +60,7 @@ enum Command {
 pub enum MethodArg {
     Hermite,
     Spacetime,
+    MassSpring,
 }
 
 impl From<MethodArg> for Method {
@@ -64,6 +68,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Hermite => Method::Hermite,
             MethodArg::Spacetime => Method::Spacetime,
+            MethodArg::MassSpring => Method::MassSpring,
         }
     }
 }
@@ -79,6 +84,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => export::run(a, &progress),
         Command::Report(a) => report::run(a, &progress),
         Command::Bake(a) => bake::run(a, &progress, cli.quiet),
+        Command::Blend(a) => blend::run(a, &progress, cli.quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

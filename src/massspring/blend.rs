@@ -405,10 +405,12 @@ impl MassSpring {
         })
     }
 
+    /// The network and how it was built.
     pub fn summary(&self) -> &ModelSummary {
         &self.summary
     }
 
+    /// The spring network.
     pub fn springs(&self) -> &Springs {
         &self.springs
     }

@@ -41,6 +41,6 @@ pub(crate) mod testing;
 #[cfg(test)]
 mod tests;
 
-pub use blend::{check_weights, linear_blend, Blend, BlendReport, Boundary, MassSpring, ModelSummary, Settings, Targets};
+pub use blend::{check_weights, linear_blend, Blend, Boundary, MassSpring, Settings, Targets};
 pub use obstacle::Obstacle;
-pub use springs::{Bending, SpringKind};
+pub use springs::Bending;

@@ -177,11 +177,7 @@ impl Rigid {
         add(mat_vec(&rt, sub(sub(y, self.centre), self.translation)), self.centre)
     }
 
-    /// A direction (no translation).
-    pub fn rotate(&self, v: Point) -> Point {
-        mat_vec(&self.rotation.to_matrix(), v)
-    }
-
+    /// A direction mapped back (the inverse rotation, no translation).
     pub fn rotate_inverse(&self, v: Point) -> Point {
         mat_vec(&mat3::transpose(&self.rotation.to_matrix()), v)
     }

@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use super::testing::bend;
+use super::springs::SpringKind;
 use super::*;
 use crate::mesh::surface::enclosed_volume;
 use crate::mesh::{norm, sub, Point, TetMesh, TriMesh};

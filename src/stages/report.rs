@@ -13,13 +13,14 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
     let error = blendshape_error(tr, &frames, diagonal);
-    let keyframe_deviation =
-        deviation(tr.positions.iter().cloned().zip(animation.input_keys.iter().cloned()), diagonal);
+    // At the input keys' times: a trajectory may hold in-between keys too (mass-spring).
+    let key_times = &scene.keyframes.times;
+    let keyframe_deviation = deviation(key_times.iter().map(|&t| tr.evaluate(t)).zip(animation.input_keys.iter().cloned()), diagonal);
     let triangles = &animation.mesh.triangles;
     let closed = !triangles.is_empty() && surface::open_edges(&animation.mesh).is_empty();
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
     let volume = (closed && rest_volume > 0.0).then(|| {
-        let hermite = Trajectory::with_zero_velocities(tr.times.clone(), animation.input_keys.clone());
+        let hermite = Trajectory::with_zero_velocities(key_times.clone(), animation.input_keys.clone());
         Volume {
             rest: rest_volume,
             animation: volume_range(tr, &frames, triangles, rest_volume),

@@ -7,6 +7,7 @@
 
 mod common;
 
+mod blend;
 mod cache_fit;
 mod cli_errors;
 mod cli_physics;
