@@ -420,3 +420,64 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
     };
     Ok((trajectory, log))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    const SCENE: &str = "name = \"s\"\n[keyframes]\nmeshes = [\"a.obj\", \"b.obj\"]\ntimes = [0.0, 1.0]\n[solver]\nmethod = \"mass-spring\"\n";
+
+    #[test]
+    fn mass_spring_table_parses_with_defaults_and_refuses_bad_values() {
+        let s = Scene::parse(SCENE).unwrap();
+        assert_eq!(s.solver.method, Method::MassSpring);
+        assert_eq!(s.mass_spring, scene::MassSpring::default());
+        let s = Scene::parse(&format!(
+            "{SCENE}[mass_spring]\ninbetweens = 5\nbending = \"hinge\"\n[[mass_spring.obstacle]]\nkind = \"sphere\"\ncenter = [0, 1, 0]\nradius = 0.5\n"
+        ))
+        .unwrap();
+        assert_eq!(s.mass_spring.inbetweens, 5);
+        assert_eq!(s.mass_spring.obstacle, vec![Obstacle::Sphere { center: [0.0, 1.0, 0.0], radius: 0.5 }]);
+        for (table, says) in [
+            ("bending = \"none\"", "bending"),
+            ("tolerance = 0.0", "tolerance"),
+            ("inbetweens = 5000", "inbetweens"),
+            ("[[mass_spring.obstacle]]\nkind = \"plane\"\npoint = [0, 0, 0]\nnormal = [0, 0, 0]", "obstacle"),
+            ("[[mass_spring.obstacle]]\nkind = \"cube\"", "cube"),
+            ("stiffness = 1.0", "stiffness"),
+        ] {
+            let e = Scene::parse(&format!("{SCENE}[mass_spring]\n{table}\n")).unwrap_err();
+            assert!(e.to_string().contains(says), "{table}: {e}");
+        }
+    }
+
+    #[test]
+    fn easing_is_the_hermite_baselines() {
+        // The hermite baseline's position weight of the next key is 3θ² - 2θ³; its derivative
+        // checked by central differences.
+        for theta in [0.0, 0.1, 0.25, 0.5, 0.9, 1.0] {
+            let (a, da) = ease(theta);
+            let h01 = crate::spacetime::trajectory::hermite_weights(theta, 1.0).pos[2];
+            assert!((a - h01).abs() < 1e-15, "θ = {theta}: {a} vs {h01}");
+            let e = 1e-6;
+            let fd = (ease(theta + e).0 - ease(theta - e).0) / (2.0 * e);
+            assert!((da - fd).abs() < 1e-8, "θ = {theta}: {da} vs {fd}");
+        }
+    }
+
+    #[test]
+    fn weights_files_take_commas_blanks_and_comments() {
+        let dir = std::env::temp_dir().join(format!("blendsim-weights-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("w.txt");
+        std::fs::write(&path, "# header\n0.2, 0.8\n\n  1 0   # end\n0.5\t0.5\n").unwrap();
+        let w = read_weights(&Weights::File(path.clone()), 2).unwrap();
+        assert_eq!(w, vec![vec![0.2, 0.8], vec![1.0, 0.0], vec![0.5, 0.5]]);
+        std::fs::write(&path, "# nothing\n").unwrap();
+        assert!(read_weights(&Weights::File(path.clone()), 2).unwrap_err().to_string().contains("has no weights"));
+        let e = read_weights(&Weights::One(vec![0.5, 0.6]), 2).unwrap_err();
+        assert!(e.to_string().starts_with("--weights: the weights 0.5,0.6 sum to 1.1"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
