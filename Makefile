@@ -12,16 +12,23 @@ CHECKERS := tests/checkers
 # apt-get needs root; use sudo when not already root.
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 USD_CORE := usd-core==26.11
+# Blender as a Python module, for the Blender checker: bpy 4.2.0 needs exactly Python 3.11, so
+# it lives in a venv of its own under build/ (the system Python is left untouched). The tests
+# find it there, or at $$BLENDSIM_BLENDER_PYTHON.
+BPY := bpy==4.2.0
+PYTHON311 ?= python3.11
+BLENDER_VENV := build/blender-venv
 
 # `make batch SCENES=folder`: bake every *.toml of a folder (works with -j).
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test test-deps deps-tetgen deps-usd deps-npm deps-chromium bench bench-cache batch clean
+.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
-	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers)"
+	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
+	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
@@ -63,7 +70,24 @@ $(CHECKERS)/node_modules/.installed: $(CHECKERS)/package.json $(CHECKERS)/packag
 	cd $(CHECKERS) && npm ci --no-audit --no-fund --loglevel=error
 	@touch $@
 
-test-deps: deps-tetgen deps-usd deps-npm deps-chromium
+# Blender's shared libraries need a few X and GL client libraries even when nothing is drawn.
+BLENDER_APT := python3.11 python3.11-venv libxrender1 libxxf86vm1 libxfixes3 libxi6 libxkbcommon0 libsm6 libgl1 libegl1
+deps-blender:
+	@if $(BLENDER_VENV)/bin/python -c 'import bpy' >/dev/null 2>&1; then \
+		echo "==> $(BPY) (Blender as a Python module): already installed in $(BLENDER_VENV)"; \
+	else \
+		if ! command -v $(PYTHON311) >/dev/null 2>&1 || ! $(PYTHON311) -c 'import ensurepip, venv' >/dev/null 2>&1 || ! ldconfig -p | grep libXrender.so.1 >/dev/null; then \
+			echo "==> installing Python 3.11 with venv and Blender's X/GL client libraries (apt-get)"; \
+			$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(BLENDER_APT); \
+		fi; \
+		echo "==> installing $(BPY) (pip, a 519 MB wheel) into the venv $(BLENDER_VENV)"; \
+		rm -rf $(BLENDER_VENV); \
+		$(PYTHON311) -m venv $(BLENDER_VENV); \
+		$(BLENDER_VENV)/bin/python -m pip install --quiet --disable-pip-version-check $(BPY); \
+		$(BLENDER_VENV)/bin/python -c 'import bpy; print("==> bpy", bpy.app.version_string)'; \
+	fi
+
+test-deps: deps-tetgen deps-usd deps-npm deps-chromium deps-blender
 
 demo: build deps-tetgen deps-usd
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"
@@ -74,6 +98,14 @@ demo: build deps-tetgen deps-usd
 test: test-deps
 	@echo "==> running the test suite (release build)"
 	$(CARGO) test --release --locked
+
+# The readers' property tests (src/fuzz.rs) run 10,000 cases per property in `make test`;
+# this runs many more (random bytes and mutations of valid files, with shrinking). The filter
+# also runs the vertex-cache readers' properties (src/cache/fuzz.rs, a fixed 3,000 cases).
+FUZZ_CASES ?= 1000000
+fuzz:
+	@echo "==> fuzzing the OBJ, MEDIT, TetGen, selection and scene readers ($(FUZZ_CASES) cases per property)"
+	PROPTEST_CASES=$(FUZZ_CASES) $(CARGO) test --release --locked --lib fuzz -- --nocapture
 
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"

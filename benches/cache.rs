@@ -8,7 +8,9 @@
 //!
 //! Bytes: "f32" columns count the raw numbers a file must hold (blendshapes: base + sparse
 //! targets as index + offset + f32 Hermite weight keys; full frame: every vertex of every frame;
-//! PCA: mean + basis + per-frame weights), the glb/usda columns are our exporters' files.
+//! PCA: mean + basis + per-frame weights), the glb/usda columns are our exporters' files. The
+//! blendshapes are in the signed form (`[export] weights = "signed"`), whose weights are signed
+//! like PCA's; the default Bernstein form costs one more shape per key with a velocity.
 //! "passes" is frames read by the selection over the frame count; "held frames" the most
 //! frames it held in memory at once.
 
@@ -22,7 +24,7 @@ use blendsim::cache::deviation::cache_diagonal;
 use blendsim::cache::fit::{fit, FitSettings};
 use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::cache::{FrameSource, MemoryFrames};
-use blendsim::clip::BlendShapeClip;
+use blendsim::clip::{BlendShapeClip, Weights};
 use blendsim::internals::{glb, usda, FullFrame, Placement, UsdSettings};
 
 const TOLERANCE: f64 = 0.005;
@@ -102,7 +104,7 @@ fn run(name: &str, cache: &BarCache) {
     }
     let auto = auto.unwrap();
     let diagonal = cache_diagonal(&mut frames).unwrap();
-    let clip = BlendShapeClip::from_trajectory(&auto.trajectory);
+    let clip = BlendShapeClip::new(&auto.trajectory, Weights::Signed);
     let triangles = &cache.surface.triangles;
     let placement = Placement { z_up: false, meters_per_unit: 1.0 };
     let usd = UsdSettings { name: name.replace(' ', "_"), fps: cache.settings.fps, up_axis: 'Y', meters_per_unit: 1.0 };

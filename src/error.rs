@@ -56,13 +56,72 @@ impl Error {
 
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // One line, always, and nothing a terminal would act on: control characters in paths
+        // are shown escaped, and line breaks in the problem (external tools' messages) folded.
         if let Some(path) = &self.path {
-            write!(f, "{}: ", path.display())?;
+            write!(f, "{}: ", excerpt(&printable(&path.display().to_string()), MAX_PART))?;
         }
-        // One line, always: newlines from external tools' messages are folded.
-        let problem = self.problem.replace('\n', " ");
-        write!(f, "{problem} (fix: {})", self.fix.replace('\n', " "))
+        write!(f, "{} (fix: {})", excerpt(&folded(&self.problem), MAX_PART), excerpt(&folded(&self.fix), MAX_PART))
     }
+}
+
+/// The longest path, problem or fix a message shows (longer ones are elided in the middle).
+const MAX_PART: usize = 2000;
+/// The longest token [`quoted`] shows.
+const MAX_TOKEN: usize = 40;
+
+/// Characters a terminal may act on or that break a line: C0 and C1 controls (newline, CR,
+/// ESC, ...), DEL, the Unicode line and paragraph separators, and bidirectional overrides.
+fn is_unsafe(c: char) -> bool {
+    c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
+}
+
+/// `text` with every unsafe character shown as an escape (`\n`, `\r`, `\u{1b}`), so it
+/// prints on one line and cannot drive the terminal. For paths and tokens from input files.
+pub fn printable(text: &str) -> String {
+    if !text.chars().any(is_unsafe) {
+        return text.to_string();
+    }
+    text.chars().map(|c| if is_unsafe(c) { c.escape_default().to_string() } else { c.to_string() }).collect()
+}
+
+/// Line breaks and tabs as spaces (messages of external tools span lines), other unsafe
+/// characters escaped.
+fn folded(text: &str) -> String {
+    printable(&text.replace("\r\n", " ").replace(['\n', '\r', '\t'], " "))
+}
+
+/// At most `max` characters of `text`: longer text keeps its head and tail around a note of
+/// how much was left out.
+fn excerpt(text: &str, max: usize) -> String {
+    let count = text.chars().count();
+    if count <= max {
+        return text.to_string();
+    }
+    let keep = max / 2;
+    let head: String = text.chars().take(keep).collect();
+    let tail: String = text.chars().skip(count - keep / 2).collect();
+    format!("{head}...[{} characters left out]...{tail}", count - keep - keep / 2)
+}
+
+/// A token from an input file as [`quoted`] shows it, without the backquotes.
+pub fn short(token: &str) -> String {
+    let q = quoted(token);
+    match q.strip_prefix('`').and_then(|r| r.split_once('`')) {
+        Some((inner, rest)) => format!("{inner}{rest}"),
+        None => q,
+    }
+}
+
+/// A token from an input file, for a message: in backquotes, unsafe characters escaped, and at
+/// most a short excerpt of a long token with its length (a 200 MB token is not echoed).
+pub fn quoted(token: &str) -> String {
+    let count = token.chars().count();
+    if count <= MAX_TOKEN {
+        return format!("`{}`", printable(token));
+    }
+    let head: String = token.chars().take(MAX_TOKEN - 8).collect();
+    format!("`{}...` ({} bytes)", printable(&head), token.len())
 }
 
 impl std::error::Error for Error {}
@@ -77,6 +136,21 @@ mod tests {
         assert_eq!(e.to_string(), "a/k1.obj: has 26 vertices but k0 has 24 (fix: re-export k1.obj)");
         let g = Error::general("tetgen is not installed", "apt-get install tetgen");
         assert_eq!(g.to_string(), "tetgen is not installed (fix: apt-get install tetgen)");
+    }
+
+    #[test]
+    fn control_characters_are_folded_and_long_text_elided() {
+        let e = Error::in_file("out\n\u{1b}[2J/k\r.obj", "TetGen said:\nline one\r\nline two\u{7}", "re-export\u{202e}");
+        let s = e.to_string();
+        assert_eq!(s, "out\\n\\u{1b}[2J/k\\r.obj: TetGen said: line one line two\\u{7} (fix: re-export\\u{202e})");
+        assert!(!s.chars().any(is_unsafe));
+        let long = "x".repeat(10_000);
+        let s = Error::general(format!("bad {long}"), "fix").to_string();
+        assert!(s.len() < 2 * MAX_PART && s.contains("characters left out") && s.ends_with("(fix: fix)"), "{}", s.len());
+        assert_eq!(quoted("1.5e3"), "`1.5e3`");
+        let q = quoted(&"9".repeat(200_000_000 / 1000));
+        assert_eq!(q, format!("`{}...` (200000 bytes)", "9".repeat(MAX_TOKEN - 8)));
+        assert_eq!(quoted("a\u{1b}b"), "`a\\u{1b}b`");
     }
 
     #[test]

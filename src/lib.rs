@@ -30,15 +30,17 @@
 //! The public surface: the stages and their data ([`stages`], [`scene`], [`stage`],
 //! [`report`]), the meshes and their files ([`mesh`], [`procedural`] shapes), the trajectory the
 //! stage files carry ([`Trajectory`]) and the blendshape clip the files hold ([`clip`]), vertex
-//! caches ([`cache`]), output staging ([`output`]), progress ([`progress`]) and errors
-//! ([`Error`]). The algorithms (physics, the spacetime solver, TetGen, the binding, the writers)
-//! are internal: they take plain inputs and know neither the scene file nor the stage files.
+//! caches ([`cache`]), output staging ([`output`]), clean interruption ([`interrupt`]),
+//! progress ([`progress`]) and errors ([`Error`]). The algorithms (physics, the spacetime
+//! solver, TetGen, the binding, the writers) are internal: they take plain inputs and know
+//! neither the scene file nor the stage files.
 
 #![warn(missing_docs)]
 // Numeric kernels index several arrays (and SIMD lanes) in lockstep on purpose.
 #![allow(clippy::needless_range_loop)]
 
 pub mod cache;
+pub mod interrupt;
 pub mod mesh;
 pub mod output;
 pub mod procedural;
@@ -51,6 +53,9 @@ pub mod stages;
 mod embed;
 mod error;
 mod export;
+#[cfg(test)]
+mod fuzz;
+mod input;
 mod massspring;
 mod physics;
 mod spacetime;

@@ -11,6 +11,7 @@ use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+pub use crate::export::clip::Weights;
 pub use crate::mesh::Axis;
 pub use crate::procedural::Twist;
 
@@ -26,8 +27,9 @@ pub struct SceneFile {
 impl SceneFile {
     /// Read, parse and validate a scene file.
     pub fn load(path: &Path) -> Result<SceneFile> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the scene file"))?;
-        let scene = Scene::parse(&text).map_err(|e| e.with_path(path))?;
+        let text = crate::input::read_text(path, "the scene file")?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+        let scene = Scene::parse(text).map_err(|e| e.with_path(path))?;
         Ok(SceneFile { path: path.to_path_buf(), scene })
     }
 
@@ -127,6 +129,7 @@ pub struct Material {
     /// Rayleigh mass damping: D = damping * M (per second).
     pub damping: f64,
     /// Gravitational acceleration (units per second squared), applied as M g.
+    #[serde(deserialize_with = "three_components")]
     pub gravity: [f64; 3],
 }
 
@@ -220,6 +223,20 @@ pub struct Export {
     pub up_axis: Axis,
     /// Scene units in meters (USD `metersPerUnit`; glTF files are scaled to meters).
     pub meters_per_unit: f64,
+    /// The blendshape form of the trajectory in every blendshape file.
+    pub weights: Weights,
+    /// How the blendshape glTF animates its weights.
+    pub gltf_interpolation: GltfInterpolation,
+}
+
+/// The interpolation of the blendshape glTF's weight animation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GltfInterpolation {
+    /// Weights and their slopes at the keys: the trajectory exactly, at any instant.
+    Cubicspline,
+    /// Weights sampled at every frame: exact at frames, linear in between (Blender plays it).
+    Linear,
 }
 
 // The defaults of every table, written once: `#[serde(default)]` fills a missing key from these.
@@ -244,7 +261,14 @@ impl Default for Solver {
 
 impl Default for Export {
     fn default() -> Self {
-        Export { formats: vec![Format::Usda, Format::Glb], full_frame: true, up_axis: Axis::Y, meters_per_unit: 1.0 }
+        Export {
+            formats: vec![Format::Usda, Format::Glb],
+            full_frame: true,
+            up_axis: Axis::Y,
+            meters_per_unit: 1.0,
+            weights: Weights::Bernstein,
+            gltf_interpolation: GltfInterpolation::Cubicspline,
+        }
     }
 }
 
@@ -381,6 +405,13 @@ impl Serialize for Selection {
 
 // --- Deserialization of the string-or-table entries, with precise messages. ---
 
+/// A vector of exactly three numbers (serde's own `[f64; 3]` would drop a fourth).
+fn three_components<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[f64; 3], D::Error> {
+    let v = Vec::<f64>::deserialize(d)?;
+    <[f64; 3]>::try_from(v.as_slice())
+        .map_err(|_| de::Error::custom(format!("expected 3 components (x, y, z), found {}", v.len())))
+}
+
 impl<'de> Deserialize<'de> for KeyMesh {
     fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
         struct V;
@@ -472,6 +503,30 @@ impl<'de> Deserialize<'de> for Selection {
     }
 }
 
+/// The scene name is the stem of every output file: one plain file name component, printable.
+fn check_name(name: &str) -> Result<()> {
+    let problem = if name.is_empty() {
+        Some("is empty")
+    } else if name.contains(['/', '\\']) {
+        Some("contains a path separator")
+    } else if name.starts_with('.') {
+        Some("starts with '.' (a hidden file)")
+    } else if name.chars().any(|c| c.is_control()) {
+        Some("contains a control character")
+    } else if name.len() > 200 {
+        Some("is longer than 200 bytes")
+    } else {
+        None
+    };
+    match problem {
+        Some(p) => Err(Error::general(
+            format!("name {} cannot be a file stem: it {p}", crate::error::quoted(name)),
+            "use letters, digits, '-' and '_'",
+        )),
+        None => Ok(()),
+    }
+}
+
 impl Scene {
     /// Parse and validate scene text. Errors carry no path; [`SceneFile::load`] adds it.
     pub fn parse(text: &str) -> Result<Scene> {
@@ -495,9 +550,7 @@ impl Scene {
     /// Every table's values in range, checked table by table in file order (the first problem
     /// is reported).
     fn validate(&self) -> Result<()> {
-        if self.name.is_empty() || self.name.contains(['/', '\\']) || self.name.starts_with('.') {
-            return invalid(format!("name {:?} cannot be a file stem", self.name), "use letters, digits, '-' and '_'");
-        }
+        check_name(&self.name)?;
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
         }
@@ -513,6 +566,42 @@ impl Scene {
 /// A scene error: the problem and its fix (the caller adds the file).
 fn invalid(problem: String, fix: &str) -> Result<()> {
     Err(Error::general(problem, fix))
+}
+
+/// Slab bounds must be numbers with `min <= max` (NaN or crossed bounds select nothing).
+fn check_selections(k: &KeyframeSpec) -> Result<()> {
+    fn check(what: &str, key: usize, s: &Selection) -> Result<()> {
+        match s {
+            Selection::Slab { axis, min, max, .. } => {
+                let axis = format!("{axis:?}").to_lowercase();
+                for (bound, v) in [("min", min), ("max", max)] {
+                    if v.is_some_and(f64::is_nan) {
+                        return Err(Error::general(
+                            format!("[keyframes] {what}[{key}]: the {axis} slab has {bound} = nan"),
+                            "give the bound as a number, or leave it out for no bound",
+                        ));
+                    }
+                }
+                if let (Some(lo), Some(hi)) = (min, max) {
+                    if lo > hi {
+                        return Err(Error::general(
+                            format!("[keyframes] {what}[{key}]: the {axis} slab has min = {lo} > max = {hi}, so it selects nothing"),
+                            "swap the bounds (use `invert = true` to select outside a slab)",
+                        ));
+                    }
+                }
+                Ok(())
+            }
+            Selection::Union(items) => items.iter().try_for_each(|i| check(what, key, i)),
+            _ => Ok(()),
+        }
+    }
+    for (what, list) in [("fixed", &k.fixed), ("fixed_velocity", &k.fixed_velocity)] {
+        for (key, s) in list.iter().flatten().enumerate() {
+            check(what, key, s)?;
+        }
+    }
+    Ok(())
 }
 
 impl KeyframeSpec {
@@ -562,7 +651,7 @@ impl KeyframeSpec {
                 "add an in-between key, or set cyclic = false",
             );
         }
-        Ok(())
+        check_selections(self)
     }
 }
 
@@ -692,7 +781,7 @@ impl MassSpring {
             let finite = |p: &[f64; 3]| p.iter().all(|c| c.is_finite());
             let bad = match *o {
                 Obstacle::Plane { point, normal } => !finite(&point) || !finite(&normal) || normal == [0.0; 3],
-                Obstacle::Sphere { center, radius } => !finite(&center) || !(radius.is_finite() && radius > 0.0),
+                Obstacle::Sphere { center, radius } => !(finite(&center) && radius.is_finite() && radius > 0.0),
             };
             if bad {
                 return invalid(
@@ -723,6 +812,7 @@ times = [0.0, 0.5]
         assert_eq!(s.solver.method, Method::Spacetime);
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
+        assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
         assert_eq!(s.keyframes.rest, Rest::Key(0));
     }
 
@@ -763,6 +853,8 @@ full_frame = true
 "#;
         let s = Scene::parse(text).unwrap();
         assert_eq!(s.solver.method, Method::Hermite);
+        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
+        assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
         assert_eq!(
             s.keyframes.fixed,
             Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }])
@@ -825,6 +917,31 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
     }
 
     #[test]
+    fn nonsense_values_are_rejected() {
+        let sel = |entry: &str| MINIMAL.replace("times", &format!("fixed = [\"all\", {entry}]\ntimes"));
+        let cases = [
+            (MINIMAL.to_string() + "[material]\ngravity = [0.0, -9.8, 0.0, 1.0]\n", "expected 3 components (x, y, z), found 4"),
+            (MINIMAL.to_string() + "[material]\ngravity = [0.0, -9.8]\n", "found 2"),
+            (sel("{ axis = \"y\", min = nan }"), "[keyframes] fixed[1]: the y slab has min = nan"),
+            (sel("[\"none\", { axis = \"x\", max = nan }]"), "the x slab has max = nan"),
+            (sel("{ axis = \"z\", min = 2.0, max = 1.0 }"), "the z slab has min = 2 > max = 1, so it selects nothing"),
+            (MINIMAL.replace("name = \"twist\"", "name = \"a\\nb\""), "name `a\\nb` cannot be a file stem: it contains a control character"),
+            (MINIMAL.replace("name = \"twist\"", "name = \"\\u001b[31mred\""), "contains a control character"),
+            (MINIMAL.replace("name = \"twist\"", "name = \"a\\\\b\""), "contains a path separator"),
+            (MINIMAL.replace("name = \"twist\"", "name = \"../x\""), "contains a path separator"),
+            (MINIMAL.replace("name = \"twist\"", "name = \".hidden\""), "starts with '.'"),
+            (MINIMAL.replace("name = \"twist\"", "name = \"\""), "is empty"),
+            (MINIMAL.replace("name = \"twist\"", &format!("name = \"{}\"", "n".repeat(300))), "is longer than 200 bytes"),
+        ];
+        for (text, expect) in cases {
+            let e = Scene::parse(&text).unwrap_err().to_string();
+            assert!(e.contains(expect), "expected {expect:?} in {e}");
+            assert!(e.contains("(fix: ") && !e.contains('\n') && !e.contains('\u{1b}'), "{e}");
+        }
+        assert!(Scene::parse(&sel("{ axis = \"y\", min = 1.0, max = 1.0 }")).is_ok(), "a slab of zero thickness is fine");
+    }
+
+    #[test]
     fn invalid_values_are_rejected_with_a_fix() {
         let cases = [
             (MINIMAL.replace("[0.0, 0.5]", "[0.5, 0.0]"), "times decrease"),
@@ -833,6 +950,8 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
             (MINIMAL.to_string() + "[solver]\nsamples = 0\n", "samples = 0"),
             (MINIMAL.to_string() + "[solver]\nmethod = \"magic\"\n", "unknown variant `magic`"),
             (MINIMAL.to_string() + "[export]\nformats = [\"fbx\"]\n", "unknown variant `fbx`"),
+            (MINIMAL.to_string() + "[export]\nweights = \"positive\"\n", "unknown variant `positive`"),
+            (MINIMAL.to_string() + "[export]\ngltf_interpolation = \"step\"\n", "unknown variant `step`"),
         ];
         for (text, expect) in cases {
             let e = Scene::parse(&text).unwrap_err().to_string();

@@ -291,7 +291,7 @@ pub fn write<T: StageData>(path: &Path, value: &T) -> Result<()> {
 
 /// Read a stage file, checking that it holds the expected stage.
 pub fn read<T: StageData>(path: &Path) -> Result<T> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, &format!("read the {} file", T::STAGE)))?;
+    let bytes = crate::input::read_bytes(path, &format!("the {} file", T::STAGE))?;
     let wrong = |what: String| {
         Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER))
     };

@@ -295,14 +295,11 @@ struct Finished {
 
 /// Run `program switches surface.smesh` in `dir`, killing it after `timeout`.
 fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, source: &Path) -> Result<Finished> {
-    let mut child = Command::new(program)
-        .args([switches, INPUT])
-        .current_dir(dir)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| {
+    // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
+    let mut guard = crate::interrupt::spawn(
+        Command::new(program).args([switches, INPUT]).current_dir(dir).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
+    )
+    .map_err(|e| {
             Error::in_file(
                 source,
                 format!(
@@ -322,6 +319,8 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, s
             String::from_utf8_lossy(&bytes).into_owned()
         })
     }
+    crate::interrupt::pause_point("tetgen", &format!("(pid {})", guard.id()));
+    let child = guard.child();
     let stdout = drain(child.stdout.take());
     let stderr = drain(child.stderr.take());
     let started = Instant::now();
@@ -356,9 +355,14 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, s
 }
 
 /// A fresh folder only this run uses (so no stray `surface.poly` is picked up), removed
-/// with everything in it when dropped.
+/// with everything in it when dropped or when the run is interrupted. It is flocked while in
+/// use; creating one removes the work folders of runs that were killed (their process is gone
+/// and nobody holds their lock: the lock also protects a run in another PID namespace sharing
+/// the temporary folder).
 struct WorkDir {
     path: PathBuf,
+    _lock: Option<std::fs::File>,
+    _token: crate::interrupt::Token,
 }
 
 impl WorkDir {
@@ -367,15 +371,46 @@ impl WorkDir {
         let mut builder = std::fs::DirBuilder::new();
         #[cfg(unix)]
         std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
+        remove_dead_work_dirs();
         loop {
             let name = format!("blendsim-tetgen-{}-{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
             let path = std::env::temp_dir().join(name);
             match builder.create(&path) {
-                Ok(()) => return Ok(WorkDir { path }),
+                Ok(()) => {
+                    let token = crate::interrupt::register_tree(path.clone());
+                    let lock = std::fs::File::open(&path).ok().filter(|f| f.lock().is_ok());
+                    return Ok(WorkDir { path, _lock: lock, _token: token });
+                }
                 // Left behind by an earlier process with the same id: take the next name.
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
                 Err(e) => return Err(e),
             }
+        }
+    }
+}
+
+/// `blendsim-tetgen-PID-N` folders of our user in the temporary folder whose process is gone
+/// and whose lock nobody holds.
+fn remove_dead_work_dirs() {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let pid = name.to_str().and_then(|n| n.strip_prefix("blendsim-tetgen-")).and_then(|r| r.split_once('-'));
+        let Some(pid) = pid.and_then(|(p, _)| p.parse::<u32>().ok()) else { continue };
+        #[cfg(unix)]
+        {
+            // Only our own user's folders (a shared /tmp holds other users' too).
+            use std::os::unix::fs::MetadataExt;
+            // SAFETY: getuid cannot fail and touches no memory.
+            let uid = unsafe { libc::getuid() };
+            let mine = entry.metadata().is_ok_and(|m| m.uid() == uid);
+            if !mine {
+                continue;
+            }
+        }
+        let unlocked = || std::fs::File::open(entry.path()).is_ok_and(|f| f.try_lock().is_ok());
+        if pid != std::process::id() && !crate::interrupt::process_alive(pid) && unlocked() {
+            let _ = std::fs::remove_dir_all(entry.path());
         }
     }
 }

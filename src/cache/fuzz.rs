@@ -3,10 +3,8 @@
 //! exceeds a bound set by the input's size, whatever its header claims.
 //!
 //! The allocation bound is measured, not inferred: this test binary's global allocator
-//! records the largest request made while a probe is armed on the current thread.
+//! (`crate::testing::alloc`) records the largest request made on the current thread.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::io::Cursor;
 use std::path::Path;
 
@@ -16,56 +14,7 @@ use super::mdd::MddFrames;
 use super::pc2::{Pc2Frames, MAGIC};
 use super::sequence::SequencePattern;
 use super::FrameSource;
-
-struct Probe;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    static LARGEST: Cell<usize> = const { Cell::new(0) };
-}
-
-fn note(size: usize) {
-    let _ = ARMED.try_with(|armed| {
-        if armed.get() {
-            let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
-        }
-    });
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; the probe only reads
-// and writes two thread-local cells, which never allocate.
-unsafe impl GlobalAlloc for Probe {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note(layout.size());
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note(layout.size());
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note(new_size);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static PROBE: Probe = Probe;
-
-/// Run `f` and return the largest single allocation it made on this thread.
-fn largest_allocation(f: impl FnOnce()) -> usize {
-    LARGEST.with(|l| l.set(0));
-    ARMED.with(|a| a.set(true));
-    f();
-    ARMED.with(|a| a.set(false));
-    LARGEST.with(|l| l.get())
-}
+use crate::testing::alloc::largest_allocation;
 
 /// Open `bytes` with a reader and read every frame (errors allowed, panics not); returns the
 /// largest allocation. A reader that opens must report counts its bytes can hold.

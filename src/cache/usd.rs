@@ -19,7 +19,7 @@ use std::ffi::OsString;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::binary::require_regular;
@@ -58,15 +58,22 @@ impl Drop for TempDir {
 fn run_script(path: &Path, args: &[&std::ffi::OsStr]) -> Result<()> {
     let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
     let py = python.to_string_lossy().into_owned();
-    let output = Command::new(&python)
-        // usd-core maps .usdc files into memory by default, so every sample read stays
-        // resident; pread keeps the reader at one sample.
-        .env("USDC_USE_PREAD", "1")
-        .arg("-c")
-        .arg(SCRIPT)
-        .args(args)
-        .output()
-        .map_err(|e| Error::in_file(path, format!("cannot run {py} to read or write USD: {e}"), FIX_PXR))?;
+    let cannot_run = |e: std::io::Error| Error::in_file(path, format!("cannot run {py} to read or write USD: {e}"), FIX_PXR);
+    // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
+    let child = crate::interrupt::spawn(
+        Command::new(&python)
+            // usd-core maps .usdc files into memory by default, so every sample read stays
+            // resident; pread keeps the reader at one sample.
+            .env("USDC_USE_PREAD", "1")
+            .arg("-c")
+            .arg(SCRIPT)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    )
+    .map_err(cannot_run)?;
+    let output = child.wait_with_output().map_err(cannot_run)?;
     if output.status.success() {
         return Ok(());
     }

@@ -1,7 +1,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use blendsim::output::Staging;
+use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
 use blendsim::{stages, Result};
@@ -12,7 +12,8 @@ use super::MethodArg;
 ///
 /// Writes NAME.usda / NAME.glb (and the other formats of [export]), their full-frame
 /// versions NAME.full.EXT, report.json and report.md into --out. Nothing is written unless
-/// the whole bake succeeds.
+/// the whole bake succeeds; the folder is then replaced in one step, keeping files that are
+/// not blendsim's and removing those an earlier bake wrote that this one does not.
 #[derive(clap::Args)]
 pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
@@ -23,13 +24,22 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
+    /// Fail at once if another blendsim is writing into --out (by default: wait for it).
+    #[arg(long)]
+    no_wait: bool,
+}
+
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.scene
+    }
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
-    let mut staging = Staging::new(&args.out)?;
+    let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let r = stages::bake(&scene, args.method.map(Into::into), &mut staging, progress)?;
     staging.commit()?;
     if !quiet {

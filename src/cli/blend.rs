@@ -11,9 +11,10 @@ use blendsim::{stages, Result};
 ///   blendsim blend --targets a.obj b.obj c.obj --weights 0.2,0.5,0.3 --out shape.obj
 ///   blendsim blend --targets a.obj b.obj --weights-file w.txt --out frames/frame_####.obj
 ///
-/// Targets are one mesh with moved vertices. Weights are convex: each at least 0, summing to
-/// 1. A weights file holds one blend per line; its shapes are written as an OBJ sequence or a
-/// vertex cache (.pc2, .mdd, .glb, .usda), one frame per line. Nothing is written on error.
+/// Targets are one mesh with moved vertices. Weights are convex: each at least 0, all
+/// summing to one. A weights file holds one blend per line; its shapes are written as an OBJ
+/// sequence or a vertex cache (.pc2, .mdd, .glb, .usda), one frame per line. Nothing is
+/// written on error.
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -49,6 +50,13 @@ pub struct Args {
     /// Write the linear blend of the positions instead (the baseline, for comparison).
     #[arg(long)]
     linear: bool,
+}
+
+impl Args {
+    /// The weights file, or the first target (the spring network's rest).
+    pub fn input(&self) -> &std::path::Path {
+        self.weights_file.as_deref().unwrap_or(&self.targets[0])
+    }
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {

@@ -17,6 +17,12 @@ pub struct Args {
     output: PathBuf,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.solution
+    }
+}
+
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let solution: Solution = stage::read(&args.solution)?;
     stage::write(&args.output, &stages::embed(&solution)?)

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use blendsim::output::Staging;
+use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation};
 use blendsim::{stages, Result};
@@ -10,7 +10,9 @@ use blendsim::{stages, Result};
 /// Formats are the scene's [export] formats; NAME.outputs.json lists what was written.
 /// Blendshape: NAME.usda / NAME.usdc (UsdSkel BlendShapes and weights), NAME.glb (morph
 /// targets with CUBICSPLINE weights). Full-frame: NAME.full.EXT. `usdc` needs usd-core
-/// (`pip install usd-core`). Nothing is written unless every file succeeds.
+/// (`pip install usd-core`). Nothing is written unless every file succeeds; the folder is then
+/// replaced in one step, keeping files that are not blendsim's and removing the files an
+/// earlier export of the same scene wrote that this one does not.
 #[derive(clap::Args)]
 pub struct Args {
     /// The animation stage file from `blendsim embed`.
@@ -18,11 +20,20 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(long)]
     out: PathBuf,
+    /// Fail at once if another blendsim is writing into --out (by default: wait for it).
+    #[arg(long)]
+    no_wait: bool,
+}
+
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.animation
+    }
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
-    let mut staging = Staging::new(&args.out)?;
+    let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let bar = progress.stage("export");
     let outputs = stages::export(&animation, &mut staging)?;
     staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;

@@ -17,6 +17,12 @@ pub struct Args {
     output: PathBuf,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.scene
+    }
+}
+
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
     stage::write(&args.output, &stages::import(&scene)?)

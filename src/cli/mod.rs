@@ -1,7 +1,8 @@
 //! Command-line definitions: one file per subcommand, nothing else.
 //!
 //! Exit codes: 0 success; 1 bad input or a failed stage (the message names the file, the
-//! problem and the fix); 2 usage errors (from clap).
+//! problem and the fix); 2 usage errors (from clap). SIGINT, SIGTERM and SIGHUP remove the
+//! unfinished outputs and end the process by the same signal (see `blendsim::interrupt`).
 
 mod bake;
 mod blend;
@@ -74,8 +75,22 @@ impl From<MethodArg> for Method {
 }
 
 pub fn main() -> ExitCode {
+    // Before any thread starts, so every thread inherits the blocked signals.
+    blendsim::interrupt::install();
     let cli = Cli::parse();
     let progress = Progress::new(cli.quiet);
+    // An error that concerns no particular file is about the command's input.
+    let input = match &cli.command {
+        Command::Import(a) => a.input(),
+        Command::Tetrahedralize(a) => a.input(),
+        Command::Solve(a) => a.input(),
+        Command::Embed(a) => a.input(),
+        Command::Export(a) => a.input(),
+        Command::Report(a) => a.input(),
+        Command::Bake(a) => a.input(),
+        Command::Blend(a) => a.input(),
+    }
+    .to_path_buf();
     let result = match cli.command {
         Command::Import(a) => import::run(a, &progress),
         Command::Tetrahedralize(a) => tetrahedralize::run(a, &progress),
@@ -86,7 +101,9 @@ pub fn main() -> ExitCode {
         Command::Bake(a) => bake::run(a, &progress, cli.quiet),
         Command::Blend(a) => blend::run(a, &progress, cli.quiet),
     };
-    match result {
+    // Stopped by a signal: its cleanup ends the process, with the signal's status.
+    blendsim::interrupt::settle();
+    match result.map_err(|e| e.with_path(input)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use blendsim::output::Staging;
+use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
 use blendsim::stage::{self, Animation, Outputs};
 use blendsim::{stages, Result};
@@ -19,13 +19,22 @@ pub struct Args {
     /// Output folder for report.json and report.md.
     #[arg(long)]
     out: PathBuf,
+    /// Fail at once if another blendsim is writing into --out (by default: wait for it).
+    #[arg(long)]
+    no_wait: bool,
+}
+
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.animation
+    }
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let outputs: Outputs = stage::read(&args.outputs)?;
     let report = stages::report(&animation, &outputs);
-    let mut staging = Staging::new(&args.out)?;
+    let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     report.write(&mut staging)?;
     staging.commit()
 }

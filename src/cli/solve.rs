@@ -22,6 +22,12 @@ pub struct Args {
     method: Option<MethodArg>,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.body
+    }
+}
+
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let body: Body = stage::read(&args.body)?;
     stage::write(&args.output, &stages::solve(&body, args.method.map(Into::into), progress)?)

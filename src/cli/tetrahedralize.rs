@@ -17,6 +17,12 @@ pub struct Args {
     output: PathBuf,
 }
 
+impl Args {
+    pub fn input(&self) -> &std::path::Path {
+        &self.keyframes
+    }
+}
+
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let keys: Keyframes = stage::read(&args.keyframes)?;
     stage::write(&args.output, &stages::tetrahedralize(&keys, progress)?)

@@ -1,5 +1,9 @@
 //! The blendshape form of a Hermite trajectory, shared by every blendshape writer.
 //!
+//! Two forms ([`Weights`]); [`BlendShapeClip::new`] builds either. Below is the *signed* form
+//! (`[export] weights = "signed"`); the default Bernstein form, whose weights stay in [0, 1],
+//! is built in `export/bernstein.rs` from the same types.
+//!
 //! With base pose `b = x_0`, a *pose target* `P_k = x_k - b` per key and a *velocity target*
 //! `V_k = v_k` per key, the trajectory is exactly
 //!
@@ -25,10 +29,22 @@
 use crate::mesh::Point;
 use crate::spacetime::trajectory::{hermite_weights, locate, Trajectory};
 
+/// The form of the blendshapes and their weights (the scene's `[export] weights`;
+/// `formats/usd.md`, "Weights").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Weights {
+    /// Each interval in the Bernstein basis: a shape per key pose and per control point, every
+    /// weight in [0, 1]. Plays right in consumers that clamp shape-key values (Blender).
+    Bernstein,
+    /// A pose and a velocity shape per key; velocity weights go negative. Fewer shapes.
+    Signed,
+}
+
 /// One blendshape: a named set of vertex offsets.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
-    /// A valid USD prim name and glTF target name (`pose_3`, `velocity_0`).
+    /// A valid USD prim name and glTF target name (`key_3`, `key_0_velocity`, `key_3_out`).
     pub name: String,
     /// The vertices this target moves, increasing. Vertices not listed have zero offset.
     pub indices: Vec<u32>,
@@ -61,12 +77,12 @@ pub struct BlendShapeClip {
     pub curves: Vec<WeightCurve>,
 }
 
-fn f32x3(p: Point) -> [f32; 3] {
+pub(super) fn f32x3(p: Point) -> [f32; 3] {
     [p[0] as f32, p[1] as f32, p[2] as f32]
 }
 
 /// The nonzero entries of `offsets` (after rounding to f32).
-fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<Target> {
+pub(super) fn sparse_target(name: String, offsets: impl Iterator<Item = Point>) -> Option<Target> {
     let (mut indices, mut values) = (Vec::new(), Vec::new());
     for (i, o) in offsets.enumerate() {
         let o = f32x3(o);
@@ -88,13 +104,19 @@ pub fn is_cyclic(trajectory: &Trajectory) -> bool {
 }
 
 impl BlendShapeClip {
-    /// The blendshape form of `trajectory`, cyclic when [`is_cyclic`] says so.
-    pub fn from_trajectory(trajectory: &Trajectory) -> Self {
-        Self::with_layout(trajectory, is_cyclic(trajectory))
+    /// The blendshape form of `trajectory` in the form `weights` names, cyclic when
+    /// [`is_cyclic`] says so: the one constructor of the clip every blendshape file holds.
+    pub fn new(trajectory: &Trajectory, weights: Weights) -> Self {
+        let cyclic = is_cyclic(trajectory);
+        match weights {
+            Weights::Bernstein => Self::bernstein(trajectory, cyclic),
+            Weights::Signed => Self::signed(trajectory, cyclic),
+        }
     }
 
-    /// The blendshape form of `trajectory`; `cyclic`: the last key aliases the first.
-    fn with_layout(trajectory: &Trajectory, cyclic: bool) -> Self {
+    /// The signed blendshape form of `trajectory`: `key_K` (pose) and `key_K_velocity`.
+    /// `cyclic`: the last key aliases the first.
+    pub(super) fn signed(trajectory: &Trajectory, cyclic: bool) -> Self {
         let n_keys = trajectory.key_count();
         let base_f64 = &trajectory.positions[0];
         let base: Vec<[f32; 3]> = base_f64.iter().map(|&p| f32x3(p)).collect();
@@ -111,7 +133,7 @@ impl BlendShapeClip {
                 continue;
             }
             let offsets = trajectory.positions[k].iter().zip(&base_rounded).map(|(x, b)| crate::mesh::sub(*x, *b));
-            if let Some(t) = sparse_target(format!("pose_{k}"), offsets) {
+            if let Some(t) = sparse_target(format!("key_{k}"), offsets) {
                 let mut values = zeros();
                 values[k] = 1.0;
                 targets.push(t);
@@ -122,7 +144,7 @@ impl BlendShapeClip {
             if owner(k) != k {
                 continue;
             }
-            if let Some(t) = sparse_target(format!("velocity_{k}"), trajectory.velocities[k].iter().copied()) {
+            if let Some(t) = sparse_target(format!("key_{k}_velocity"), trajectory.velocities[k].iter().copied()) {
                 let (mut in_t, mut out_t) = (zeros(), zeros());
                 for key in (0..n_keys).filter(|&key| owner(key) == k) {
                     in_t[key] = 1.0;
@@ -216,7 +238,7 @@ mod tests {
         for cyclic in [false, true] {
             let tr = wavy(cyclic);
             assert_eq!(is_cyclic(&tr), cyclic);
-            let clip = BlendShapeClip::from_trajectory(&tr);
+            let clip = BlendShapeClip::new(&tr, Weights::Signed);
             assert!(max_error(&tr, &clip) < 1e-5, "cyclic={cyclic}: {}", max_error(&tr, &clip));
         }
     }
@@ -224,10 +246,10 @@ mod tests {
     #[test]
     fn zero_targets_are_dropped_and_sparse_ones_are_sparse() {
         let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
-        let clip = BlendShapeClip::from_trajectory(&tr);
-        // Key 2 aliases key 0 (cyclic), velocities are zero: only pose_1 remains, moving vertex 1.
+        let clip = BlendShapeClip::new(&tr, Weights::Signed);
+        // Key 2 aliases key 0 (cyclic), velocities are zero: only key_1 remains, moving vertex 1.
         assert_eq!(clip.targets.len(), 1);
-        assert_eq!(clip.targets[0].name, "pose_1");
+        assert_eq!(clip.targets[0].name, "key_1");
         assert_eq!(clip.targets[0].indices, vec![1]);
         assert!(max_error(&tr, &clip) < 1e-6);
     }
@@ -244,11 +266,11 @@ mod tests {
     #[test]
     fn weights_follow_the_trajectory_basis_at_and_between_keys() {
         let tr = wavy(false);
-        let clip = BlendShapeClip::from_trajectory(&tr);
+        let clip = BlendShapeClip::new(&tr, Weights::Signed);
         for (k, &t) in tr.times.iter().enumerate() {
             let w = clip.weights_at(t);
             for (target, wj) in clip.targets.iter().zip(&w) {
-                let expected = if target.name == format!("pose_{k}") { 1.0 } else { 0.0 };
+                let expected = if target.name == format!("key_{k}") { 1.0 } else { 0.0 };
                 assert_eq!(*wj, expected, "{} at key {k}", target.name);
             }
         }

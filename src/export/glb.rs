@@ -31,20 +31,41 @@ pub struct Placement {
 /// A clip without targets (a static animation) is a plain mesh with no animation: glTF has
 /// no way to say "a weights channel over zero targets".
 pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], name: &str, placement: Placement) -> Vec<u8> {
+    let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
+    let curves = &clip.curves;
+    let mut output = Vec::with_capacity(3 * times.len() * curves.len());
+    for k in 0..times.len() {
+        output.extend(curves.iter().map(|c| c.in_tangents[k]));
+        output.extend(curves.iter().map(|c| c.values[k]));
+        output.extend(curves.iter().map(|c| c.out_tangents[k]));
+    }
+    with_weights(clip, triangles, name, placement, &times, &output, Interpolation::CubicSpline)
+}
+
+/// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
+/// frames, the linear blend of two frames in between, and nothing an importer could drop
+/// (Blender's glTF importer ignores CUBICSPLINE tangents).
+pub fn blendshapes_sampled(clip: &BlendShapeClip, frame_times: &[f64], triangles: &[[u32; 3]], name: &str, placement: Placement) -> Vec<u8> {
+    let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
+    let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
+    with_weights(clip, triangles, name, placement, &times, &output, Interpolation::Linear)
+}
+
+fn with_weights(
+    clip: &BlendShapeClip,
+    triangles: &[[u32; 3]],
+    name: &str,
+    placement: Placement,
+    times: &[f32],
+    output: &[f32],
+    interpolation: Interpolation,
+) -> Vec<u8> {
     let mut file = File::new(name, triangles, &clip.base, placement);
     let n = clip.vertex_count();
     let targets: Vec<(String, Index<json::Accessor>)> =
         clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets))).collect();
     if !targets.is_empty() {
-        let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
-        let curves = &clip.curves;
-        let mut output = Vec::with_capacity(3 * times.len() * curves.len());
-        for k in 0..times.len() {
-            output.extend(curves.iter().map(|c| c.in_tangents[k]));
-            output.extend(curves.iter().map(|c| c.values[k]));
-            output.extend(curves.iter().map(|c| c.out_tangents[k]));
-        }
-        file.morph(targets, &times, &output, Interpolation::CubicSpline);
+        file.morph(targets, times, output, interpolation);
     }
     file.finish()
 }
@@ -457,6 +478,21 @@ mod tests {
             120.0, 121.0, 20.0, 21.0, 220.0, 221.0,
         ]);
         assert_eq!(root.meshes[0].weights, Some(vec![0.0, 0.0]));
+    }
+
+    #[test]
+    fn linear_output_is_the_weights_at_every_frame() {
+        let c = clip();
+        let frames = [0.0, 0.25, 0.5, 1.0];
+        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, &[[0, 1, 2]], "box", Y_UP));
+        let sampler = &root.animations[0].samplers[0];
+        assert_eq!(sampler.interpolation, Valid(Interpolation::Linear));
+        assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.25, 0.5, 1.0]);
+        // Per frame, the weights of both targets in target order.
+        let expected: Vec<f32> = frames.iter().flat_map(|&t| c.weights_at(t)).map(|w| w as f32).collect();
+        assert_eq!(read_f32s(&root, &bin, sampler.output), expected);
+        assert_eq!(expected[4..6], [c.curves[0].values[1], c.curves[1].values[1]], "frame 2 is key 1: its values");
+        assert_eq!(root.meshes[0].primitives[0].targets.as_ref().unwrap().len(), 2);
     }
 
     #[test]

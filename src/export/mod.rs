@@ -1,12 +1,14 @@
 //! Writers of the animation files, and the two forms they write.
 //!
-//! - [`clip`]: the blendshape form of a Hermite trajectory (base, targets, weight curves);
+//! - [`clip`]: the blendshape form of a Hermite trajectory (base, targets, weight curves), in
+//!   the signed form or the Bernstein form of `bernstein` (every weight in [0, 1]);
 //! - [`fullframe`]: one pose per frame (what a vertex cache holds);
 //! - [`usda`] (written natively), [`usdc`] (converted by usd-core), [`glb`]: the files.
 //!
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
 //! gets is decided by the export stage (`crate::stages::export`).
 
+mod bernstein;
 pub mod clip;
 pub mod fullframe;
 pub mod glb;

@@ -6,7 +6,7 @@
 
 use std::ffi::{OsStr, OsString};
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Stdio};
 
 use crate::error::{Error, Result};
 
@@ -35,13 +35,14 @@ pub fn convert(usda: &Path, usdc: &Path) -> Result<()> {
 /// [`convert`] with an explicit Python executable.
 pub(crate) fn convert_with(python: &OsStr, usda: &Path, usdc: &Path) -> Result<()> {
     let py = python.to_string_lossy();
-    let output = Command::new(python)
-        .arg("-c")
-        .arg(SCRIPT)
-        .arg(usda)
-        .arg(usdc)
-        .output()
-        .map_err(|e| Error::in_file(usdc, format!("cannot run {py} to write the usdc file: {e}"), FIX))?;
+    // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
+    let cannot_run = |e: std::io::Error| Error::in_file(usdc, format!("cannot run {py} to write the usdc file: {e}"), FIX);
+    let child = crate::interrupt::spawn(
+        Command::new(python).arg("-c").arg(SCRIPT).arg(usda).arg(usdc).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
+    )
+    .map_err(cannot_run)?;
+    crate::interrupt::pause_point("usdc", &format!("(pid {})", child.id()));
+    let output = child.wait_with_output().map_err(cannot_run)?;
     if output.status.success() && usdc.is_file() {
         return Ok(());
     }

@@ -69,7 +69,7 @@ impl Quaternion {
         q.normalized()
     }
 
-    pub fn to_matrix(&self) -> Mat3 {
+    pub fn to_matrix(self) -> Mat3 {
         let (w, [x, y, z]) = (self.w, self.v);
         [
             [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],

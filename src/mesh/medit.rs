@@ -15,11 +15,11 @@ use std::path::Path;
 
 use super::tetgen_io::{content_lines, first_flat_tet};
 use super::{Point, TetMesh};
-use crate::error::{Error, Result};
+use crate::error::{quoted, Error, Result};
 
 /// Read a MEDIT tet mesh; errors name the file and the line.
 pub fn read(path: &Path) -> Result<TetMesh> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the MEDIT tet mesh"))?;
+    let text = crate::input::read_text(path, "the MEDIT tet mesh")?;
     parse(&text).map_err(|e| e.with_path(path))
 }
 
@@ -39,9 +39,9 @@ pub fn parse(text: &str) -> Result<TetMesh> {
         if keyword == "End" {
             break;
         }
-        if !keyword.starts_with(|c: char| c.is_ascii_alphabetic()) {
+        if !is_keyword(keyword) {
             return Err(Error::general(
-                format!("line {line_no}: expected a block keyword (Vertices, Tetrahedra, ...), found `{keyword}`"),
+                format!("line {line_no}: expected a block keyword (Vertices, Tetrahedra, ...), found {}", quoted(keyword)),
                 "the row count of the block above is too small; correct it or re-export the tet mesh",
             ));
         }
@@ -115,6 +115,12 @@ pub fn parse(text: &str) -> Result<TetMesh> {
     Ok(mesh)
 }
 
+/// A block keyword starts with a letter; `nan`, `inf` and `infinity` (any case) are values of
+/// a row, so a NaN row is reported as a NaN, not as the end of its block.
+fn is_keyword(token: &str) -> bool {
+    token.starts_with(|c: char| c.is_ascii_alphabetic()) && token.parse::<f64>().is_err()
+}
+
 /// The number after a keyword: on the same line or alone on the next one.
 fn block_value<'a>(
     keyword: &str,
@@ -131,7 +137,7 @@ fn block_value<'a>(
     };
     token.parse().map_err(|_| {
         Error::general(
-            format!("line {at}: `{keyword}` must be followed by a count or value, found `{token}`"),
+            format!("line {at}: {} must be followed by a count or value, found {}", quoted(keyword), quoted(&token)),
             "write the number of rows after each block keyword, as MEDIT files do",
         )
     })
@@ -149,16 +155,15 @@ fn block_rows<'a>(
         let short = |found: String| {
             Error::general(
                 format!(
-                    "line {line_no}: `{keyword}` declares {count} rows but only {} follow before {found}",
+                    "line {line_no}: {} declares {count} rows but only {} follow before {found}",
+                    quoted(keyword),
                     rows.len()
                 ),
                 format!("correct the count on line {line_no} or re-export the tet mesh"),
             )
         };
         match lines.next() {
-            Some((_, tokens)) if tokens[0].starts_with(|c: char| c.is_ascii_alphabetic()) => {
-                return Err(short(format!("`{}`", tokens[0])))
-            }
+            Some((_, tokens)) if is_keyword(tokens[0]) => return Err(short(quoted(tokens[0]))),
             Some(row) => rows.push(row),
             None => return Err(short("the end of the file".into())),
         }
@@ -176,7 +181,7 @@ fn vertex_row((line_no, tokens): &Line, row: usize) -> Result<Point> {
     let mut p = [0.0; 3];
     for (slot, token) in p.iter_mut().zip(tokens) {
         *slot = token.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
-            Error::general(format!("line {line_no}: Vertices row {row}: `{token}` is not a finite number"), REEXPORT)
+            Error::general(format!("line {line_no}: Vertices row {row}: {} is not a finite number", quoted(token)), REEXPORT)
         })?;
     }
     Ok(p)
@@ -192,7 +197,7 @@ fn tet_row((line_no, tokens): &Line, row: usize) -> Result<([i64; 4], usize, usi
     let mut corners = [0i64; 4];
     for (slot, token) in corners.iter_mut().zip(tokens) {
         *slot = token.parse().map_err(|_| {
-            Error::general(format!("line {line_no}: Tetrahedra row {row}: `{token}` is not a vertex number"), REEXPORT)
+            Error::general(format!("line {line_no}: Tetrahedra row {row}: {} is not a vertex number", quoted(token)), REEXPORT)
         })?;
     }
     Ok((corners, *line_no, row))
@@ -240,6 +245,12 @@ End
     }
 
     #[test]
+    fn a_byte_order_mark_and_crlf_are_accepted() {
+        let with_bom = format!("\u{feff}{}", TWO_TETS.replace('\n', "\r\n"));
+        assert_eq!(parse(&with_bom).unwrap(), parse(TWO_TETS).unwrap());
+    }
+
+    #[test]
     fn skips_other_blocks_and_orients_tets() {
         let mesh = parse(TWO_TETS).unwrap();
         assert_eq!(mesh.positions.len(), 5);
@@ -276,6 +287,11 @@ End
             ),
             (format!("{TWO_TETS}Vertices\n0\n").replace("End\n", ""), "a second `Vertices` block"),
             ("MeshVersionFormatted 1\nDimension 3\n".to_string(), "has no `Vertices` block"),
+            // A NaN row is a NaN, not the end of its block.
+            (TWO_TETS.replace("1 0 0 1\n", "nan 0 0 1\n"), "line 8: Vertices row 2: `nan` is not a finite number"),
+            (TWO_TETS.replace("1 0 0 1\n", "1 -Infinity 0 1\n"), "line 8: Vertices row 2: `-Infinity` is not a finite number"),
+            (TWO_TETS.replace("1 2 3 5 1", "1 2 3 5 1\nNaN 2 3 4 1"), "line 23: expected a block keyword (Vertices, Tetrahedra, ...), found `NaN`"),
+            (TWO_TETS.replace("0 0 0 1\n", &format!("0 0 {} 1\n", "1".repeat(100_000))), "(100000 bytes) is not a finite number"),
         ];
         for (text, expected) in cases {
             let s = parse_err(&text);

@@ -15,14 +15,14 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::{Point, TriMesh};
-use crate::error::{Error, Result};
+use crate::error::{quoted, Error, Result};
 
 /// Read an OBJ surface; errors name the file and the line.
 ///
 /// Bytes that are not UTF-8 (Latin-1 comments or group names from older exporters) are
 /// replaced, not refused: only the ASCII keywords and numbers matter.
 pub fn read(path: &Path) -> Result<TriMesh> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the OBJ surface"))?;
+    let bytes = crate::input::read_bytes(path, "the OBJ surface")?;
     parse(&String::from_utf8_lossy(&bytes)).map_err(|e| e.with_path(path))
 }
 
@@ -67,13 +67,13 @@ fn parse_vertex<'a>(tokens: impl Iterator<Item = &'a str>, line_no: usize) -> Re
     for token in tokens.take(3) {
         let value: f64 = token.parse().map_err(|_| {
             Error::general(
-                format!("line {line_no}: vertex coordinate `{token}` is not a number"),
+                format!("line {line_no}: vertex coordinate {} is not a number", quoted(token)),
                 "write vertices as `v x y z` with decimal numbers, e.g. `v 0.5 1 -2e-3`",
             )
         })?;
         if !value.is_finite() {
             return Err(Error::general(
-                format!("line {line_no}: vertex coordinate `{token}` is not finite"),
+                format!("line {line_no}: vertex coordinate {} is not finite", quoted(token)),
                 "fix or delete the vertex in your modeling tool and re-export",
             ));
         }
@@ -95,7 +95,7 @@ fn parse_corner(token: &str, defined: usize, line_no: usize) -> Result<u32> {
     let vertex = token.split('/').next().unwrap_or("");
     let index: i64 = vertex.parse().map_err(|_| {
         Error::general(
-            format!("line {line_no}: face corner `{token}` does not start with an integer vertex index"),
+            format!("line {line_no}: face corner {} does not start with an integer vertex index", quoted(token)),
             "write faces as `f 1 2 3` (or `f 1/1/1 2/2/2 3/3/3`) with 1-based vertex numbers",
         )
     })?;

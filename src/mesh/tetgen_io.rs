@@ -10,18 +10,16 @@ use std::path::Path;
 use std::str::FromStr;
 
 use super::{norm, sub, tet_signed_volume, Point, TetMesh, TriMesh};
-use crate::error::{Error, Result};
+use crate::error::{quoted, short, Error, Result};
 
 /// Read a `.node`/`.ele` pair given either file; indices may be 0- or 1-based (taken from the
 /// first node number). Tets are oriented to positive volume.
 pub fn read(path: &Path) -> Result<TetMesh> {
     let node_path = path.with_extension("node");
     let ele_path = path.with_extension("ele");
-    let node_text =
-        std::fs::read_to_string(&node_path).map_err(|e| Error::io(&node_path, &e, "read the TetGen nodes"))?;
+    let node_text = crate::input::read_text(&node_path, "the TetGen nodes")?;
     let (positions, first_index) = parse_node(&node_text).map_err(|e| e.with_path(&node_path))?;
-    let ele_text =
-        std::fs::read_to_string(&ele_path).map_err(|e| Error::io(&ele_path, &e, "read the TetGen tetrahedra"))?;
+    let ele_text = crate::input::read_text(&ele_path, "the TetGen tetrahedra")?;
     let tets = parse_ele(&ele_text, first_index, positions.len()).map_err(|e| e.with_path(&ele_path))?;
     if tets.is_empty() {
         return Err(Error::in_file(&ele_path, "has no tetrahedra", "re-run TetGen on a closed surface"));
@@ -120,7 +118,7 @@ pub fn parse_ele(text: &str, first_index: usize, node_count: usize) -> Result<Ve
                     return Err(Error::general(
                         format!(
                             "line {line_no}: tetrahedron {} refers to node {node}, but nodes are numbered {first_index} to {}",
-                            tokens[0],
+                            short(tokens[0]),
                             (first_index + node_count).saturating_sub(1)
                         ),
                         "use the .node file written together with this .ele file",
@@ -151,22 +149,25 @@ pub fn write_smesh(surface: &TriMesh) -> String {
 }
 
 /// The first tet whose volume is at round-off level (below 1e-12 of its longest edge cubed),
-/// which no orientation fix can make positive.
+/// which no orientation fix can make positive. A volume that overflows (finite coordinates
+/// near 1e100 and beyond give an infinite or NaN volume) counts as flat too: no sign can be
+/// trusted.
 pub(crate) fn first_flat_tet(mesh: &TetMesh) -> Option<usize> {
     mesh.tets.iter().position(|tet| {
         let [a, b, c, d] = tet.map(|i| mesh.positions[i as usize]);
         let longest =
             [(a, b), (a, c), (a, d), (b, c), (b, d), (c, d)].iter().map(|&(p, q)| norm(sub(p, q))).fold(0.0, f64::max);
-        6.0 * tet_signed_volume(a, b, c, d).abs() <= 1e-12 * longest.powi(3)
+        let volume6 = 6.0 * tet_signed_volume(a, b, c, d).abs();
+        !(volume6.is_finite() && volume6 > 1e-12 * longest.powi(3))
     })
 }
 
 const REMESH: &str = "re-run TetGen, or re-export the tet mesh as TetGen .node/.ele";
 
 /// Non-empty lines without their `#` comment: 1-based number and tokens. Shared with the
-/// MEDIT reader, whose comments are the same.
+/// MEDIT reader, whose comments are the same. A UTF-8 byte order mark is skipped.
 pub(super) fn content_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
-    text.lines().enumerate().filter_map(|(i, line)| {
+    text.strip_prefix('\u{feff}').unwrap_or(text).lines().enumerate().filter_map(|(i, line)| {
         let tokens: Vec<&str> = line.split('#').next().unwrap_or("").split_whitespace().collect();
         (!tokens.is_empty()).then_some((i + 1, tokens))
     })
@@ -211,7 +212,7 @@ fn optional_field<T: FromStr>(tokens: &[&str], i: usize, line_no: usize, what: &
         .map(|token| {
             token
                 .parse()
-                .map_err(|_| Error::general(format!("line {line_no}: {what} `{token}` is not a valid number"), REMESH))
+                .map_err(|_| Error::general(format!("line {line_no}: {what} {} is not a valid number", quoted(token)), REMESH))
         })
         .transpose()
 }
@@ -263,6 +264,19 @@ mod tests {
             .contains("line 2: tetrahedron 1 refers to node 6, but nodes are numbered 1 to 5"));
         assert!(err(parse_ele("1 4 0\n1 0 2 3 4\n", 1, 5)).contains("refers to node 0"));
         assert!(err(parse_ele("1 6 0\n", 0, 5)).contains("line 1: header says 6 nodes per tetrahedron"));
+        assert_eq!(parse_node(&format!("\u{feff}{NODE}")).unwrap(), parse_node(NODE).unwrap(), "a byte order mark is skipped");
+        let long = "9".repeat(99_999) + "x";
+        let s = err(parse_node(&format!("1 3 0 0\n0 {long} 0 0\n")));
+        assert!(s.contains("line 2: a coordinate `999") && s.contains("(100000 bytes) is not a valid number") && s.len() < 300, "{s}");
+    }
+
+    #[test]
+    fn a_tet_whose_volume_overflows_counts_as_flat() {
+        // Finite coordinates whose volume is NaN in f64 (0 * inf): no orientation can be trusted.
+        let positions = vec![[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1e308, 0.0], [0.0, 0.0, 1e308], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let mesh = TetMesh { positions, tets: vec![[0, 4, 5, 6], [0, 1, 2, 3]] };
+        assert!(mesh.signed_volume_at(&mesh.positions, 1).is_nan());
+        assert_eq!(first_flat_tet(&mesh), Some(1));
     }
 
     #[test]

@@ -102,8 +102,10 @@ impl Report {
         bytes
     }
 
-    /// Stage `report.json` and `report.md`.
+    /// Stage `report.json` and `report.md`, in the staging group `report` (a commit replaces
+    /// the report an earlier run wrote, and keeps an export's files beside it).
     pub fn write(&self, staging: &mut Staging) -> Result<()> {
+        staging.set_group("report");
         staging.write("report.json", &self.to_json())?;
         staging.write("report.md", markdown::render(self).as_bytes())
     }

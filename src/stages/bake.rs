@@ -36,7 +36,10 @@ impl<'a> Bake<'a> {
 
     /// ... `solve`, `embed`: the exported surface's animation.
     pub fn animation(&self) -> Result<Animation> {
-        embed(&solve(&self.body()?, self.method, self.progress)?)
+        let body = self.body()?;
+        // The interruption tests stop here, between TetGen and the solver.
+        crate::interrupt::pause_point("solve", "");
+        embed(&solve(&body, self.method, self.progress)?)
     }
 
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the

@@ -1,10 +1,14 @@
 //! The `export` stage: the animation's blendshape and full-frame files.
 //!
-//! Contract: build the [`BlendShapeClip`] (blendshapes) and the `FullFrame` (one pose per
-//! frame) from the animation, and stage, for each format in `scene.export.formats`,
-//! `NAME.EXT` (blendshapes) and, when `full_frame`, `NAME.full.EXT` (full-frame). `usdc` is
-//! converted from the staged `.usda` by usd-core. Returns the list of staged files with their
-//! sizes. The layouts are specified in `formats/usd.md` and `formats/gltf.md`.
+//! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights`
+//! names) and the `FullFrame` (one pose per frame) from the animation, and stage, for each
+//! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
+//! `NAME.full.EXT` (full-frame). `usdc` is converted from the staged `.usda` by usd-core.
+//! Returns the list of staged files with their sizes. The files (and whatever the caller
+//! stages after them, e.g. `NAME.outputs.json`) are in the staging group `export:NAME`: a
+//! commit removes the files an earlier export of the same scene wrote that this one did not,
+//! and keeps the report and other scenes' files. The layouts are specified in
+//! `formats/usd.md` and `formats/gltf.md`.
 
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
@@ -12,7 +16,7 @@ use crate::export::fullframe::FullFrame;
 use crate::export::{glb, usda, usdc};
 use crate::mesh::Axis;
 use crate::output::Staging;
-use crate::scene::Format;
+use crate::scene::{Format, GltfInterpolation};
 use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
@@ -20,6 +24,7 @@ use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     check(animation)?;
     let scene = &animation.scene;
+    staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
     let triangles = &animation.mesh.triangles;
     let mut formats = scene.export.formats.clone();
@@ -33,7 +38,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     };
     let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
 
-    let clip = BlendShapeClip::from_trajectory(trajectory);
+    let clip = BlendShapeClip::new(trajectory, scene.export.weights);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     let mut forms = vec![(OutputKind::Blendshape, String::new())];
     if full.is_some() {
@@ -74,6 +79,10 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                 Format::Glb => {
                     let bytes = match (&kind, &full) {
                         (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, triangles, &scene.name, placement),
+                        _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
+                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
+                            glb::blendshapes_sampled(&clip, &frame_times, triangles, &scene.name, placement)
+                        }
                         _ => glb::blendshapes(&clip, triangles, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;

@@ -12,7 +12,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
-    let error = blendshape_error(tr, &frames, diagonal);
+    let error = blendshape_error(tr, scene.export.weights, &frames, diagonal);
     // At the input keys' times: a trajectory may hold in-between keys too (mass-spring).
     let key_times = &scene.keyframes.times;
     let keyframe_deviation = deviation(key_times.iter().map(|&t| tr.evaluate(t)).zip(animation.input_keys.iter().cloned()), diagonal);

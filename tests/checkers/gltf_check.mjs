@@ -48,13 +48,19 @@ function parse(bytes) {
   return new Promise((resolve, reject) => new GLTFLoader().parse(buffer, '', resolve, reject));
 }
 
-/** The kind of animation the file holds, from its JSON. */
+/** The kind of animation the file holds, from its JSON: full-frame files are LINEAR with one
+ *  target per frame (`frame_N`); blendshape files are CUBICSPLINE, or LINEAR samples of the
+ *  weights at every frame. */
 function kindOf(json) {
   const samplers = (json.animations ?? []).flatMap((a) => a.samplers);
   if (samplers.length === 0) return 'static';
   const interpolations = new Set(samplers.map((s) => s.interpolation ?? 'LINEAR'));
   if (interpolations.size !== 1) return [...interpolations].join('+');
-  return { CUBICSPLINE: 'blendshape', LINEAR: 'full-frame' }[[...interpolations][0]] ?? [...interpolations][0];
+  const interpolation = [...interpolations][0];
+  if (interpolation === 'CUBICSPLINE') return 'blendshape';
+  if (interpolation !== 'LINEAR') return interpolation;
+  const names = json.meshes?.[0]?.extras?.targetNames ?? [];
+  return names.length > 0 && names.every((n) => /^frame_-?\d+$/.test(n)) ? 'full-frame' : 'blendshape';
 }
 
 /** Local positions of a morphed mesh at its current influences. */
@@ -122,6 +128,7 @@ async function main() {
   }
   const mesh = meshes[0];
   summary.kind = kindOf(gltf.parser.json);
+  summary.interpolation = [...new Set((gltf.parser.json.animations ?? []).flatMap((a) => a.samplers.map((s) => s.interpolation ?? 'LINEAR')))].join('+');
   if (expected.kind && summary.kind !== expected.kind && !(summary.kind === 'static' && expected.kind === 'blendshape')) {
     summary.issues.push(`animates as ${summary.kind}, expected ${expected.kind}`);
   }
@@ -157,6 +164,7 @@ async function main() {
       return;
     }
     const error = maxDistance(got, want) / scale;
+    if (Number.isNaN(error)) summary.issues.push(`time ${t}: a point is NaN`);
     if (error > worst) [worst, worstTime] = [error, t];
   });
   Object.assign(summary, { times: expected.times.length, max_error: worst, worst_time: worstTime });

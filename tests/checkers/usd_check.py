@@ -111,7 +111,9 @@ def diagonal(frames):
 
 
 def max_distance(a, b):
-    return max(math.dist(p, q) for p, q in zip(a, b))
+    """The largest point distance; NaN when any distance is (max() would skip it)."""
+    distances = [math.dist(p, q) for p, q in zip(a, b)]
+    return math.nan if any(math.isnan(d) for d in distances) else max(distances)
 
 
 def check(path, expected):
@@ -138,6 +140,8 @@ def check(path, expected):
             summary["issues"].append(f"timecode {tc}: {len(got)} points, expected {len(want)}")
             return summary, frames
         error = max_distance(got, want) / scale
+        if math.isnan(error):
+            summary["issues"].append(f"timecode {tc}: a point is NaN")
         if error > worst:
             worst, worst_at = error, tc
     summary.update(vertices=len(frames[0]) if frames else 0, timecodes=len(frames), max_error=worst, worst_timecode=worst_at)

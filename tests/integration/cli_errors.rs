@@ -6,6 +6,9 @@
 //! folder (the child's TMPDIR is a folder of the test's own, which must stay empty). Usage
 //! errors exit 2. Each case builds its inputs in a fresh folder; meshes come from
 //! `blendsim::procedural` and `blendsim::mesh::obj::write`, or are written out by hand.
+//! `corpus_of_bad_inputs` runs a table of bad inputs of every family twice, into a fresh
+//! place and over a good bake (which must stay byte-identical), and prints the table of
+//! messages with `--nocapture`.
 
 use std::ffi::OsStr;
 use std::path::Path;
@@ -455,4 +458,269 @@ fn help_of_every_subcommand() {
         }
     }
     assert!(tree(&dir.path).is_empty());
+}
+
+// --- The corpus: bad inputs of every family, each into a fresh place and over a good bake. ---
+
+/// A file of a corpus case.
+enum Content {
+    Text(String),
+    Bytes(Vec<u8>),
+    Fifo,
+    Folder,
+    Link(&'static str),
+}
+
+struct Bad {
+    name: &'static str,
+    files: Vec<(String, Content)>,
+    /// The file the message must name, as a path from where blendsim runs.
+    names: String,
+    says: Vec<String>,
+}
+
+fn text(name: &str, content: impl Into<String>) -> (String, Content) {
+    (name.to_string(), Content::Text(content.into()))
+}
+
+/// A two-tet MEDIT mesh (the second tet written with negative orientation).
+const TWO_TETS: &str = "MeshVersionFormatted 1\nDimension 3\nVertices 5\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\n0 0 -1 7\n\
+                        Tetrahedra 2\n1 2 3 4 1\n1 2 3 5 1\nEnd\n";
+
+/// The good scene over k0.obj and k1.obj with extra `[keyframes]` lines and tables.
+fn good_scene(keyframe_lines: &str, tables: &str) -> String {
+    scene(&["k0.obj", "k1.obj"], keyframe_lines, tables)
+}
+
+fn bad(name: &'static str, files: Vec<(String, Content)>, names: &str, says: &[&str]) -> Bad {
+    let mut all = vec![text("k0.obj", obj::write(&cube())), text("k1.obj", obj::write(&translated(cube(), [0.0, 0.5, 0.0])))];
+    for f in files {
+        all.retain(|(n, _)| *n != f.0);
+        all.push(f);
+    }
+    Bad { name, files: all, names: names.to_string(), says: says.iter().map(|s| s.to_string()).collect() }
+}
+
+/// A scene-file case: the good scene edited by `edit`.
+fn bad_scene(name: &'static str, scene_text: String, says: &[&str]) -> Bad {
+    bad(name, vec![text("scene.toml", scene_text)], "in/scene.toml", says)
+}
+
+fn corpus() -> Vec<Bad> {
+    let base = good_scene("", "");
+    let with = |line: &str| good_scene(line, "");
+    let table = |t: &str| good_scene("", t);
+    let renamed = |n: &str| base.replacen("name = \"t\"", &format!("name = {n}"), 1);
+    let key1 = |content: String| vec![text("scene.toml", base.clone()), text("k1.obj", content)];
+    let cube_obj = obj::write(&cube());
+    let moved = |t: &str| TWO_TETS.replace("0 0 1 1\n", t);
+    let tets = |k1: String| vec![text("k0.mesh", TWO_TETS), text("k1.mesh", k1), text("scene.toml", scene(&["k0.mesh", "k1.mesh"], "", ""))];
+    let dmat = |values: &str| {
+        vec![text("sel.dmat", format!("1 26\n{}{values}\n", "0\n".repeat(25))), text("scene.toml", with("fixed = [\"all\", \"sel.dmat\"]"))]
+    };
+    let index = |content: &str| vec![text("ends.txt", content), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))];
+    let huge = "7".repeat(1_000_000);
+    vec![
+        // The scene file itself.
+        bad_scene("scene-syntax", "name = \"t\"\n[keyframes\nmeshes = []\n".into(), &["line 2: "]),
+        bad_scene("scene-missing-table", "name = \"t\"\n".into(), &["missing field `keyframes`", "(fix: add the key"]),
+        bad_scene("scene-unknown-table", table("[solverr]\nsamples = 3"), &["unknown field `solverr`"]),
+        bad("scene-not-utf8", vec![("scene.toml".into(), Content::Bytes(b"name = \"caf\xe9\"\n".to_vec()))], "in/scene.toml", &["is not UTF-8 text (invalid byte at offset 11)"]),
+        bad("scene-fifo", vec![("scene.toml".into(), Content::Fifo)], "in/scene.toml", &["is a named pipe (FIFO), not a regular file"]),
+        bad("scene-folder", vec![("scene.toml".into(), Content::Folder)], "in/scene.toml", &["is a folder, not a regular file"]),
+        bad_scene("name-newline", renamed("\"a\\nb\""), &["name `a\\nb` cannot be a file stem: it contains a control character"]),
+        bad_scene("name-escape", renamed("\"\\u001b[31mred\""), &["name `\\u{1b}[31mred` cannot be a file stem"]),
+        bad_scene("name-carriage-return", renamed("\"a\\rb\""), &["name `a\\rb`", "contains a control character"]),
+        bad_scene("name-parent", renamed("\"../escape\""), &["contains a path separator"]),
+        bad_scene("name-backslash", renamed("\"a\\\\b\""), &["contains a path separator"]),
+        bad_scene("name-hidden", renamed("\".t\""), &["starts with '.'"]),
+        bad_scene("fps-zero", base.replacen("[keyframes]", "fps = 0\n[keyframes]", 1), &["fps = 0 must be positive"]),
+        bad_scene("fps-nan", base.replacen("[keyframes]", "fps = nan\n[keyframes]", 1), &["fps = NaN must be positive"]),
+        bad_scene("one-key", scene(&["k0.obj"], "", ""), &["[keyframes] has 1 mesh(es)"]),
+        bad_scene("times-count", base.replace("times = [0.0, 1.0]", "times = [0.0, 1.0, 2.0]"), &["has 2 meshes but 3 times"]),
+        bad_scene("times-decrease", base.replace("times = [0.0, 1.0]", "times = [1.0, 0.0]"), &["times decrease at key 1"]),
+        bad_scene("times-equal", base.replace("times = [0.0, 1.0]", "times = [0.5, 0.5]"), &["keys 0 and 1 share the time 0.5"]),
+        bad_scene("times-inf", base.replace("times = [0.0, 1.0]", "times = [0.0, inf]"), &["times[1] is not a number"]),
+        bad_scene("rest-range", with("rest = 5"), &["rest = 5 but there are 2 keys"]),
+        bad_scene("rest-negative", with("rest = -1"), &["rest key index must be >= 0"]),
+        bad_scene("cyclic-two-keys", with("cyclic = true"), &["cyclic = true needs at least 3 keys"]),
+        bad_scene("fixed-count", with("fixed = [\"all\"]"), &["fixed has 1 entries for 2 keys"]),
+        bad_scene("slab-nan", with("fixed = [\"all\", { axis = \"y\", min = nan }]"), &["fixed[1]: the y slab has min = nan"]),
+        bad_scene("slab-crossed", with("fixed_velocity = [\"none\", [{ axis = \"x\", min = 2.0, max = 1.0 }]]"), &["fixed_velocity[1]: the x slab has min = 2 > max = 1"]),
+        bad_scene("slab-and-file", with("fixed = [\"all\", { file = \"a.txt\", axis = \"y\" }]"), &["either `file` or `axis`"]),
+        bad_scene("gravity-four", table("[material]\ngravity = [0.0, -9.8, 0.0, 1.0]"), &["expected 3 components (x, y, z), found 4"]),
+        bad_scene("gravity-nan", table("[material]\ngravity = [0.0, nan, 0.0]"), &["gravity has a non-finite component"]),
+        bad_scene("quality", table("[tet]\nquality = 0.5"), &["[tet] quality = 0.5 must be >= 1"]),
+        bad_scene("max-volume", table("[tet]\nmax_volume = -1.0"), &["[tet] max_volume = -1 must be >= 0"]),
+        bad_scene("timeout", table("[tet]\ntimeout = 0"), &["[tet] timeout = 0 must be positive"]),
+        bad_scene("density", table("[material]\ndensity = 0.0"), &["[material] density = 0 is out of range"]),
+        bad_scene("no-stiffness", table("[material]\nstiffness = 0.0\nvolume = 0.0"), &["stiffness and volume are both 0"]),
+        bad_scene("samples-zero", table("[solver]\nsamples = 0"), &["[solver] samples = 0"]),
+        bad_scene("samples-negative", table("[solver]\nsamples = -3"), &["line 7: invalid value: integer `-3`, expected usize"]),
+        bad_scene("tolerance", table("[solver]\ntolerance = -1.0"), &["tolerance = -1 must be positive"]),
+        bad_scene("regularization", table("[solver]\nregularization = -1.0"), &["regularization = -1 must be >= 0"]),
+        bad_scene("method", table("[solver]\nmethod = \"magic\""), &["unknown variant `magic`"]),
+        bad_scene("up-axis", table("[export]\nup_axis = \"x\""), &["up_axis = \"x\""]),
+        bad_scene("meters-per-unit", table("[export]\nmeters_per_unit = 0.0"), &["meters_per_unit = 0 must be positive"]),
+        bad_scene("formats-empty", table("[export]\nformats = []"), &["formats is empty"]),
+        bad_scene("formats-unknown", table("[export]\nformats = [\"fbx\"]"), &["unknown variant `fbx`"]),
+        // OBJ keyframes.
+        bad("obj-nan", key1(cube_obj.replacen("v ", "v nan ", 1).replacen("nan 0", "nan", 1)), "in/k1.obj", &["line 1: vertex coordinate `nan` is not finite"]),
+        bad("obj-index-zero", key1(format!("{cube_obj}f 0 1 2\n")), "in/k1.obj", &["face refers to vertex 0, but OBJ vertex numbers start at 1"]),
+        bad("obj-index-range", key1(format!("{cube_obj}f 1 2 99\n")), "in/k1.obj", &["face refers to vertex 99, but only 26 vertices"]),
+        bad("obj-no-faces", key1("v 0 0 0\nv 1 0 0\n".into()), "in/k1.obj", &["has no faces (2 vertices"]),
+        bad("obj-huge-token", key1(format!("v 0 0 {huge}x\n")), "in/k1.obj", &["line 1: vertex coordinate `7777", "(1000001 bytes) is not a number"]),
+        bad("obj-fifo", vec![("k1.obj".into(), Content::Fifo), text("scene.toml", base.clone())], "in/k1.obj", &["is a named pipe (FIFO), not a regular file, so it cannot be read as the OBJ surface"]),
+        bad("obj-folder", vec![("k1.obj".into(), Content::Folder), text("scene.toml", base.clone())], "in/k1.obj", &["is a folder, not a regular file"]),
+        bad("obj-device", vec![("k1.obj".into(), Content::Link("/dev/zero")), text("scene.toml", base.clone())], "in/k1.obj", &["is a device, not a regular file"]),
+        bad("mesh-extension", vec![text("k1.stl", cube_obj.clone()), text("scene.toml", scene(&["k0.obj", "k1.stl"], "", ""))], "in/k1.stl", &["unknown mesh format"]),
+        bad("path-escape", vec![text("scene.toml", scene(&["k0.obj", "k\\u001b[2J.obj"], "", ""))], "in/k\\u{1b}[2J.obj", &["cannot read the OBJ surface"]),
+        bad("path-newline", vec![text("scene.toml", scene(&["k0.obj", "k\\n1.obj"], "", ""))], "in/k\\n1.obj", &["cannot read the OBJ surface"]),
+        bad("obj-vertex-count", key1(obj::write(&prism([1.0, 1.0, 1.0], [3, 2, 2]))), "in/k1.obj", &["has 34 vertices but in/k0.obj has 26"]),
+        // MEDIT and TetGen keyframes.
+        bad("medit-nan-row", tets(moved("nan 0 1 1\n")), "in/k1.mesh", &["line 7: Vertices row 4: `nan` is not a finite number"]),
+        bad("medit-inf-row", tets(moved("0 inf 1 1\n")), "in/k1.mesh", &["Vertices row 4: `inf` is not a finite number"]),
+        bad("medit-index", tets(TWO_TETS.replace("1 2 3 5 1", "1 2 3 6 1")), "in/k1.mesh", &["Tetrahedra row 2 refers to vertex 6, but vertices are numbered 1 to 5"]),
+        bad("medit-flat", tets(TWO_TETS.replace("1 2 3 5 1", "1 2 3 3 1")), "in/k1.mesh", &["Tetrahedra row 2 (vertices 1 2 3 3) is flat"]),
+        bad("medit-count", tets(TWO_TETS.replace("Vertices 5", "Vertices 6")), "in/k1.mesh", &["`Vertices` declares 6 rows but only 5 follow before `Tetrahedra`"]),
+        bad("medit-no-tets", tets(TWO_TETS.replace("Tetrahedra 2\n1 2 3 4 1\n1 2 3 5 1\n", "")), "in/k1.mesh", &["has no tetrahedra"]),
+        bad("medit-dimension", tets(TWO_TETS.replace("Dimension 3", "Dimension 2")), "in/k1.mesh", &["the mesh has dimension 2, blendsim needs 3"]),
+        bad("medit-huge-keyword", tets(format!("{}{TWO_TETS}", "Q".repeat(100_000))), "in/k1.mesh", &["line 1: `QQQQ", "(100020 bytes) declares 1 rows but only 0 follow before `Dimension`"]),
+        bad("mixed-kinds", vec![text("k1.mesh", TWO_TETS), text("scene.toml", scene(&["k0.obj", "k1.mesh"], "", ""))], "in/k1.mesh", &["is a tet mesh but in/k0.obj is a surface"]),
+        bad("tetgen-no-ele", vec![text("k0.node", "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 0 0 -1\n"), text("scene.toml", scene(&["k0.node", "k0.node"], "", ""))], "in/k0.ele", &["cannot read the TetGen tetrahedra"]),
+        bad("tetgen-header", vec![text("k0.node", "x 3 0 0\n"), text("k0.ele", "0 4 0\n"), text("scene.toml", scene(&["k0.node", "k0.node"], "", ""))], "in/k0.node", &["line 1: the node count `x` is not a valid number"]),
+        // Selection files.
+        bad("dmat-half", dmat("0.5"), "in/sel.dmat", &["line 27: value `0.5` is neither 0 nor 1"]),
+        bad("dmat-two", dmat("2"), "in/sel.dmat", &["value `2` is neither 0 nor 1"]),
+        bad("dmat-negative", dmat("-1"), "in/sel.dmat", &["value `-1` is neither 0 nor 1"]),
+        bad("dmat-nan", dmat("nan"), "in/sel.dmat", &["value `nan` is neither 0 nor 1"]),
+        bad("dmat-header", vec![text("sel.dmat", "2 26\n"), text("scene.toml", with("fixed = [\"all\", \"sel.dmat\"]"))], "in/sel.dmat", &["is a 26x2 matrix"]),
+        bad("index-word", index("0\nabc\n"), "in/ends.txt", &["line 2: `abc` is not a vertex index"]),
+        bad("index-negative", index("-1\n"), "in/ends.txt", &["line 1: `-1` is not a vertex index"]),
+        bad("index-missing", vec![text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["cannot read the vertex selection"]),
+        bad("index-fifo", vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["is a named pipe (FIFO)"]),
+        bad("embed-surface-missing", vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))], "in/fine.obj", &["cannot read the OBJ surface"]),
+        // Found after TetGen and the solve: these once named no file, now the scene.
+        bad_scene("singular", good_scene("fixed = [\"none\", \"none\"]", "[solver]\nregularization = 0.0"), &["the spacetime system is singular"]),
+        bad_scene("no-frame", base.replace("times = [0.0, 1.0]", "times = [0.010, 0.015]"), &["cannot export: the animation runs from 0.01 s to 0.015 s, between two frames at 60 fps"]),
+    ]
+}
+
+fn make(dir: &Path, name: &str, content: &Content) {
+    let path = dir.join(name);
+    match content {
+        Content::Text(t) => std::fs::write(&path, t).unwrap(),
+        Content::Bytes(b) => std::fs::write(&path, b).unwrap(),
+        Content::Folder => std::fs::create_dir(&path).unwrap(),
+        Content::Link(to) => std::os::unix::fs::symlink(to, &path).unwrap(),
+        Content::Fifo => {
+            let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+            // SAFETY: mkfifo with a valid path.
+            assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0, "mkfifo {}", path.display());
+        }
+    }
+}
+
+/// Every case of the corpus, once into a place with no output folder (nothing may be
+/// created) and once over a good bake (it must stay byte for byte as it was, with nothing left
+/// beside it). Prints the corpus table with `--nocapture`.
+#[test]
+fn corpus_of_bad_inputs() {
+    let template = TempDir::new("errors-corpus-template");
+    std::fs::create_dir_all(template.join("in")).unwrap();
+    std::fs::write(template.join("in/k0.obj"), obj::write(&cube())).unwrap();
+    std::fs::write(template.join("in/k1.obj"), obj::write(&translated(cube(), [0.0, 0.5, 0.0]))).unwrap();
+    std::fs::write(template.join("in/scene.toml"), good_scene("", "[export]\nformats = [\"glb\"]")).unwrap();
+    run(&template.path, &["bake", "in/scene.toml", "--out", "out/baked", "-q"]).success();
+    let good = crate::common::cli::snapshot(&template.join("out/baked"));
+
+    let cases = corpus();
+    let mut rows = Vec::new();
+    for case in &cases {
+        let mut message = String::new();
+        for over_a_bake in [false, true] {
+            let dir = TempDir::new(&format!("errors-corpus-{}-{over_a_bake}", case.name));
+            std::fs::create_dir_all(dir.join("in")).unwrap();
+            std::fs::create_dir_all(dir.join("tmp")).unwrap();
+            for (name, content) in &case.files {
+                make(&dir.join("in"), name, content);
+            }
+            if over_a_bake {
+                crate::common::cli::copy_tree(&template.join("out"), &dir.join("out"));
+            }
+            let before = tree(&dir.path);
+            let tmp = dir.join("tmp");
+            let r = crate::common::cli::run_timeout(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked"], &[("TMPDIR", tmp.as_os_str())], 120.0);
+            assert_eq!(r.code, Some(1), "{}: bad input must exit 1:\n{r}", case.name);
+            assert_one_line_error(&r);
+            assert!(r.stdout.is_empty(), "{}:\n{r}", case.name);
+            assert!(!r.stderr.trim_end().chars().any(char::is_control), "{}: a control character in the message:\n{r:?}", case.name);
+            assert!(r.stderr.len() < 1000, "{}: a message of {} bytes", case.name, r.stderr.len());
+            assert_names(&r, &case.names);
+            for s in &case.says {
+                assert_says(&r, s);
+            }
+            assert_eq!(tree(&dir.path), before, "{}: the run left files behind or removed some:\n{r}", case.name);
+            if over_a_bake {
+                assert_eq!(crate::common::cli::snapshot(&dir.join("out/baked")), good, "{}: the earlier bake changed", case.name);
+            }
+            message = r.stderr.trim_end().trim_start_matches("error: ").to_string();
+        }
+        rows.push(format!("| {} | `{}` |", case.name, message.replace('|', "\\|")));
+    }
+    eprintln!("| input | message (exit 1) |\n|---|---|\n{}", rows.join("\n"));
+    assert!(cases.len() >= 60, "{} cases", cases.len());
+}
+
+/// A UTF-8 byte order mark is accepted by every text reader: scene, OBJ, MEDIT, selections.
+#[test]
+fn byte_order_marks_are_accepted_everywhere() {
+    let dir = TempDir::new("errors-bom");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    let bom = |s: String| format!("\u{feff}{s}");
+    std::fs::write(input.join("k0.obj"), bom(obj::write(&cube()))).unwrap();
+    std::fs::write(input.join("k1.obj"), bom(obj::write(&translated(cube(), [0.0, 0.5, 0.0])))).unwrap();
+    std::fs::write(input.join("ends.txt"), bom("0\n1\n".into())).unwrap();
+    std::fs::write(input.join("sel.dmat"), bom(format!("1 26\n{}", "1\n".repeat(26)))).unwrap();
+    let text = good_scene("fixed = [\"sel.dmat\", \"ends.txt\"]", "[export]\nformats = [\"glb\"]");
+    std::fs::write(input.join("scene.toml"), bom(text)).unwrap();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "out", "-q"]).success();
+    let tets = dir.join("tets");
+    std::fs::create_dir_all(&tets).unwrap();
+    std::fs::write(tets.join("k0.mesh"), bom(TWO_TETS.into())).unwrap();
+    std::fs::write(tets.join("scene.toml"), bom(scene(&["k0.mesh", "k0.mesh"], "", "[export]\nformats = [\"glb\"]"))).unwrap();
+    run(&dir.path, &["bake", "tets/scene.toml", "--out", "out2", "-q"]).success();
+}
+
+/// Errors found after a stage file was read (by the solver, the export's checks) once named
+/// no file; they name the stage file the subcommand was given.
+#[test]
+fn errors_found_after_reading_a_stage_file_name_it() {
+    let dir = TempDir::new("errors-after-stage");
+    stage_files(&dir.path);
+    let edit = |file: &str, to: &str, change: &dyn Fn(&mut serde_json::Value)| {
+        let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(file)).unwrap()).unwrap();
+        change(&mut v);
+        std::fs::write(dir.join(to), serde_json::to_vec(&v).unwrap()).unwrap();
+    };
+    edit("body.json", "free.json", &|v| {
+        v["data"]["scene"]["solver"]["regularization"] = 0.0.into();
+        let keys = v["data"]["keys"]["fixed"].as_array().unwrap().len();
+        v["data"]["keys"]["fixed"] = serde_json::json!(vec![Vec::<u32>::new(); keys]);
+    });
+    edit("animation.json", "broken.json", &|v| v["data"]["mesh"]["triangles"][0] = serde_json::json!([0, 1, 100000]));
+    let before = tree(&dir.path);
+    let cases: [(&[&str], &str, &str); 2] = [
+        (&["solve", "free.json", "-o", "new.json"], "free.json", "the spacetime system is singular"),
+        (&["export", "broken.json", "--out", "new"], "broken.json", "cannot export: the animation mesh triangle 0 uses a vertex index beyond"),
+    ];
+    for (args, file, problem) in cases {
+        let r = run(&dir.path, args);
+        assert_eq!(r.code, Some(1), "{args:?}:\n{r}");
+        assert_one_line_error(&r);
+        assert_names(&r, file);
+        assert_says(&r, problem);
+        assert_eq!(tree(&dir.path), before, "{args:?} left files behind:\n{r}");
+    }
 }

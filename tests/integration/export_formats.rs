@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use blendsim::clip::BlendShapeClip;
+use blendsim::clip::{BlendShapeClip, Weights};
 use blendsim::mesh::Point;
 use blendsim::output::Staging;
 use blendsim::procedural::prism as box_mesh;
@@ -90,10 +90,11 @@ fn export_to(anim: &Animation, dir: &Path) -> Outputs {
 fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let dir = scratch(&anim.scene.name).join("out");
     let outputs = export_to(anim, &dir);
-    let listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
+    let mut listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
+    listed.insert(blendsim::output::MANIFEST.to_string());
     let on_disk: BTreeSet<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    assert_eq!(listed, on_disk, "the folder holds exactly the listed files");
+    assert_eq!(listed, on_disk, "the folder holds exactly the listed files and the manifest");
     crate::common::verify::check_outputs(&dir, anim, &outputs.files);
     (dir, outputs)
 }
@@ -111,6 +112,16 @@ fn twisting_box_in_every_format() {
     );
 }
 
+/// The other forms: signed weights, and weights sampled per frame in a LINEAR glTF.
+#[test]
+fn signed_weights_and_linear_gltf_in_every_format() {
+    for export in ["weights = \"signed\"", "gltf_interpolation = \"linear\"", "weights = \"signed\"\ngltf_interpolation = \"linear\""] {
+        let anim = cyclic_box(&format!("[\"usda\", \"usdc\", \"glb\"]\n{export}"));
+        let (_, outputs) = export_and_check(&anim);
+        assert_eq!(outputs.files.len(), 6, "{export}");
+    }
+}
+
 #[test]
 fn cyclic_z_up_centimeters_without_usda() {
     let (_, outputs) = export_and_check(&cyclic_box("[\"usdc\", \"glb\"]"));
@@ -121,7 +132,7 @@ fn cyclic_z_up_centimeters_without_usda() {
 #[test]
 fn sparse_targets_stay_sparse() {
     let anim = waving_top("[\"usda\", \"glb\"]");
-    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
+    let clip = BlendShapeClip::new(&anim.trajectory, Weights::Bernstein);
     let n = clip.vertex_count();
     assert!(clip.targets.iter().all(|t| 4 * t.indices.len() < 3 * n), "the test needs sparse targets");
     let (dir, _) = export_and_check(&anim);
@@ -134,7 +145,7 @@ fn sparse_targets_stay_sparse() {
 #[test]
 fn a_static_animation_still_validates() {
     let anim = still_box("[\"usda\", \"usdc\", \"glb\"]");
-    assert!(BlendShapeClip::from_trajectory(&anim.trajectory).targets.is_empty());
+    assert!(BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights).targets.is_empty());
     export_and_check(&anim);
 }
 
@@ -212,7 +223,7 @@ fn checkers_reject_wrong_points_and_broken_files() {
     anim.scene.export.full_frame = false;
     let dir = scratch("negative").join("out");
     export_to(&anim, &dir);
-    let clip = BlendShapeClip::from_trajectory(&anim.trajectory);
+    let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
     let frames: Vec<f64> = anim.trajectory.frames(60.0).iter().map(|f| f.1).collect();
     // Expected one frame late.
     let late = Expected::at(&frames, 60.0, |t| clip.points_at(t + 1.0 / 60.0));
@@ -240,4 +251,66 @@ fn checkers_reject_wrong_points_and_broken_files() {
     std::fs::write(dir.join("broken.glb"), broken).unwrap();
     let e = try_check_glb(&dir.join("broken.glb"), &right).unwrap_err();
     assert!(e.contains("VALUE_NOT_IN_LIST"), "{e}");
+}
+
+/// The tetrahedron of `formats/usd.md` and `formats/gltf.md`: its top vertex rises by 0.5 in
+/// 0.5 s while the whole shape starts with a sideways velocity of 0.5 units/s; z up, 4 fps.
+fn tetra(export: &str) -> Animation {
+    let positions = vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let mesh = blendsim::mesh::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] };
+    let mut risen = positions.clone();
+    risen[3][2] += 0.5;
+    let tr = blendsim::Trajectory {
+        times: vec![0.0, 0.5],
+        positions: vec![positions, risen],
+        velocities: vec![vec![[0.5, 0.0, 0.0]; 4], vec![[0.0; 3]; 4]],
+    };
+    animation("tetra", 4.0, mesh, tr, false, &format!("formats = [\"usda\", \"glb\"]\nup_axis = \"z\"\n{export}"))
+}
+
+/// The fenced block of `doc` that follows the line containing `after`.
+fn block_after<'a>(doc: &'a str, after: &str) -> &'a str {
+    let at = doc.find(after).unwrap_or_else(|| panic!("no {after:?} in the doc"));
+    let start = at + doc[at..].find("```").unwrap();
+    let start = start + doc[start..].find('\n').unwrap() + 1;
+    &doc[start..start + doc[start..].find("```").unwrap()]
+}
+
+/// The examples in the format documents are this version's real output, byte for byte (USD)
+/// and value for value (the glTF JSON), and the sizes they state are the files' sizes.
+#[test]
+fn format_documents_show_real_output() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let usd_doc = std::fs::read_to_string(root.join("formats/usd.md")).unwrap();
+    let gltf_doc = std::fs::read_to_string(root.join("formats/gltf.md")).unwrap();
+    let (dir, outputs) = export_and_check(&tetra(""));
+    let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    for name in ["tetra.usda", "tetra.full.usda"] {
+        let text = String::from_utf8(read(name)).unwrap();
+        assert_eq!(block_after(&usd_doc, &format!("`{name}` (")), text, "formats/usd.md's {name} is not the current output");
+        let stated = format!("`{name}` ({} bytes", fmt_thousands(text.len()));
+        assert!(usd_doc.contains(&stated), "formats/usd.md must state {stated}");
+    }
+    let glb = read("tetra.glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let actual: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let documented: serde_json::Value = serde_json::from_str(block_after(&gltf_doc, "Its JSON chunk, pretty-printed")).unwrap();
+    assert_eq!(documented, actual, "formats/gltf.md's JSON chunk is not the current output");
+    for name in ["tetra.glb", "tetra.full.glb"] {
+        let bytes = outputs.files.iter().find(|f| f.path == name).unwrap().bytes as usize;
+        let stated = format!("`{name}` ({} bytes", fmt_thousands(bytes));
+        assert!(gltf_doc.contains(&stated) || gltf_doc.contains(&format!("`{name}` is {} bytes", fmt_thousands(bytes))), "formats/gltf.md must state the size of {name}: {bytes}");
+    }
+}
+
+fn fmt_thousands(n: usize) -> String {
+    let s = n.to_string();
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i > 0 && (s.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
 }

@@ -2,14 +2,17 @@
 //! module of it with a filter (`cargo test --release --test integration cli_stages::`).
 //!
 //! The CLI as a user (or a Makefile) runs it, and every file it writes opened by the
-//! independent tools (usd-core, the Khronos glTF validator, three.js in Chromium). Shared
+//! independent tools (usd-core, the Khronos glTF validator, three.js in Chromium, Blender's bpy). Shared
 //! helpers are in [`common`].
 
 mod common;
 
 mod blend;
+mod blender;
 mod cache_fit;
 mod cli_errors;
+mod cli_interrupt;
+mod cli_output;
 mod cli_physics;
 mod cli_stages;
 mod export_formats;

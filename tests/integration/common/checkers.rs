@@ -149,3 +149,44 @@ pub fn render_glb(file: &Path, out_dir: &Path, times: Option<[f64; 2]>) -> Value
     let output = cmd.output().expect("run render_check.mjs");
     summary(&format!("render_check.mjs {}", file.display()), output).unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// The Python that has Blender's `bpy`: `$BLENDSIM_BLENDER_PYTHON`, or the venv `make
+/// deps-blender` creates in build/blender-venv.
+fn blender_python() -> PathBuf {
+    std::env::var_os("BLENDSIM_BLENDER_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("build/blender-venv/bin/python"))
+}
+
+/// `blender_check.py`: each file imported into Blender (bpy 4.2.0) with its own importer at
+/// default settings, evaluated through the depsgraph at `expected.timecodes` (USD) or
+/// `expected.times` (glTF) in world space, and compared with the expected points placed z up in
+/// meters. One Blender process for all the files. Returns the summary (`files`: one entry per
+/// file, in order, each with its own `ok`); the caller decides which files must pass.
+///
+/// Blender 4.2.0 can crash while its interpreter shuts down after a glTF import; the script
+/// leaves with `os._exit` once its summary is printed, and a crash after a complete summary is
+/// judged by the summary (and noted in it as `exit`).
+pub fn check_blender(files: &[(&Path, &Expected)]) -> Value {
+    let python = blender_python();
+    assert!(
+        python.exists(),
+        "{} is missing: run `make deps-blender` (or `make test-deps`), or set BLENDSIM_BLENDER_PYTHON to a Python 3.11 with bpy==4.2.0",
+        python.display()
+    );
+    let mut cmd = Command::new(&python);
+    cmd.arg(checkers_dir().join("blender_check.py"));
+    for (file, expected) in files {
+        cmd.arg(file).arg(write_expected(file, expected));
+    }
+    let output = cmd.output().unwrap_or_else(|e| panic!("cannot run {} ({e}): run `make deps-blender`", python.display()));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let last = stdout.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    let mut summary: Value = match serde_json::from_str::<Value>(last) {
+        Ok(v) if v["files"].as_array().is_some_and(|f| f.len() == files.len()) => v,
+        _ => panic!("blender_check.py gave no summary ({}):\n--- stdout\n{stdout}--- stderr\n{stderr}", output.status),
+    };
+    summary["exit"] = output.status.code().map_or_else(|| Value::from(output.status.to_string()), Value::from);
+    summary
+}

@@ -130,3 +130,171 @@ pub fn without_timings(mut report: Value) -> Value {
 pub fn energies(report: &Value) -> Vec<f64> {
     report["solver"]["energy"].as_array().expect("solver.energy is an array").iter().map(|w| w.as_f64().unwrap()).collect()
 }
+
+/// Run `blendsim ARGS` in `cwd` with extra environment, failing the test if it has not ended
+/// within `seconds` (a hang is a failure, not a stuck test run).
+pub fn run_timeout<S: AsRef<OsStr>>(cwd: &Path, args: &[S], env: &[(&str, &OsStr)], seconds: f64) -> Run {
+    let mut p = Spawned::start(cwd, args, env);
+    let status = p.wait_timeout(seconds).unwrap_or_else(|| {
+        p.kill();
+        let stderr = p.stderr_so_far();
+        panic!("blendsim {:?} did not finish within {seconds} s; stderr so far:\n{stderr}", p.args)
+    });
+    p.finish(status)
+}
+
+/// A `blendsim` process running in the background, its stderr read line by line (to wait for
+/// the `BLENDSIM_TEST_PAUSE` hook's line).
+pub struct Spawned {
+    pub args: Vec<String>,
+    pub child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    stderr: Vec<String>,
+    stdout: std::thread::JoinHandle<String>,
+}
+
+impl Spawned {
+    pub fn start<S: AsRef<OsStr>>(cwd: &Path, args: &[S], env: &[(&str, &OsStr)]) -> Spawned {
+        use std::io::{BufRead, Read};
+        let mut cmd = Command::new(bin());
+        cmd.args(args)
+            .current_dir(cwd)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped());
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let mut child = cmd.spawn().unwrap_or_else(|e| panic!("cannot start {}: {e}", bin()));
+        let (send, lines) = std::sync::mpsc::channel();
+        let err = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(err).lines() {
+                let Ok(line) = line else { break };
+                if send.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut out = child.stdout.take().unwrap();
+        let stdout = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = out.read_to_string(&mut s);
+            s
+        });
+        Spawned { args: args.iter().map(|a| a.as_ref().to_string_lossy().into_owned()).collect(), child, lines, stderr: Vec::new(), stdout }
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Wait for a stderr line containing `needle`; returns it, or panics after `seconds`.
+    pub fn wait_for_line(&mut self, needle: &str, seconds: f64) -> String {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(seconds);
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    self.stderr.push(line.clone());
+                    if line.contains(needle) {
+                        return line;
+                    }
+                }
+                Err(_) => {
+                    self.kill();
+                    panic!("blendsim {:?} never said {needle:?} within {seconds} s; stderr:\n{}", self.args, self.stderr.join("\n"))
+                }
+            }
+        }
+    }
+
+    /// Send `signal` (a libc signal number).
+    pub fn signal(&self, signal: i32) {
+        // SAFETY: kill(2) on our own child's pid.
+        assert_eq!(unsafe { libc::kill(self.pid() as libc::pid_t, signal) }, 0, "kill {signal}");
+    }
+
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// The exit status, or `None` if it is still running after `seconds`.
+    pub fn wait_timeout(&mut self, seconds: f64) -> Option<std::process::ExitStatus> {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(seconds);
+        loop {
+            if let Some(status) = self.child.try_wait().expect("try_wait") {
+                return Some(status);
+            }
+            if std::time::Instant::now() > deadline {
+                return None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+
+    pub fn stderr_so_far(&mut self) -> String {
+        while let Ok(line) = self.lines.try_recv() {
+            self.stderr.push(line);
+        }
+        self.stderr.join("\n")
+    }
+
+    /// Collect everything once the process has ended with `status`.
+    pub fn finish(mut self, status: std::process::ExitStatus) -> Run {
+        // The reader thread ends with the pipe; drain what is left.
+        while let Ok(line) = self.lines.recv_timeout(std::time::Duration::from_secs(5)) {
+            self.stderr.push(line);
+        }
+        let stdout = self.stdout.join().unwrap_or_default();
+        let mut stderr = self.stderr.join("\n");
+        if !stderr.is_empty() {
+            stderr.push('\n');
+        }
+        Run { args: self.args, code: status.code(), stdout, stderr }
+    }
+}
+
+/// Whether a process with this id exists and is not a zombie.
+pub fn process_alive(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(stat) => stat.rsplit_once(") ").is_some_and(|(_, rest)| !rest.starts_with(['Z', 'X'])),
+        Err(_) => false,
+    }
+}
+
+/// Every file under `dir` (hidden ones included) with its bytes, and every folder (with no
+/// bytes): what a folder holds, to compare before and after a run.
+pub fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Option<Vec<u8>>> {
+    fn walk(root: &Path, dir: &Path, out: &mut std::collections::BTreeMap<String, Option<Vec<u8>>>) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for e in entries {
+            let path = e.unwrap().path();
+            let rel = path.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+            if path.is_dir() {
+                out.insert(rel, None);
+                walk(root, &path, out);
+            } else {
+                out.insert(rel, Some(std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))));
+            }
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// Copy a folder tree (files and folders only).
+pub fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let (src, dst) = (e.path(), to.join(e.file_name()));
+        if src.is_dir() {
+            copy_tree(&src, &dst);
+        } else {
+            std::fs::copy(&src, &dst).unwrap();
+        }
+    }
+}

@@ -7,7 +7,7 @@ use std::path::Path;
 use blendsim::clip::BlendShapeClip;
 use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
 use blendsim::progress::Progress;
-use blendsim::scene::{Axis, Format, Method, SceneFile};
+use blendsim::scene::{Axis, Format, GltfInterpolation, Method, SceneFile};
 use blendsim::stage::{Animation, OutputFile, OutputKind};
 use blendsim::stages::Bake;
 use serde_json::Value;
@@ -44,14 +44,41 @@ pub fn glb_times(anim: &Animation) -> Vec<f64> {
     set.into_iter().map(f64::from_bits).collect()
 }
 
+/// Every frame time and the midpoint between each two frames, in order.
+pub fn frames_and_midpoints(frames: &[f64]) -> Vec<f64> {
+    let mut times = Vec::with_capacity(2 * frames.len());
+    for (i, &t) in frames.iter().enumerate() {
+        if i > 0 {
+            times.push((frames[i - 1] + t) / 2.0);
+        }
+        times.push(t);
+    }
+    times
+}
+
+/// The points a consumer of per-frame weight samples plays at `t` (USD time samples, a LINEAR
+/// glTF sampler): the exact weights at the two frames around `t`, blended linearly. At frames
+/// this is the clip itself; in between, the best a linear interpolant of the frames can do.
+pub fn sampled_points(clip: &BlendShapeClip, frames: &[f64], t: f64) -> Vec<Point> {
+    if frames.len() < 2 {
+        return clip.points_at(frames[0]);
+    }
+    let i = frames.partition_point(|&f| f <= t).clamp(1, frames.len() - 1) - 1;
+    let s = ((t - frames[i]) / (frames[i + 1] - frames[i])).clamp(0.0, 1.0);
+    let (a, b) = (clip.weights_at(frames[i]), clip.weights_at(frames[i + 1]));
+    clip.points_with_weights(&a.iter().zip(&b).map(|(x, y)| (1.0 - s) * x + s * y).collect::<Vec<_>>())
+}
+
 /// The `outputs` list of a report.json (or of NAME.outputs.json's `data`).
 pub fn output_files(list: &Value) -> Vec<OutputFile> {
     serde_json::from_value(list.clone()).unwrap_or_else(|e| panic!("not a list of output files ({e}): {list}"))
 }
 
 /// Check every file of `outputs` in `dir` with the reference tools: blendshape files against
-/// the blendshape clip (UsdSkel at every frame, three.js at keys, in-betweens and every 5th
-/// frame), full-frame files against the trajectory at every frame. A `.usda` is also
+/// the blendshape clip in the scene's `[export] weights` form (UsdSkel at every frame and
+/// between frames, where USD blends the frames' weights linearly; three.js at keys,
+/// in-betweens and every 5th frame for CUBICSPLINE, at and between frames for LINEAR),
+/// full-frame files against the trajectory at every frame. A `.usda` is also
 /// converted to `.usdc` by usd-core and re-checked when the scene asks for no `.usdc` of its
 /// own. Returns each file's checker summary.
 pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Vec<(String, Value)> {
@@ -59,7 +86,7 @@ pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Ve
     let tr = &anim.trajectory;
     let fps = anim.scene.fps;
     let export = &anim.scene.export;
-    let clip = BlendShapeClip::from_trajectory(tr);
+    let clip = BlendShapeClip::new(tr, export.weights);
     let frames: Vec<f64> = tr.frames(fps).iter().map(|f| f.1).collect();
     // Our two evaluations agree before either is compared with a file.
     let diagonal = bbox_diagonal(&tr.positions.concat());
@@ -81,6 +108,9 @@ pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Ve
         let bytes = std::fs::metadata(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).len();
         assert_eq!(bytes, f.bytes, "{}: size on disk vs listed", f.path);
         let summary = match (f.kind, f.format) {
+            (OutputKind::Blendshape, Format::Glb) if export.gltf_interpolation == GltfInterpolation::Linear => {
+                check_glb(&path, &decorate(Expected::at(&frames_and_midpoints(&frames), fps, |t| sampled_points(&clip, &frames, t)), "blendshape"))
+            }
             (OutputKind::Blendshape, Format::Glb) => {
                 check_glb(&path, &decorate(Expected::at(&glb_times(anim), fps, |t| clip.points_at(t)), "blendshape"))
             }
@@ -89,7 +119,7 @@ pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Ve
             }
             (OutputKind::Blendshape, format) => check_usd(
                 &path,
-                &decorate(Expected::at(&frames, fps, |t| clip.points_at(t)), "blendshape"),
+                &decorate(Expected::at(&frames_and_midpoints(&frames), fps, |t| sampled_points(&clip, &frames, t)), "blendshape"),
                 format == Format::Usda && round_trip,
             ),
             (OutputKind::FullFrame, format) => check_usd(

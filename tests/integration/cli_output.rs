@@ -1,0 +1,196 @@
+//! The output folder through the `blendsim` binary: concurrent bakes into one folder (the
+//! second waits and says so, or fails at once with `--no-wait`), a re-bake with fewer formats
+//! (stale files of the earlier bake removed, the user's files kept as the same files), the
+//! `export` + `report` chain sharing a folder, and folders that cannot be output folders.
+
+use std::ffi::OsStr;
+use std::os::unix::fs::MetadataExt;
+use std::os::unix::process::ExitStatusExt;
+use std::path::Path;
+
+use blendsim::mesh::{obj, TriMesh};
+use blendsim::procedural::prism;
+use crate::common::cli::{names, read_json, run, run_env, Spawned, TempDir};
+
+fn cube() -> TriMesh {
+    prism([1.0, 1.0, 1.0], [2, 2, 2])
+}
+
+/// A two-key box scene `NAME.toml` in `dir/in` with the given formats.
+fn scene(dir: &Path, file: &str, formats: &str) {
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    let mut k1 = cube();
+    k1.positions.iter_mut().for_each(|p| p[1] += 0.5);
+    std::fs::write(input.join("k0.obj"), obj::write(&cube())).unwrap();
+    std::fs::write(input.join("k1.obj"), obj::write(&k1)).unwrap();
+    let text = format!("name = \"box\"\n[keyframes]\nmeshes = [\"k0.obj\", \"k1.obj\"]\ntimes = [0.0, 1.0]\n[export]\nformats = {formats}\n");
+    std::fs::write(input.join(file), text).unwrap();
+}
+
+fn manifest_files(folder: &Path) -> Vec<String> {
+    let m = read_json(&folder.join(".blendsim-manifest.json"));
+    m["files"].as_object().expect("files").keys().cloned().collect()
+}
+
+fn set(items: &[&str]) -> std::collections::BTreeSet<String> {
+    items.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn a_rebake_with_fewer_formats_removes_its_stale_files_and_keeps_the_users() {
+    let dir = TempDir::new("output-fewer");
+    scene(&dir.path, "all.toml", "[\"usda\", \"usdc\", \"glb\"]");
+    scene(&dir.path, "glb.toml", "[\"glb\"]");
+    run(&dir.path, &["bake", "in/all.toml", "--out", "out", "-q"]).success();
+    let out = dir.join("out");
+    std::fs::write(out.join("notes.txt"), "keep me").unwrap();
+    std::fs::create_dir_all(out.join("renders/frames")).unwrap();
+    std::fs::write(out.join("renders/frames/0001.png"), "png").unwrap();
+    // A file named like one blendsim writes, but that this bake does not own (no manifest
+    // entry): it is the user's, and stays.
+    std::fs::write(out.join("box.fbx"), "user's export").unwrap();
+    let inode = |p: &str| std::fs::metadata(out.join(p)).unwrap().ino();
+    let before = [inode("notes.txt"), inode("renders/frames/0001.png"), inode("box.fbx")];
+
+    run(&dir.path, &["bake", "in/glb.toml", "--out", "out", "-q"]).success();
+    assert_eq!(
+        names(&out),
+        set(&[".blendsim-manifest.json", "box.fbx", "box.full.glb", "box.glb", "notes.txt", "renders", "report.json", "report.md"])
+    );
+    assert_eq!(manifest_files(&out), ["box.full.glb", "box.glb", "report.json", "report.md"]);
+    assert_eq!([inode("notes.txt"), inode("renders/frames/0001.png"), inode("box.fbx")], before, "the same files, untouched");
+    let report = read_json(&out.join("report.json"));
+    let listed: Vec<&str> = report["outputs"].as_array().unwrap().iter().map(|f| f["path"].as_str().unwrap()).collect();
+    assert_eq!(listed, ["box.glb", "box.full.glb"], "the report lists exactly the files in the folder");
+    assert_eq!(names(&dir.path), set(&["in", "out"]), "nothing left beside the folder");
+}
+
+#[test]
+fn export_and_report_share_a_folder_and_each_replaces_only_its_own_files() {
+    let dir = TempDir::new("output-chain");
+    scene(&dir.path, "all.toml", "[\"usda\", \"glb\"]");
+    let d = &dir.path;
+    run(d, &["import", "in/all.toml", "-o", "keys.json"]).success();
+    run(d, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
+    run(d, &["solve", "body.json", "-o", "solution.json"]).success();
+    run(d, &["embed", "solution.json", "-o", "animation.json"]).success();
+    run(d, &["export", "animation.json", "--out", "out"]).success();
+    run(d, &["report", "animation.json", "--outputs", "out/box.outputs.json", "--out", "out"]).success();
+    let out = dir.join("out");
+    let all = [".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.outputs.json", "box.usda", "report.json", "report.md"];
+    assert_eq!(names(&out), set(&all), "report kept the export's files");
+    // Export again with fewer formats (the animation file edited to ask for glb only): the
+    // report stays, the usda files go.
+    let mut animation = read_json(&dir.join("animation.json"));
+    animation["data"]["scene"]["export"]["formats"] = serde_json::json!(["glb"]);
+    std::fs::write(dir.join("animation.json"), serde_json::to_vec(&animation).unwrap()).unwrap();
+    run(d, &["export", "animation.json", "--out", "out"]).success();
+    assert_eq!(
+        names(&out),
+        set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "box.outputs.json", "report.json", "report.md"])
+    );
+    // A bake owns both groups: the export's list goes too.
+    run(d, &["bake", "in/all.toml", "--out", "out", "-q"]).success();
+    assert_eq!(
+        names(&out),
+        set(&[".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.usda", "report.json", "report.md"])
+    );
+}
+
+/// The first bake holds the folder (paused by the test hook); the second waits and says so,
+/// `--no-wait` fails at once; when the first is stopped, the second takes over and completes.
+#[test]
+fn a_second_bake_into_a_busy_folder_waits_or_fails_clearly() {
+    let dir = TempDir::new("output-busy");
+    scene(&dir.path, "usda.toml", "[\"usda\"]");
+    scene(&dir.path, "glb.toml", "[\"glb\"]");
+    let mut first = Spawned::start(&dir.path, &["bake", "in/usda.toml", "--out", "out", "-q"], &[("BLENDSIM_TEST_PAUSE", OsStr::new("solve"))]);
+    first.wait_for_line("paused at solve", 60.0);
+
+    let r = run(&dir.path, &["bake", "in/glb.toml", "--out", "out", "--no-wait"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(
+        r.stderr,
+        format!(
+            "error: out: another blendsim (pid {}) is writing into this output folder (fix: wait for it to finish and run again (without --no-wait, blendsim waits by itself), or choose another --out)\n",
+            first.pid()
+        )
+    );
+
+    let mut second = Spawned::start(&dir.path, &["bake", "in/glb.toml", "--out", "out"], &[]);
+    let waiting = second.wait_for_line("waiting", 30.0);
+    assert_eq!(waiting, format!("blendsim: waiting for another blendsim (pid {}) to finish writing out", first.pid()));
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    assert!(second.wait_timeout(0.0).is_none(), "the second bake still waits");
+    first.signal(libc::SIGTERM);
+    let status = first.wait_timeout(30.0).expect("the first bake stops");
+    assert_eq!(status.signal(), Some(libc::SIGTERM));
+    let status = second.wait_timeout(120.0).expect("the second bake finishes");
+    let r = second.finish(status);
+    assert_eq!(r.code, Some(0), "{r}");
+    assert_eq!(manifest_files(&dir.join("out")), ["box.full.glb", "box.glb", "report.json", "report.md"]);
+    assert_eq!(names(&dir.path), set(&["in", "out"]));
+}
+
+/// Two bakes started together into one folder, many times: both succeed, one after the
+/// other, and the folder always holds exactly one of the two complete bakes.
+#[test]
+fn concurrent_bakes_into_one_folder_never_mix() {
+    let dir = TempDir::new("output-race");
+    scene(&dir.path, "usda.toml", "[\"usda\"]");
+    scene(&dir.path, "glb.toml", "[\"glb\"]");
+    let usda = set(&[".blendsim-manifest.json", "box.full.usda", "box.usda", "report.json", "report.md"]);
+    let glb = set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "report.json", "report.md"]);
+    let mut waited = 0;
+    for round in 0..4 {
+        let a = Spawned::start(&dir.path, &["bake", "in/usda.toml", "--out", "out"], &[]);
+        let b = Spawned::start(&dir.path, &["bake", "in/glb.toml", "--out", "out"], &[]);
+        let mut results = Vec::new();
+        for mut p in [a, b] {
+            let status = p.wait_timeout(120.0).expect("bake finishes");
+            results.push(p.finish(status));
+        }
+        for r in &results {
+            assert_eq!(r.code, Some(0), "round {round}: {r}");
+            waited += r.stderr.lines().filter(|l| l.starts_with("blendsim: waiting for another blendsim")).count();
+        }
+        let now = names(&dir.join("out"));
+        assert!(now == usda || now == glb, "round {round}: a mixed folder {now:?}");
+        let report = read_json(&dir.join("out/report.json"));
+        let first = report["outputs"][0]["path"].as_str().unwrap();
+        assert!(now.contains(first), "round {round}: the report belongs to the bake whose files are there");
+        assert_eq!(names(&dir.path), set(&["in", "out"]));
+    }
+    eprintln!("{waited} of 8 bakes waited for the other");
+    assert!(waited > 0, "the bakes overlap (each takes far longer than starting the other)");
+}
+
+#[test]
+fn folders_that_cannot_be_output_folders() {
+    let dir = TempDir::new("output-refused");
+    scene(&dir.path, "glb.toml", "[\"glb\"]");
+    std::fs::write(dir.join("file"), "").unwrap();
+    let cases: [(&[&str], &str); 3] = [
+        (&["bake", "in/glb.toml", "--out", "file"], "error: file: exists and is not a folder"),
+        (&["bake", "in/glb.toml", "--out", "."], "error: .: is the working folder or one of its parents"),
+        (&["bake", "in/glb.toml", "--out", "in/.."], "error: in/..: is the working folder or one of its parents"),
+    ];
+    for (args, expected) in cases {
+        let r = run(&dir.path, args);
+        assert_eq!(r.code, Some(1), "{r}");
+        assert!(r.stderr.starts_with(expected) && r.stderr.lines().count() == 1, "{r}");
+    }
+    // A symlink to a folder is followed: the link stays a link, the folder is replaced.
+    std::fs::create_dir(dir.join("real")).unwrap();
+    std::os::unix::fs::symlink("real", dir.join("link")).unwrap();
+    run(&dir.path, &["bake", "in/glb.toml", "--out", "link", "-q"]).success();
+    assert!(std::fs::symlink_metadata(dir.join("link")).unwrap().file_type().is_symlink());
+    assert!(dir.join("real/box.glb").is_file());
+    assert_eq!(names(&dir.path), set(&["file", "in", "link", "real"]));
+    // The two-rename fallback gives the same folder.
+    let r = run_env(&dir.path, &["bake", "in/glb.toml", "--out", "real", "-q"], &[("BLENDSIM_TEST_NO_EXCHANGE", OsStr::new("1"))]).success();
+    assert!(r.stderr.is_empty(), "{r}");
+    assert!(dir.join("real/box.glb").is_file());
+    assert_eq!(names(&dir.path), set(&["file", "in", "link", "real"]));
+}
