@@ -84,7 +84,7 @@ pub enum Boundary {
     /// body: at least three, not on one line.
     Fixed(Vec<u32>),
     /// An anchor at these points (in target 0), or `None` for the default frame at the centre
-    /// of mass (see [`super::anchor`]): at least three points, not on one line.
+    /// of mass (see the `anchor` module): at least three points, not on one line.
     Anchor(Option<Vec<Point>>),
 }
 

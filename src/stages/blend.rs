@@ -2,7 +2,7 @@
 //!
 //! - [`blend()`]: `blendsim blend`: target meshes and convex weights in, blended shapes out
 //!   (one OBJ, or a vertex cache for a weights file);
-//! - [`inbetween`]: `[solver] method = "mass-spring"` in a keyframe scene (the `solve` stage
+//! - `inbetween`: `[solver] method = "mass-spring"` in a keyframe scene (the `solve` stage
 //!   calls it): in-between shapes on every keyframe interval, as keys of the node trajectory.
 //!
 //! This layer translates files, the scene and the body into the model's plain inputs (target

@@ -3,7 +3,7 @@
 //! - `hermite`: the keyframes joined with zero velocities (the geometric baseline); its W is
 //!   still evaluated, so reports compare methods on one scale.
 //! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
-//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval ([`super::blend`]).
+//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval ([`stages::blend`](mod@super::blend)).
 //!
 //! The scene's `[solver]` and `[material]` become the solver's [`Settings`] and the body's
 //! elastic material here; the body's keyframes become its [`KeyConstraints`].
