@@ -62,6 +62,7 @@ pub enum MethodArg {
     Hermite,
     Spacetime,
     MassSpring,
+    Fit,
 }
 
 impl From<MethodArg> for Method {
@@ -70,6 +71,7 @@ impl From<MethodArg> for Method {
             MethodArg::Hermite => Method::Hermite,
             MethodArg::Spacetime => Method::Spacetime,
             MethodArg::MassSpring => Method::MassSpring,
+            MethodArg::Fit => Method::Fit,
         }
     }
 }

@@ -300,7 +300,12 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
     let scene = &body.scene;
     let spec = &scene.mass_spring;
     let keys = &body.keys;
-    let mesh = &body.mesh;
+    let Some(mesh) = body.mesh.as_ref() else {
+        return Err(Error::general(
+            "method mass-spring needs a tet mesh, but this body was imported for method fit",
+            "set [solver] method = \"mass-spring\" in the scene (or bake with --method mass-spring) and re-run import and tetrahedralize",
+        ));
+    };
     let nodes = mesh.positions.len();
     // Surface nodes first, in index order (the model's convention), then the interior.
     let triangles = surface::boundary(mesh);

@@ -23,6 +23,7 @@
 
 pub mod bake;
 pub mod blend;
+pub mod cache;
 pub mod embed;
 pub mod export;
 pub mod import;
