@@ -25,3 +25,8 @@ pub fn solver_inputs(body: &Body) -> Result<(Elastic, KeyConstraints, Settings)>
     let elastic = Elastic::new(tets, &crate::stages::elastic_material(&body.scene.material))?;
     Ok((elastic, crate::stages::solve::key_constraints(&body.keys), crate::stages::solve::settings(&body.scene)))
 }
+
+/// The mass-spring blendshape model (Ma et al. 2012), for its benchmark (`benches/massspring.rs`).
+pub mod massspring {
+    pub use crate::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
+}

@@ -57,6 +57,7 @@ mod export;
 #[cfg(test)]
 mod fuzz;
 mod input;
+mod massspring;
 mod physics;
 mod spacetime;
 mod tetgen;

@@ -80,6 +80,9 @@ pub struct Scene {
     /// `[export]`: the files to write.
     #[serde(default)]
     pub export: Export,
+    /// `[mass_spring]`: the in-betweens of `[solver] method = "mass-spring"`.
+    #[serde(default)]
+    pub mass_spring: MassSpring,
     /// `[[obstacle]]`: static obstacles the body may not enter.
     #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<ObstacleSpec>,
@@ -181,6 +184,9 @@ pub enum Method {
     Hermite,
     /// BlendSim's spacetime projective dynamics.
     Spacetime,
+    /// Mass-spring blendshapes (Ma et al. 2012): in-between shapes from blended spring rest
+    /// lengths (`[mass_spring]`).
+    MassSpring,
     /// The least-squares cubic Hermite fit of a cache on its keys, no physics (`[cache]` only).
     Fit,
 }
@@ -190,6 +196,7 @@ impl fmt::Display for Method {
         f.write_str(match self {
             Method::Hermite => "hermite",
             Method::Spacetime => "spacetime",
+            Method::MassSpring => "mass-spring",
             Method::Fit => "fit",
         })
     }
@@ -633,6 +640,7 @@ impl Scene {
         self.material.validate()?;
         // A cache's key count is known only after the selection: fixed_times is checked then.
         self.solver.validate(self.keyframes.as_ref().map(|k| k.meshes.len()))?;
+        self.mass_spring.validate()?;
         self.export.validate()?;
         validate_obstacles(&self.obstacles)
     }
@@ -844,6 +852,78 @@ impl Export {
         }
         if self.formats.is_empty() {
             return invalid("[export] formats is empty".into(), "list at least one of \"usda\", \"usdc\", \"glb\"");
+        }
+        Ok(())
+    }
+}
+
+/// The `[mass_spring]` table (defaults: [`MassSpring::default`]): how `method = "mass-spring"`
+/// makes the in-betweens of each keyframe interval (see `formats/scene.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MassSpring {
+    /// In-between shapes per keyframe interval, evenly spaced in time; each becomes a key of
+    /// the exported animation.
+    pub inbetweens: usize,
+    /// Bending springs: "two-ring" (the paper's: surface vertices two edges apart) or "hinge"
+    /// (the far corners of each edge's two triangles).
+    pub bending: String,
+    /// Newton stops when no vertex moves more than this fraction of the size in a step.
+    pub tolerance: f64,
+    /// Rigid obstacles the in-betweens collide with (`[[mass_spring.obstacle]]`).
+    pub obstacle: Vec<Obstacle>,
+}
+
+impl Default for MassSpring {
+    fn default() -> Self {
+        MassSpring { inbetweens: 3, bending: "two-ring".into(), tolerance: 1e-7, obstacle: Vec::new() }
+    }
+}
+
+/// A rigid obstacle: `kind = "plane"` (`point`, `normal` towards the free side) or
+/// `kind = "sphere"` (`center`, `radius`; solid).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Obstacle {
+    /// The half-space behind `point` against `normal` is solid.
+    Plane {
+        /// A point on the plane.
+        point: [f64; 3],
+        /// The plane's normal, pointing to the free side (any nonzero length).
+        normal: [f64; 3],
+    },
+    /// A solid ball.
+    Sphere {
+        /// Its centre.
+        center: [f64; 3],
+        /// Its radius, positive.
+        radius: f64,
+    },
+}
+
+impl MassSpring {
+    fn validate(&self) -> Result<()> {
+        if self.inbetweens > 1000 {
+            return invalid(format!("[mass_spring] inbetweens = {} is more than 1000 per interval", self.inbetweens), "use a few in-betweens per interval (3 is typical)");
+        }
+        if !matches!(self.bending.as_str(), "two-ring" | "hinge") {
+            return invalid(format!("[mass_spring] bending = {:?} is not a bending kind", self.bending), "use \"two-ring\" (the paper's) or \"hinge\"");
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return invalid(format!("[mass_spring] tolerance = {} must be between 0 and 1", self.tolerance), "use e.g. 1e-7 (a fraction of the size)");
+        }
+        for (i, o) in self.obstacle.iter().enumerate() {
+            let finite = |p: &[f64; 3]| p.iter().all(|c| c.is_finite());
+            let bad = match *o {
+                Obstacle::Plane { point, normal } => !finite(&point) || !finite(&normal) || normal == [0.0; 3],
+                Obstacle::Sphere { center, radius } => !(finite(&center) && radius.is_finite() && radius > 0.0),
+            };
+            if bad {
+                return invalid(
+                    format!("[[mass_spring.obstacle]] {} is degenerate: {o:?}", i + 1),
+                    "give a plane a finite point and a nonzero normal, a sphere a finite center and a radius > 0",
+                );
+            }
         }
         Ok(())
     }

@@ -5,6 +5,7 @@
 //! unfinished outputs and end the process by the same signal (see `blendsim::interrupt`).
 
 mod bake;
+mod blend;
 mod embed;
 mod export;
 mod import;
@@ -31,7 +32,8 @@ use clap::{Parser, Subcommand};
 ///   blendsim export animation.json --out DIR
 ///   blendsim report animation.json --outputs DIR/NAME.outputs.json --out DIR
 ///
-/// `blendsim bake SCENE.toml --out DIR` runs them all in one process.
+/// `blendsim bake SCENE.toml --out DIR` runs them all in one process; `blendsim blend`
+/// blends target meshes with mass-spring blendshapes.
 #[derive(Parser)]
 #[command(name = "blendsim", version, about, long_about, verbatim_doc_comment, propagate_version = true)]
 struct Cli {
@@ -51,6 +53,7 @@ enum Command {
     Export(export::Args),
     Report(report::Args),
     Bake(bake::Args),
+    Blend(blend::Args),
 }
 
 /// `--method`, for `solve` and `bake`: overrides the scene's `[solver] method`.
@@ -58,6 +61,7 @@ enum Command {
 pub enum MethodArg {
     Hermite,
     Spacetime,
+    MassSpring,
     Fit,
 }
 
@@ -66,6 +70,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Hermite => Method::Hermite,
             MethodArg::Spacetime => Method::Spacetime,
+            MethodArg::MassSpring => Method::MassSpring,
             MethodArg::Fit => Method::Fit,
         }
     }
@@ -107,6 +112,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => a.input(),
         Command::Report(a) => a.input(),
         Command::Bake(a) => a.input(),
+        Command::Blend(a) => a.input(),
     }
     .to_path_buf();
     let result = match cli.command {
@@ -117,6 +123,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => export::run(a, &progress),
         Command::Report(a) => report::run(a, &progress),
         Command::Bake(a) => bake::run(a, &progress, cli.quiet),
+        Command::Blend(a) => blend::run(a, &progress, cli.quiet),
     };
     // Stopped by a signal: its cleanup ends the process, with the signal's status.
     blendsim::interrupt::settle();

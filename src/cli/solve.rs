@@ -9,7 +9,8 @@ use super::MethodArg;
 /// Optimize the keyframe trajectory of a body and write the solution stage file.
 ///
 /// `spacetime` (default) runs BlendSim's spacetime projective dynamics; `hermite` joins the
-/// keyframes with zero velocities (the geometric baseline).
+/// keyframes with zero velocities (the geometric baseline); `mass-spring` makes in-between
+/// shapes by Ma et al. 2012's mass-spring blendshapes ([mass_spring] in the scene).
 #[derive(clap::Args)]
 pub struct Args {
     /// The body stage file from `blendsim tetrahedralize`.

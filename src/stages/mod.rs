@@ -14,12 +14,15 @@
 //! - [`export()`]: the blendshape and full-frame files;
 //! - [`report()`]: sizes, fidelity, volume and the solver's history.
 //!
+//! Beside the chain, [`blend()`]: mass-spring blendshapes of target meshes (`blendsim blend`).
+//!
 //! This layer is the only one that reads the scene and the stage data: it translates them into
 //! the plain inputs of the algorithms (meshes, an elastic material, key constraints, solver
 //! settings) and their results back into stage data. No algorithm module knows the scene file
 //! or the stage files.
 
 pub mod bake;
+pub mod blend;
 pub mod cache;
 pub mod embed;
 pub mod export;
@@ -29,6 +32,7 @@ pub mod solve;
 pub mod tetrahedralize;
 
 pub use bake::{bake, Bake};
+pub use blend::blend;
 pub use embed::embed;
 pub use export::export;
 pub use import::import;

@@ -18,13 +18,16 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
     let error = blendshape_error(tr, scene.export.weights, &frames, diagonal);
-    let keyframe_deviation =
-        deviation(tr.positions.iter().cloned().zip(animation.input_keys.iter().cloned()), diagonal);
+    // The input keys: every key of the trajectory, or every `stride`-th when it also holds
+    // in-betweens (mass-spring: `inbetweens + 1`).
+    let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
+    let key_times: Vec<f64> = tr.times.iter().step_by(stride).copied().collect();
+    let keyframe_deviation = deviation(tr.positions.iter().step_by(stride).cloned().zip(animation.input_keys.iter().cloned()), diagonal);
     let triangles = &animation.mesh.triangles;
     let closed = !triangles.is_empty() && surface::open_edges(&animation.mesh).is_empty();
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
     let volume = (closed && rest_volume > 0.0).then(|| {
-        let hermite = Trajectory::with_zero_velocities(tr.times.clone(), animation.input_keys.clone());
+        let hermite = Trajectory::with_zero_velocities(key_times, animation.input_keys.clone());
         Volume {
             rest: rest_volume,
             animation: volume_range(tr, &frames, triangles, rest_volume),
@@ -60,7 +63,7 @@ fn cache_report(animation: &Animation, record: &CacheRecord, outputs: &Outputs) 
     let error = super::cache::error_against(record, &animation.trajectory)?;
     let fit_error = match animation.log.method {
         Method::Fit => None,
-        Method::Hermite | Method::Spacetime => {
+        Method::Hermite | Method::Spacetime | Method::MassSpring => {
             let fit = super::cache::fit_cache(record)?;
             Some(super::cache::error_against(record, &fit)?.into())
         }

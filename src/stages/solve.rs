@@ -3,6 +3,7 @@
 //! - `hermite`: the keyframes joined with zero velocities (the geometric baseline); its W is
 //!   still evaluated, so reports compare methods on one scale.
 //! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
+//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval ([`stages::blend`](mod@super::blend)).
 //!
 //! The scene's `[solver]`, `[material]` and `[[obstacle]]` become the solver's [`Settings`] and
 //! the body's elastic material here; the body's keyframes become its [`KeyConstraints`].
@@ -37,7 +38,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
     let scene = &body.scene;
     let tets = match (&body.mesh, scene.solver.method) {
         (None, Method::Fit) => return solve_fit(body),
-        (Some(tets), Method::Hermite | Method::Spacetime) => tets,
+        (Some(tets), Method::Hermite | Method::Spacetime | Method::MassSpring) => tets,
         (Some(_), Method::Fit) => {
             return Err(Error::general(
                 "method fit was chosen after import: this body was tetrahedralized for a simulation",
@@ -113,6 +114,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             };
             (solved.trajectory, log)
         }
+        Method::MassSpring => super::blend::inbetween(&body, progress)?,
         Method::Fit => unreachable!("handled above"),
     };
     Ok(Solution { body, trajectory, log })

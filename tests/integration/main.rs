@@ -7,6 +7,7 @@
 
 mod common;
 
+mod blend;
 mod blender;
 mod cache_bake;
 mod cache_fit;
