@@ -139,5 +139,8 @@ fn check(animation: &Animation) -> Result<()> {
     if let Some(t) = animation.mesh.triangles.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
         return bad(format!("mesh triangle {t} uses a vertex index beyond its {n} vertices"));
     }
+    if let Some(Err(problem)) = animation.mesh.attributes.as_ref().map(|a| a.check(animation.mesh.triangles.len())) {
+        return bad(format!("mesh {problem}"));
+    }
     Ok(())
 }

@@ -35,7 +35,7 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
     };
     match &keys.rest {
         Shape::Volume(mesh) => {
-            let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh) };
+            let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
             Ok(Body { scene: scene.clone(), mesh: mesh.clone(), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary) })
         }
         Shape::Surface(rest) => {
