@@ -7,6 +7,7 @@
 
 mod common;
 
+mod attributes;
 mod blender;
 mod cache_fit;
 mod cli_errors;
