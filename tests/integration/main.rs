@@ -9,6 +9,7 @@ mod common;
 
 mod attributes;
 mod blender;
+mod cache_bake;
 mod cache_fit;
 mod cli_errors;
 mod cli_interrupt;
