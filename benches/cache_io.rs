@@ -59,7 +59,7 @@ fn grid(side: usize) -> TriMesh {
             triangles.push([a, a + n + 1, a + n]);
         }
     }
-    let mut mesh = TriMesh { positions: vec![[0.0; 3]; side * side], triangles };
+    let mut mesh = TriMesh { positions: vec![[0.0; 3]; side * side], triangles, attributes: None };
     Wave { side, frames: 1 }.read_frame(0, &mut mesh.positions).unwrap();
     mesh
 }

@@ -138,7 +138,7 @@ fn figure(boxes: &[([i32; 3], [i32; 3])], m: i32, unit: f64) -> TriMesh {
             }
         }
     }
-    let mesh = TriMesh { positions, triangles };
+    let mesh = TriMesh { positions, triangles, attributes: None };
     let mut edges: Vec<[u32; 2]> = mesh.triangles.iter().flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])])).collect();
     edges.sort_unstable();
     assert!(edges.chunk_by(|a, b| a == b).all(|g| g.len() == 2), "a closed 2-manifold figure");

@@ -73,7 +73,7 @@ pub fn prism(size: [f64; 3], divisions: [usize; 3]) -> TriMesh {
             }
         }
     }
-    TriMesh { positions, triangles }
+    TriMesh { positions, triangles, attributes: None }
 }
 
 /// A unit icosphere with `subdivisions` levels (0 = icosahedron), outward wound.
@@ -138,7 +138,7 @@ pub fn icosphere(subdivisions: usize) -> TriMesh {
             })
             .collect();
     }
-    TriMesh { positions, triangles }
+    TriMesh { positions, triangles, attributes: None }
 }
 
 /// Apply a twist (see [`Twist`]) to points: angle grows linearly along the axis over the

@@ -149,7 +149,7 @@ pub(crate) mod tests {
                 triangles.push([a, a + n + 1, a + n]);
             }
         }
-        TriMesh { positions, triangles }
+        TriMesh { positions, triangles, attributes: None }
     }
 
     /// `frames` frames at `fps` of `vertices` points on a travelling wave, values that are

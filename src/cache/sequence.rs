@@ -328,7 +328,7 @@ pub fn write(pattern: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: 
         }
     }
     let mut staging = Staging::new(parsed.dir())?;
-    let mut posed = TriMesh { positions: vec![[0.0; 3]; vertices], triangles: mesh.triangles.clone() };
+    let mut posed = TriMesh { positions: vec![[0.0; 3]; vertices], triangles: mesh.triangles.clone(), attributes: None };
     for i in 0..count {
         frames.read_frame(i, &mut posed.positions)?;
         staging.write(&parsed.file_name(first + i as u64), obj::write(&posed).as_bytes())?;
@@ -418,7 +418,7 @@ mod tests {
         std::fs::write(dir.join("f_0004.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();
         assert!(e.contains("f_0004.obj: has 3 vertices, but the first frame f_0003.obj has 9"), "{e}");
-        let mut text = obj::write(&TriMesh { positions: frames.frames[4].clone(), triangles: mesh.triangles.clone() });
+        let mut text = obj::write(&TriMesh { positions: frames.frames[4].clone(), triangles: mesh.triangles.clone(), attributes: None });
         text = text.replacen("f 1 2 5", "f 1 5 2", 1);
         std::fs::write(dir.join("f_0004.obj"), text).unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();

@@ -185,7 +185,7 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
     pc2.read_frame(0, &mut positions).map_err(|e| Error { path: Some(path.to_path_buf()), ..e })?;
     let times = info.time_codes.iter().map(|t| t / fps).collect();
     let frames = UsdFrames { pc2, times, _temp: temp };
-    Ok(OpenedUsd { mesh: TriMesh { positions, triangles }, frames, fps, prim: info.prim, bytes })
+    Ok(OpenedUsd { mesh: TriMesh { positions, triangles, attributes: None }, frames, fps, prim: info.prim, bytes })
 }
 
 impl FrameSource for UsdFrames {

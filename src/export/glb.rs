@@ -15,6 +15,7 @@ use serde_json::{json as value, Value};
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
 use super::sparse_is_smaller;
+use crate::mesh::attributes::{split_at_seams, CornerAttributes};
 use crate::mesh::Bounds;
 
 /// How the node maps scene units to glTF's y-up meters.
@@ -30,7 +31,10 @@ pub struct Placement {
 ///
 /// A clip without targets (a static animation) is a plain mesh with no animation: glTF has
 /// no way to say "a weights channel over zero targets".
-pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], name: &str, placement: Placement) -> Vec<u8> {
+///
+/// `attributes` add `TEXCOORD_0`, `NORMAL` and one primitive per material group (vertices split
+/// at UV and normal seams, see `File::new`); without them the file is as before.
+pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, name: &str, placement: Placement) -> Vec<u8> {
     let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
     let curves = &clip.curves;
     let mut output = Vec::with_capacity(3 * times.len() * curves.len());
@@ -39,28 +43,35 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], name: &str, pl
         output.extend(curves.iter().map(|c| c.values[k]));
         output.extend(curves.iter().map(|c| c.out_tangents[k]));
     }
-    with_weights(clip, triangles, name, placement, &times, &output, Interpolation::CubicSpline)
+    with_weights(clip, (triangles, attributes), name, placement, &times, &output, Interpolation::CubicSpline)
 }
 
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
 /// frames, the linear blend of two frames in between, and nothing an importer could drop
 /// (Blender's glTF importer ignores CUBICSPLINE tangents).
-pub fn blendshapes_sampled(clip: &BlendShapeClip, frame_times: &[f64], triangles: &[[u32; 3]], name: &str, placement: Placement) -> Vec<u8> {
+pub fn blendshapes_sampled(
+    clip: &BlendShapeClip,
+    frame_times: &[f64],
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    name: &str,
+    placement: Placement,
+) -> Vec<u8> {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
-    with_weights(clip, triangles, name, placement, &times, &output, Interpolation::Linear)
+    with_weights(clip, (triangles, attributes), name, placement, &times, &output, Interpolation::Linear)
 }
 
 fn with_weights(
     clip: &BlendShapeClip,
-    triangles: &[[u32; 3]],
+    surface: Surface,
     name: &str,
     placement: Placement,
     times: &[f32],
     output: &[f32],
     interpolation: Interpolation,
 ) -> Vec<u8> {
-    let mut file = File::new(name, triangles, &clip.base, placement);
+    let mut file = File::new(name, surface, &clip.base, placement);
     let n = clip.vertex_count();
     let targets: Vec<(String, Index<json::Accessor>)> =
         clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets))).collect();
@@ -72,9 +83,9 @@ fn with_weights(
 
 /// One morph target per frame (the offset of that frame from frame 0) with one-hot LINEAR
 /// weights: what a vertex cache looks like in glTF.
-pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], name: &str, placement: Placement) -> Vec<u8> {
+pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, name: &str, placement: Placement) -> Vec<u8> {
     let base = &frames.points[0];
-    let mut file = File::new(name, triangles, base, placement);
+    let mut file = File::new(name, (triangles, attributes), base, placement);
     let mut targets = Vec::with_capacity(frames.frames.len());
     for (frame, points) in frames.frames.iter().zip(&frames.points) {
         let (mut indices, mut offsets) = (Vec::new(), Vec::new());
@@ -106,13 +117,23 @@ enum Block {
     SparseIndices,
     SparseValues,
     Animation,
+    /// TEXCOORD_0 (vec2 f32, stride 8); last, so files without UVs keep their layout.
+    Texcoords,
 }
-const BLOCKS: usize = 5;
+const BLOCKS: usize = 6;
 
-/// A glTF file under construction: one node, one mesh with one primitive.
+/// The surface's triangles and its corner attributes.
+type Surface<'a> = (&'a [[u32; 3]], Option<&'a CornerAttributes>);
+
+/// A glTF file under construction: one node, one mesh with one primitive per material group
+/// (all sharing the vertex attributes and morph targets).
 struct File {
     root: json::Root,
     blocks: [Vec<u8>; BLOCKS],
+    /// For each glTF vertex, the animated point it shows, when vertices were split at seams.
+    sources: Option<Vec<u32>>,
+    /// Morph target names, for the mesh's `extras`.
+    target_names: Vec<String>,
 }
 
 fn f32x3_value(v: [f32; 3]) -> Value {
@@ -172,8 +193,13 @@ fn accessor(view: Option<(Block, u64)>, count: usize, component: ComponentType, 
 }
 
 impl File {
-    fn new(name: &str, triangles: &[[u32; 3]], base: &[[f32; 3]], placement: Placement) -> File {
-        let mut f = File { root: json::Root::default(), blocks: Default::default() };
+    /// The node, mesh and primitives of `base` (one position per animated point). With UVs or
+    /// normals, vertices are split where a point's corners differ (`split_at_seams`): the first
+    /// `base.len()` glTF vertices are the points in order, the seam copies follow, and
+    /// `extras.seamSources` lists the point each copy shows.
+    fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement) -> File {
+        let (triangles, attributes) = surface;
+        let mut f = File { root: json::Root::default(), blocks: Default::default(), sources: None, target_names: Vec::new() };
         f.root.asset = json::Asset {
             copyright: None,
             extensions: None,
@@ -182,30 +208,69 @@ impl File {
             min_version: None,
             version: "2.0".into(),
         };
+        let split = attributes
+            .filter(|a| !a.uv_corners.is_empty() || !a.normal_corners.is_empty())
+            .map(|a| split_at_seams(triangles, base.len(), a));
+        let triangles: &[[u32; 3]] = split.as_ref().map_or(triangles, |s| &s.triangles);
+        if let Some(s) = &split {
+            f.sources = Some(s.sources.clone());
+        }
         let position = f.positions(base);
-        let (component, size) = index_type(base.len(), false);
-        let offset = f.push(Block::Indices, &index_bytes(triangles.iter().flatten().copied(), size));
-        let indices = f.root.push(accessor(Some((Block::Indices, offset)), triangles.len() * 3, component, Type::Scalar));
-        // glTF's default material is fully metallic, which renders black without an
-        // environment map; a plain dielectric reads in every viewer.
-        let mut material = json::Material { name: Some(name.into()), ..Default::default() };
-        material.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
-        let material = f.root.push(material);
-        let mesh = f.root.push(json::Mesh {
-            extensions: None,
-            extras: None,
-            name: Some(name.into()),
-            primitives: vec![json::mesh::Primitive {
-                attributes: [(Valid(json::mesh::Semantic::Positions), position)].into_iter().collect(),
+        let mut attributes_json = vec![(Valid(json::mesh::Semantic::Positions), position)];
+        if let Some(normals) = split.as_ref().and_then(|s| s.normals.as_ref()) {
+            let unit: Vec<[f32; 3]> = normals
+                .iter()
+                .map(|n| {
+                    let length = crate::mesh::norm(*n);
+                    if length > 0.0 { n.map(|x| (x / length) as f32) } else { [0.0, 0.0, 1.0] }
+                })
+                .collect();
+            let offset = f.push(Block::Vertices, &vec3_bytes(unit.into_iter()));
+            let count = normals.len();
+            attributes_json.push((Valid(json::mesh::Semantic::Normals), f.root.push(accessor(Some((Block::Vertices, offset)), count, ComponentType::F32, Type::Vec3))));
+        }
+        if let Some(uvs) = split.as_ref().and_then(|s| s.uvs.as_ref()) {
+            // glTF's v runs down the image, OBJ's up.
+            let bytes: Vec<u8> = uvs.iter().flat_map(|&[u, v]| [u as f32, (1.0 - v) as f32]).flat_map(f32::to_le_bytes).collect();
+            let offset = f.push(Block::Texcoords, &bytes);
+            attributes_json.push((Valid(json::mesh::Semantic::TexCoords(0)), f.root.push(accessor(Some((Block::Texcoords, offset)), uvs.len(), ComponentType::F32, Type::Vec2))));
+        }
+        let vertex_count = split.as_ref().map_or(base.len(), |s| s.sources.len());
+        let (component, size) = index_type(vertex_count, false);
+        // One primitive per material group, its triangles in surface order.
+        let groups: Vec<(String, Vec<[u32; 3]>)> = match attributes.filter(|a| !a.groups.is_empty()) {
+            Some(a) => a
+                .groups
+                .iter()
+                .enumerate()
+                .map(|(g, group)| {
+                    let tris = triangles.iter().zip(&a.triangle_groups).filter(|(_, &x)| x as usize == g).map(|(t, _)| *t).collect();
+                    (group.clone(), tris)
+                })
+                .filter(|(_, tris): &(String, Vec<[u32; 3]>)| !tris.is_empty())
+                .collect(),
+            None => vec![(name.to_string(), triangles.to_vec())],
+        };
+        let mut primitives = Vec::with_capacity(groups.len());
+        for (material_name, tris) in groups {
+            let offset = f.push(Block::Indices, &index_bytes(tris.iter().flatten().copied(), size));
+            let indices = f.root.push(accessor(Some((Block::Indices, offset)), tris.len() * 3, component, Type::Scalar));
+            // glTF's default material is fully metallic, which renders black without an
+            // environment map; a plain dielectric reads in every viewer.
+            let mut material = json::Material { name: Some(material_name), ..Default::default() };
+            material.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
+            let material = f.root.push(material);
+            primitives.push(json::mesh::Primitive {
+                attributes: attributes_json.iter().cloned().collect(),
                 extensions: None,
                 extras: None,
                 indices: Some(indices),
                 material: Some(material),
                 mode: Valid(json::mesh::Mode::Triangles),
                 targets: None,
-            }],
-            weights: None,
-        });
+            });
+        }
+        let mesh = f.root.push(json::Mesh { extensions: None, extras: None, name: Some(name.into()), primitives, weights: None });
         let s = placement.meters_per_unit as f32;
         let half = std::f32::consts::FRAC_1_SQRT_2;
         let node = f.root.push(json::Node {
@@ -231,6 +296,14 @@ impl File {
 
     /// A dense vec3 accessor with the min/max that POSITION accessors require.
     fn positions(&mut self, points: &[[f32; 3]]) -> Index<json::Accessor> {
+        let expanded: Vec<[f32; 3]>;
+        let points = match &self.sources {
+            Some(sources) if sources.len() != points.len() => {
+                expanded = sources.iter().map(|&i| points[i as usize]).collect();
+                &expanded[..]
+            }
+            _ => points,
+        };
         let offset = self.push(Block::Vertices, &vec3_bytes(points.iter().copied()));
         let (lo, hi) = bounds(points);
         let mut a = accessor(Some((Block::Vertices, offset)), points.len(), ComponentType::F32, Type::Vec3);
@@ -241,6 +314,22 @@ impl File {
     /// A POSITION morph target: no data at all when nothing moves (glTF reads an accessor
     /// without a buffer view as zeros), sparse when that is smaller, dense otherwise.
     fn morph_target(&mut self, vertices: usize, indices: &[u32], offsets: &[[f32; 3]]) -> Index<json::Accessor> {
+        // Seam copies move with their point: the target's entries in glTF vertex order.
+        let remapped: (Vec<u32>, Vec<[f32; 3]>);
+        let (vertices, indices, offsets) = match &self.sources {
+            Some(sources) if sources.len() != vertices => {
+                let mut at = vec![u32::MAX; vertices];
+                indices.iter().enumerate().for_each(|(k, &i)| at[i as usize] = k as u32);
+                remapped = sources
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &s)| at[s as usize] != u32::MAX)
+                    .map(|(j, &s)| (j as u32, offsets[at[s as usize] as usize]))
+                    .unzip();
+                (sources.len(), &remapped.0[..], &remapped.1[..])
+            }
+            _ => (vertices, indices, offsets),
+        };
         let (component, size) = index_type(vertices, true);
         if !indices.is_empty() && !sparse_is_smaller(indices.len(), vertices, size) {
             let mut dense = vec![[0.0f32; 3]; vertices];
@@ -296,13 +385,13 @@ impl File {
 
     /// Attach named morph targets (default weights 0) and their weights animation.
     fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
-        let names: Vec<&str> = targets.iter().map(|(n, _)| n.as_str()).collect();
-        let extras = serde_json::to_string(&value!({ "targetNames": names })).expect("names serialize");
+        self.target_names = targets.iter().map(|(n, _)| n.clone()).collect();
         let mesh = &mut self.root.meshes[0];
-        mesh.extras = Some(json::extras::RawValue::from_string(extras).expect("valid JSON"));
         mesh.weights = Some(vec![0.0; targets.len()]);
-        mesh.primitives[0].targets =
-            Some(targets.iter().map(|&(_, a)| json::mesh::MorphTarget { positions: Some(a), normals: None, tangents: None }).collect());
+        for primitive in &mut mesh.primitives {
+            primitive.targets =
+                Some(targets.iter().map(|&(_, a)| json::mesh::MorphTarget { positions: Some(a), normals: None, tangents: None }).collect());
+        }
         let input = self.floats(times, true);
         let output = self.floats(output, false);
         let name = self.root.meshes[0].name.clone();
@@ -328,9 +417,22 @@ impl File {
     /// Lay the non-empty blocks out as buffer views of one buffer, point the accessors (which
     /// hold block numbers until now) at them, and wrap JSON and binary into a GLB.
     fn finish(mut self) -> Vec<u8> {
+        let mut extras = serde_json::Map::new();
+        if let Some(sources) = &self.sources {
+            // Points keep their index (`split_at_seams`); the copies follow them.
+            let points = sources.iter().enumerate().take_while(|&(j, &s)| j as u32 == s).count();
+            extras.insert("seamSources".into(), value!(&sources[points..]));
+        }
+        if !self.target_names.is_empty() {
+            extras.insert("targetNames".into(), value!(self.target_names));
+        }
+        if !extras.is_empty() {
+            let text = serde_json::to_string(&Value::Object(extras)).expect("extras serialize");
+            self.root.meshes[0].extras = Some(json::extras::RawValue::from_string(text).expect("valid JSON"));
+        }
         let mut bin = Vec::new();
         let mut view_of = [None; BLOCKS];
-        let kinds = [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation];
+        let kinds = [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation, Block::Texcoords];
         for (block, data) in kinds.into_iter().zip(&self.blocks) {
             if data.is_empty() {
                 continue;
@@ -338,6 +440,7 @@ impl File {
             let (target, stride) = match block {
                 Block::Indices => (Some(ViewTarget::ElementArrayBuffer), None),
                 Block::Vertices => (Some(ViewTarget::ArrayBuffer), Some(Stride(12))),
+                Block::Texcoords => (Some(ViewTarget::ArrayBuffer), Some(Stride(8))),
                 _ => (None, None),
             };
             view_of[block as usize] = Some(self.root.push(json::buffer::View {
@@ -443,7 +546,7 @@ mod tests {
     #[test]
     fn glb_chunks_and_accessors_are_aligned() {
         // 3 triangles = 9 u16 indices = 18 bytes: the next block must still start aligned.
-        let glb = blendshapes(&clip(), &[[0, 1, 2], [2, 1, 3], [3, 4, 5]], "box", Y_UP);
+        let glb = blendshapes(&clip(), &[[0, 1, 2], [2, 1, 3], [3, 4, 5]], None, "box", Y_UP);
         let (root, _) = chunks(&glb);
         assert!(matches!(root.accessors[1].component_type, Valid(GenericComponentType(ComponentType::U16))));
         for v in &root.buffer_views {
@@ -465,7 +568,7 @@ mod tests {
 
     #[test]
     fn cubicspline_output_groups_in_tangents_values_out_tangents_per_key() {
-        let (root, bin) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], None, "box", Y_UP));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::CubicSpline));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.5, 1.25]);
@@ -484,7 +587,7 @@ mod tests {
     fn linear_output_is_the_weights_at_every_frame() {
         let c = clip();
         let frames = [0.0, 0.25, 0.5, 1.0];
-        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, &[[0, 1, 2]], "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, &[[0, 1, 2]], None, "box", Y_UP));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::Linear));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.25, 0.5, 1.0]);
@@ -501,7 +604,7 @@ mod tests {
         assert!(!sparse_is_smaller(75, 100, 4));
         assert!(sparse_is_smaller(85, 100, 2));
         assert!(!sparse_is_smaller(86, 100, 2));
-        let (root, _) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], None, "box", Y_UP));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         let one = &root.accessors[targets[0].positions.unwrap().value()];
         let s = one.sparse.as_ref().expect("a target moving 1 of 100 vertices is sparse");
@@ -521,7 +624,7 @@ mod tests {
             times: vec![0.0, 0.5, 1.0],
             points: vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[1.0; 3], [1.0; 3]]],
         };
-        let (root, bin) = chunks(&full_frame(&ff, &[[0, 1, 1]], "ff", Placement { z_up: true, meters_per_unit: 0.01 }));
+        let (root, bin) = chunks(&full_frame(&ff, &[[0, 1, 1]], None, "ff", Placement { z_up: true, meters_per_unit: 0.01 }));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         assert_eq!(targets.len(), 3);
         let frame0 = &root.accessors[targets[0].positions.unwrap().value()];
@@ -539,7 +642,7 @@ mod tests {
         let mut c = clip();
         c.targets.clear();
         c.curves.clear();
-        let (root, _) = chunks(&blendshapes(&c, &[[0, 1, 2]], "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&c, &[[0, 1, 2]], None, "box", Y_UP));
         assert!(root.animations.is_empty());
         assert!(root.meshes[0].weights.is_none() && root.meshes[0].primitives[0].targets.is_none());
     }

@@ -8,6 +8,8 @@ use std::fmt::Write;
 
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
+use super::usda_attributes as attrs;
+use crate::mesh::attributes::CornerAttributes;
 use crate::mesh::Bounds;
 use crate::spacetime::trajectory::frames_between;
 
@@ -37,7 +39,10 @@ pub fn prim_name(name: &str) -> String {
 ///
 /// A clip without targets (a static animation) is written as a plain mesh under an Xform:
 /// a SkelAnimation with no blend shapes would only add noise for importers.
-pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &UsdSettings) -> String {
+///
+/// `attributes` (UVs, normals, material groups of the surface) add `primvars:st`, `normals`,
+/// `GeomSubset`s and their placeholder materials; without them the file is as before.
+pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     let (start, end) = (clip.times[0], *clip.times.last().expect("a clip has keys"));
     let frames = frames_between(start, end, settings.fps);
     let mut out = header(settings, frames[0].0, frames[frames.len() - 1].0);
@@ -46,8 +51,10 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
         let _ = writeln!(out, "def Xform \"{root}\"\n{{\n    def Mesh \"Mesh\"\n    {{");
         push_attr(&mut out, 8, "float3[] extent", |o| push_vec3s(o, extent(&clip.base).iter()));
         push_topology(&mut out, triangles);
+        push_mesh_attributes(&mut out, triangles, clip.vertex_count(), attributes);
         push_attr(&mut out, 8, "point3f[] points", |o| push_vec3s(o, clip.base.iter()));
-        out.push_str("        uniform token subdivisionScheme = \"none\"\n    }\n}\n");
+        out.push_str("        uniform token subdivisionScheme = \"none\"\n");
+        close_mesh_and_root(&mut out, attributes, root);
         return out;
     }
 
@@ -67,6 +74,7 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
     out.push_str("    def Mesh \"Mesh\" (\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n    {\n");
     push_attr(&mut out, 8, "float3[] extent", |o| push_vec3s(o, extent(&clip.base).iter()));
     push_topology(&mut out, triangles);
+    push_mesh_attributes(&mut out, triangles, clip.vertex_count(), attributes);
     push_attr(&mut out, 8, "point3f[] points", |o| push_vec3s(o, clip.base.iter()));
     push_attr(&mut out, 8, "uniform token[] skel:blendShapes", |o| push_tokens(o, names()));
     push_attr(&mut out, 8, "rel skel:blendShapeTargets", |o| {
@@ -91,7 +99,14 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
         }
         out.push_str("        }\n");
     }
+    if let Some(a) = attributes.filter(|a| !a.groups.is_empty()) {
+        attrs::push_subsets(&mut out, a, root);
+    }
     out.push_str("    }\n\n");
+    if let Some(a) = attributes.filter(|a| !a.groups.is_empty()) {
+        attrs::push_materials(&mut out, a, root);
+        out.push('\n');
+    }
 
     out.push_str("    def Skeleton \"Skel\" (\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n    {\n");
     out.push_str("        uniform token[] joints = []\n");
@@ -109,7 +124,7 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], settings: &Usd
 }
 
 /// Full-frame animation: `points.timeSamples` at every frame.
-pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], settings: &UsdSettings) -> String {
+pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
     let mut out = header(settings, first, last);
     let _ = writeln!(out, "def Xform \"{}\"\n{{\n    def Mesh \"Mesh\"\n    {{", settings.name);
@@ -121,14 +136,36 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], settings: &UsdSett
     }
     out.push_str("        }\n");
     push_topology(&mut out, triangles);
+    let vertices = frames.points.first().map_or(0, Vec::len);
+    push_mesh_attributes(&mut out, triangles, vertices, attributes);
     out.push_str("        point3f[] points.timeSamples = {\n");
     for (frame, points) in frames.frames.iter().zip(&frames.points) {
         let _ = write!(out, "            {frame}: ");
         push_vec3s(&mut out, points.iter());
         out.push_str(",\n");
     }
-    out.push_str("        }\n        uniform token subdivisionScheme = \"none\"\n    }\n}\n");
+    out.push_str("        }\n        uniform token subdivisionScheme = \"none\"\n");
+    close_mesh_and_root(&mut out, attributes, &settings.name);
     out
+}
+
+fn push_mesh_attributes(out: &mut String, triangles: &[[u32; 3]], vertices: usize, attributes: Option<&CornerAttributes>) {
+    if let Some(a) = attributes {
+        attrs::push_properties(out, triangles, vertices, a);
+    }
+}
+
+/// `}` of a plain mesh (after its subsets) and of its root (after the materials).
+fn close_mesh_and_root(out: &mut String, attributes: Option<&CornerAttributes>, root: &str) {
+    let groups = attributes.filter(|a| !a.groups.is_empty());
+    if let Some(a) = groups {
+        attrs::push_subsets(out, a, root);
+    }
+    out.push_str("    }\n");
+    if let Some(a) = groups {
+        attrs::push_materials(out, a, root);
+    }
+    out.push_str("}\n");
 }
 
 pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
@@ -158,13 +195,13 @@ pub(crate) fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
 }
 
 /// `INDENT DECLARATION = VALUE\n`.
-fn push_attr(out: &mut String, indent: usize, declaration: &str, value: impl FnOnce(&mut String)) {
+pub(super) fn push_attr(out: &mut String, indent: usize, declaration: &str, value: impl FnOnce(&mut String)) {
     let _ = write!(out, "{:indent$}{declaration} = ", "");
     value(out);
     out.push('\n');
 }
 
-fn push_list<T>(out: &mut String, items: impl Iterator<Item = T>, mut item: impl FnMut(&mut String, T)) {
+pub(super) fn push_list<T>(out: &mut String, items: impl Iterator<Item = T>, mut item: impl FnMut(&mut String, T)) {
     out.push('[');
     for (i, x) in items.enumerate() {
         if i > 0 {
@@ -175,7 +212,7 @@ fn push_list<T>(out: &mut String, items: impl Iterator<Item = T>, mut item: impl
     out.push(']');
 }
 
-fn push_ints(out: &mut String, items: impl Iterator<Item = u32>) {
+pub(super) fn push_ints(out: &mut String, items: impl Iterator<Item = u32>) {
     push_list(out, items, |o, i| {
         let _ = write!(o, "{i}");
     });
@@ -201,7 +238,7 @@ pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [
 
 /// The shorter of `{}` and `{:e}`: both are the shortest round-trip digits of the f32, and the
 /// exponent form keeps tiny offsets (`1.5e-9`) from spelling out their leading zeros.
-fn push_f32(out: &mut String, x: f32) {
+pub(super) fn push_f32(out: &mut String, x: f32) {
     let start = out.len();
     let _ = write!(out, "{x}");
     // Only runs of zeros make the exponent form shorter; skip formatting it otherwise.
@@ -263,7 +300,7 @@ mod tests {
 
     #[test]
     fn blendshape_layout() {
-        let text = blendshapes(&clip(), &[[0, 2, 1], [0, 1, 3]], &settings());
+        let text = blendshapes(&clip(), &[[0, 2, 1], [0, 1, 3]], None, &settings());
         assert!(text.starts_with("#usda 1.0\n(\n    defaultPrim = \"box\"\n"), "{text}");
         for line in [
             "    endTimeCode = 2\n",
@@ -290,7 +327,7 @@ mod tests {
         let mut c = clip();
         c.targets.clear();
         c.curves.clear();
-        let text = blendshapes(&c, &[[0, 2, 1]], &settings());
+        let text = blendshapes(&c, &[[0, 2, 1]], None, &settings());
         assert!(text.contains("def Xform \"box\"\n{\n    def Mesh \"Mesh\"\n"), "{text}");
         assert!(!text.contains("Skel"), "{text}");
     }
@@ -298,7 +335,7 @@ mod tests {
     #[test]
     fn full_frame_layout() {
         let ff = FullFrame { frames: vec![3, 4], times: vec![0.3, 0.4], points: vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]]] };
-        let text = full_frame(&ff, &[[0, 1, 1]], &settings());
+        let text = full_frame(&ff, &[[0, 1, 1]], None, &settings());
         assert!(text.contains("    endTimeCode = 4\n"), "{text}");
         assert!(text.contains("    startTimeCode = 3\n"), "{text}");
         assert!(text.contains("            4: [(0, 0, 0), (2, 2, 2)],\n"), "{text}");

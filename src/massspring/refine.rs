@@ -137,7 +137,7 @@ mod tests {
             }
         }
         // Still a closed, consistently wound surface of the same volume.
-        let mesh = TriMesh { positions: r.surface[0].clone(), triangles: r.triangles.clone() };
+        let mesh = TriMesh { positions: r.surface[0].clone(), triangles: r.triangles.clone(), attributes: None };
         assert!(open_edges(&mesh).is_empty());
         assert_eq!(orient_outward(&mut mesh.clone()), 0);
         assert!((enclosed_volume(&mesh.positions, &mesh.triangles) - 8.0).abs() < 1e-12);

@@ -266,7 +266,7 @@ fn refinement_before_tetgen_leaves_no_spring_much_longer_than_the_median() {
     let targets = vec![coarse.positions.clone(), bend(&coarse.positions, 2.0, 60f64.to_radians(), 0.125)];
     let refined = split_long_edges(&targets, &coarse.triangles, 1.5);
     let median = median_edge(&refined.surface, &refined.triangles);
-    let surface = TriMesh { positions: refined.surface[0].clone(), triangles: refined.triangles.clone() };
+    let surface = TriMesh { positions: refined.surface[0].clone(), triangles: refined.triangles.clone(), attributes: None };
     let options = TetgenOptions { quality: 1.414, max_volume: regular_tet_volume(1.5 * median), timeout: 60.0 };
     let body = tetrahedralize(&surface, &options, Path::new("refined bar")).unwrap();
     let t = Targets { surface: &refined.surface, triangles: &refined.triangles, body: Some(&body), body_poses: None };

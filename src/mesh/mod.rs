@@ -9,6 +9,7 @@
 //!
 //! Readers keep the vertex order of the file: per-vertex masks in scene files index it.
 
+pub mod attributes;
 pub mod bounds;
 pub mod medit;
 pub mod obj;
@@ -33,6 +34,10 @@ pub struct TriMesh {
     pub positions: Vec<Point>,
     /// Vertex indices of each triangle, counter-clockwise seen from the front.
     pub triangles: Vec<[u32; 3]>,
+    /// UVs, normals and material groups per triangle corner (OBJ `vt`, `vn`, `usemtl`), when
+    /// the file has any. Absent from stage files that have none, so they read as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attributes: Option<attributes::CornerAttributes>,
 }
 
 /// A tetrahedral mesh. Invariant once built by a reader: every tet has positive signed volume

@@ -3,9 +3,16 @@
 //! Contract: `parse` reads `v` and `f` lines of the *first object* (stop at the second `o`
 //! line that follows faces; `g` lines do not split), keeps every `v` in file order (unused
 //! vertices included, so index files match the file), triangulates polygons as fans, accepts
-//! `f a/b/c`, `a//c`, `a/b` forms and negative (relative) indices, ignores `vt`, `vn`, `usemtl`,
-//! `mtllib`, `s`, `l`, `p` and comments. Errors name the line and say how to fix it.
+//! `f a/b/c`, `a//c`, `a/b` forms and negative (relative) indices, and ignores `mtllib`, `s`,
+//! `l`, `p` and comments. Errors name the line and say how to fix it.
 //! `tobj` is not used: it renumbers vertices in first-use order and drops unused ones.
+//!
+//! Attributes: `vt` (texture coordinates), `vn` (normals) and `usemtl` (material groups) are
+//! kept per triangle corner in [`TriMesh::attributes`] (`None` when the file has none of
+//! them on its faces, so such meshes are exactly what they were). UVs (likewise normals) are
+//! kept only when every face corner gives one: a surface textured on some faces only has no
+//! UV layout to carry, and such files were read before, so they still are (without UVs).
+//! Faces before the first `usemtl` form the group `default`.
 //!
 //! Extra columns after `v x y z` (a `w` weight or per-vertex colours) are ignored. Face
 //! indices must refer to vertices defined above the face, as every exporter writes them:
@@ -14,6 +21,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::attributes::CornerAttributes;
 use super::{Point, TriMesh};
 use crate::error::{quoted, Error, Result};
 
@@ -31,22 +39,51 @@ pub fn read(path: &Path) -> Result<TriMesh> {
 pub fn parse(text: &str) -> Result<TriMesh> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut mesh = TriMesh::default();
+    let mut attributes = CornerAttributes::default();
+    // Per triangle, its `usemtl` group (None before the first `usemtl`).
+    let mut triangle_groups: Vec<Option<u32>> = Vec::new();
+    let mut group: Option<u32> = None;
+    let mut uv_corners: Vec<Option<[u32; 3]>> = Vec::new();
+    let mut normal_corners: Vec<Option<[u32; 3]>> = Vec::new();
     for (number, line) in text.lines().enumerate() {
         let line_no = number + 1;
         let content = line.split('#').next().unwrap_or("");
         let mut tokens = content.split_whitespace();
         match tokens.next() {
             Some("v") => mesh.positions.push(parse_vertex(tokens, line_no)?),
+            Some("vt") => {
+                let uv = parse_numbers::<2>(tokens, 1, line_no, "texture coordinate", "`vt u v`")?;
+                attributes.uvs.push(uv);
+            }
+            Some("vn") => attributes.normals.push(parse_numbers::<3>(tokens, 3, line_no, "normal", "`vn x y z`")?),
+            Some("usemtl") => {
+                let name = tokens.collect::<Vec<_>>().join(" ");
+                let name = if name.is_empty() { "default".to_string() } else { name };
+                group = Some(match attributes.groups.iter().position(|g| *g == name) {
+                    Some(g) => g as u32,
+                    None => {
+                        attributes.groups.push(name);
+                        attributes.groups.len() as u32 - 1
+                    }
+                });
+            }
             Some("f") => {
-                let corners =
-                    tokens.map(|t| parse_corner(t, mesh.positions.len(), line_no)).collect::<Result<Vec<u32>>>()?;
+                let defined = (mesh.positions.len(), attributes.uvs.len(), attributes.normals.len());
+                let corners = tokens.map(|t| parse_corner(t, defined, line_no)).collect::<Result<Vec<Corner>>>()?;
                 if corners.len() < 3 {
                     return Err(Error::general(
                         format!("line {line_no}: face has {} vertices, needs at least 3", corners.len()),
                         "remove the line, or export edges as `l` lines and polygons as `f` lines",
                     ));
                 }
-                mesh.triangles.extend((1..corners.len() - 1).map(|k| [corners[0], corners[k], corners[k + 1]]));
+                for k in 1..corners.len() - 1 {
+                    let tri = [&corners[0], &corners[k], &corners[k + 1]];
+                    mesh.triangles.push(tri.map(|c| c.vertex));
+                    let all = |f: fn(&Corner) -> Option<u32>| tri.iter().all(|c| f(c).is_some()).then(|| tri.map(|c| f(c).unwrap_or(0)));
+                    uv_corners.push(all(|c| c.uv));
+                    normal_corners.push(all(|c| c.normal));
+                    triangle_groups.push(group);
+                }
             }
             Some("o") if !mesh.triangles.is_empty() => break,
             _ => {}
@@ -58,7 +95,61 @@ pub fn parse(text: &str) -> Result<TriMesh> {
             "export the mesh with its faces; point clouds and curves cannot be simulated",
         ));
     }
+    if triangle_groups.iter().any(Option::is_some) {
+        let default = || match attributes.groups.iter().position(|g| g == "default") {
+            Some(g) => g as u32,
+            None => attributes.groups.len() as u32,
+        };
+        let fallback = default();
+        if fallback as usize == attributes.groups.len() && triangle_groups.iter().any(Option::is_none) {
+            attributes.groups.push("default".into());
+        }
+        attributes.triangle_groups = triangle_groups.iter().map(|g| g.unwrap_or(fallback)).collect();
+    } else {
+        attributes.groups.clear();
+    }
+    attributes.uv_corners = uv_corners.into_iter().collect::<Option<Vec<_>>>().unwrap_or_default();
+    attributes.normal_corners = normal_corners.into_iter().collect::<Option<Vec<_>>>().unwrap_or_default();
+    if !attributes.is_empty() {
+        // Only what the faces use is kept: values no face refers to would be dead weight.
+        if attributes.uv_corners.is_empty() {
+            attributes.uvs.clear();
+        }
+        if attributes.normal_corners.is_empty() {
+            attributes.normals.clear();
+        }
+        mesh.attributes = Some(attributes);
+    }
     Ok(mesh)
+}
+
+/// `N` finite numbers of a `vt` or `vn` line (at least `required`; missing ones are 0, extra
+/// ones such as a `w` are ignored).
+fn parse_numbers<'a, const N: usize>(
+    tokens: impl Iterator<Item = &'a str>,
+    required: usize,
+    line_no: usize,
+    what: &str,
+    form: &str,
+) -> Result<[f64; N]> {
+    let mut out = [0.0; N];
+    let mut count = 0;
+    for token in tokens.take(N) {
+        match token.parse::<f64>() {
+            Ok(value) if value.is_finite() => out[count] = value,
+            _ => {
+                return Err(Error::general(
+                    format!("line {line_no}: {what} value {} is not a finite number", quoted(token)),
+                    format!("write {what}s as {form} with decimal numbers"),
+                ))
+            }
+        }
+        count += 1;
+    }
+    if count < required {
+        return Err(Error::general(format!("line {line_no}: {what} has {count} values, needs {required}"), format!("write {what}s as {form}")));
+    }
+    Ok(out)
 }
 
 fn parse_vertex<'a>(tokens: impl Iterator<Item = &'a str>, line_no: usize) -> Result<Point> {
@@ -89,20 +180,50 @@ fn parse_vertex<'a>(tokens: impl Iterator<Item = &'a str>, line_no: usize) -> Re
     Ok(p)
 }
 
-/// The 0-based vertex of one `f` corner (`v`, `v/t`, `v//n` or `v/t/n`), given how many
-/// vertices are defined above it.
-fn parse_corner(token: &str, defined: usize, line_no: usize) -> Result<u32> {
-    let vertex = token.split('/').next().unwrap_or("");
+/// One `f` corner: 0-based vertex, texture coordinate and normal indices.
+struct Corner {
+    vertex: u32,
+    uv: Option<u32>,
+    normal: Option<u32>,
+}
+
+/// One `f` corner (`v`, `v/t`, `v//n` or `v/t/n`), given how many vertices, texture
+/// coordinates and normals are defined above it.
+fn parse_corner(token: &str, defined: (usize, usize, usize), line_no: usize) -> Result<Corner> {
+    let mut parts = token.split('/');
+    let vertex = parts.next().unwrap_or("");
     let index: i64 = vertex.parse().map_err(|_| {
         Error::general(
             format!("line {line_no}: face corner {} does not start with an integer vertex index", quoted(token)),
             "write faces as `f 1 2 3` (or `f 1/1/1 2/2/2 3/3/3`) with 1-based vertex numbers",
         )
     })?;
+    let vertex = resolve(index, defined.0, line_no, "vertex", "vertices")?;
+    let mut optional = |defined: usize, what: &str, plural: &str| -> Result<Option<u32>> {
+        match parts.next() {
+            None | Some("") => Ok(None),
+            Some(s) => {
+                let index: i64 = s.parse().map_err(|_| {
+                    Error::general(
+                        format!("line {line_no}: face corner {} has a {what} index that is not an integer", quoted(token)),
+                        "write face corners as `v`, `v/vt`, `v//vn` or `v/vt/vn` with 1-based numbers",
+                    )
+                })?;
+                resolve(index, defined, line_no, what, plural).map(Some)
+            }
+        }
+    };
+    let uv = optional(defined.1, "texture coordinate", "texture coordinates")?;
+    let normal = optional(defined.2, "normal", "normals")?;
+    Ok(Corner { vertex, uv, normal })
+}
+
+/// A 1-based (or negative, relative) OBJ index as a 0-based one, given how many are defined.
+fn resolve(index: i64, defined: usize, line_no: usize, what: &str, plural: &str) -> Result<u32> {
     let resolved = match index {
         0 => {
             return Err(Error::general(
-                format!("line {line_no}: face refers to vertex 0, but OBJ vertex numbers start at 1"),
+                format!("line {line_no}: face refers to {what} 0, but OBJ {what} numbers start at 1"),
                 "re-export the mesh; the exporter wrote 0-based indices",
             ))
         }
@@ -112,7 +233,7 @@ fn parse_corner(token: &str, defined: usize, line_no: usize) -> Result<u32> {
     match u32::try_from(resolved) {
         Ok(i) if (i as usize) < defined => Ok(i),
         _ => Err(Error::general(
-            format!("line {line_no}: face refers to vertex {index}, but only {defined} vertices are defined above it"),
+            format!("line {line_no}: face refers to {what} {index}, but only {defined} {plural} are defined above it"),
             "re-export the mesh; the file is truncated or its faces come from another mesh",
         )),
     }
@@ -151,6 +272,48 @@ mod tests {
         assert_eq!(mesh.positions.len(), 5);
         assert_eq!(mesh.positions[4], [2.0, 0.0, 0.0]);
         assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3], [4, 1, 2], [4, 2, 3], [4, 3, 0]]);
+    }
+
+    #[test]
+    fn uvs_normals_and_groups_are_kept_per_corner() {
+        // A quad (fanned into two triangles) in `red`, a triangle before any `usemtl` and one
+        // in `blue`, with relative `vt`/`vn` indices on the last face.
+        let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1 0.5\nvn 0 0 2\n\
+                    f 1/1/1 2/2/1 3/3/1\nusemtl red\nf 1/1/1 2/2/1 3/3/1 4/4/1\nusemtl blue\nf -4/-4/-1 -3/-3/-1 -1/-1/-1\n";
+        let mesh = parse(text).unwrap();
+        let a = mesh.attributes.expect("vt, vn and usemtl are kept");
+        assert_eq!(a.uvs, vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
+        assert_eq!(a.uv_corners, vec![[0, 1, 2], [0, 1, 2], [0, 2, 3], [0, 1, 3]]);
+        assert_eq!(a.normals, vec![[0.0, 0.0, 2.0]]);
+        assert_eq!(a.normal_corners, vec![[0; 3]; 4]);
+        assert_eq!(a.groups, vec!["red", "blue", "default"]);
+        assert_eq!(a.triangle_groups, vec![2, 0, 0, 1]);
+        assert_eq!(a.check(mesh.triangles.len()), Ok(()));
+    }
+
+    #[test]
+    fn attributes_on_some_corners_only_are_dropped_and_plain_meshes_have_none() {
+        let mixed = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1 3//1\n").unwrap();
+        assert_eq!(mixed.attributes, None);
+        let normals_only = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1//1 2//1 3//1\n").unwrap();
+        let a = normals_only.attributes.unwrap();
+        assert!(a.uvs.is_empty() && a.uv_corners.is_empty() && a.groups.is_empty() && a.normal_corners.len() == 1);
+        assert_eq!(parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1 2 3\n").unwrap().attributes, None);
+    }
+
+    #[test]
+    fn bad_attribute_lines_name_the_line() {
+        let cases = [
+            ("vt x 0\n", "line 1: texture coordinate value `x` is not a finite number"),
+            ("vn 0 0\n", "line 1: normal has 2 values, needs 3"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2/1 3/1\n", "line 5: face refers to texture coordinate 2, but only 1 texture coordinates"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//0 2 3\n", "line 4: face refers to normal 0"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/a 2 3\n", "line 4: face corner `1/a` has a texture coordinate index that is not an integer"),
+        ];
+        for (text, expected) in cases {
+            let s = parse_err(text);
+            assert!(s.contains(expected), "{text:?}: got {s}");
+        }
     }
 
     #[test]
@@ -210,6 +373,7 @@ mod tests {
                 [7.0, 8.0, 9.0],
             ],
             triangles: vec![[0, 1, 2], [2, 1, 0]],
+            attributes: None,
         };
         let text = write(&mesh);
         let back = parse(&text).unwrap();

@@ -89,6 +89,11 @@ pub fn orient_outward(mesh: &mut TriMesh) -> usize {
             component.iter().for_each(|&t| mesh.triangles[t].swap(1, 2));
         }
     }
+    // Every change above swaps corners 1 and 2 (an even number of times undoes it), so the
+    // per-corner attributes follow the triangles that differ from their original.
+    if let Some(attributes) = &mut mesh.attributes {
+        (0..count).filter(|&t| mesh.triangles[t] != original[t]).for_each(|t| attributes.swap_corners(t));
+    }
     mesh.triangles.iter().zip(&original).filter(|(now, before)| !same_winding(**now, **before)).count()
 }
 
@@ -109,6 +114,7 @@ pub fn compact(mesh: &TriMesh) -> (TriMesh, Vec<u32>) {
     let compacted = TriMesh {
         positions: kept.iter().map(|&old| mesh.positions[old as usize]).collect(),
         triangles: mesh.triangles.iter().map(|t| t.map(|v| new_index[v as usize])).collect(),
+        attributes: mesh.attributes.clone(),
     };
     (compacted, kept)
 }
@@ -227,6 +233,28 @@ mod tests {
     }
 
     #[test]
+    fn orient_outward_carries_corner_attributes_and_compact_keeps_them() {
+        // Corner attributes equal to the vertex numbers must stay equal to them whatever flips.
+        let mut mesh = procedural::icosphere(1);
+        mesh.triangles.iter_mut().step_by(3).for_each(|t| t.swap(0, 1));
+        mesh.triangles[5].swap(1, 2);
+        let corners = mesh.triangles.clone();
+        mesh.attributes = Some(crate::mesh::attributes::CornerAttributes {
+            uvs: vec![[0.0; 2]; mesh.positions.len()],
+            uv_corners: corners.clone(),
+            normals: vec![[0.0; 3]; mesh.positions.len()],
+            normal_corners: corners,
+            ..Default::default()
+        });
+        assert!(orient_outward(&mut mesh) > 0);
+        let a = mesh.attributes.as_ref().unwrap();
+        assert_eq!(a.uv_corners, mesh.triangles);
+        assert_eq!(a.normal_corners, mesh.triangles);
+        mesh.positions.push([9.0; 3]);
+        assert_eq!(compact(&mesh).0.attributes, mesh.attributes);
+    }
+
+    #[test]
     fn orient_outward_repairs_scrambled_components() {
         let sphere = procedural::icosphere(2);
         let mut box_inside_out = procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]);
@@ -256,6 +284,7 @@ mod tests {
         let mesh = TriMesh {
             positions: vec![[9.0; 3], [0.0; 3], [1.0, 0.0, 0.0], [8.0; 3], [0.0, 1.0, 0.0]],
             triangles: vec![[4, 1, 2]],
+            attributes: None,
         };
         let (compacted, kept) = compact(&mesh);
         assert_eq!(kept, vec![1, 2, 4]);
@@ -281,7 +310,7 @@ mod tests {
         let mesh = medit::read(&path).unwrap();
         let faces = boundary(&mesh);
         assert_eq!(faces.len(), 680);
-        let surface = TriMesh { positions: mesh.positions.clone(), triangles: faces.clone() };
+        let surface = TriMesh { positions: mesh.positions.clone(), triangles: faces.clone(), attributes: None };
         assert!(open_edges(&surface).is_empty());
         assert_closed_and_consistent(&faces);
         assert!((enclosed_volume(&mesh.positions, &faces) - 4.8).abs() < 1e-12);

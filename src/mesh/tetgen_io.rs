@@ -307,6 +307,7 @@ mod tests {
         let surface = TriMesh {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.25, 0.25, 0.1]],
             triangles: vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+            attributes: None,
         };
         assert_eq!(
             write_smesh(&surface),

@@ -154,7 +154,7 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
         }
         _ => (meshes.iter().map(|m| m.positions.clone()).collect(), first.triangles.clone()),
     };
-    let first = &TriMesh { positions: positions[0].clone(), triangles };
+    let first = &TriMesh { positions: positions[0].clone(), triangles, attributes: None };
     if job.linear {
         let shapes: Vec<Vec<Point>> = weights.iter().map(|w| massspring::linear_blend(&positions, w)).collect();
         write_shapes(job, first, shapes, out_is_obj)?;
@@ -211,7 +211,7 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
 /// One OBJ, or a cache with one frame per shape.
 fn write_shapes(job: &BlendJob, mesh: &TriMesh, mut shapes: Vec<Vec<Point>>, out_is_obj: bool) -> Result<()> {
     if out_is_obj {
-        let shape = TriMesh { positions: shapes.pop().expect("one blend"), triangles: mesh.triangles.clone() };
+        let shape = TriMesh { positions: shapes.pop().expect("one blend"), triangles: mesh.triangles.clone(), attributes: mesh.attributes.clone() };
         crate::output::write_atomic(&job.out, obj::write(&shape).as_bytes())
     } else {
         let mut frames = MemoryFrames { times: (0..shapes.len()).map(|i| i as f64 / job.fps).collect(), frames: shapes };

@@ -208,7 +208,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     Ok(Keyframes {
         scene,
         rest_source: record.path.clone(),
-        rest: Shape::Surface(TriMesh { positions: rest.positions, triangles: rest.triangles }),
+        rest: Shape::Surface(TriMesh { positions: rest.positions, triangles: rest.triangles, attributes: rest.attributes }),
         times,
         poses,
         fixed: per_key(&fixed),

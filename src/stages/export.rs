@@ -27,6 +27,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
     let triangles = &animation.mesh.triangles;
+    let attributes = animation.mesh.attributes.as_ref();
     let mut formats = scene.export.formats.clone();
     formats.sort();
     formats.dedup();
@@ -49,8 +50,8 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
         let usda_text = || match (&kind, &full) {
-            (OutputKind::FullFrame, Some(full)) => usda::full_frame(full, triangles, &usd),
-            _ => usda::blendshapes(&clip, triangles, &usd),
+            (OutputKind::FullFrame, Some(full)) => usda::full_frame(full, triangles, attributes, &usd),
+            _ => usda::blendshapes(&clip, triangles, attributes, &usd),
         };
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
@@ -78,12 +79,12 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                 }
                 Format::Glb => {
                     let bytes = match (&kind, &full) {
-                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, triangles, &scene.name, placement),
+                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, triangles, attributes, &scene.name, placement),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
                             let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(&clip, &frame_times, triangles, &scene.name, placement)
+                            glb::blendshapes_sampled(&clip, &frame_times, triangles, attributes, &scene.name, placement)
                         }
-                        _ => glb::blendshapes(&clip, triangles, &scene.name, placement),
+                        _ => glb::blendshapes(&clip, triangles, attributes, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;
                 }
@@ -145,6 +146,9 @@ fn check(animation: &Animation) -> Result<()> {
     }
     if let Some(t) = animation.mesh.triangles.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
         return bad(format!("mesh triangle {t} uses a vertex index beyond its {n} vertices"));
+    }
+    if let Some(Err(problem)) = animation.mesh.attributes.as_ref().map(|a| a.check(animation.mesh.triangles.len())) {
+        return bad(format!("mesh {problem}"));
     }
     Ok(())
 }

@@ -225,9 +225,15 @@ impl KeyMeshes {
             }
         };
         debug_assert!(self.poses.iter().all(|p| p.len() == rest_positions.len()));
+        // UVs, normals and material groups come from the rest file alone (it has the keys'
+        // topology); other keyframes' `vt`/`vn`/`usemtl` are not read back (formats/scene.md).
+        let attributes = match self.cache.get(&rest_source)? {
+            MeshFile::Surface(s) => s.attributes.clone(),
+            MeshFile::Volume(_) => None,
+        };
         let rest = match &self.first {
             MeshFile::Surface(s) => {
-                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone() };
+                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone(), attributes };
                 surface::orient_outward(&mut rest);
                 Shape::Surface(rest)
             }

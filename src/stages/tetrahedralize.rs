@@ -53,7 +53,7 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
             Ok(Body { scene: scene.clone(), mesh: None, keys: key_poses(keys.poses.clone()), surface: rest.clone(), cache, cage: None })
         }
         Shape::Volume(mesh) => {
-            let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh) };
+            let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
             Ok(Body { scene: scene.clone(), mesh: Some(mesh.clone()), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary), cache, cage: None })
         }
         Shape::Surface(rest) => {

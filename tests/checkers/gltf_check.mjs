@@ -122,11 +122,19 @@ async function main() {
   const gltf = await parse(bytes);
   const meshes = [];
   gltf.scene.traverse((o) => o.isMesh && meshes.push(o));
-  if (meshes.length !== 1) {
-    summary.issues.push(`expected one mesh, three.js found ${meshes.length}`);
+  // One glTF mesh; three.js makes one Mesh per primitive (one per material group), which must
+  // share their vertices.
+  if (meshes.length < 1 || meshes.some((m) => m.geometry.attributes.position.count !== meshes[0].geometry.attributes.position.count)) {
+    summary.issues.push(`expected one mesh (primitives sharing their vertices), three.js found ${meshes.length} meshes with ${meshes.map((m) => m.geometry.attributes.position.count)} vertices`);
     return finish(summary);
   }
   const mesh = meshes[0];
+  summary.primitives = meshes.length;
+  summary.materials = meshes.map((m) => m.material.name);
+  summary.attributes = Object.keys(mesh.geometry.attributes).sort();
+  // Vertices split at UV/normal seams: the copies after the points show extras.seamSources.
+  const seamSources = gltf.parser.json.meshes?.[0]?.extras?.seamSources ?? [];
+  summary.seam_copies = seamSources.length;
   summary.kind = kindOf(gltf.parser.json);
   summary.interpolation = [...new Set((gltf.parser.json.animations ?? []).flatMap((a) => a.samplers.map((s) => s.interpolation ?? 'LINEAR')))].join('+');
   if (expected.kind && summary.kind !== expected.kind && !(summary.kind === 'static' && expected.kind === 'blendshape')) {
@@ -157,8 +165,10 @@ async function main() {
   expected.times.forEach((t, i) => {
     actions.forEach((a) => a.reset());
     mixer.setTime(t);
-    const got = morphedPositions(mesh);
-    const want = expected.points[i];
+    const gots = meshes.map(morphedPositions);
+    const got = gots[0];
+    const want = expected.points[i].concat(seamSources.map((j) => expected.points[i][j]));
+    for (const other of gots.slice(1)) if (maxDistance(other, got) > 0) summary.issues.push(`time ${t}: primitives of one mesh morph differently`);
     if (got.length !== want.length) {
       summary.issues.push(`time ${t}: ${got.length} points, expected ${want.length}`);
       return;

@@ -41,7 +41,7 @@ fn targets(dir: &TempDir) -> TriMesh {
     let mesh = bar();
     for (name, degrees) in [("a.obj", 0.0), ("b.obj", 90.0), ("c.obj", -60.0)] {
         let positions = if degrees == 0.0 { mesh.positions.clone() } else { bent(&mesh.positions, degrees) };
-        std::fs::write(dir.join(name), obj::write(&TriMesh { positions, triangles: mesh.triangles.clone() })).unwrap();
+        std::fs::write(dir.join(name), obj::write(&TriMesh { positions, triangles: mesh.triangles.clone(), attributes: None })).unwrap();
     }
     mesh
 }
@@ -172,7 +172,7 @@ fn bad_blend_input_is_one_line_and_writes_nothing() {
     let mut open = rest.clone();
     open.triangles.pop();
     std::fs::write(dir.join("open_a.obj"), obj::write(&open)).unwrap();
-    std::fs::write(dir.join("open_b.obj"), obj::write(&TriMesh { positions: bent(&open.positions, 90.0), triangles: open.triangles.clone() })).unwrap();
+    std::fs::write(dir.join("open_b.obj"), obj::write(&TriMesh { positions: bent(&open.positions, 90.0), triangles: open.triangles.clone(), attributes: None })).unwrap();
     refused(&dir, &["blend", "--targets", "open_a.obj", "open_b.obj", "--weights", "0.5,0.5", "--out", "shape.obj"], &["open_a.obj", "not a closed surface", "--no-body"]);
     run(&dir.path, &["blend", "-q", "--targets", "open_a.obj", "open_b.obj", "--weights", "0.5,0.5", "--out", "open.obj", "--no-body"]).success();
 

@@ -257,7 +257,7 @@ fn checkers_reject_wrong_points_and_broken_files() {
 /// 0.5 s while the whole shape starts with a sideways velocity of 0.5 units/s; z up, 4 fps.
 fn tetra(export: &str) -> Animation {
     let positions = vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let mesh = blendsim::mesh::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] };
+    let mesh = blendsim::mesh::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], attributes: None };
     let mut risen = positions.clone();
     risen[3][2] += 0.5;
     let tr = blendsim::Trajectory {

@@ -7,6 +7,7 @@
 
 mod common;
 
+mod attributes;
 mod blend;
 mod blender;
 mod cache_bake;

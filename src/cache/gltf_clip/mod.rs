@@ -387,7 +387,7 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
     let mut first = vec![[0.0; 3]; clip.base.len()];
     clip.read_frame(0, &mut first)?;
     let bytes = clip.store.bytes;
-    Ok(OpenedClip { mesh: TriMesh { positions: first, triangles }, frames: clip, fps, fps_from_keys, bytes })
+    Ok(OpenedClip { mesh: TriMesh { positions: first, triangles, attributes: None }, frames: clip, fps, fps_from_keys, bytes })
 }
 
 /// The rate of evenly spaced keys (within 1e-3 of the mean interval: f32 times jitter).
