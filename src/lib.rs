@@ -46,6 +46,7 @@ pub mod output;
 pub mod procedural;
 pub mod progress;
 pub mod report;
+pub mod resources;
 pub mod scene;
 pub mod stage;
 pub mod stages;

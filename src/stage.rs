@@ -257,7 +257,12 @@ impl StageData for Keyframes {
         if let Some(display) = &self.display {
             rerun.tri_mesh("display surface", display)?;
         }
-        Ok(())
+        let tets = match &self.rest {
+            Shape::Surface(m) => m.triangles.len().div_ceil(4),
+            Shape::Volume(m) => m.tets.len(),
+        };
+        let vertices = self.display.as_ref().map_or(n, |d| d.positions.len());
+        rerun.resources(&self.scene, &self.times, vertices, tets)
     }
 }
 impl StageData for Body {
@@ -269,7 +274,7 @@ impl StageData for Body {
         let n = rerun.tet_mesh("mesh", &self.mesh)?;
         rerun.key_poses(&self.keys, n)?;
         rerun.tri_mesh("surface", &self.surface)?;
-        Ok(())
+        rerun.resources(&self.scene, &self.keys.times, self.surface.positions.len(), self.mesh.tets.len())
     }
 }
 impl StageData for Solution {
@@ -281,7 +286,8 @@ impl StageData for Solution {
         let n = rerun.tet_mesh("body mesh", &self.body.mesh)?;
         rerun.key_poses(&self.body.keys, n)?;
         rerun.tri_mesh("body surface", &self.body.surface)?;
-        rerun.trajectory(&self.trajectory, n, "tet nodes")
+        rerun.trajectory(&self.trajectory, n, "tet nodes")?;
+        rerun.resources(&self.body.scene, &self.trajectory.times, self.body.surface.positions.len(), 0)
     }
 }
 impl StageData for Animation {
@@ -302,7 +308,7 @@ impl StageData for Animation {
                 self.mesh.triangles.len()
             ));
         }
-        Ok(())
+        rerun.resources(&self.scene, &self.trajectory.times, n, 0)
     }
 }
 impl StageData for Outputs {
@@ -333,6 +339,12 @@ impl Check {
         scene.validate().map_err(|e| {
             Error::general(format!("its scene: {}", e.problem), format!("{}; edit the scene file, then re-run the chain from `blendsim import`", e.fix))
         })
+    }
+
+    /// The memory the stages after this one need, within the budget.
+    fn resources(&self, scene: &Scene, times: &[f64], vertices: usize, tets: usize) -> Result<()> {
+        crate::stages::check_resources(scene, times, vertices, tets)
+            .map_err(|e| Error::general(e.problem, format!("{}; edit the scene file, then re-run the chain from `blendsim import`", e.fix)))
     }
 
     fn points(&self, what: &str, points: &[Point]) -> Result<()> {

@@ -148,6 +148,14 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         }
         None => None,
     };
+    // Before TetGen: the exported vertices, and the fewest tets a tet mesh of the rest shape
+    // can have (each boundary triangle is a face of a tet, a tet has 4 faces).
+    let (vertices, tets) = match &rest {
+        Shape::Surface(s) => (s.positions.len(), s.triangles.len().div_ceil(4)),
+        Shape::Volume(v) => (v.positions.len(), v.tets.len()),
+    };
+    let vertices = display.as_ref().map_or(vertices, |d| d.positions.len());
+    super::check_resources(scene, &keys.times, vertices, tets)?;
     Ok(Keyframes {
         scene: scene.clone(),
         rest_source: rest_source.display().to_string(),

@@ -25,6 +25,7 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
         body.scene.solver.method = m;
     }
     let scene = &body.scene;
+    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), body.mesh.tets.len())?;
     let elastic = Elastic::new(&body.mesh, &super::elastic_material(&scene.material))?;
     let settings = settings(scene);
     let keys = key_constraints(&body.keys);

@@ -600,6 +600,12 @@ fn corpus() -> Vec<Bad> {
         bad("index-missing", vec![text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["cannot read the vertex selection"]),
         bad("index-fifo", vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["is a named pipe (FIFO)"]),
         bad("embed-surface-missing", vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))], "in/fine.obj", &["cannot read the OBJ surface"]),
+        // Beyond the machine's memory: once a capacity-overflow panic or an allocation abort.
+        bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "GB available", "lower [solver] samples"]),
+        bad_scene("samples-1e9", table("[solver]\nsamples = 1000000000"), &["would need about 3456.0 GB of memory for 1000000000 samples per interval"]),
+        bad_scene("samples-float", table("[solver]\nsamples = 1e9"), &["invalid type: floating point `1000000000.0`, expected usize"]),
+        bad_scene("fps-1e9", base.replacen("[keyframes]", "fps = 1e9\n[keyframes]", 1), &["GB of memory for 1.000e9 frames (1 s at 1000000000 fps) of 26 vertices", "lower fps"]),
+        bad_scene("times-1e6", base.replace("times = [0.0, 1.0]", "times = [0.0, 1e6]"), &["GB of memory for 6.000e7 frames (1000000 s at 60 fps) of 26 vertices"]),
         // Found after TetGen and the solve: these once named no file, now the scene.
         bad_scene("singular", good_scene("fixed = [\"none\", \"none\"]", "[solver]\nregularization = 0.0"), &["the spacetime system is singular"]),
         bad_scene("no-frame", base.replace("times = [0.0, 1.0]", "times = [0.010, 0.015]"), &["cannot export: the animation runs from 0.01 s to 0.015 s, between two frames at 60 fps"]),
@@ -758,6 +764,8 @@ fn stage_corpus() -> Vec<BadStage> {
         BadStage { name: "body-times-short", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["times"]), says: "keys.times has 1 key times, at least 2 are needed" },
         BadStage { name: "body-times-decrease", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["times"] = json!([1.0, 0.0]), says: "keys.times do not increase at key 1 (0 after 1)" },
         BadStage { name: "body-samples-zero", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(0), says: "body stage: its scene: [solver] samples = 0" },
+        BadStage { name: "body-samples-max", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(9223372036854775807u64), says: "body stage: the scene would need about" },
+        BadStage { name: "animation-fps-1e9", args: report, file: "animation.json", edit: |v| v["data"]["scene"]["fps"] = json!(1e9), says: "frames (1 s at 1000000000 fps) of 26 vertices" },
         BadStage { name: "body-fixed-count", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["fixed"]), says: "keys.fixed has 1 sets for 2 keys" },
         BadStage { name: "body-fixed-unsorted", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["fixed"][0] = json!([3, 1]), says: "keys.fixed[0] is not sorted without repeats" },
         BadStage { name: "body-inverted-tet", args: solve, file: "body.json", edit: |v| { let t = v["data"]["mesh"]["tets"][0].clone(); v["data"]["mesh"]["tets"][0] = json!([t[1], t[0], t[2], t[3]]); }, says: "mesh tet 0 is inverted or flat in the rest pose" },
