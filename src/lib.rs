@@ -56,6 +56,8 @@ mod error;
 mod export;
 #[cfg(test)]
 mod fuzz;
+#[cfg(test)]
+mod fuzz_stages;
 mod input;
 mod physics;
 mod spacetime;
