@@ -140,6 +140,7 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     if keys.cyclic {
         meshes.check_loop(rest_points)?;
     }
+    check_key_volumes(&rest, &meshes.poses, &meshes.paths)?;
     let display = match &scene.embed.surface {
         Some(p) => {
             let mut s = mesh::obj::read(&scene_file.resolve(p))?;
@@ -246,4 +247,39 @@ impl KeyMeshes {
         }
         Ok(())
     }
+}
+
+/// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or
+/// almost zero (flattened or collapsed) against the rest shape's is an error naming the key:
+/// the solver would either fight the inversion or have nothing to keep, and the report would
+/// show volumes down to -100%. Both are fixed in the modeling tool, not by blendsim.
+fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    let volume = |p: &[Point]| match rest {
+        Shape::Surface(s) => surface::enclosed_volume(p, &s.triangles),
+        Shape::Volume(v) => v.volume_at(p),
+    };
+    let rest_points = match rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let rest_volume = volume(rest_points);
+    if !(rest_volume > 0.0) {
+        return Ok(()); // the rest shape's own checks report it
+    }
+    for (k, pose) in poses.iter().enumerate() {
+        let ratio = volume(pose) / rest_volume;
+        let problem = if ratio < 0.0 {
+            "is inside out (mirrored)"
+        } else if ratio < 1e-3 {
+            "is flattened or collapsed"
+        } else {
+            continue;
+        };
+        return Err(Error::in_file(
+            &paths[k],
+            format!("key {k} {problem}: it encloses {:.1}% of the rest shape's volume", 100.0 * ratio),
+            "re-export the key from the same object without a zero or negative scale",
+        ));
+    }
+    Ok(())
 }

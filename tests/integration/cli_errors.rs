@@ -23,6 +23,15 @@ fn cube() -> TriMesh {
     prism([1.0, 1.0, 1.0], [2, 2, 2])
 }
 
+fn scaled(mut mesh: TriMesh, by: [f64; 3]) -> TriMesh {
+    for p in &mut mesh.positions {
+        for d in 0..3 {
+            p[d] *= by[d];
+        }
+    }
+    mesh
+}
+
 fn translated(mut mesh: TriMesh, by: [f64; 3]) -> TriMesh {
     for p in &mut mesh.positions {
         for d in 0..3 {
@@ -600,6 +609,10 @@ fn corpus() -> Vec<Bad> {
         bad("index-missing", vec![text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["cannot read the vertex selection"]),
         bad("index-fifo", vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["is a named pipe (FIFO)"]),
         bad("embed-surface-missing", vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))], "in/fine.obj", &["cannot read the OBJ surface"]),
+        // Degenerate keys: once baked with volumes down to -100%.
+        bad("key-mirrored", key1(obj::write(&scaled(cube(), [-1.0, 1.0, 1.0]))), "in/k1.obj", &["key 1 is inside out (mirrored): it encloses -100.0% of the rest shape's volume"]),
+        bad("key-flattened", key1(obj::write(&scaled(cube(), [1.0, 0.0, 1.0]))), "in/k1.obj", &["key 1 is flattened or collapsed: it encloses 0.0%"]),
+        bad("key-collapsed", key1(obj::write(&scaled(cube(), [0.0, 0.0, 0.0]))), "in/k1.obj", &["key 1 is flattened or collapsed"]),
         // Beyond the machine's memory: once a capacity-overflow panic or an allocation abort.
         bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "GB available", "lower [solver] samples"]),
         bad_scene("samples-1e9", table("[solver]\nsamples = 1000000000"), &["would need about 3456.0 GB of memory for 1000000000 samples per interval"]),
