@@ -45,7 +45,7 @@ pub fn check(bytes: f64, what: &str, fix: &str) -> Result<()> {
 
 fn check_against(bytes: f64, budget: Option<f64>, what: &str, fix: &str) -> Result<()> {
     match budget {
-        Some(budget) if !(bytes <= budget) => Err(Error::general(
+        Some(budget) if bytes.is_nan() || bytes > budget => Err(Error::general(
             format!("the scene would need about {} of memory for {what}, more than the {} available", gb(bytes), gb(budget)),
             fix,
         )),

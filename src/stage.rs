@@ -378,7 +378,7 @@ impl Check {
         if let Some(t) = m.tets.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
             return self.fail(format!("{what} tet {t} uses node {}, but there are {n} nodes", m.tets[t].iter().max().unwrap()));
         }
-        if let Some(t) = (0..m.tets.len()).find(|&t| !(m.signed_volume_at(&m.positions, t) > 0.0)) {
+        if let Some(t) = (0..m.tets.len()).find(|&t| m.signed_volume_at(&m.positions, t).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
             return self.fail(format!("{what} tet {t} is inverted or flat in the rest pose (signed volume {:e})", m.signed_volume_at(&m.positions, t)));
         }
         Ok(n)

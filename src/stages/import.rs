@@ -263,7 +263,7 @@ fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> R
         Shape::Volume(v) => &v.positions,
     };
     let rest_volume = volume(rest_points);
-    if !(rest_volume > 0.0) {
+    if rest_volume.is_nan() || rest_volume <= 0.0 {
         return Ok(()); // the rest shape's own checks report it
     }
     for (k, pose) in poses.iter().enumerate() {
