@@ -23,7 +23,7 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch clean
+.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -31,7 +31,8 @@ help:
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
-	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j)"
+	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
+	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
 	@echo "make test-deps / build / clean"
 
 build:
@@ -122,6 +123,12 @@ bench-cache: deps-usd
 SCENE_NAMES := $(basename $(notdir $(wildcard $(SCENES)/*.toml)))
 batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
 	@for n in $(SCENE_NAMES); do echo "$(BATCH_OUT)/$$n/report.md"; done
+	$(BIN) report --batch $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)) --out $(BATCH_OUT)
+	@echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
+
+# The simulated test caches (rapier3d bar, 2 and 1 Hz, every cache format) baked and summarized.
+batch-caches: deps-usd
+	BLENDSIM_BATCH_DIR=$(CURDIR)/build/batch-caches $(CARGO) test --release --locked --test integration cache_bake::batch_of_the_generated_caches -- --ignored --nocapture
 
 $(BATCH_OUT)/%/report.json: $(SCENES)/%.toml | build deps-tetgen
 	$(BIN) bake $< --out $(@D) --quiet

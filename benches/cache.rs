@@ -13,18 +13,31 @@
 //! like PCA's; the default Bernstein form costs one more shape per key with a velocity.
 //! "passes" is frames read by the selection over the frame count; "held frames" the most
 //! frames it held in memory at once.
+//!
+//! A second table compares what a user would do instead, per cache: bakes through the whole
+//! chain with `fit` and `spacetime` (keys, bytes, max error against the cache, bake time per
+//! cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
+//! are sparse, so it is smaller than our exporter's full-frame glb), gltfpack 1.3.0 on that glb
+//! (`make deps-npm` installs it; bytes with `-cc`, error measured without `-c`), and a PCA basis
+//! meeting the same tolerance (bytes computed).
 
 #[path = "../tests/integration/common/bar.rs"]
 mod bar;
 
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use bar::{bar, BarCache, BarSettings};
-use blendsim::cache::deviation::cache_diagonal;
+use blendsim::cache::deviation::{cache_diagonal, deviation};
 use blendsim::cache::fit::{fit, FitSettings};
 use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
-use blendsim::cache::{FrameSource, MemoryFrames};
+use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
 use blendsim::clip::{BlendShapeClip, Weights};
+use blendsim::mesh::obj;
+use blendsim::output::Staging;
+use blendsim::progress::Progress;
+use blendsim::scene::SceneFile;
 use blendsim::internals::{glb, usda, FullFrame, Placement, UsdSettings};
 
 const TOLERANCE: f64 = 0.005;
@@ -144,6 +157,150 @@ fn run(name: &str, cache: &BarCache) {
     );
 }
 
+/// Bytes and max error (of the cache's bbox diagonal) of what a user would do with the
+/// full-frame glb: gltfpack 1.3.0 (npm, in tests/checkers), with `-af 0` (no resampling,
+/// keeps every frame) and at its defaults (30 Hz resampling); bytes with `-cc`, error measured
+/// on the same settings without `-c` (meshopt compression is lossless on the quantized data and
+/// our reader refuses it). gltfpack reorders vertices: they are matched to the cache's by
+/// nearest rest position. None when gltfpack is not installed.
+fn gltfpack(full_glb: &Path, cache: &BarCache, diagonal: f64) -> Option<Vec<(&'static str, u64, f64)>> {
+    let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/node_modules/.bin/gltfpack");
+    if !bin.is_file() {
+        return None;
+    }
+    let dir = full_glb.parent().unwrap();
+    let mut rows = Vec::new();
+    for (label, flags) in [("gltfpack -af 0 -cc", &["-af", "0"][..]), ("gltfpack -cc (30 Hz)", &[][..])] {
+        let packed = |extra: &[&str], name: &str| {
+            let out = dir.join(name);
+            let status = Command::new(&bin).arg("-i").arg(full_glb).arg("-o").arg(&out).args(flags).args(extra).stdout(Stdio::null()).stderr(Stdio::null()).status().expect("run gltfpack");
+            assert!(status.success(), "gltfpack {flags:?} {extra:?} failed");
+            out
+        };
+        let bytes = std::fs::metadata(packed(&["-cc"], "packed_cc.glb")).unwrap().len();
+        let plain = packed(&[], "packed.glb");
+        let mut read = VertexCache::open(&plain, &CacheOptions { fps: Some(cache.settings.fps), ..CacheOptions::default() }).expect("read gltfpack's output");
+        let rest = &cache.frames.frames[0];
+        let mut first = vec![[0.0; 3]; read.frames.vertex_count()];
+        read.frames.read_frame(0, &mut first).unwrap();
+        // Its vertex v is the cache's vertex map[v].
+        let map: Vec<usize> = first.iter().map(|p| (0..rest.len()).min_by(|&a, &b| dist(*p, rest[a]).total_cmp(&dist(*p, rest[b]))).unwrap()).collect();
+        let mut got = vec![[0.0; 3]; first.len()];
+        let mut max = 0.0f64;
+        for (f, frame) in cache.frames.frames.iter().enumerate() {
+            // Resampled output: evaluate at the cache's frame times.
+            let t = cache.frames.times[f];
+            let g = (0..read.frames.frame_count()).min_by(|&a, &b| (read.frames.time(a) - t).abs().total_cmp(&(read.frames.time(b) - t).abs())).unwrap();
+            read.frames.read_frame(g, &mut got).unwrap();
+            max = got.iter().zip(&map).map(|(p, &v)| dist(*p, frame[v])).fold(max, f64::max);
+        }
+        rows.push((label, bytes, max / diagonal));
+    }
+    Some(rows)
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// One bake of the cache through the library's chain (as `blendsim bake`): seconds, keys,
+/// blendshape glb and usda bytes, max error against the cache.
+fn bake(dir: &Path, method: &str, weights: &str) -> (f64, usize, u64, u64, f64) {
+    let physics = if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n[solver]\nmax_iterations = 15\n" };
+    let text = format!(
+        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = false\nweights = \"{weights}\"\n",
+        if method == "fit" { "[solver]\nmethod = \"fit\"\n" } else { "" }
+    );
+    let scene_path = dir.join(format!("{method}-{weights}.toml"));
+    std::fs::write(&scene_path, text).unwrap();
+    let out = dir.join(format!("out-{method}-{weights}"));
+    let _ = std::fs::remove_dir_all(&out);
+    let t = Instant::now();
+    let scene = SceneFile::load(&scene_path).unwrap_or_else(|e| panic!("{e}"));
+    let mut staging = Staging::new(&out).unwrap();
+    let report = blendsim::stages::bake(&scene, None, &mut staging, &Progress::new(true)).unwrap_or_else(|e| panic!("{e}"));
+    staging.commit().unwrap();
+    let seconds = t.elapsed().as_secs_f64();
+    let bytes = |ext: &str| std::fs::metadata(out.join(format!("bar.{ext}"))).unwrap().len();
+    let c = report.cache.expect("a cache report");
+    (seconds, c.keys.len(), bytes("glb"), bytes("usda"), c.error.max)
+}
+
+/// A proposal measured: the fit's clip with its shapes reduced to their principal components.
+/// The key positions (minus the first) and velocities (scaled by the mean key interval) of the
+/// fit on keys chosen for `tolerance / 2` form a 2K x 3V matrix; its rank-r truncation is again a
+/// Hermite trajectory, so a file stores r dense targets and r CUBICSPLINE weight curves (3
+/// floats per key per curve) exactly. Returns the smallest r meeting the tolerance, its f32
+/// bytes (base + r targets + curves + key times) and max error against the cache.
+fn reduced_clip(cache: &BarCache, diagonal: f64) -> (usize, usize, usize, f64) {
+    let mut frames = cache.frames.clone();
+    let auto = select(&mut frames, &AutoSettings { tolerance: TOLERANCE / 2.0, ..AutoSettings::default() }).expect("select");
+    let tr = &auto.trajectory;
+    let (k, n) = (tr.times.len(), 3 * tr.positions[0].len());
+    let h = (tr.times[k - 1] - tr.times[0]) / (k - 1) as f64;
+    let base = tr.positions[0].as_flattened().to_vec();
+    let a = faer::Mat::<f64>::from_fn(2 * k, n, |r, c| if r < k { tr.positions[r].as_flattened()[c] - base[c] } else { h * tr.velocities[r - k].as_flattened()[c] });
+    let svd = a.thin_svd().expect("SVD converges");
+    let (u, s, v) = (svd.U(), svd.S(), svd.V());
+    for rank in 1..=2 * k {
+        let row = |r: usize| -> Vec<[f64; 3]> {
+            let flat: Vec<f64> = (0..n).map(|c| (0..rank).map(|j| (u[(r, j)] * s[j]) as f32 as f64 * (v[(c, j)] as f32 as f64)).sum()).collect();
+            flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
+        };
+        let mut reduced = tr.clone();
+        for key in 0..k {
+            reduced.positions[key] = row(key).iter().zip(base.chunks_exact(3)).map(|(d, b)| [b[0] + d[0], b[1] + d[1], b[2] + d[2]]).collect();
+            reduced.velocities[key] = row(k + key).iter().map(|d| [d[0] / h, d[1] / h, d[2] / h]).collect();
+        }
+        let max = deviation(&mut frames, &reduced, diagonal).expect("deviation").max;
+        if max <= TOLERANCE {
+            return (rank, k, 4 * (n + rank * n + 3 * k * rank + k), max);
+        }
+    }
+    unreachable!("full rank reproduces the fit")
+}
+
+/// The comparison: per cache, fit and spacetime bakes (keys, bytes, max error, bake
+/// time per cache frame) against the full-frame files, gltfpack on the full-frame glb, and PCA.
+fn compare(name: &str, cache: &BarCache) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/cache-compare").join(name.replace([' ', ','], "_"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("rest.obj"), obj::write(&cache.surface)).unwrap();
+    let fps = cache.settings.fps;
+    blendsim::cache::write(&dir.join("bar.pc2"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::cache::write(&dir.join("full.glb"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::cache::write(&dir.join("full.usda"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    let frames = cache.frames.frame_count() as f64;
+    let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
+    let size = |p: &str| std::fs::metadata(dir.join(p)).unwrap().len();
+    let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
+    let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, max: f64, ms: Option<f64>| {
+        println!(
+            "| {name} | {what} | {keys} | {} | {} | {:.2e} | {:.1}x | {} | {} |",
+            kb(glb as usize),
+            usda.map_or("-".into(), |u| kb(u as usize)),
+            max,
+            full_glb as f64 / glb as f64,
+            usda.map_or("-".into(), |u| format!("{:.1}x", full_usda as f64 / u as f64)),
+            ms.map_or("-".into(), |m| format!("{m:.2}"))
+        )
+    };
+    row("full frame (the cache as glb / usda)", "-".into(), full_glb, Some(full_usda), 0.0, None);
+    for (method, weights) in [("fit", "bernstein"), ("fit", "signed"), ("spacetime", "bernstein")] {
+        let (s, keys, glb, usda, max) = bake(&dir, method, weights);
+        row(&format!("blendsim {method} ({weights} weights)"), keys.to_string(), glb, Some(usda), max, Some(1e3 * s / frames));
+    }
+    match gltfpack(&dir.join("full.glb"), cache, diagonal) {
+        Some(rows) => rows.into_iter().for_each(|(label, bytes, max)| row(label, "-".into(), bytes, None, max, None)),
+        None => println!("| {name} | gltfpack not installed (make deps-npm) | | | | | | | |"),
+    }
+    let (rank, pca_bytes, pca_max) = pca_baseline(&cache.frames, diagonal);
+    row(&format!("PCA rank {rank}, f32 (bytes computed)"), "-".into(), pca_bytes as u64, None, pca_max, None);
+    let (rank, keys, bytes, max) = reduced_clip(cache, diagonal);
+    row(&format!("proposal: fit clip reduced to rank {rank} (f32, bytes computed)"), keys.to_string(), bytes as u64, None, max, None);
+}
+
 fn main() {
     let cases: Vec<(&str, BarSettings)> = vec![
         ("bar 2 Hz", BarSettings::default()),
@@ -159,6 +316,14 @@ fn main() {
         let cache = bar(settings);
         eprintln!("{name}: cache ready in {:.1} s (simulated once, then read from target/)", t.elapsed().as_secs_f64());
         run(name, &cache);
+    }
+    println!();
+    println!("What a user would do instead (tolerance {TOLERANCE}; KB; \"smaller\" is the full-frame file of the same format over this; bake ms per cache frame, load average {}):", load());
+    println!();
+    println!("| cache | form | keys | glb KB | usda KB | max error | glb smaller | usda smaller | bake ms/frame |");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for (name, settings) in cases.iter().take(2).filter(|(n, _)| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| n.contains(only.as_str()))) {
+        compare(name, &bar(settings));
     }
     println!();
     println!("load average after: {}", load());

@@ -67,7 +67,7 @@ fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    Body { scene, mesh, keys, surface }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None }
 }
 
 struct Measured {
@@ -219,11 +219,12 @@ fn main() {
     for (name, make, paper) in cases.iter().filter(|c| only.is_empty() || only.iter().any(|o| o == c.0)) {
         let body = make();
         let samples = body.scene.solver.samples * (body.keys.times.len() - 1);
-        let big = body.mesh.tets.len() > 5000;
+        let tets = body.mesh.as_ref().expect("the paper scenes are simulated");
+        let big = tets.tets.len() > 5000;
         let m = measure(&body, if big { 3 } else { 5 }, if big { 7 } else { 9 });
         println!(
             "| {name} | {} ({}) | {} ({}) | {} ({}) | {samples} ({}) | {} | {:.2}M | {:.2}M | {:.3} ({:.3}) | {:.4} ({:.3}) | {:.4} | {:.4} | {:.3} | {:.3} | {:.4} | {} | {} |",
-            body.mesh.positions.len(), paper.verts, body.mesh.tets.len(), paper.tets, body.keys.times.len(), paper.keys, paper.samples,
+            tets.positions.len(), paper.verts, tets.tets.len(), paper.tets, body.keys.times.len(), paper.keys, paper.samples,
             m.unknowns, m.matrix_nnz as f64 / 1e6, m.factor_nnz as f64 / 1e6, m.precompute, paper.precompute, m.iteration, paper.iteration,
             m.local, m.global, m.assemble, m.factor, m.exact_iteration, m.ordering, load()
         );

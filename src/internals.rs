@@ -21,6 +21,7 @@ use crate::stage::Body;
 /// The solver's inputs for a body, as the `solve` stage builds them: the elastic body, its key
 /// constraints, and the settings of its scene.
 pub fn solver_inputs(body: &Body) -> Result<(Elastic, KeyConstraints, Settings)> {
-    let elastic = Elastic::new(&body.mesh, &crate::stages::elastic_material(&body.scene.material))?;
+    let tets = body.mesh.as_ref().ok_or_else(|| crate::error::Error::general("the body has no tet mesh (method fit)", "tetrahedralize for spacetime"))?;
+    let elastic = Elastic::new(tets, &crate::stages::elastic_material(&body.scene.material))?;
     Ok((elastic, crate::stages::solve::key_constraints(&body.keys), crate::stages::solve::settings(&body.scene)))
 }

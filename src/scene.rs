@@ -15,6 +15,9 @@ pub use crate::export::clip::Weights;
 pub use crate::mesh::Axis;
 pub use crate::procedural::Twist;
 
+mod cache;
+pub use cache::{CacheKeys, CacheSpec, DEFAULT_TOLERANCE};
+
 /// A parsed, validated scene and the folder its relative paths resolve against.
 #[derive(Debug, Clone)]
 pub struct SceneFile {
@@ -55,8 +58,13 @@ pub struct Scene {
     /// Full-frame rate, and the USD weight sample rate (frames per second).
     #[serde(default = "default_fps")]
     pub fps: f64,
-    /// `[keyframes]`: the keyframe meshes, their times and constraints.
-    pub keyframes: KeyframeSpec,
+    /// `[keyframes]`: the keyframe meshes, their times and constraints (exclusive with
+    /// `[cache]`: a scene has exactly one of them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keyframes: Option<KeyframeSpec>,
+    /// `[cache]`: a vertex cache whose frames give the keys (see [`CacheSpec`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheSpec>,
     /// `[tet]`: TetGen's settings.
     #[serde(default)]
     pub tet: Tet,
@@ -138,6 +146,8 @@ pub enum Method {
     Hermite,
     /// BlendSim's spacetime projective dynamics.
     Spacetime,
+    /// The least-squares cubic Hermite fit of a cache on its keys, no physics (`[cache]` only).
+    Fit,
 }
 
 impl fmt::Display for Method {
@@ -145,6 +155,7 @@ impl fmt::Display for Method {
         f.write_str(match self {
             Method::Hermite => "hermite",
             Method::Spacetime => "spacetime",
+            Method::Fit => "fit",
         })
     }
 }
@@ -547,7 +558,19 @@ impl Scene {
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
         }
-        self.keyframes.validate()?;
+        match (&self.keyframes, &self.cache) {
+            (Some(k), None) => k.validate()?,
+            (None, Some(c)) => c.validate(self)?,
+            (Some(_), Some(_)) => {
+                return invalid("the scene has both [keyframes] and [cache]".into(), "keep one: keyframe meshes, or a vertex cache to take keys from");
+            }
+            (None, None) => {
+                return invalid("the scene has neither [keyframes] nor [cache]".into(), "add a [keyframes] table of meshes, or a [cache] table naming a vertex cache");
+            }
+        }
+        if self.keyframes.is_some() && self.solver.method == Method::Fit {
+            return invalid("[solver] method = \"fit\" fits a vertex cache, but the scene has [keyframes]".into(), "use \"spacetime\" or \"hermite\", or give a [cache]");
+        }
         self.tet.validate()?;
         self.material.validate()?;
         self.solver.validate()?;
@@ -733,7 +756,7 @@ times = [0.0, 0.5]
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
         assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
-        assert_eq!(s.keyframes.rest, Rest::Key(0));
+        assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Key(0));
     }
 
     #[test]
@@ -776,7 +799,7 @@ full_frame = true
         let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
         assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
         assert_eq!(
-            s.keyframes.fixed,
+            s.keyframes.as_ref().unwrap().fixed,
             Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }])
         );
     }
@@ -801,9 +824,9 @@ fixed = ["all", [{ axis = "y", max = 0.01 }, { axis = "y", min = 2.99 }], { file
 rest = "rest.mesh"
 "#;
         let s = Scene::parse(text).unwrap();
-        assert_eq!(s.keyframes.meshes[1].twist().unwrap().degrees, 180.0);
-        assert_eq!(s.keyframes.rest, Rest::Mesh("rest.mesh".into()));
-        let fixed = s.keyframes.fixed.unwrap();
+        assert_eq!(s.keyframes.as_ref().unwrap().meshes[1].twist().unwrap().degrees, 180.0);
+        assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Mesh("rest.mesh".into()));
+        let fixed = s.keyframes.unwrap().fixed.unwrap();
         assert_eq!(
             fixed[1],
             Selection::Union(vec![

@@ -20,6 +20,9 @@ use crate::mesh::{Point, TetMesh, TriMesh};
 use crate::scene::{Format, Method, Scene};
 use crate::spacetime::trajectory::Trajectory;
 
+mod cache;
+pub use cache::{CacheRecord, CacheRecordOptions};
+
 /// A sorted set of vertex indices.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(transparent)]
@@ -97,6 +100,9 @@ pub struct Keyframes {
     pub cyclic: bool,
     /// A separate surface to embed and export, in the rest pose (`[embed] surface`).
     pub display: Option<TriMesh>,
+    /// The cache the keys were taken from (`[cache]` scenes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheRecord>,
 }
 
 /// Keyframe data per tet node: what the solver constrains and starts from.
@@ -119,13 +125,17 @@ pub struct KeyPoses {
 pub struct Body {
     /// The scene.
     pub scene: Scene,
-    /// Rest pose, every tet positively oriented.
-    pub mesh: TetMesh,
+    /// Rest pose, every tet positively oriented; none when nothing is simulated (method
+    /// `fit`: the trajectory is the surface's own).
+    pub mesh: Option<TetMesh>,
     /// The keyframes of every node.
     pub keys: KeyPoses,
     /// The surface that is exported, in the rest pose, outward oriented, with no unused
     /// vertices. It is embedded in `mesh`.
     pub surface: TriMesh,
+    /// The cache the keys were taken from (`[cache]` scenes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheRecord>,
 }
 
 /// What the solver did.
@@ -194,6 +204,9 @@ pub struct Animation {
     pub input_keys: Vec<Vec<Point>>,
     /// What the solver did.
     pub log: SolverLog,
+    /// The cache the keys were taken from (`[cache]` scenes): the report measures against it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<CacheRecord>,
 }
 
 /// The two forms of the animation in the files.
@@ -271,10 +284,14 @@ impl StageData for Body {
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER);
         rerun.scene(&self.scene)?;
-        let n = rerun.tet_mesh("mesh", &self.mesh)?;
+        // Without a tet mesh (method fit) the keys are the surface's own.
+        let surface = rerun.tri_mesh("surface", &self.surface)?;
+        let n = match &self.mesh {
+            Some(m) => rerun.tet_mesh("mesh", m)?,
+            None => surface,
+        };
         rerun.key_poses(&self.keys, n)?;
-        rerun.tri_mesh("surface", &self.surface)?;
-        rerun.resources(&self.scene, &self.keys.times, self.surface.positions.len(), self.mesh.tets.len())
+        rerun.resources(&self.scene, &self.keys.times, surface, self.mesh.as_ref().map_or(0, |m| m.tets.len()))
     }
 }
 impl StageData for Solution {
@@ -283,10 +300,13 @@ impl StageData for Solution {
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER);
         rerun.scene(&self.body.scene)?;
-        let n = rerun.tet_mesh("body mesh", &self.body.mesh)?;
+        let surface = rerun.tri_mesh("body surface", &self.body.surface)?;
+        let (n, of) = match &self.body.mesh {
+            Some(m) => (rerun.tet_mesh("body mesh", m)?, "tet nodes"),
+            None => (surface, "surface vertices"),
+        };
         rerun.key_poses(&self.body.keys, n)?;
-        rerun.tri_mesh("body surface", &self.body.surface)?;
-        rerun.trajectory(&self.trajectory, n, "tet nodes")?;
+        rerun.trajectory(&self.trajectory, n, of)?;
         rerun.resources(&self.body.scene, &self.trajectory.times, self.body.surface.positions.len(), 0)
     }
 }

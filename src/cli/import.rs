@@ -1,20 +1,27 @@
 use std::path::PathBuf;
 
+use blendsim::Error;
 use blendsim::progress::Progress;
 use blendsim::scene::SceneFile;
 use blendsim::{stage, stages, Result};
 
-/// Read a scene's keyframe meshes and write the keyframes stage file.
+/// Read a scene's keyframe meshes (or vertex cache) and write the keyframes stage file; or
+/// convert the scene's cache to another cache format.
 ///
 /// Checks that every keyframe has the same topology, applies procedural deformations,
 /// orients the rest shape, and resolves the per-key `fixed` / `fixed_velocity` selections.
+/// With a [cache], chooses its keys. `--cache-out PATH` writes the [cache] (its range) in the
+/// format PATH names: an OBJ sequence (a #### pattern), .pc2, .mdd, .glb, .usda, .usdc or .usd.
 #[derive(clap::Args)]
 pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
     scene: PathBuf,
     /// Where to write the keyframes stage file (JSON).
-    #[arg(short, long)]
-    output: PathBuf,
+    #[arg(short, long, required_unless_present = "cache_out")]
+    output: Option<PathBuf>,
+    /// Also (or only) write the scene's [cache] in the format this path names.
+    #[arg(long)]
+    cache_out: Option<PathBuf>,
 }
 
 impl Args {
@@ -25,5 +32,14 @@ impl Args {
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
-    stage::write(&args.output, &stages::import(&scene)?)
+    if let Some(out) = &args.cache_out {
+        let Some(spec) = &scene.scene.cache else {
+            return Err(Error::in_file(&args.scene, "--cache-out converts a [cache], but the scene has [keyframes]", "give a scene with a [cache] table"));
+        };
+        stages::cache::convert(&scene, spec, out)?;
+    }
+    match &args.output {
+        Some(o) => stage::write(o, &stages::import(&scene)?),
+        None => Ok(()),
+    }
 }

@@ -58,6 +58,7 @@ enum Command {
 pub enum MethodArg {
     Hermite,
     Spacetime,
+    Fit,
 }
 
 impl From<MethodArg> for Method {
@@ -65,6 +66,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Hermite => Method::Hermite,
             MethodArg::Spacetime => Method::Spacetime,
+            MethodArg::Fit => Method::Fit,
         }
     }
 }

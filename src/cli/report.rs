@@ -2,21 +2,29 @@ use std::path::PathBuf;
 
 use blendsim::output::{LockWait, Staging};
 use blendsim::progress::Progress;
+use blendsim::report::batch;
 use blendsim::stage::{self, Animation, Outputs};
 use blendsim::{stages, Result};
 
-/// Write report.json and report.md into --out.
+/// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
+/// many bakes.
 ///
 /// Sizes of the blendshape and full-frame files side by side, fidelity against the full-frame
-/// evaluation, keyframe deviation, volume, and the solver's history (see formats/report.md).
+/// evaluation, keyframe deviation, volume, the solver's history, and for a cache the error
+/// against its frames (see formats/report.md). `--batch DIR...` reads the report.json of each
+/// DIR (or of each subfolder of DIR) and writes one row per bake.
 #[derive(clap::Args)]
 pub struct Args {
     /// The animation stage file from `blendsim embed`.
-    animation: PathBuf,
+    #[arg(required_unless_present = "batch", conflicts_with = "batch")]
+    animation: Option<PathBuf>,
     /// The NAME.outputs.json written by `blendsim export`.
-    #[arg(long)]
-    outputs: PathBuf,
-    /// Output folder for report.json and report.md.
+    #[arg(long, required_unless_present = "batch", conflicts_with = "batch")]
+    outputs: Option<PathBuf>,
+    /// Bake output folders (or folders of them) to summarize.
+    #[arg(long, num_args = 1..)]
+    batch: Vec<PathBuf>,
+    /// Output folder for report.json and report.md (summary.csv and summary.md with --batch).
     #[arg(long)]
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
@@ -26,15 +34,24 @@ pub struct Args {
 
 impl Args {
     pub fn input(&self) -> &std::path::Path {
-        &self.animation
+        self.animation.as_deref().or(self.batch.first().map(PathBuf::as_path)).unwrap_or(&self.out)
     }
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
-    let animation: Animation = stage::read(&args.animation)?;
-    let outputs: Outputs = stage::read(&args.outputs)?;
-    let report = stages::report(&animation, &outputs);
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
+    if !args.batch.is_empty() {
+        let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;
+        let (csv, md) = batch::summarize(&reports);
+        staging.set_group("summary");
+        staging.write("summary.csv", csv.as_bytes())?;
+        staging.write("summary.md", md.as_bytes())?;
+        return staging.commit();
+    }
+    let (Some(animation), Some(outputs)) = (&args.animation, &args.outputs) else { unreachable!("clap requires both without --batch") };
+    let animation: Animation = stage::read(animation)?;
+    let outputs: Outputs = stage::read(outputs)?;
+    let report = stages::report(&animation, &outputs)?;
     report.write(&mut staging)?;
     staging.commit()
 }

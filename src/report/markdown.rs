@@ -79,6 +79,9 @@ pub fn render(report: &Report) -> String {
         };
         push(&mut s, format!("| {} | {kind} | {} |", f.path, f.bytes));
     }
+    if let Some(c) = &report.cache {
+        s.push_str(&super::cache::markdown(c, &report.outputs));
+    }
     s
 }
 

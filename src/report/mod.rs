@@ -8,6 +8,8 @@
 //!
 //! The `report` stage (`crate::stages::report`) fills the model from an animation and its files.
 
+pub mod batch;
+pub mod cache;
 pub mod markdown;
 pub mod measures;
 
@@ -92,6 +94,9 @@ pub struct Report {
     pub keyframe_deviation: Deviation,
     /// Present when the surface is closed.
     pub volume: Option<Volume>,
+    /// A cache bake: the cache, sizes against it, and the error against its frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<cache::CacheReport>,
 }
 
 impl Report {

@@ -29,9 +29,14 @@ impl<'a> Bake<'a> {
         Bake { method, ..self }
     }
 
-    /// `import`, `tetrahedralize`: the simulation body.
+    /// `import`, `tetrahedralize`: the simulation body. The method is known from the start, so
+    /// `fit` skips TetGen and a cache's default `fixed` follows the method.
     pub fn body(&self) -> Result<Body> {
-        tetrahedralize(&import(self.scene)?, self.progress)
+        let mut scene = self.scene.clone();
+        if let Some(m) = self.method {
+            scene.scene.solver.method = m;
+        }
+        tetrahedralize(&import(&scene)?, self.progress)
     }
 
     /// ... `solve`, `embed`: the exported surface's animation.
@@ -47,7 +52,7 @@ impl<'a> Bake<'a> {
     pub fn files(&self, staging: &mut Staging) -> Result<Report> {
         let animation = self.animation()?;
         let outputs = export(&animation, staging)?;
-        let report = report(&animation, &outputs);
+        let report = report(&animation, &outputs)?;
         report.write(staging)?;
         Ok(report)
     }

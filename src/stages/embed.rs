@@ -13,20 +13,33 @@ use crate::stage::{Animation, Counts, Solution};
 /// The exported surface's animation.
 pub fn embed(solution: &Solution) -> Result<Animation> {
     let body = &solution.body;
-    let binding = Binding::compute(&body.mesh, &body.surface.positions);
-    let carry = |nodes: &[Point]| binding.apply(&body.mesh, nodes);
+    let Some(tets) = &body.mesh else {
+        // Nothing simulated (`fit`): the trajectory is the surface's own.
+        return Ok(Animation {
+            scene: body.scene.clone(),
+            counts: Counts { vertices: body.surface.positions.len(), faces: body.surface.triangles.len(), tet_nodes: 0, tets: 0, keyframes: body.keys.times.len() },
+            mesh: body.surface.clone(),
+            trajectory: solution.trajectory.clone(),
+            input_keys: body.keys.positions.clone(),
+            log: solution.log.clone(),
+            cache: body.cache.clone(),
+        });
+    };
+    let binding = Binding::compute(tets, &body.surface.positions);
+    let carry = |nodes: &[Point]| binding.apply(tets, nodes);
     Ok(Animation {
         scene: body.scene.clone(),
         counts: Counts {
             vertices: body.surface.positions.len(),
             faces: body.surface.triangles.len(),
-            tet_nodes: body.mesh.positions.len(),
-            tets: body.mesh.tets.len(),
+            tet_nodes: tets.positions.len(),
+            tets: tets.tets.len(),
             keyframes: body.keys.times.len(),
         },
         mesh: body.surface.clone(),
         trajectory: solution.trajectory.map_linear(carry),
         input_keys: body.keys.positions.iter().map(|p| carry(p)).collect(),
         log: solution.log.clone(),
+        cache: body.cache.clone(),
     })
 }

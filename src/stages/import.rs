@@ -84,7 +84,7 @@ fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &Mes
 }
 
 /// Vertices selected by `selection`, over `rest` positions.
-fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
+pub(super) fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
     let n = rest.len();
     Ok(match selection {
         Selection::All => vec![true; n],
@@ -120,7 +120,11 @@ fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -
 /// Read and check the keyframes of a scene.
 pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     let scene = &scene_file.scene;
-    let keys = &scene.keyframes;
+    let keys = match (&scene.keyframes, &scene.cache) {
+        (Some(keys), _) => keys,
+        (None, Some(cache)) => return super::cache::import(scene_file, cache),
+        (None, None) => return Err(Error::general("the scene has neither [keyframes] nor [cache]", "add one of them (formats/scene.md)")),
+    };
     let mut meshes = KeyMeshes::read(scene_file)?;
     let (rest, rest_source) = meshes.rest_shape(scene_file)?;
     let rest_points = match &rest {
@@ -167,6 +171,7 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         fixed_velocity,
         cyclic: keys.cyclic,
         display,
+        cache: None,
     })
 }
 
@@ -185,7 +190,7 @@ impl KeyMeshes {
     /// Read every key's mesh (each file once), check it has the first one's topology, and
     /// deform it as the scene says.
     fn read(scene_file: &SceneFile) -> Result<KeyMeshes> {
-        let keys = &scene_file.scene.keyframes;
+        let keys = scene_file.scene.keyframes.as_ref().expect("a keyframe scene");
         let mut cache = MeshCache::default();
         let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
         let first = cache.get(&paths[0])?.clone();
@@ -208,7 +213,7 @@ impl KeyMeshes {
     /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came
     /// from.
     fn rest_shape(&mut self, scene_file: &SceneFile) -> Result<(Shape, PathBuf)> {
-        let (rest_positions, rest_source) = match &scene_file.scene.keyframes.rest {
+        let (rest_positions, rest_source) = match &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
             Rest::Key(r) => (self.poses[*r].clone(), self.paths[*r].clone()),
             Rest::Mesh(p) => {
                 let path = scene_file.resolve(p);

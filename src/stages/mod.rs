@@ -20,6 +20,7 @@
 //! or the stage files.
 
 pub mod bake;
+pub mod cache;
 pub mod embed;
 pub mod export;
 pub mod import;

@@ -1,13 +1,18 @@
 //! The `report` stage: measure an animation and the files exported from it.
 
+use crate::error::Result;
 use crate::mesh::{bbox_diagonal, surface};
+use crate::report::cache::{cache_ratios, CacheReport};
+use crate::scene::Method;
+use crate::stage::CacheRecord;
 use crate::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
 use crate::report::{Report, Volume};
 use crate::spacetime::trajectory::Trajectory;
 use crate::stage::{Animation, Outputs};
 
-/// The report of an animation and the files exported from it.
-pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
+/// The report of an animation and the files exported from it (for a cache, measured against
+/// the cache's frames, streamed again from it).
+pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     let scene = &animation.scene;
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
@@ -26,7 +31,8 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
             hermite: volume_range(&hermite, &frames, triangles, rest_volume),
         }
     });
-    Report {
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, record, outputs)).transpose()?;
+    Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
         faces: animation.counts.faces,
@@ -42,5 +48,33 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Report {
         error,
         keyframe_deviation,
         volume,
-    }
+        cache,
+    })
+}
+
+/// The cache part of the report: the animation (as the trajectory of the exported surface,
+/// whose vertices are the cache's) against every cache frame, and for the simulated methods
+/// the least-squares fit on the same keys and `fixed` constraints.
+fn cache_report(animation: &Animation, record: &CacheRecord, outputs: &Outputs) -> Result<CacheReport> {
+    let error = super::cache::error_against(record, &animation.trajectory)?;
+    let fit_error = match animation.log.method {
+        Method::Fit => None,
+        Method::Hermite | Method::Spacetime => {
+            let fit = super::cache::fit_cache(record)?;
+            Some(super::cache::error_against(record, &fit)?.into())
+        }
+    };
+    Ok(CacheReport {
+        path: record.path.clone(),
+        format: record.format.clone(),
+        frames: record.frames,
+        fps: record.fps,
+        fps_source: record.fps_note.clone(),
+        bytes: record.bytes,
+        keys: record.keys.clone(),
+        tolerance: record.tolerance,
+        ratios: cache_ratios(record.bytes, &outputs.files),
+        error: error.into(),
+        fit_error,
+    })
 }

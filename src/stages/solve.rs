@@ -9,7 +9,7 @@
 
 use std::time::Instant;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::physics::elastic::Elastic;
 use crate::progress::Progress;
 use crate::scene::{Method, Scene};
@@ -25,8 +25,24 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
         body.scene.solver.method = m;
     }
     let scene = &body.scene;
-    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), body.mesh.tets.len())?;
-    let elastic = Elastic::new(&body.mesh, &super::elastic_material(&scene.material))?;
+    let tets = match (&body.mesh, scene.solver.method) {
+        (None, Method::Fit) => return solve_fit(body),
+        (Some(tets), Method::Hermite | Method::Spacetime) => tets,
+        (Some(_), Method::Fit) => {
+            return Err(Error::general(
+                "method fit was chosen after import: this body was tetrahedralized for a simulation",
+                "set [solver] method = \"fit\" in the [cache] scene (or bake with --method fit), so the chain skips TetGen",
+            ))
+        }
+        (None, m) => {
+            return Err(Error::general(
+                format!("method {m} needs a tet mesh, but this body was imported for method fit (nothing to simulate)"),
+                format!("set [solver] method = \"{m}\" in the scene (or bake with --method {m}) and re-run import and tetrahedralize"),
+            ))
+        }
+    };
+    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), tets.tets.len())?;
+    let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
     let settings = settings(scene);
     let keys = key_constraints(&body.keys);
     let (trajectory, log) = match scene.solver.method {
@@ -69,6 +85,28 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
             };
             (solved.trajectory, log)
         }
+        Method::Fit => unreachable!("handled above"),
+    };
+    Ok(Solution { body, trajectory, log })
+}
+
+/// `fit`: the least-squares cubic Hermite fit of the body's cache on its keys, with the keys'
+/// `fixed` vertices held on the cache frames. No physics: W is not evaluated.
+fn solve_fit(body: Body) -> Result<Solution> {
+    let start = Instant::now();
+    let record = body.cache.as_ref().ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
+    let trajectory = super::cache::fit_cache(record)?;
+    let log = SolverLog {
+        method: Method::Fit,
+        iterations: 0,
+        energy: Vec::new(),
+        seconds: start.elapsed().as_secs_f64(),
+        precompute_seconds: 0.0,
+        iteration_seconds: 0.0,
+        unknowns: 2 * body.keys.times.len(),
+        halvings: 0,
+        converged: true,
+        stop_reason: "fit: linear least squares, solved exactly".into(),
     };
     Ok(Solution { body, trajectory, log })
 }

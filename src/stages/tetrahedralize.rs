@@ -13,6 +13,7 @@ use crate::mesh::{surface, Point, TetMesh, TriMesh};
 use crate::physics::elastic::Elastic;
 use crate::physics::equilibrium::Equilibrium;
 use crate::progress::Progress;
+use crate::scene::Method;
 use crate::stage::{Body, KeyPoses, Keyframes, Shape};
 use crate::tetgen::{self, TetgenOptions};
 
@@ -33,10 +34,15 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
         fixed_velocity: keys.fixed_velocity.clone(),
         cyclic: keys.cyclic,
     };
+    let cache = keys.cache.clone();
     match &keys.rest {
+        // The fit of a cache simulates nothing: its trajectory is the surface's own.
+        Shape::Surface(rest) if scene.solver.method == Method::Fit => {
+            Ok(Body { scene: scene.clone(), mesh: None, keys: key_poses(keys.poses.clone()), surface: rest.clone(), cache })
+        }
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh) };
-            Ok(Body { scene: scene.clone(), mesh: mesh.clone(), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary) })
+            Ok(Body { scene: scene.clone(), mesh: Some(mesh.clone()), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary), cache })
         }
         Shape::Surface(rest) => {
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
@@ -64,7 +70,7 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
                 })
                 .collect();
             bar.finish_and_clear();
-            Ok(Body { scene: scene.clone(), mesh, keys: key_poses(positions), surface: export_surface(keys, rest.clone()) })
+            Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses(positions), surface: export_surface(keys, rest.clone()), cache })
         }
     }
 }

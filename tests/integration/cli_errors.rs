@@ -449,7 +449,7 @@ fn help_of_every_subcommand() {
             "export",
             &["<ANIMATION>", "animation stage file", "--out", "NAME.usda", "NAME.usdc", "NAME.glb", "NAME.full.EXT", "NAME.outputs.json"],
         ),
-        ("report", &["<ANIMATION>", "animation stage file", "--outputs", "NAME.outputs.json", "--out", "report.json", "report.md"]),
+        ("report", &["[ANIMATION]", "animation stage file", "--outputs", "NAME.outputs.json", "--out", "report.json", "report.md", "--batch", "summary.csv"]),
         ("bake", &["<SCENE>", "scene file", "--out", "NAME.usda", "NAME.glb", "NAME.full.EXT", "report.json", "report.md", "--method"]),
     ];
     for (sub, words) in cases {
@@ -532,7 +532,7 @@ fn corpus() -> Vec<Bad> {
     vec![
         // The scene file itself.
         bad_scene("scene-syntax", "name = \"t\"\n[keyframes\nmeshes = []\n".into(), &["line 2: "]),
-        bad_scene("scene-missing-table", "name = \"t\"\n".into(), &["missing field `keyframes`", "(fix: add the key"]),
+        bad_scene("scene-missing-table", "name = \"t\"\n".into(), &["neither [keyframes] nor [cache]", "(fix: add a [keyframes] table"]),
         bad_scene("scene-unknown-table", table("[solverr]\nsamples = 3"), &["unknown field `solverr`"]),
         bad("scene-not-utf8", vec![("scene.toml".into(), Content::Bytes(b"name = \"caf\xe9\"\n".to_vec()))], "in/scene.toml", &["is not UTF-8 text (invalid byte at offset 11)"]),
         bad("scene-fifo", vec![("scene.toml".into(), Content::Fifo)], "in/scene.toml", &["is a named pipe (FIFO), not a regular file"]),

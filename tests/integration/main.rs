@@ -8,6 +8,7 @@
 mod common;
 
 mod blender;
+mod cache_bake;
 mod cache_fit;
 mod cli_errors;
 mod cli_interrupt;

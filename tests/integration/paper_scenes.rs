@@ -86,7 +86,7 @@ fn stretch_cyclic() {
     let Some(scene) = paper_scene("stretch") else { return };
     let dir = TempDir::new("paper-stretch");
     let (report, anim) = bake_and_check(&dir, &scene, "stretch");
-    assert!(anim.scene.keyframes.cyclic);
+    assert!(anim.scene.keyframes.as_ref().unwrap().cyclic);
     assert_eq!((report["tet_nodes"].as_u64(), report["tets"].as_u64(), report["keyframes"].as_u64()), (Some(594), Some(2400), Some(3)));
     // A loop: the last key is the first, position and velocity.
     let tr = &anim.trajectory;

@@ -599,3 +599,41 @@ mod fuzz {
         }
     }
 }
+
+/// The CUBICSPLINE morph clip and the skinned clip baked end to end through the chain
+/// (`[cache]` with `keyframes = "auto"`, method `fit`): within the tolerance of our reader's
+/// frames at every frame, which three.js agrees with (the tests above).
+#[test]
+fn cubic_morph_and_skinned_clips_bake_end_to_end() {
+    let dir = scratch("gltf-bake");
+    morph_clip(&dir.join("morph.glb"));
+    skinned_clip(&dir.join("skinned.glb"));
+    for (file, animation) in [("morph.glb", "animation = \"cubic\"\n"), ("skinned.glb", "")] {
+        let scene_path = dir.join("scene.toml");
+        std::fs::write(
+            &scene_path,
+            format!("name = \"clip\"\n[cache]\npath = \"{file}\"\nfps = 30\n{animation}keyframes = \"auto\"\ntolerance = 0.005\n[solver]\nmethod = \"fit\"\n[export]\nformats = [\"glb\"]\n"),
+        )
+        .unwrap();
+        let scene = crate::scene::SceneFile::load(&scene_path).unwrap();
+        let out = dir.join(format!("out-{file}"));
+        let mut staging = crate::output::Staging::new(&out).unwrap();
+        let report = crate::stages::bake(&scene, None, &mut staging, &crate::progress::Progress::new(true)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        staging.commit().unwrap();
+        let c = report.cache.expect("a cache report");
+        assert_eq!((c.format.as_str(), c.frames), ("gltf", 31), "{file}");
+        assert!(c.error.max <= 0.005 && c.error.per_frame.iter().all(|&e| e <= 0.005), "{file}: {:?}", c.error);
+        assert!(c.keys.len() >= 2 && c.keys[0] == 0 && *c.keys.last().unwrap() == 30, "{file}: {:?}", c.keys);
+        // The baked glb, read back at the clip's frames, is within the tolerance of the clip.
+        let mut clip = open(&dir.join(file), (!animation.is_empty()).then_some("cubic"), Some(30.0)).unwrap();
+        let mut baked = open(&out.join("clip.glb"), None, Some(30.0)).unwrap();
+        let (_, expected) = evaluate(&mut clip.frames);
+        let (_, got) = evaluate(&mut baked.frames);
+        assert!(motion(&expected) > 0.05, "{file}: the clip moves");
+        let all: Vec<Point> = expected.iter().flatten().copied().collect();
+        let diagonal = crate::mesh::bbox_diagonal(&all);
+        let max = expected.iter().zip(&got).flat_map(|(a, b)| a.iter().zip(b).map(|(p, q)| crate::mesh::norm(crate::mesh::sub(*p, *q)))).fold(0.0, f64::max);
+        assert!(max / diagonal <= 0.005 + 1e-6, "{file}: {}", max / diagonal);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

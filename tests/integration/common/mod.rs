@@ -71,5 +71,6 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             converged: true,
             stop_reason: "synthetic test animation".into(),
         },
+        cache: None,
     }
 }
