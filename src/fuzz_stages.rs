@@ -41,6 +41,7 @@ fn seeds() -> (Value, Value, Value, Value) {
         fixed_velocity: vec![VertexSet::default(), VertexSet::all(5)],
         cyclic: false,
         display: None,
+        cache: None,
     };
     let progress = Progress::hidden();
     let body = crate::stages::tetrahedralize(&keys, &progress).unwrap();
