@@ -46,6 +46,7 @@ pub mod output;
 pub mod procedural;
 pub mod progress;
 pub mod report;
+pub mod resources;
 pub mod scene;
 pub mod stage;
 pub mod stages;
@@ -56,6 +57,8 @@ mod error;
 mod export;
 #[cfg(test)]
 mod fuzz;
+#[cfg(test)]
+mod fuzz_stages;
 mod input;
 mod massspring;
 mod physics;

@@ -617,8 +617,8 @@ impl Scene {
     }
 
     /// Every table's values in range, checked table by table in file order (the first problem
-    /// is reported).
-    fn validate(&self) -> Result<()> {
+    /// is reported). Also run on the scene embedded in a stage file.
+    pub(crate) fn validate(&self) -> Result<()> {
         check_name(&self.name)?;
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");

@@ -146,6 +146,7 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
     if keys.cyclic {
         meshes.check_loop(rest_points)?;
     }
+    check_key_volumes(&rest, &meshes.poses, &meshes.paths)?;
     let display = match &scene.embed.surface {
         Some(p) => {
             let mut s = mesh::obj::read(&scene_file.resolve(p))?;
@@ -154,6 +155,14 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         }
         None => None,
     };
+    // Before TetGen: the exported vertices, and the fewest tets a tet mesh of the rest shape
+    // can have (each boundary triangle is a face of a tet, a tet has 4 faces).
+    let (vertices, tets) = match &rest {
+        Shape::Surface(s) => (s.positions.len(), s.triangles.len().div_ceil(4)),
+        Shape::Volume(v) => (v.positions.len(), v.tets.len()),
+    };
+    let vertices = display.as_ref().map_or(vertices, |d| d.positions.len());
+    super::check_resources(scene, &keys.times, vertices, tets)?;
     // A contact key is duplicated at its own time: the two share the pose and the masks (the
     // solver aliases their positions), not the velocities.
     let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);
@@ -260,4 +269,39 @@ impl KeyMeshes {
         }
         Ok(())
     }
+}
+
+/// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or
+/// almost zero (flattened or collapsed) against the rest shape's is an error naming the key:
+/// the solver would either fight the inversion or have nothing to keep, and the report would
+/// show volumes down to -100%. Both are fixed in the modeling tool, not by blendsim.
+fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    let volume = |p: &[Point]| match rest {
+        Shape::Surface(s) => surface::enclosed_volume(p, &s.triangles),
+        Shape::Volume(v) => v.volume_at(p),
+    };
+    let rest_points = match rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let rest_volume = volume(rest_points);
+    if rest_volume.is_nan() || rest_volume <= 0.0 {
+        return Ok(()); // the rest shape's own checks report it
+    }
+    for (k, pose) in poses.iter().enumerate() {
+        let ratio = volume(pose) / rest_volume;
+        let problem = if ratio < 0.0 {
+            "is inside out (mirrored)"
+        } else if ratio < 1e-3 {
+            "is flattened or collapsed"
+        } else {
+            continue;
+        };
+        return Err(Error::in_file(
+            &paths[k],
+            format!("key {k} {problem}: it encloses {:.1}% of the rest shape's volume", 100.0 * ratio),
+            "re-export the key from the same object without a zero or negative scale",
+        ));
+    }
+    Ok(())
 }

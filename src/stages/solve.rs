@@ -52,6 +52,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             ))
         }
     };
+    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), tets.tets.len())?;
     let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
     let settings = Settings { max_memory, ..settings(scene) };
     let keys = key_constraints(&body.keys);

@@ -23,6 +23,15 @@ fn cube() -> TriMesh {
     prism([1.0, 1.0, 1.0], [2, 2, 2])
 }
 
+fn scaled(mut mesh: TriMesh, by: [f64; 3]) -> TriMesh {
+    for p in &mut mesh.positions {
+        for d in 0..3 {
+            p[d] *= by[d];
+        }
+    }
+    mesh
+}
+
 fn translated(mut mesh: TriMesh, by: [f64; 3]) -> TriMesh {
     for p in &mut mesh.positions {
         for d in 0..3 {
@@ -604,6 +613,16 @@ fn corpus() -> Vec<Bad> {
         bad("index-missing", vec![text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["cannot read the vertex selection"]),
         bad("index-fifo", vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["is a named pipe (FIFO)"]),
         bad("embed-surface-missing", vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))], "in/fine.obj", &["cannot read the OBJ surface"]),
+        // Degenerate keys: once baked with volumes down to -100%.
+        bad("key-mirrored", key1(obj::write(&scaled(cube(), [-1.0, 1.0, 1.0]))), "in/k1.obj", &["key 1 is inside out (mirrored): it encloses -100.0% of the rest shape's volume"]),
+        bad("key-flattened", key1(obj::write(&scaled(cube(), [1.0, 0.0, 1.0]))), "in/k1.obj", &["key 1 is flattened or collapsed: it encloses 0.0%"]),
+        bad("key-collapsed", key1(obj::write(&scaled(cube(), [0.0, 0.0, 0.0]))), "in/k1.obj", &["key 1 is flattened or collapsed"]),
+        // Beyond the machine's memory: once a capacity-overflow panic or an allocation abort.
+        bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "GB available", "lower [solver] samples"]),
+        bad_scene("samples-1e9", table("[solver]\nsamples = 1000000000"), &["would need about 3456.0 GB of memory for 1000000000 samples per interval"]),
+        bad_scene("samples-float", table("[solver]\nsamples = 1e9"), &["invalid type: floating point `1000000000.0`, expected usize"]),
+        bad_scene("fps-1e9", base.replacen("[keyframes]", "fps = 1e9\n[keyframes]", 1), &["GB of memory for 1.000e9 frames (1 s at 1000000000 fps) of 26 vertices", "lower fps"]),
+        bad_scene("times-1e6", base.replace("times = [0.0, 1.0]", "times = [0.0, 1e6]"), &["GB of memory for 6.000e7 frames (1000000 s at 60 fps) of 26 vertices"]),
         // Found after TetGen and the solve: these once named no file, now the scene.
         bad_scene("singular", good_scene("fixed = [\"none\", \"none\"]", "[solver]\nregularization = 0.0"), &["the spacetime system is singular"]),
         bad_scene("no-frame", base.replace("times = [0.0, 1.0]", "times = [0.010, 0.015]"), &["cannot export: the animation runs from 0.01 s to 0.015 s, between two frames at 60 fps"]),
@@ -717,7 +736,7 @@ fn errors_found_after_reading_a_stage_file_name_it() {
     let before = tree(&dir.path);
     let cases: [(&[&str], &str, &str); 2] = [
         (&["solve", "free.json", "-o", "new.json"], "free.json", "the spacetime system is singular"),
-        (&["export", "broken.json", "--out", "new"], "broken.json", "cannot export: the animation mesh triangle 0 uses a vertex index beyond"),
+        (&["export", "broken.json", "--out", "new"], "broken.json", "animation stage: mesh triangle 0 uses vertex 100000, but there are 26 vertices"),
     ];
     for (args, file, problem) in cases {
         let r = run(&dir.path, args);
@@ -727,4 +746,92 @@ fn errors_found_after_reading_a_stage_file_name_it() {
         assert_says(&r, problem);
         assert_eq!(tree(&dir.path), before, "{args:?} left files behind:\n{r}");
     }
+}
+
+// --- Stage files: hand-edited copies of a real chain's files. ---
+
+/// One edited stage file: the subcommand reading it, the file edited (and written as `bad.json`),
+/// the edit, and what the message must say.
+struct BadStage {
+    name: &'static str,
+    args: &'static [&'static str],
+    file: &'static str,
+    edit: fn(&mut serde_json::Value),
+    says: &'static str,
+}
+
+fn stage_corpus() -> Vec<BadStage> {
+    use serde_json::json;
+    let solve: &[&str] = &["solve", "bad.json", "-o", "new.json"];
+    let tetrahedralize: &[&str] = &["tetrahedralize", "bad.json", "-o", "new.json"];
+    let embed: &[&str] = &["embed", "bad.json", "-o", "new.json"];
+    let export: &[&str] = &["export", "bad.json", "--out", "new"];
+    let report: &[&str] = &["report", "bad.json", "--outputs", "exported/t.outputs.json", "--out", "new"];
+    let report_outputs: &[&str] = &["report", "animation.json", "--outputs", "bad.json", "--out", "new"];
+    fn pop(v: &mut serde_json::Value) {
+        v.as_array_mut().unwrap().pop();
+    }
+    vec![
+        // Once panics (exit 101) in the solver.
+        BadStage { name: "body-tet-index", args: solve, file: "body.json", edit: |v| v["data"]["mesh"]["tets"][0][0] = json!(100000), says: "body stage: mesh tet 0 uses node 100000, but there are" },
+        BadStage { name: "body-pose-short", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["positions"][1]), says: "keys.positions[1] has 25 points but the mesh has 26" },
+        BadStage { name: "body-fixed-index", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["fixed"][0].as_array_mut().unwrap().push(json!(100000)), says: "keys.fixed[0] holds index 100000, but there are 26 vertices" },
+        BadStage { name: "body-times-extra", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["times"].as_array_mut().unwrap().push(json!(2.0)), says: "keys.positions has 2 poses for 3 key times" },
+        // Once accepted with garbage, or misdiagnosed.
+        BadStage { name: "body-times-short", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["times"]), says: "keys.times has 1 key times, at least 2 are needed" },
+        BadStage { name: "body-times-decrease", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["times"] = json!([1.0, 0.0]), says: "keys.times do not increase at key 1 (0 after 1)" },
+        BadStage { name: "body-samples-zero", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(0), says: "body stage: its scene: [solver] samples = 0" },
+        BadStage { name: "body-samples-max", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(9223372036854775807u64), says: "body stage: the scene would need about" },
+        BadStage { name: "animation-fps-1e9", args: report, file: "animation.json", edit: |v| v["data"]["scene"]["fps"] = json!(1e9), says: "frames (1 s at 1000000000 fps) of 26 vertices" },
+        BadStage { name: "body-fixed-count", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["fixed"]), says: "keys.fixed has 1 sets for 2 keys" },
+        BadStage { name: "body-fixed-unsorted", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["fixed"][0] = json!([3, 1]), says: "keys.fixed[0] is not sorted without repeats" },
+        BadStage { name: "body-inverted-tet", args: solve, file: "body.json", edit: |v| { let t = v["data"]["mesh"]["tets"][0].clone(); v["data"]["mesh"]["tets"][0] = json!([t[1], t[0], t[2], t[3]]); }, says: "mesh tet 0 is inverted or flat in the rest pose" },
+        BadStage { name: "body-cyclic-two-keys", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["cyclic"] = json!(true), says: "cyclic is true with 2 keys" },
+        BadStage { name: "body-no-tets", args: solve, file: "body.json", edit: |v| v["data"]["mesh"]["tets"] = json!([]), says: "mesh has no tets" },
+        // tetrahedralize: once a copy_from_slice panic.
+        BadStage { name: "keys-pose-short", args: tetrahedralize, file: "keys.json", edit: |v| pop(&mut v["data"]["poses"][1]), says: "keyframes stage: poses[1] has 25 points but the mesh has 26" },
+        BadStage { name: "keys-triangle-index", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["rest"]["triangles"][2][1] = json!(26), says: "rest surface triangle 2 uses vertex 26, but there are 26 vertices" },
+        BadStage { name: "keys-velocity-index", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["fixed_velocity"][1] = json!([26]), says: "fixed_velocity[1] holds index 26" },
+        BadStage { name: "keys-name", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["scene"]["name"] = json!("../x"), says: "its scene: name `../x` cannot be a file stem: it contains a path separator" },
+        // embed: once an assertion, and an out-of-range triangle accepted.
+        BadStage { name: "solution-trajectory-short", args: embed, file: "solution.json", edit: |v| pop(&mut v["data"]["trajectory"]["positions"][1]), says: "trajectory.positions[1] has" },
+        BadStage { name: "solution-velocities-missing", args: embed, file: "solution.json", edit: |v| pop(&mut v["data"]["trajectory"]["velocities"]), says: "trajectory.velocities has 1 keys for 2 key times" },
+        BadStage { name: "solution-surface-index", args: embed, file: "solution.json", edit: |v| v["data"]["body"]["surface"]["triangles"][0][0] = json!(100000), says: "body surface triangle 0 uses vertex 100000" },
+        // export: fps = 0 once reached usd-core; the name once escaped --out.
+        BadStage { name: "animation-fps-zero", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["fps"] = json!(0.0), says: "animation stage: its scene: fps = 0 must be positive" },
+        BadStage { name: "animation-name-escape", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["name"] = json!("../../x"), says: "name `../../x` cannot be a file stem" },
+        BadStage { name: "animation-name-newline", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["name"] = json!("a\nb"), says: "name `a\\nb` cannot be a file stem: it contains a control character" },
+        BadStage { name: "animation-input-keys", args: export, file: "animation.json", edit: |v| pop(&mut v["data"]["input_keys"]), says: "input_keys has 1 poses for 2 key times" },
+        BadStage { name: "animation-counts", args: export, file: "animation.json", edit: |v| v["data"]["counts"]["vertices"] = json!(7), says: "counts say 7 vertices" },
+        BadStage { name: "animation-meters", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["export"]["meters_per_unit"] = json!(-1.0), says: "meters_per_unit = -1 must be positive" },
+        BadStage { name: "animation-times-report", args: report, file: "animation.json", edit: |v| v["data"]["trajectory"]["times"] = json!([0.0, 0.0]), says: "trajectory.times do not increase at key 1" },
+        BadStage { name: "outputs-path", args: report_outputs, file: "exported/t.outputs.json", edit: |v| v["data"]["files"][0]["path"] = json!("../x.glb"), says: "outputs stage: files[0] is `../x.glb`, not a plain file name" },
+    ]
+}
+
+/// Every edit of a real chain's stage files that once panicked, was accepted or was
+/// misdiagnosed is one line naming the file, exit 1, nothing written. Prints the table with
+/// `--nocapture`.
+#[test]
+fn corpus_of_bad_stage_files() {
+    let dir = TempDir::new("errors-stage-corpus");
+    stage_files(&dir.path);
+    let mut rows = Vec::new();
+    for case in stage_corpus() {
+        let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(case.file)).unwrap()).unwrap();
+        (case.edit)(&mut v);
+        std::fs::write(dir.join("bad.json"), serde_json::to_vec(&v).unwrap()).unwrap();
+        let before = tree(&dir.path);
+        let r = crate::common::cli::run_timeout(&dir.path, case.args, &[], 120.0);
+        assert_eq!(r.code, Some(1), "{}: a bad stage file must exit 1:\n{r}", case.name);
+        assert_one_line_error(&r);
+        assert!(!r.stderr.trim_end().chars().any(char::is_control), "{}: a control character in the message:\n{r:?}", case.name);
+        assert_names(&r, "bad.json");
+        assert_says(&r, case.says);
+        assert_says(&r, "re-run ");
+        assert_eq!(tree(&dir.path), before, "{}: the run left files behind or removed some:\n{r}", case.name);
+        rows.push(format!("| {} | `{}` |", case.name, r.stderr.trim_end().trim_start_matches("error: ").replace('|', "\\|")));
+        std::fs::remove_file(dir.join("bad.json")).unwrap();
+    }
+    eprintln!("| stage file edit | message (exit 1) |\n|---|---|\n{}", rows.join("\n"));
 }

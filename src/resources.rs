@@ -1,0 +1,107 @@
+//! Memory estimates, checked before the large allocations: the frames an export or a report
+//! evaluates (frames x vertices) and the spacetime samples the solver keeps (samples x tets).
+//! A scene whose estimate exceeds the memory budget is a one-line error with the estimate in
+//! GB and the setting to change, instead of a capacity-overflow panic or an allocation abort.
+//!
+//! The estimates are in `f64`, so absurd settings (`samples = 9223372036854775807`) cannot
+//! overflow. They are deliberately rough upper bounds of the dominant arrays, not a profile.
+
+use crate::error::{Error, Result};
+
+/// Bytes per evaluated frame and vertex: the full-frame pose (3 f64), the blendshape
+/// reconstruction compared with it in the report, and the written copy (USD text or glb).
+const BYTES_PER_FRAME_VERTEX: f64 = 4.0 * 24.0;
+/// Bytes per frame for the frame list itself (frame number and time).
+const BYTES_PER_FRAME: f64 = 16.0;
+/// Bytes per spacetime sample and tet: the projection target (a 3x3 matrix), its residual and
+/// deformation gradient, and the optional projection Jacobian the timing derivatives keep.
+const BYTES_PER_SAMPLE_TET: f64 = 4.0 * 72.0;
+
+/// The memory a bake may use, in bytes: the machine's available memory (`MemAvailable` in
+/// `/proc/meminfo`), or `None` where that is unknown (no check). The one place a budget is
+/// read, so a `--max-memory` flag can be routed here.
+pub fn memory_budget() -> Option<f64> {
+    available_memory()
+}
+
+/// `MemAvailable` of `/proc/meminfo`, in bytes.
+pub fn available_memory() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024.0)
+}
+
+/// Frames of an animation from `start` to `end` seconds at `fps` (an upper bound).
+pub fn frame_count(start: f64, end: f64, fps: f64) -> f64 {
+    ((end - start) * fps).abs().floor() + 2.0
+}
+
+/// Fail when `bytes` exceed the budget. `what` says what needs the memory, `fix` which
+/// setting to change.
+pub fn check(bytes: f64, what: &str, fix: &str) -> Result<()> {
+    check_against(bytes, memory_budget(), what, fix)
+}
+
+fn check_against(bytes: f64, budget: Option<f64>, what: &str, fix: &str) -> Result<()> {
+    match budget {
+        Some(budget) if bytes.is_nan() || bytes > budget => Err(Error::general(
+            format!("the scene would need about {} of memory for {what}, more than the {} available", gb(bytes), gb(budget)),
+            fix,
+        )),
+        _ => Ok(()),
+    }
+}
+
+fn gb(bytes: f64) -> String {
+    let g = bytes / 1e9;
+    if g < 1e6 {
+        format!("{g:.1} GB")
+    } else {
+        format!("{g:.1e} GB")
+    }
+}
+
+/// The frames an export or a report evaluates: `frames x vertices`.
+pub fn check_frames(start: f64, end: f64, fps: f64, vertices: usize) -> Result<()> {
+    let frames = frame_count(start, end, fps);
+    let bytes = frames * (BYTES_PER_FRAME + BYTES_PER_FRAME_VERTEX * vertices as f64);
+    check(
+        bytes,
+        &format!("{frames:.3e} frames ({} s at {fps} fps) of {vertices} vertices", end - start),
+        "lower fps, or shorten the key times (they are in seconds)",
+    )
+}
+
+/// The spacetime samples the solver keeps: `samples per interval x intervals x tets`.
+pub fn check_samples(samples: usize, intervals: usize, tets: usize) -> Result<()> {
+    let bytes = samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET;
+    check(
+        bytes,
+        &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"),
+        "lower [solver] samples (10 is typical)",
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn estimates_over_the_budget_fail_with_the_estimate() {
+        let e = check_against(3.0e10, Some(2.0e10), "x", "y").unwrap_err();
+        assert_eq!(e.problem, "the scene would need about 30.0 GB of memory for x, more than the 20.0 GB available");
+        assert!(check_against(1.0e9, Some(2.0e10), "x", "y").is_ok());
+        assert!(check_against(f64::INFINITY, Some(2.0e10), "x", "y").is_err());
+        assert!(check_against(f64::NAN, Some(2.0e10), "x", "y").is_err());
+        assert!(check_against(1e300, None, "x", "y").is_ok());
+        assert!(check_samples(usize::MAX, 1, 1).is_err() || memory_budget().is_none());
+        assert!(available_memory().is_none_or(|m| m > 0.0));
+    }
+
+    #[test]
+    fn frame_counts_include_both_ends() {
+        assert_eq!(frame_count(0.0, 1.0, 60.0), 62.0);
+        assert_eq!(frame_count(0.0, 1e6, 1e9), 1e15 + 2.0);
+    }
+}
