@@ -155,7 +155,7 @@ fn mutated(seed: &'static str) -> impl Strategy<Value = String> {
     prop::collection::vec(any::<Edit>(), 1..8).prop_map(move |edits| mutate(seed, &edits))
 }
 
-const OBJ: &str = "# cube\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\nvn 0 0 1\n\
+const OBJ: &str = "# cube\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\nvn 0 0 1\nvt 0 0\nvt 1 0\n\
                    f 1 3 2\nf 1 4 3\nf 5 6 7 8\nf 1/1/1 2/2/1 6//1\nf -8 -3 -7\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\no next\nv 9 9 9\n";
 const MEDIT: &str = "MeshVersionFormatted 1\nDimension\n3\nVertices 5\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\n0 0 -1 7\n\
                      Triangles\n1\n1 2 3 0\nTetrahedra\n2\n1 2 3 4 1\n1 2 3 5 1\nEnd\n";
