@@ -239,16 +239,5 @@ fn mass_spring_scene_keeps_volume_and_its_files_pass_the_checkers() {
     check_outputs(&dir.join("out"), &anim, &output_files(&report["outputs"]));
     // Its stage files (in-betweens as trajectory keys) pass the stage readers' checks, and the
     // chain of subcommands gives the bake's bytes.
-    for args in [
-        &["import", "bend.toml", "-o", "keys.json"][..],
-        &["tetrahedralize", "keys.json", "-o", "body.json"],
-        &["solve", "body.json", "-o", "solution.json"],
-        &["embed", "solution.json", "-o", "animation.json"],
-        &["export", "animation.json", "--out", "chained"],
-    ] {
-        run(&dir.path, args).success();
-    }
-    for name in ["bend.usda", "bend.glb"] {
-        assert!(std::fs::read(dir.join("chained").join(name)).unwrap() == std::fs::read(dir.join("out").join(name)).unwrap(), "{name}: the chain differs from the bake");
-    }
+    crate::common::cli::assert_chain_gives_bake_bytes(&dir.path, "bend.toml", "out", &["bend.usda", "bend.glb"]);
 }

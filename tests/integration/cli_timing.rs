@@ -334,16 +334,5 @@ formats = ["usda", "glb"]
     check_outputs(&dir.join("out"), &anim, &output_files(&report["outputs"]));
     // The stage files of a contact scene (a key time repeated) pass the stage readers' checks,
     // and the chain of subcommands gives the bake's bytes.
-    for args in [
-        &["import", "scene.toml", "-o", "keys.json"][..],
-        &["tetrahedralize", "keys.json", "-o", "body.json"],
-        &["solve", "body.json", "-o", "solution.json"],
-        &["embed", "solution.json", "-o", "animation.json"],
-        &["export", "animation.json", "--out", "chained"],
-    ] {
-        run(&dir.path, args).success();
-    }
-    for name in ["ball.usda", "ball.glb"] {
-        assert!(std::fs::read(dir.join("chained").join(name)).unwrap() == std::fs::read(dir.join("out").join(name)).unwrap(), "{name}: the chain differs from the bake");
-    }
+    crate::common::cli::assert_chain_gives_bake_bytes(&dir.path, "scene.toml", "out", &["ball.usda", "ball.glb"]);
 }

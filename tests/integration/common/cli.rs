@@ -112,6 +112,25 @@ pub fn names(dir: &Path) -> BTreeSet<String> {
         .collect()
 }
 
+/// Runs the chain of subcommands (import .. export) on `scene` in `cwd`, into `cwd/chained`,
+/// and asserts that each of `files` has the bytes `bake` wrote into `cwd/baked`: the stage
+/// files carry everything, and their readers accept what the writers wrote.
+pub fn assert_chain_gives_bake_bytes(cwd: &Path, scene: &str, baked: &str, files: &[&str]) {
+    for args in [
+        &["import", scene, "-o", "keys.json"][..],
+        &["tetrahedralize", "keys.json", "-o", "body.json"],
+        &["solve", "body.json", "-o", "solution.json"],
+        &["embed", "solution.json", "-o", "animation.json"],
+        &["export", "animation.json", "--out", "chained"],
+    ] {
+        run(cwd, args).success();
+    }
+    for name in files {
+        let (chained, bake) = (std::fs::read(cwd.join("chained").join(name)).unwrap(), std::fs::read(cwd.join(baked).join(name)).unwrap());
+        assert!(chained == bake, "{name}: the chain of subcommands differs from the bake");
+    }
+}
+
 pub fn read_json(path: &Path) -> Value {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
