@@ -870,35 +870,12 @@ pub struct MassSpring {
     pub bending: String,
     /// Newton stops when no vertex moves more than this fraction of the size in a step.
     pub tolerance: f64,
-    /// Rigid obstacles the in-betweens collide with (`[[mass_spring.obstacle]]`).
-    pub obstacle: Vec<Obstacle>,
 }
 
 impl Default for MassSpring {
     fn default() -> Self {
-        MassSpring { inbetweens: 3, bending: "two-ring".into(), tolerance: 1e-7, obstacle: Vec::new() }
+        MassSpring { inbetweens: 3, bending: "two-ring".into(), tolerance: 1e-7 }
     }
-}
-
-/// A rigid obstacle: `kind = "plane"` (`point`, `normal` towards the free side) or
-/// `kind = "sphere"` (`center`, `radius`; solid).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum Obstacle {
-    /// The half-space behind `point` against `normal` is solid.
-    Plane {
-        /// A point on the plane.
-        point: [f64; 3],
-        /// The plane's normal, pointing to the free side (any nonzero length).
-        normal: [f64; 3],
-    },
-    /// A solid ball.
-    Sphere {
-        /// Its centre.
-        center: [f64; 3],
-        /// Its radius, positive.
-        radius: f64,
-    },
 }
 
 impl MassSpring {
@@ -911,19 +888,6 @@ impl MassSpring {
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
             return invalid(format!("[mass_spring] tolerance = {} must be between 0 and 1", self.tolerance), "use e.g. 1e-7 (a fraction of the size)");
-        }
-        for (i, o) in self.obstacle.iter().enumerate() {
-            let finite = |p: &[f64; 3]| p.iter().all(|c| c.is_finite());
-            let bad = match *o {
-                Obstacle::Plane { point, normal } => !finite(&point) || !finite(&normal) || normal == [0.0; 3],
-                Obstacle::Sphere { center, radius } => !(finite(&center) && radius.is_finite() && radius > 0.0),
-            };
-            if bad {
-                return invalid(
-                    format!("[[mass_spring.obstacle]] {} is degenerate: {o:?}", i + 1),
-                    "give a plane a finite point and a nonzero normal, a sphere a finite center and a radius > 0",
-                );
-            }
         }
         Ok(())
     }

@@ -29,7 +29,7 @@ use crate::massspring::{self, refine, Bending, Boundary, MassSpring, Settings, T
 use crate::mesh::{obj, selection, surface, Point, TetMesh, TriMesh};
 use crate::physics::elastic::Elastic;
 use crate::progress::Progress;
-use crate::scene::{self, Method, Obstacle};
+use crate::scene::{self, Method, ObstacleSpec};
 use crate::spacetime::solver;
 use crate::spacetime::trajectory::Trajectory;
 use crate::spacetime::unknowns::KeyConstraints;
@@ -270,7 +270,7 @@ fn read_obstacles(path: &Path) -> Result<Vec<massspring::Obstacle>> {
     #[serde(deny_unknown_fields)]
     struct File {
         #[serde(default)]
-        obstacle: Vec<Obstacle>,
+        obstacle: Vec<ObstacleSpec>,
     }
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the obstacles file"))?;
     let file: File = toml::from_str(&text).map_err(|e| {
@@ -279,10 +279,10 @@ fn read_obstacles(path: &Path) -> Result<Vec<massspring::Obstacle>> {
     file.obstacle.iter().enumerate().map(|(i, o)| model_obstacle(o).validated(&format!("obstacle {}", i + 1)).map_err(|e| e.with_path(path))).collect()
 }
 
-fn model_obstacle(o: &Obstacle) -> massspring::Obstacle {
+fn model_obstacle(o: &ObstacleSpec) -> massspring::Obstacle {
     match *o {
-        Obstacle::Plane { point, normal } => massspring::Obstacle::Plane { point, normal },
-        Obstacle::Sphere { center, radius } => massspring::Obstacle::Sphere { center, radius },
+        ObstacleSpec::Plane { point, normal } => massspring::Obstacle::Plane { point, normal },
+        ObstacleSpec::Sphere { center, radius } => massspring::Obstacle::Sphere { center, radius },
     }
 }
 
@@ -337,7 +337,8 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         tolerance: spec.tolerance,
         ..Settings::default()
     };
-    let obstacles: Vec<massspring::Obstacle> = spec.obstacle.iter().map(model_obstacle).collect();
+    // The scene's `[[obstacle]]` entries, the same ones the spacetime solver's contacts use.
+    let obstacles: Vec<massspring::Obstacle> = scene.obstacles.iter().map(model_obstacle).collect();
     let bar = progress.stage("solve: mass-spring network");
     let mut model = MassSpring::new(&targets, &boundary, &settings)?;
     bar.finish_and_clear();
@@ -448,17 +449,17 @@ mod tests {
         assert_eq!(s.solver.method, Method::MassSpring);
         assert_eq!(s.mass_spring, scene::MassSpring::default());
         let s = Scene::parse(&format!(
-            "{SCENE}[mass_spring]\ninbetweens = 5\nbending = \"hinge\"\n[[mass_spring.obstacle]]\nkind = \"sphere\"\ncenter = [0, 1, 0]\nradius = 0.5\n"
+            "{SCENE}[mass_spring]\ninbetweens = 5\nbending = \"hinge\"\n[[obstacle]]\nkind = \"sphere\"\ncenter = [0, 1, 0]\nradius = 0.5\n"
         ))
         .unwrap();
         assert_eq!(s.mass_spring.inbetweens, 5);
-        assert_eq!(s.mass_spring.obstacle, vec![Obstacle::Sphere { center: [0.0, 1.0, 0.0], radius: 0.5 }]);
+        assert_eq!(s.obstacles, vec![ObstacleSpec::Sphere { center: [0.0, 1.0, 0.0], radius: 0.5 }]);
         for (table, says) in [
             ("bending = \"none\"", "bending"),
             ("tolerance = 0.0", "tolerance"),
             ("inbetweens = 5000", "inbetweens"),
-            ("[[mass_spring.obstacle]]\nkind = \"plane\"\npoint = [0, 0, 0]\nnormal = [0, 0, 0]", "obstacle"),
-            ("[[mass_spring.obstacle]]\nkind = \"cube\"", "cube"),
+            ("[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, 0]\nnormal = [0, 0, 0]", "obstacle"),
+            ("[[obstacle]]\nkind = \"cube\"", "cube"),
             ("stiffness = 1.0", "stiffness"),
         ] {
             let e = Scene::parse(&format!("{SCENE}[mass_spring]\n{table}\n")).unwrap_err();
