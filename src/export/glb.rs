@@ -1,4 +1,4 @@
-//! Binary glTF writers (helper-owned). Layout in `formats/gltf.md`.
+//! Binary glTF writers. Layout in `formats/gltf.md`.
 //!
 //! The JSON is built with `gltf-json`; the GLB container is ours (12-byte header, a JSON chunk
 //! padded with spaces, a BIN chunk padded with zeros). Every block of binary data starts on a

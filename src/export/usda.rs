@@ -1,4 +1,4 @@
-//! USD ASCII writers (helper-owned). Layout in `formats/usd.md`.
+//! USD ASCII writers. Layout in `formats/usd.md`.
 //!
 //! Written as text directly (no USD library in Rust): the layout is small and fixed, and
 //! writing it ourselves keeps the bytes deterministic. Floats are f32 in their shortest

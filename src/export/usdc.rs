@@ -1,4 +1,4 @@
-//! `.usdc` by converting our `.usda` with usd-core's `pxr` in a Python process (helper-owned).
+//! `.usdc` by converting our `.usda` with usd-core's `pxr` in a Python process.
 //!
 //! The crate format is only written faithfully by USD itself (no Rust writer that usd-core
 //! 26.11 accepts builds with our toolchain), so we ask the reference implementation.
