@@ -176,8 +176,14 @@ fn index_bytes(values: impl Iterator<Item = u32>, size: usize) -> Vec<u8> {
 }
 
 fn accessor(view: Option<(Block, u64)>, count: usize, component: ComponentType, type_: Type) -> json::Accessor {
+    accessor_in(view.map(|(b, o)| (b as u32, o)), count, component, type_)
+}
+
+/// An accessor of `count` elements at (buffer view, byte offset), or with no view (all zero,
+/// or sparse values set by the caller). Shared with the vertex-cache glTF writer.
+pub(crate) fn accessor_in(view: Option<(u32, u64)>, count: usize, component: ComponentType, type_: Type) -> json::Accessor {
     json::Accessor {
-        buffer_view: view.map(|(b, _)| Index::new(b as u32)),
+        buffer_view: view.map(|(b, _)| Index::new(b)),
         byte_offset: view.map(|(_, o)| USize64(o)).filter(|o| o.0 != 0),
         count: USize64(count as u64),
         component_type: Valid(GenericComponentType(component)),

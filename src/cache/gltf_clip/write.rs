@@ -15,7 +15,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use gltf_json as json;
-use json::accessor::{sparse, ComponentType, GenericComponentType, IndexComponentType, Type};
+use json::accessor::{sparse, ComponentType, IndexComponentType, Type};
 use json::animation::{Interpolation, Property};
 use json::buffer::{Stride, Target as ViewTarget};
 use json::validation::{Checked::Valid, USize64};
@@ -24,6 +24,7 @@ use serde_json::{json as value, Value};
 
 use crate::cache::{check_writable, FrameSource};
 use crate::error::{Error, Result};
+use crate::export::glb::accessor_in as accessor;
 use crate::export::sparse_is_smaller;
 use crate::mesh::TriMesh;
 
@@ -91,23 +92,6 @@ fn push_index(out: &mut Vec<u8>, v: u32, size: usize) {
 
 fn pad_to_4(out: &mut Vec<u8>) {
     out.resize(pad4(out.len()), 0);
-}
-
-fn accessor(view: Option<(u32, usize)>, count: usize, component: ComponentType, type_: Type) -> json::Accessor {
-    json::Accessor {
-        buffer_view: view.map(|(v, _)| Index::new(v)),
-        byte_offset: view.map(|(_, o)| USize64(o as u64)).filter(|o| o.0 != 0),
-        count: USize64(count as u64),
-        component_type: Valid(GenericComponentType(component)),
-        extensions: None,
-        extras: None,
-        type_: Valid(type_),
-        min: None,
-        max: None,
-        name: None,
-        normalized: false,
-        sparse: None,
-    }
 }
 
 fn sparse_of(
@@ -247,7 +231,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
             Storage::Zero => accessor(None, n, ComponentType::F32, Type::Vec3),
             Storage::Dense => {
                 dense_at += 12 * n;
-                accessor(Some((vertex_view, dense_at - 12 * n)), n, ComponentType::F32, Type::Vec3)
+                accessor(Some((vertex_view, (dense_at - 12 * n) as u64)), n, ComponentType::F32, Type::Vec3)
             }
             Storage::Sparse => {
                 let sv = sparse_view.expect("a sparse target has a view");
