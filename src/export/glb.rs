@@ -75,8 +75,15 @@ fn with_weights(
 ) -> Vec<u8> {
     let mut file = File::new(name, surface, &clip.base, placement);
     let n = clip.vertex_count();
-    let targets: Vec<(String, Index<json::Accessor>)> =
-        clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets))).collect();
+    let mut targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)> =
+        clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets), None)).collect();
+    if let Some(triangles) = file.normal_triangles.clone() {
+        let deltas = morph_normal_deltas(clip, &triangles, file.sources.as_deref());
+        let vertices = file.sources.as_ref().map_or(n, Vec::len);
+        for (target, (indices, offsets)) in targets.iter_mut().zip(deltas) {
+            target.2 = Some(file.morph_target(vertices, &indices, &offsets));
+        }
+    }
     if !targets.is_empty() {
         file.morph(targets, times, output, interpolation);
     }
@@ -98,7 +105,7 @@ pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: P
                 offsets.push(d);
             }
         }
-        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets)));
+        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets), None));
     }
     let times: Vec<f32> = frames.times.iter().map(|&t| t as f32).collect();
     let count = times.len();
@@ -108,6 +115,56 @@ pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: P
     }
     file.morph(targets, &times, &output, Interpolation::Linear);
     file.finish()
+}
+
+/// Area-weighted unit normals of the glTF vertices (`sources[j]`: the point vertex `j` shows;
+/// `None`: vertex `j` is point `j`), each from the triangles that use that vertex: what a
+/// renderer computes on the file's vertices (three.js `computeVertexNormals`).
+fn vertex_normals(points: &[[f64; 3]], triangles: &[[u32; 3]], sources: Option<&[u32]>) -> Vec<[f64; 3]> {
+    let point = |j: u32| points[sources.map_or(j, |s| s[j as usize]) as usize];
+    let mut n = vec![[0.0; 3]; sources.map_or(points.len(), <[u32]>::len)];
+    for t in triangles {
+        let p = t.map(point);
+        let f = crate::mesh::cross(crate::mesh::sub(p[1], p[0]), crate::mesh::sub(p[2], p[0]));
+        for &j in t {
+            let x = &mut n[j as usize];
+            *x = [x[0] + f[0], x[1] + f[1], x[2] + f[2]];
+        }
+    }
+    n.into_iter()
+        .map(|x| {
+            let l = crate::mesh::norm(x);
+            if l > 0.0 { x.map(|c| c / l) } else { x }
+        })
+        .collect()
+}
+
+/// Per target, the glTF vertices whose normal changes and by how much: the normals of the
+/// target's shape (base + offsets) minus the base's, both recomputed on the file's vertices. A
+/// renderer adds them with the target weights and renormalizes: the normals of the blended
+/// shape to first order (README, "Animated normals", measures how close).
+pub fn morph_normal_deltas(clip: &BlendShapeClip, triangles: &[[u32; 3]], sources: Option<&[u32]>) -> Vec<(Vec<u32>, Vec<[f32; 3]>)> {
+    let base: Vec<[f64; 3]> = clip.base.iter().map(|p| p.map(f64::from)).collect();
+    let rest = vertex_normals(&base, triangles, sources);
+    clip.targets
+        .iter()
+        .map(|t| {
+            let mut shape = base.clone();
+            for (&i, o) in t.indices.iter().zip(&t.offsets) {
+                let p = &mut shape[i as usize];
+                *p = [p[0] + o[0] as f64, p[1] + o[1] as f64, p[2] + o[2] as f64];
+            }
+            let mut out = (Vec::new(), Vec::new());
+            for (j, (a, b)) in vertex_normals(&shape, triangles, sources).iter().zip(&rest).enumerate() {
+                let d = [(a[0] - b[0]) as f32, (a[1] - b[1]) as f32, (a[2] - b[2]) as f32];
+                if d != [0.0; 3] {
+                    out.0.push(j as u32);
+                    out.1.push(d);
+                }
+            }
+            out
+        })
+        .collect()
 }
 
 /// The binary data, one buffer view per kind, in this order.
@@ -134,12 +191,15 @@ pub struct Surface<'a> {
     pub attributes: Option<&'a CornerAttributes>,
     /// Per material group, its diffuse texture (may be shorter than the groups, or empty).
     pub textures: &'a [Option<Texture>],
+    /// Morph targets carry NORMAL deltas (and the base gets recomputed `NORMAL`s if the
+    /// surface has none): see [`morph_normal_deltas`].
+    pub morph_normals: bool,
 }
 
 impl<'a> Surface<'a> {
     /// Triangles only: no UVs, normals, groups or textures.
     pub fn plain(triangles: &'a [[u32; 3]]) -> Surface<'a> {
-        Surface { triangles, attributes: None, textures: &[] }
+        Surface { triangles, attributes: None, textures: &[], morph_normals: false }
     }
 }
 
@@ -154,6 +214,8 @@ struct File {
     target_names: Vec<String>,
     /// Embedded images (one buffer view each, after the blocks), in `images` order.
     images: Vec<Vec<u8>>,
+    /// The triangles over glTF vertices (split at seams), kept when morph normals are asked.
+    normal_triangles: Option<Vec<[u32; 3]>>,
 }
 
 fn f32x3_value(v: [f32; 3]) -> Value {
@@ -224,8 +286,15 @@ impl File {
     /// `base.len()` glTF vertices are the points in order, the seam copies follow, and
     /// `extras.seamSources` lists the point each copy shows.
     fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement) -> File {
-        let Surface { triangles, attributes, textures } = surface;
-        let mut f = File { root: json::Root::default(), blocks: Default::default(), sources: None, target_names: Vec::new(), images: Vec::new() };
+        let Surface { triangles, attributes, textures, morph_normals } = surface;
+        let mut f = File {
+            root: json::Root::default(),
+            blocks: Default::default(),
+            sources: None,
+            target_names: Vec::new(),
+            images: Vec::new(),
+            normal_triangles: None,
+        };
         f.root.asset = json::Asset {
             copyright: None,
             extensions: None,
@@ -243,7 +312,14 @@ impl File {
         }
         let position = f.positions(base);
         let mut attributes_json = vec![(Valid(json::mesh::Semantic::Positions), position)];
-        if let Some(normals) = split.as_ref().and_then(|s| s.normals.as_ref()) {
+        if morph_normals {
+            f.normal_triangles = Some(triangles.to_vec());
+        }
+        let recomputed: Option<Vec<[f64; 3]>> = (morph_normals && split.as_ref().and_then(|s| s.normals.as_ref()).is_none()).then(|| {
+            let points: Vec<[f64; 3]> = base.iter().map(|p| p.map(f64::from)).collect();
+            vertex_normals(&points, triangles, f.sources.as_deref())
+        });
+        if let Some(normals) = split.as_ref().and_then(|s| s.normals.as_ref()).or(recomputed.as_ref()) {
             let unit: Vec<[f32; 3]> = normals
                 .iter()
                 .map(|n| {
@@ -439,13 +515,13 @@ impl File {
     }
 
     /// Attach named morph targets (default weights 0) and their weights animation.
-    fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
-        self.target_names = targets.iter().map(|(n, _)| n.clone()).collect();
+    fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
+        self.target_names = targets.iter().map(|(n, _, _)| n.clone()).collect();
         let mesh = &mut self.root.meshes[0];
         mesh.weights = Some(vec![0.0; targets.len()]);
         for primitive in &mut mesh.primitives {
             primitive.targets =
-                Some(targets.iter().map(|&(_, a)| json::mesh::MorphTarget { positions: Some(a), normals: None, tangents: None }).collect());
+                Some(targets.iter().map(|&(_, a, normals)| json::mesh::MorphTarget { positions: Some(a), normals, tangents: None }).collect());
         }
         let input = self.floats(times, true);
         let output = self.floats(output, false);

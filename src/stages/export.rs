@@ -44,7 +44,8 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
     let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
-    let surface = glb::Surface { triangles, attributes, textures: &textures };
+    let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
+    let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
     if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {
         let mut copied: Vec<&str> = Vec::new();
         for t in textures.iter().flatten() {
@@ -95,9 +96,9 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                         (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
                             let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(&clip, &frame_times, surface, &scene.name, placement)
+                            glb::blendshapes_sampled(&clip, &frame_times, blendshape_surface, &scene.name, placement)
                         }
-                        _ => glb::blendshapes(&clip, surface, &scene.name, placement),
+                        _ => glb::blendshapes(&clip, blendshape_surface, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;
                 }

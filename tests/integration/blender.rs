@@ -37,7 +37,7 @@ use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// A copy of `scene` in `dir` whose file paths are absolute and whose `[export]` table starts
 /// with `export` (TOML lines): the same animation, exported another way.
-fn scene_variant(scene: &Path, dir: &Path, name: &str, export: &str) -> PathBuf {
+pub(crate) fn scene_variant(scene: &Path, dir: &Path, name: &str, export: &str) -> PathBuf {
     let text = std::fs::read_to_string(scene).unwrap();
     let folder = scene.parent().unwrap();
     // Every quoted string naming a file beside the scene becomes that file's absolute path.

@@ -22,9 +22,13 @@ use blendsim::mesh::attributes::split_at_seams;
 use blendsim::mesh::{cross, norm, sub, Point};
 use blendsim::stage::Animation;
 
+use blendsim::stage::OutputKind;
+use serde_json::Value;
+
+use crate::attributes::Glb;
 use crate::common::assets::paper_scene;
-use crate::common::cli::TempDir;
-use crate::common::verify::library_animation;
+use crate::common::cli::{read_json, run, TempDir};
+use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// Area-weighted normals of `triangles` over `vertices` (unit; zero where no area).
 fn normals(points: &[Point], triangles: &[[u32; 3]], sources: &[u32]) -> Vec<Point> {
@@ -66,6 +70,25 @@ struct Row {
     position_bytes: usize,
 }
 
+/// The rest normals on the file's vertices and, per target, the change of every vertex's
+/// normal from the base's to the target shape's (both recomputed): NORMAL morph deltas.
+fn rest_and_deltas(clip: &BlendShapeClip, triangles: &[[u32; 3]], sources: &[u32]) -> (Vec<Point>, Vec<Vec<Point>>) {
+    let base: Vec<Point> = clip.base.iter().map(|p| p.map(f64::from)).collect();
+    let rest = normals(&base, triangles, sources);
+    let deltas = clip
+        .targets
+        .iter()
+        .map(|t| {
+            let mut shape = base.clone();
+            for (&i, o) in t.indices.iter().zip(&t.offsets) {
+                shape[i as usize] = [shape[i as usize][0] + o[0] as f64, shape[i as usize][1] + o[1] as f64, shape[i as usize][2] + o[2] as f64];
+            }
+            normals(&shape, triangles, sources).iter().zip(&rest).map(|(a, b)| sub(*a, *b)).collect()
+        })
+        .collect();
+    (rest, deltas)
+}
+
 fn measure(name: &str, anim: &Animation) -> Row {
     let mesh = &anim.mesh;
     let n = mesh.positions.len();
@@ -90,19 +113,7 @@ fn measure(name: &str, anim: &Animation) -> Row {
     };
 
     let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
-    let base: Vec<Point> = clip.base.iter().map(|p| p.map(f64::from)).collect();
-    let rest = normals(&base, file_tris, file_sources);
-    let deltas: Vec<Vec<Point>> = clip
-        .targets
-        .iter()
-        .map(|t| {
-            let mut shape = base.clone();
-            for (&i, o) in t.indices.iter().zip(&t.offsets) {
-                shape[i as usize] = [shape[i as usize][0] + o[0] as f64, shape[i as usize][1] + o[1] as f64, shape[i as usize][2] + o[2] as f64];
-            }
-            normals(&shape, file_tris, file_sources).iter().zip(&rest).map(|(a, b)| sub(*a, *b)).collect()
-        })
-        .collect();
+    let (rest, deltas) = rest_and_deltas(&clip, file_tris, file_sources);
     // glTF stores a delta target like a position target: sparse when smaller (u16 indices).
     let target_bytes = |moved: usize| if moved * 14 < 12 * file_sources.len() { moved * 14 } else { 12 * file_sources.len() };
     let delta_bytes: usize = deltas.iter().map(|d| target_bytes(d.iter().filter(|x| **x != [0.0; 3]).count())).sum();
@@ -161,4 +172,86 @@ fn animated_normals_error_table() {
         assert!(r.recomputed.2 <= r.rest.2, "{}", r.name);
     }
     assert!(rows[0].recomputed.0 < 1e-6, "no seams in the demo: recomputing is the truth");
+}
+
+/// A glb accessor's vec3 values, dense or sparse (zeros where a sparse accessor has no entry).
+fn vec3s(glb: &Glb, a: u64) -> Vec<[f32; 3]> {
+    let acc = &glb.json["accessors"][a as usize];
+    let count = acc["count"].as_u64().unwrap() as usize;
+    let mut out = if acc["bufferView"].is_u64() { glb.floats(a, 3).chunks(3).map(|c| [c[0], c[1], c[2]]).collect() } else { vec![[0.0; 3]; count] };
+    if let Some(sparse) = acc.get("sparse") {
+        let at = |part: &Value| {
+            let view = &glb.json["bufferViews"][part["bufferView"].as_u64().unwrap() as usize];
+            view["byteOffset"].as_u64().unwrap_or(0) as usize + part["byteOffset"].as_u64().unwrap_or(0) as usize
+        };
+        let (i0, v0) = (at(&sparse["indices"]), at(&sparse["values"]));
+        let size = match sparse["indices"]["componentType"].as_u64().unwrap() {
+            5121 => 1,
+            5123 => 2,
+            _ => 4,
+        };
+        for k in 0..sparse["count"].as_u64().unwrap() as usize {
+            let b = &glb.bin[i0 + k * size..i0 + (k + 1) * size];
+            let i = match size {
+                1 => b[0] as usize,
+                2 => u16::from_le_bytes([b[0], b[1]]) as usize,
+                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+            };
+            let f = |c: usize| f32::from_le_bytes(glb.bin[v0 + 12 * k + 4 * c..v0 + 12 * k + 4 * c + 4].try_into().unwrap());
+            out[i] = [f(0), f(1), f(2)];
+        }
+    }
+    out
+}
+
+/// `[export] gltf_morph_normals = true`: every morph target of the blendshape glb carries the
+/// NORMAL deltas measured above (read back from the file, dense or sparse), the base gets
+/// NORMALs when the OBJ has none, the validator and three.js accept the file, and the
+/// full-frame glb is unchanged. Prints the size cost.
+#[test]
+fn morph_normals_in_the_glb_are_the_measured_deltas() {
+    let dir = TempDir::new("normals-morph");
+    crate::texture::textured_prism(&dir.path, "gltf_morph_normals = true");
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo/twist.toml");
+    crate::blender::scene_variant(&demo, &dir.path, "twist", "gltf_morph_normals = true");
+    for scene in ["scene.toml", "twist.toml"] {
+        let out_name = format!("out-{}", scene.trim_end_matches(".toml"));
+        run(&dir.path, &["bake", "-q", scene, "--out", &out_name]).success();
+        let out = dir.join(&out_name);
+        let outputs = output_files(&read_json(&out.join("report.json"))["outputs"]);
+        let anim = library_animation(&dir.join(scene));
+        assert!(anim.scene.export.gltf_morph_normals);
+        check_outputs(&out, &anim, &outputs);
+        let glb_file = outputs.iter().find(|f| f.kind == OutputKind::Blendshape && f.path.ends_with(".glb")).unwrap();
+        let glb = Glb::parse(&std::fs::read(out.join(&glb_file.path)).unwrap());
+        let primitive = &glb.json["meshes"][0]["primitives"][0];
+        let n = anim.mesh.positions.len() as u32;
+        let sources: Vec<u32> = (0..n).chain(glb.json["meshes"][0]["extras"]["seamSources"].as_array().map_or(vec![], |a| a.iter().map(|x| x.as_u64().unwrap() as u32).collect())).collect();
+        let attributes = anim.mesh.attributes.clone().unwrap_or_default();
+        let triangles = if sources.len() as u32 == n { anim.mesh.triangles.clone() } else { split_at_seams(&anim.mesh.triangles, n as usize, &attributes).triangles };
+        let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
+        let (_, deltas) = rest_and_deltas(&clip, &triangles, &sources);
+        assert!(primitive["attributes"]["NORMAL"].is_u64(), "{scene}: the base has NORMALs");
+        let targets = primitive["targets"].as_array().unwrap();
+        assert_eq!(targets.len(), deltas.len());
+        let mut worst = 0.0f64;
+        for (t, d) in targets.iter().zip(&deltas) {
+            let got = vec3s(&glb, t["NORMAL"].as_u64().expect("a NORMAL delta per target"));
+            assert_eq!(got.len(), d.len());
+            for (g, w) in got.iter().zip(d) {
+                worst = worst.max((0..3).map(|k| (g[k] as f64 - w[k]).abs()).fold(0.0, f64::max));
+            }
+        }
+        assert!(worst < 1e-6, "{scene}: the file's NORMAL deltas are the measured ones (max difference {worst})");
+        let full = outputs.iter().find(|f| f.kind == OutputKind::FullFrame && f.path.ends_with(".glb")).unwrap();
+        let full_glb = Glb::parse(&std::fs::read(out.join(&full.path)).unwrap());
+        assert!(full_glb.json["meshes"][0]["primitives"][0]["targets"][0].get("NORMAL").is_none(), "full-frame files are unchanged");
+        let plain = blendsim::internals::glb::blendshapes(
+            &clip,
+            blendsim::internals::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals: false },
+            "x",
+            blendsim::internals::Placement { z_up: false, meters_per_unit: 1.0 },
+        );
+        eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (textures excluded)", glb_file.bytes as f64 / 1000.0, plain.len() as f64 / 1000.0);
+    }
 }

@@ -182,7 +182,8 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
         let a = mesh["primitives"][0]["attributes"]["TEXCOORD_0"].as_u64().unwrap();
         let mut uvs = glb.floats(a, 2);
         let sources: Vec<u64> = mesh["extras"]["seamSources"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap()).collect();
-        change(&mut uvs, &sources, uvs.len() / 2 - sources.len());
+        let points = uvs.len() / 2 - sources.len();
+        change(&mut uvs, &sources, points);
         let (start, stride, _) = glb.start(a);
         let bin = bytes.len() - glb.bin.len();
         for (i, uv) in uvs.chunks(2).enumerate() {
