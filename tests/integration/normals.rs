@@ -4,16 +4,19 @@
 //! `cargo test --release --test integration normals:: -- --nocapture` prints the table in the
 //! README. At every frame, for every vertex (every split vertex where the surface has normal
 //! creases), the angle between the true normal and:
-//! - (a) the rest normals, which is what a renderer shows when the file carries `NORMAL` and no
-//!   morph-target normals (three.js, engines: morphing moves positions only);
+//! - (a) the rest normals (the file's `NORMAL`: the OBJ's `vn`, or recomputed at the base
+//!   pose), which is what a renderer shows when the file has no morph-target normals
+//!   (three.js, engines: morphing moves positions only);
 //! - (b) normals recomputed from the morphed positions on the file's vertices (three.js's
 //!   `computeVertexNormals` on the glb's split vertices: area weighted, each seam copy seeing
 //!   only its own triangles; Blender recomputes on its welded mesh, which is the truth);
 //! - (c) glTF morph-target NORMAL deltas (each target's recomputed normals minus the base's),
-//!   blended with the frame's weights and renormalized, as a shader does.
+//!   added to (a) with the frame's weights and renormalized, as a shader does.
 //!
 //! The true normal is the area-weighted normal of the surface at that frame, over the corners
-//! that share a rest normal (smooth across the surface, creased where the OBJ's `vn` crease).
+//! that share a rest normal (smooth across the surface, creased where the OBJ's `vn` crease):
+//! what three.js computes on a welded mesh. (On the prism its fanned quads weigh a vertex's two
+//! side faces unequally, so even at rest it is up to 7.9 degrees from the OBJ's radial `vn`.)
 
 use std::path::Path;
 
@@ -113,7 +116,12 @@ fn measure(name: &str, anim: &Animation) -> Row {
     };
 
     let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
-    let (rest, deltas) = rest_and_deltas(&clip, file_tris, file_sources);
+    let (recomputed_rest, deltas) = rest_and_deltas(&clip, file_tris, file_sources);
+    // The file's NORMALs: the OBJ's `vn` when it has them, else recomputed (as the writer does).
+    let rest: Vec<Point> = match file_split.as_ref().and_then(|s| s.normals.as_ref()) {
+        Some(n) => n.iter().map(|x| unit(*x)).collect(),
+        None => recomputed_rest,
+    };
     // glTF stores a delta target like a position target: sparse when smaller (u16 indices).
     let target_bytes = |moved: usize| if moved * 14 < 12 * file_sources.len() { moved * 14 } else { 12 * file_sources.len() };
     let delta_bytes: usize = deltas.iter().map(|d| target_bytes(d.iter().filter(|x| **x != [0.0; 3]).count())).sum();
@@ -166,12 +174,13 @@ fn animated_normals_error_table() {
         );
     }
     for r in &rows {
-        // Recomputing on the welded mesh is the truth itself; the morph blend is an
-        // approximation that must beat ignoring the motion.
-        assert!(r.morph.2 <= r.rest.2, "{}: morph deltas {:?} vs rest {:?}", r.name, r.morph, r.rest);
-        assert!(r.recomputed.2 <= r.rest.2, "{}", r.name);
+        // The morph blend is a first-order approximation: it must not be worse than ignoring
+        // the motion on average. (Recomputing on split vertices can be: seam copies see half
+        // their triangles, the prism's row.)
+        assert!(r.morph.2 <= r.rest.2 + 1e-9, "{}: morph deltas {:?} vs rest {:?}", r.name, r.morph, r.rest);
     }
-    assert!(rows[0].recomputed.0 < 1e-6, "no seams in the demo: recomputing is the truth");
+    assert!(rows[0].morph.2 < 0.25 * rows[0].rest.2, "the demo's twist: NORMAL deltas cut the mean error at least 4x");
+    assert!(rows[0].recomputed.0 < 1e-3, "no seams in the demo: recomputing is the truth (to acos's precision, in degrees)");
 }
 
 /// A glb accessor's vec3 values, dense or sparse (zeros where a sparse accessor has no entry).
@@ -246,12 +255,10 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
         let full = outputs.iter().find(|f| f.kind == OutputKind::FullFrame && f.path.ends_with(".glb")).unwrap();
         let full_glb = Glb::parse(&std::fs::read(out.join(&full.path)).unwrap());
         assert!(full_glb.json["meshes"][0]["primitives"][0]["targets"][0].get("NORMAL").is_none(), "full-frame files are unchanged");
-        let plain = blendsim::internals::glb::blendshapes(
-            &clip,
-            blendsim::internals::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals: false },
-            "x",
-            blendsim::internals::Placement { z_up: false, meters_per_unit: 1.0 },
-        );
-        eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (textures excluded)", glb_file.bytes as f64 / 1000.0, plain.len() as f64 / 1000.0);
+        let size = |morph_normals| {
+            let surface = blendsim::internals::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals };
+            blendsim::internals::glb::blendshapes(&clip, surface, "x", blendsim::internals::Placement { z_up: false, meters_per_unit: 1.0 }).len() as f64 / 1000.0
+        };
+        eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (texture not embedded)", size(true), size(false));
     }
 }
