@@ -77,7 +77,7 @@ fn read_mtl_textures(mtl: &Path) -> Result<Vec<(String, String)>> {
                 if !texture.is_file() {
                     return Err(Error::in_file(
                         mtl,
-                        format!("line {}: map_Kd names the texture {}, which does not exist", number + 1, quoted(&texture.to_string_lossy())),
+                        format!("line {}: map_Kd names the texture {}, which does not exist", number + 1, quoted(file)),
                         "put the texture beside the .mtl (paths are relative to it), or remove the map_Kd line",
                     ));
                 }
@@ -312,6 +312,30 @@ pub fn write(mesh: &TriMesh) -> String {
 mod tests {
     use super::*;
     use crate::testing::paper_asset;
+
+    #[test]
+    fn map_kd_of_the_mtl_gives_each_group_its_texture() {
+        let dir = std::env::temp_dir().join(format!("blendsim-obj-mtl-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tex")).unwrap();
+        std::fs::write(dir.join("tex/wood.png"), b"png").unwrap();
+        let obj = "mtllib a.mtl\nmtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n\
+                   usemtl wood\nf 1/1 2/1 3/1\nusemtl plain\nf 2/1 4/1 3/1\n";
+        std::fs::write(dir.join("m.obj"), obj).unwrap();
+        // Options before the file name, a backslash path, a material without a map.
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nKd 1 1 1\nmap_Kd -bm 1 tex\\wood.png\nnewmtl plain\nKd 0.5 0.5 0.5\n").unwrap();
+        let a = read(&dir.join("m.obj")).unwrap().attributes.unwrap();
+        let wood = dir.join("tex/wood.png").canonicalize().unwrap();
+        assert_eq!(a.textures, vec![Some(wood.to_string_lossy().into_owned()), None]);
+        assert_eq!((a.texture(0).is_some(), a.texture(1)), (true, None));
+        // A map naming a missing file: the .mtl, its line, the fix.
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nmap_Kd gone.png\n").unwrap();
+        let e = read(&dir.join("m.obj")).unwrap_err().to_string();
+        assert!(e.contains("a.mtl") && e.contains("line 2: map_Kd names the texture") && e.contains("fix:"), "{e}");
+        // No textures at all: the field stays empty (the stage file is as before).
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nKd 1 0 0\n").unwrap();
+        assert!(read(&dir.join("m.obj")).unwrap().attributes.unwrap().textures.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn parse_err(text: &str) -> String {
         let e = parse(text).expect_err("malformed OBJ must not parse");

@@ -224,3 +224,24 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
         assert!(worst > 0.05, "{f}");
     }
 }
+
+/// Bad textures are one-line errors naming the file, with exit code 1 and no output folder: a
+/// `map_Kd` naming a missing file (the `.mtl` and its line), and an image that is neither PNG
+/// nor JPEG (the image).
+#[test]
+fn missing_or_unsupported_textures_are_one_line_errors() {
+    let dir = TempDir::new("texture-errors");
+    textured_prism(&dir.path, "formats = [\"glb\"]\nfull_frame = false");
+    std::fs::write(dir.join("scene.toml"), std::fs::read_to_string(dir.join("scene.toml")).unwrap().replace("formats = [\"usda\", \"usdc\", \"glb\"]\n", "")).unwrap();
+    std::fs::write(dir.join("prism.mtl"), "newmtl side\nmap_Kd gone.png\n").unwrap();
+    let r = run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.trim().lines().count(), 1, "{r}");
+    assert!(r.stderr.contains("prism.mtl: line 2: map_Kd names the texture `gone.png`") && r.stderr.contains("(fix: "), "{r}");
+    std::fs::write(dir.join("prism.mtl"), "newmtl side\nmap_Kd uvgrid.gif\n").unwrap();
+    std::fs::write(dir.join("uvgrid.gif"), b"GIF89a....").unwrap();
+    let r = run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert!(r.stderr.contains("uvgrid.gif: is not a PNG or JPEG image"), "{r}");
+    assert!(!dir.join("out").exists(), "no partial output");
+}
