@@ -181,6 +181,9 @@ enum Block {
 }
 const BLOCKS: usize = 6;
 
+/// A material group's primitive: its name, triangles (over glTF vertices) and texture.
+type Group<'t> = (String, Vec<[u32; 3]>, Option<&'t Texture>);
+
 /// The surface a file shows: its triangles, corner attributes, and per material group its
 /// diffuse texture (empty: none).
 #[derive(Debug, Clone, Copy)]
@@ -341,7 +344,7 @@ impl File {
         let vertex_count = split.as_ref().map_or(base.len(), |s| s.sources.len());
         let (component, size) = index_type(vertex_count, false);
         // One primitive per material group, its triangles in surface order.
-        let groups: Vec<(String, Vec<[u32; 3]>, Option<&Texture>)> = match attributes.filter(|a| !a.groups.is_empty()) {
+        let groups: Vec<Group> = match attributes.filter(|a| !a.groups.is_empty()) {
             Some(a) => a
                 .groups
                 .iter()
@@ -350,7 +353,7 @@ impl File {
                     let tris = triangles.iter().zip(&a.triangle_groups).filter(|(_, &x)| x as usize == g).map(|(t, _)| *t).collect();
                     (group.clone(), tris, textures.get(g).and_then(Option::as_ref).filter(|_| has_uvs))
                 })
-                .filter(|(_, tris, _): &(String, Vec<[u32; 3]>, _)| !tris.is_empty())
+                .filter(|(_, tris, _): &Group| !tris.is_empty())
                 .collect(),
             None => vec![(name.to_string(), triangles.to_vec(), None)],
         };

@@ -123,6 +123,9 @@ for s in UsdGeom.Subset.GetAllGeomSubsets(mesh):
 print(json.dumps(out))
 "#;
 
+/// A change to a glb's UVs (u, v pairs), given the seam copies' points and the point count.
+type UvChange = dyn Fn(&mut [f32], &[u64], usize);
+
 #[test]
 fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
     let dir = TempDir::new("texture");
@@ -175,7 +178,7 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
 
     // Chromium: the glb (and the full-frame glb) against the OBJ keys; two broken copies.
     let blendshape = out.join("uvprism.glb");
-    let broken = |what: &str, change: &dyn Fn(&mut [f32], &[u64], usize)| {
+    let broken = |what: &str, change: &UvChange| {
         let mut bytes = std::fs::read(&blendshape).unwrap();
         let glb = Glb::parse(&bytes);
         let mesh = &glb.json["meshes"][0];
