@@ -283,6 +283,11 @@ pub struct Export {
     pub weights: Weights,
     /// How the blendshape glTF animates its weights.
     pub gltf_interpolation: GltfInterpolation,
+    /// Give the blendshape glTF's morph targets NORMAL deltas (each target's recomputed
+    /// normals minus the base's), for renderers that shade a morphed mesh with the file's
+    /// normals (three.js, engines); Blender recomputes them. Off by default: it adds about as
+    /// many bytes as the POSITION targets (README, "Animated normals").
+    pub gltf_morph_normals: bool,
 }
 
 /// The interpolation of the blendshape glTF's weight animation.
@@ -337,6 +342,7 @@ impl Default for Export {
             meters_per_unit: 1.0,
             weights: Weights::Bernstein,
             gltf_interpolation: GltfInterpolation::Cubicspline,
+            gltf_morph_normals: false,
         }
     }
 }

@@ -23,5 +23,7 @@ mod cli_stages;
 mod cli_timing;
 mod export_formats;
 mod fixtures;
+mod normals;
 mod paper_scenes;
 mod render_demo;
+mod texture;
