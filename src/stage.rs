@@ -228,12 +228,15 @@ pub struct SolverLog {
 /// The conjugate-gradient solves of an iterative global step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CgSummary {
+    /// Global-step solves (one per iteration of the solver, and per constraint projection).
     pub solves: usize,
     /// CG iterations over all solves.
     pub iterations: usize,
     /// Solves that stopped at `max_iterations` with the residual above `tolerance`.
     pub capped: usize,
+    /// The iteration cap of one solve.
     pub max_iterations: usize,
+    /// The relative residual a solve stops at.
     pub tolerance: f64,
     /// The largest final relative residual of any solve.
     pub worst_residual: f64,
