@@ -99,8 +99,53 @@ pub struct GlobalStats {
     /// See `predicted_bytes`.
     pub predicted_seconds: f64,
     /// `"direct"` (sparse Cholesky), or `"iterative"` when the predicted peak was over the
-    /// memory budget.
+    /// memory budget or the predicted time of the iterative step was lower ([`choose`]).
     pub linear_solver: &'static str,
+    /// The iterative step's predicted peak memory and time (see [`choose`]).
+    pub predicted_iterative_bytes: f64,
+    /// See `predicted_iterative_bytes`.
+    pub predicted_iterative_seconds: f64,
+}
+
+/// Seconds per stored factor entry of one solve with three right-hand sides (both sweeps read
+/// every entry once; measured on 2 cores: 75M entries in 0.12 s).
+const SWEEP_SECONDS_PER_ENTRY: f64 = 1.6e-9;
+
+/// Global-step solves a bake is assumed to make (the benchmark's TWIST: 64 iterations, one
+/// solve each), and CG iterations per iterative solve (measured at 20 keys on 2.7k nodes:
+/// 37-46 with the warm start).
+const ASSUMED_SOLVES: f64 = 60.0;
+/// See [`ASSUMED_SOLVES`].
+const ASSUMED_CG_ITERATIONS: f64 = 40.0;
+
+/// One CG iteration costs about this many preconditioner sweeps (the matrix-free product and
+/// the vector updates add about 30%, measured).
+const CG_ITERATION_PER_SWEEP: f64 = 1.3;
+
+/// The cost model: predicted (seconds, bytes) of a bake's global steps, direct (factorize
+/// once, then [`ASSUMED_SOLVES`] solves) and iterative (the per-key blocks factorized once,
+/// then [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each). Returns
+/// whether to factorize directly: when its peak fits in `budget` and it is predicted faster.
+pub fn choose(direct: &Cost, blocks: &Cost, parallel: bool, budget: u64) -> (bool, [(f64, f64); 2]) {
+    let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
+    let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY;
+    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY;
+    let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
+    let use_direct = direct_bytes <= budget as f64 && (direct_seconds <= iterative_seconds || iterative_bytes > budget as f64);
+    (use_direct, [(direct_seconds, direct_bytes), (iterative_seconds, iterative_bytes)])
+}
+
+/// The order of every key's block in the iterative step's preconditioner, and the blocks'
+/// predicted cost: the node graph ordered by the better of nested dissection and minimum
+/// degree, two unknowns (position, velocity) per node and key.
+fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> (Vec<u32>, Cost) {
+    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+    let weights = vec![2usize; unknowns.nodes];
+    let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
+    let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+    let keys = (unknowns.slots.count() / 2) as f64;
+    let (order, cost) = if cost_nd.flops <= cost_md.flops { (dissection, cost_nd) } else { (degree, cost_md) };
+    (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
 }
 
 /// Bytes a direct factorization needs per stored factor entry, measured as the whole
@@ -497,6 +542,8 @@ impl GlobalStep {
                 predicted_bytes: 0.0,
                 predicted_seconds: 0.0,
                 linear_solver: "none",
+                predicted_iterative_bytes: 0.0,
+                predicted_iterative_seconds: 0.0,
             };
             return Ok(GlobalStep { unknowns, cholesky: None, budget, coupling: coupling(&coefficients), stats });
         }
@@ -507,20 +554,20 @@ impl GlobalStep {
         // faer's parallel supernodal factorization pays off only for large fronts.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
-        let predicted_bytes = predicted_peak_bytes(&order.cost);
-        let predicted_seconds = order.cost.flops / FACTOR_FLOPS_PER_SECOND[parallel as usize];
+        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
+        let (use_direct, [(predicted_seconds, predicted_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, parallel, budget);
         let singular = || {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
             )
         };
-        let (inverse, factor_nnz, ordering, linear_solver) = if predicted_bytes <= budget as f64 {
+        let (inverse, factor_nnz, ordering, linear_solver) = if use_direct {
             let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
             let nnz = cholesky.factor_nnz();
             (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
         } else {
-            let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &objective.elastic.rest).map_err(|_| singular())?;
+            let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
             let nnz = iterative.preconditioner.factor_nnz();
             (Inverse::Iterative(iterative), nnz, "per-key blocks (preconditioner)", "iterative")
         };
@@ -534,6 +581,8 @@ impl GlobalStep {
             predicted_bytes,
             predicted_seconds,
             linear_solver,
+            predicted_iterative_bytes,
+            predicted_iterative_seconds,
         };
         Ok(GlobalStep { unknowns, cholesky: Some(inverse), budget, coupling: coupling(&coefficients), stats })
     }
@@ -624,16 +673,12 @@ impl GlobalStep {
 
 impl Iterative {
     /// The full rows of `a` and its per-key block preconditioner.
-    fn new(a: &SparseColMat<usize, f64>, operator: KroneckerSum, rest: &[Point]) -> std::result::Result<Iterative, crate::physics::cholesky::NotPositiveDefinite> {
+    fn new(a: &SparseColMat<usize, f64>, operator: KroneckerSum, order: &[u32]) -> std::result::Result<Iterative, crate::physics::cholesky::NotPositiveDefinite> {
         let unknowns = &operator.unknowns;
         // Every key's block is ordered by the node graph (as the direct factor is): its
-        // unknowns by their node's place in the better of nested dissection and minimum
-        // degree. On 2.6k nodes this leaves far less fill than faer's AMD on each block.
+        // unknowns by their node's place in `order` ([`key_block_order`]): 70M factor entries
+        // instead of faer's AMD's 83M at 20 keys on 2.7k nodes.
         let node_of = node_blocks(unknowns);
-        let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_of, unknowns.nodes);
-        let weights = vec![2usize; unknowns.nodes];
-        let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
-        let order = if predicted_cost(&graph, &dissection, &weights).flops <= predicted_cost(&graph, &degree, &weights).flops { dissection } else { degree };
         let mut place = vec![0u32; unknowns.nodes];
         for (k, &v) in order.iter().enumerate() {
             place[v as usize] = k as u32;
@@ -691,6 +736,19 @@ mod tests {
 
     use crate::physics::pcg::SymmetricRows;
     use crate::spacetime::unknowns::KeyConstraints;
+
+    #[test]
+    fn the_cost_model_prefers_the_faster_solver_within_the_budget() {
+        // A small factor: direct. A factor with 100x the entries of all key blocks and 1e13
+        // flops: iterative. Over the budget: iterative whatever the time.
+        let small = Cost { flops: 1e9, entries: 1e6 };
+        let blocks = Cost { flops: 1e8, entries: 5e5 };
+        assert!(choose(&small, &blocks, true, u64::MAX).0);
+        let huge = Cost { flops: 1e13, entries: 5e7 };
+        let (direct, [(ds, db), (is, ib)]) = choose(&huge, &blocks, true, u64::MAX);
+        assert!(!direct && is < ds && ib < db, "{ds} {is}");
+        assert!(!choose(&small, &blocks, true, 1).0);
+    }
 
     #[test]
     fn the_kronecker_sum_is_the_assembled_matrix() {
