@@ -25,19 +25,23 @@ pub trait SymmetricOperator: Sync {
     fn apply(&self, x: &[Point], y: &mut [Point]);
 }
 
+#[cfg(test)]
 impl SymmetricOperator for SymmetricRows {
     fn apply(&self, x: &[Point], y: &mut [Point]) {
         SymmetricRows::apply(self, x, y)
     }
 }
 
-/// A symmetric matrix stored by full rows (both triangles), for row-parallel products.
+/// A symmetric matrix stored by full rows (both triangles), for row-parallel products (the
+/// reference the matrix-free operators are tested against).
+#[cfg(test)]
 pub struct SymmetricRows {
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
     vals: Vec<f64>,
 }
 
+#[cfg(test)]
 impl SymmetricRows {
     /// The full matrix of the symmetric matrix whose lower triangle is `lower`.
     pub fn from_lower(lower: &SparseColMat<usize, f64>) -> SymmetricRows {

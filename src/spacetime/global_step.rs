@@ -297,7 +297,7 @@ const CG_MAX_ITERATIONS: usize = 5000;
 /// How the global step is inverted.
 enum Inverse {
     Direct(Box<Cholesky>),
-    Iterative(Iterative),
+    Iterative(Box<Iterative>),
 }
 
 /// The normal matrix of the free unknowns, factorized: solves the global step.
@@ -569,7 +569,7 @@ impl GlobalStep {
         } else {
             let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
             let nnz = iterative.preconditioner.factor_nnz();
-            (Inverse::Iterative(iterative), nnz, "per-key blocks (preconditioner)", "iterative")
+            (Inverse::Iterative(Box::new(iterative)), nnz, "per-key blocks (preconditioner)", "iterative")
         };
         let stats = GlobalStats {
             unknowns: dim,
