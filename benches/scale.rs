@@ -105,6 +105,19 @@ fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value
     (seconds, peak, report)
 }
 
+/// The global step's solver, with the CG solves and their mean iterations when iterative.
+fn global_step(solver: &serde_json::Value) -> String {
+    let name = solver["linear_solver"].as_str().unwrap_or("-");
+    let cg = &solver["conjugate_gradients"];
+    match (cg["solves"].as_u64(), cg["iterations"].as_u64()) {
+        (Some(solves), Some(iterations)) if solves > 0 => {
+            let capped = cg["capped"].as_u64().unwrap_or(0);
+            format!("{name} ({solves} CG solves x {:.0} iterations{})", iterations as f64 / solves as f64, if capped > 0 { format!(", {capped} capped") } else { String::new() })
+        }
+        _ => name.to_string(),
+    }
+}
+
 fn main() {
     let filters: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
     let repeats: usize = std::env::var("SCALE_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
@@ -153,7 +166,7 @@ fn main() {
             report["tet_nodes"],
             cage_text,
             case.keys,
-            report["solver"]["linear_solver"].as_str().unwrap_or("-"),
+            global_step(&report["solver"]),
             seconds,
             peak / 1024.0,
             key_error,

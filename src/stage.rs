@@ -220,6 +220,26 @@ pub struct SolverLog {
     /// The smallest distance of a node to an obstacle over keys and frames (with obstacles).
     #[serde(default)]
     pub clearance: Option<f64>,
+    /// How the iterative global step's conjugate-gradient solves went (iterative only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub conjugate_gradients: Option<CgSummary>,
+}
+
+/// The conjugate-gradient solves of an iterative global step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CgSummary {
+    /// Global-step solves (one per iteration of the solver, and per constraint projection).
+    pub solves: usize,
+    /// CG iterations over all solves.
+    pub iterations: usize,
+    /// Solves that stopped at `max_iterations` with the residual above `tolerance`.
+    pub capped: usize,
+    /// The iteration cap of one solve.
+    pub max_iterations: usize,
+    /// The relative residual a solve stops at.
+    pub tolerance: f64,
+    /// The largest final relative residual of any solve.
+    pub worst_residual: f64,
 }
 
 /// Output of `solve`: the body and its optimized node trajectory.

@@ -54,6 +54,14 @@ pub fn render(report: &Report) -> String {
         let list = |t: &[f64]| t.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
         push(&mut s, format!("| key times | optimized: {} s (input {} s; {} timing iterations, {} refactorizations) |", list(&sv.times), list(&sv.input_times), sv.timing_iterations, sv.refactorizations));
     }
+    if let Some(c) = sv.conjugate_gradients {
+        let capped = if c.capped > 0 {
+            format!("WARNING: {} stopped at the cap of {} iterations, relative residual up to {:.1e} (goal {:.0e})", c.capped, c.max_iterations, c.worst_residual, c.tolerance)
+        } else {
+            format!("all converged to a relative residual of {:.0e} (worst {:.1e})", c.tolerance, c.worst_residual)
+        };
+        push(&mut s, format!("| global step | iterative (over the memory budget): {} CG solves, {:.1} iterations each on average; {capped} |", c.solves, c.iterations as f64 / c.solves.max(1) as f64));
+    }
     if let Some(c) = sv.clearance {
         push(&mut s, format!("| obstacles | smallest node clearance {c:.3e} over keys and frames, {} node-obstacle checks held at the end |", sv.active_contacts));
     }

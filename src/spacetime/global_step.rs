@@ -43,7 +43,8 @@ use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::cholesky::Cholesky;
 use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
-use crate::physics::pcg::{pcg, BlockJacobi, SymmetricRows};
+use crate::physics::csr::Csr;
+use crate::physics::pcg::{pcg, BlockJacobi, SymmetricOperator};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -98,8 +99,53 @@ pub struct GlobalStats {
     /// See `predicted_bytes`.
     pub predicted_seconds: f64,
     /// `"direct"` (sparse Cholesky), or `"iterative"` when the predicted peak was over the
-    /// memory budget.
+    /// memory budget or the predicted time of the iterative step was lower ([`choose`]).
     pub linear_solver: &'static str,
+    /// The iterative step's predicted peak memory and time (see [`choose`]).
+    pub predicted_iterative_bytes: f64,
+    /// See `predicted_iterative_bytes`.
+    pub predicted_iterative_seconds: f64,
+}
+
+/// Seconds per stored factor entry of one solve with three right-hand sides (both sweeps read
+/// every entry once; measured on 2 cores: 75M entries in 0.12 s).
+const SWEEP_SECONDS_PER_ENTRY: f64 = 1.6e-9;
+
+/// Global-step solves a bake is assumed to make (the benchmark's TWIST: 64 iterations, one
+/// solve each), and CG iterations per iterative solve (measured at 20 keys on 2.7k nodes:
+/// 37-46 with the warm start).
+const ASSUMED_SOLVES: f64 = 60.0;
+/// See [`ASSUMED_SOLVES`].
+const ASSUMED_CG_ITERATIONS: f64 = 40.0;
+
+/// One CG iteration costs about this many preconditioner sweeps (the matrix-free product and
+/// the vector updates add about 30%, measured).
+const CG_ITERATION_PER_SWEEP: f64 = 1.3;
+
+/// The cost model: predicted (seconds, bytes) of a bake's global steps, direct (factorize
+/// once, then [`ASSUMED_SOLVES`] solves) and iterative (the per-key blocks factorized once,
+/// then [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each). Returns
+/// whether to factorize directly: when its peak fits in `budget` and it is predicted faster.
+pub fn choose(direct: &Cost, blocks: &Cost, parallel: bool, budget: u64) -> (bool, [(f64, f64); 2]) {
+    let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
+    let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY;
+    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY;
+    let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
+    let use_direct = direct_bytes <= budget as f64 && (direct_seconds <= iterative_seconds || iterative_bytes > budget as f64);
+    (use_direct, [(direct_seconds, direct_bytes), (iterative_seconds, iterative_bytes)])
+}
+
+/// The order of every key's block in the iterative step's preconditioner, and the blocks'
+/// predicted cost: the node graph ordered by the better of nested dissection and minimum
+/// degree, two unknowns (position, velocity) per node and key.
+fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> (Vec<u32>, Cost) {
+    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+    let weights = vec![2usize; unknowns.nodes];
+    let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
+    let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+    let keys = (unknowns.slots.count() / 2) as f64;
+    let (order, cost) = if cost_nd.flops <= cost_md.flops { (dissection, cost_nd) } else { (degree, cost_md) };
+    (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
 }
 
 /// Bytes a direct factorization needs per stored factor entry, measured as the whole
@@ -130,12 +176,115 @@ pub fn default_memory_budget() -> u64 {
     available.map_or(4 << 30, |bytes| (bytes as f64 * DEFAULT_MEMORY_FRACTION) as u64)
 }
 
+/// The normal matrix as the Kronecker sum it is, `C_MM ⊗ M + C_ML ⊗ L + C_KK ⊗ L M⁻¹ L`
+/// restricted to the free unknowns, applied without assembling it: per time slot two sparse
+/// products with `L` over the nodes, then the banded time coefficients mix the slots. A product
+/// costs about `slots × 2 nnz(L)` instead of the assembled matrix's `nnz(A)` (2.6k nodes, 20
+/// keys: 40 × 2 × 40k against about 30M entries), and nothing of the size of `A` is kept.
+struct KroneckerSum {
+    unknowns: Unknowns,
+    mass: Vec<f64>,
+    /// `1/m` at free nodes, 0 at supports (their rows are not in W).
+    inv_mass: Vec<f64>,
+    stiffness: Csr,
+    /// Per slot σ: the slots σ' it is coupled to, with `(C_MM, C_ML, C_KK)[σ, σ']`.
+    coupled: Vec<Vec<(usize, [f64; 3])>>,
+}
+
+impl KroneckerSum {
+    fn new(objective: &Objective, unknowns: &Unknowns, c: &TimeCoefficients) -> KroneckerSum {
+        let el = objective.elastic;
+        let inv_mass = el.mass.iter().zip(&objective.supports).map(|(m, &support)| if support { 0.0 } else { 1.0 / m }).collect();
+        let n = c.slots;
+        let coupled = (0..n)
+            .map(|s| (0..n).map(|t| (t, [c.mm[s * n + t], c.ml[s * n + t], c.kk[s * n + t]])).filter(|(_, v)| v.iter().any(|&x| x != 0.0)).collect())
+            .collect();
+        KroneckerSum { unknowns: unknowns.clone(), mass: el.mass.clone(), inv_mass, stiffness: el.stiffness.clone(), coupled }
+    }
+}
+
+impl SymmetricOperator for KroneckerSum {
+    fn apply(&self, x: &[Point], y: &mut [Point]) {
+        let (u, nodes) = (&self.unknowns, self.unknowns.nodes);
+        let slots = u.slots.count();
+        // Per slot: X (zero at fixed entries), L X and L M⁻¹ L X. Each slot on one thread, every
+        // sum in a fixed order: the same bytes on any thread count.
+        let per_slot: Vec<[Vec<Point>; 3]> = (0..slots)
+            .into_par_iter()
+            .map(|s| {
+                let xs: Vec<Point> = (0..nodes).map(|a| u.get(a, s).map_or([0.0; 3], |i| x[i])).collect();
+                let mut lx = vec![[0.0; 3]; nodes];
+                self.stiffness.mul_points_sequential(&xs, &mut lx);
+                let scaled: Vec<Point> = lx.iter().zip(&self.inv_mass).map(|(p, &w)| crate::mesh::scale(*p, w)).collect();
+                let mut kx = vec![[0.0; 3]; nodes];
+                self.stiffness.mul_points_sequential(&scaled, &mut kx);
+                [xs, lx, kx]
+            })
+            .collect();
+        let rows: Vec<Vec<Point>> = (0..slots)
+            .into_par_iter()
+            .map(|s| {
+                let mut out = vec![[0.0; 3]; nodes];
+                for &(t, [mm, ml, kk]) in &self.coupled[s] {
+                    let [xs, lx, kx] = &per_slot[t];
+                    for a in 0..nodes {
+                        let m = mm * self.mass[a];
+                        for d in 0..3 {
+                            out[a][d] += m * xs[a][d] + ml * lx[a][d] + kk * kx[a][d];
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        for (s, row) in rows.iter().enumerate() {
+            for (a, v) in row.iter().enumerate() {
+                if let Some(i) = u.get(a, s) {
+                    y[i] = *v;
+                }
+            }
+        }
+    }
+}
+
+/// The node of every unknown.
+fn node_blocks(unknowns: &Unknowns) -> Vec<u32> {
+    let mut block_of = vec![0u32; unknowns.count()];
+    for a in 0..unknowns.nodes {
+        for s in 0..unknowns.slots.count() {
+            if let Some(u) = unknowns.get(a, s) {
+                block_of[u] = a as u32;
+            }
+        }
+    }
+    block_of
+}
+
 /// The iterative global step (see the module documentation).
 struct Iterative {
-    rows: SymmetricRows,
+    operator: KroneckerSum,
     preconditioner: BlockJacobi,
     /// The previous solution, the next solve's start.
     previous: std::sync::Mutex<Option<Vec<Point>>>,
+    /// How the solves went.
+    log: std::sync::Mutex<CgLog>,
+}
+
+/// How the iterative global step's CG solves went (for the report and the warning when a
+/// solve stops at its iteration cap).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CgLog {
+    pub solves: usize,
+    /// CG iterations over all solves, and in the last solve.
+    pub iterations: usize,
+    pub last_iterations: usize,
+    /// Solves that stopped at [`CG_MAX_ITERATIONS`] above [`CG_TOLERANCE`].
+    pub capped: usize,
+    /// The largest final relative residual of any solve.
+    pub worst_residual: f64,
+    /// The cap and the tolerance the solves ran with.
+    pub max_iterations: usize,
+    pub tolerance: f64,
 }
 
 /// Relative residual at which a CG solve of the global step stops: far below the solver's
@@ -148,7 +297,7 @@ const CG_MAX_ITERATIONS: usize = 5000;
 /// How the global step is inverted.
 enum Inverse {
     Direct(Box<Cholesky>),
-    Iterative(Iterative),
+    Iterative(Box<Iterative>),
 }
 
 /// The normal matrix of the free unknowns, factorized: solves the global step.
@@ -393,6 +542,8 @@ impl GlobalStep {
                 predicted_bytes: 0.0,
                 predicted_seconds: 0.0,
                 linear_solver: "none",
+                predicted_iterative_bytes: 0.0,
+                predicted_iterative_seconds: 0.0,
             };
             return Ok(GlobalStep { unknowns, cholesky: None, budget, coupling: coupling(&coefficients), stats });
         }
@@ -403,22 +554,22 @@ impl GlobalStep {
         // faer's parallel supernodal factorization pays off only for large fronts.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
-        let predicted_bytes = predicted_peak_bytes(&order.cost);
-        let predicted_seconds = order.cost.flops / FACTOR_FLOPS_PER_SECOND[parallel as usize];
+        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
+        let (use_direct, [(predicted_seconds, predicted_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, parallel, budget);
         let singular = || {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
             )
         };
-        let (inverse, factor_nnz, ordering, linear_solver) = if predicted_bytes <= budget as f64 {
+        let (inverse, factor_nnz, ordering, linear_solver) = if use_direct {
             let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
             let nnz = cholesky.factor_nnz();
             (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
         } else {
-            let iterative = Iterative::new(&a, &unknowns).map_err(|_| singular())?;
+            let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
             let nnz = iterative.preconditioner.factor_nnz();
-            (Inverse::Iterative(iterative), nnz, "per-key blocks (preconditioner)", "iterative")
+            (Inverse::Iterative(Box::new(iterative)), nnz, "per-key blocks (preconditioner)", "iterative")
         };
         let stats = GlobalStats {
             unknowns: dim,
@@ -430,6 +581,8 @@ impl GlobalStep {
             predicted_bytes,
             predicted_seconds,
             linear_solver,
+            predicted_iterative_bytes,
+            predicted_iterative_seconds,
         };
         Ok(GlobalStep { unknowns, cholesky: Some(inverse), budget, coupling: coupling(&coefficients), stats })
     }
@@ -457,6 +610,14 @@ impl GlobalStep {
             )
         })?;
         Ok(Retimed { assemble_seconds, factor_seconds: t1.elapsed().as_secs_f64(), reused_symbolic: true })
+    }
+
+    /// How the iterative step's CG solves went (None for a direct step).
+    pub fn cg_log(&self) -> Option<CgLog> {
+        match &self.cholesky {
+            Some(Inverse::Iterative(it)) => Some(*it.log.lock().expect("no panic while solving")),
+            _ => None,
+        }
     }
 
     /// The free unknowns and their order.
@@ -512,7 +673,17 @@ impl GlobalStep {
 
 impl Iterative {
     /// The full rows of `a` and its per-key block preconditioner.
-    fn new(a: &SparseColMat<usize, f64>, unknowns: &Unknowns) -> std::result::Result<Iterative, crate::physics::cholesky::NotPositiveDefinite> {
+    fn new(a: &SparseColMat<usize, f64>, operator: KroneckerSum, order: &[u32]) -> std::result::Result<Iterative, crate::physics::cholesky::NotPositiveDefinite> {
+        let unknowns = &operator.unknowns;
+        // Every key's block is ordered by the node graph (as the direct factor is): its
+        // unknowns by their node's place in `order` ([`key_block_order`]): 70M factor entries
+        // instead of faer's AMD's 83M at 20 keys on 2.7k nodes.
+        let node_of = node_blocks(unknowns);
+        let mut place = vec![0u32; unknowns.nodes];
+        for (k, &v) in order.iter().enumerate() {
+            place[v as usize] = k as u32;
+        }
+        let rank: Vec<u32> = node_of.iter().map(|&v| place[v as usize]).collect();
         let mut key_of = vec![0u32; unknowns.count()];
         let slots = unknowns.slots.count();
         for node in 0..unknowns.nodes {
@@ -522,16 +693,22 @@ impl Iterative {
                 }
             }
         }
-        let preconditioner = BlockJacobi::new(a, &key_of, slots / 2)?;
-        Ok(Iterative { rows: SymmetricRows::from_lower(a), preconditioner, previous: std::sync::Mutex::new(None) })
+        let preconditioner = BlockJacobi::new(a, &key_of, slots / 2, Some(&rank))?;
+        Ok(Iterative { operator, preconditioner, previous: std::sync::Mutex::new(None), log: std::sync::Mutex::new(CgLog { max_iterations: CG_MAX_ITERATIONS, tolerance: CG_TOLERANCE, ..CgLog::default() }) })
     }
 
     /// `x <- A⁻¹ x` by PCG from the previous solution.
     fn solve(&self, x: &mut [Point]) {
         let mut previous = self.previous.lock().expect("no panic while solving");
         let mut solution = previous.take().unwrap_or_else(|| vec![[0.0; 3]; x.len()]);
-        pcg(&self.rows, &self.preconditioner, x, &mut solution, CG_TOLERANCE, CG_MAX_ITERATIONS);
+        let stats = pcg(&self.operator, &self.preconditioner, x, &mut solution, CG_TOLERANCE, CG_MAX_ITERATIONS);
         x.copy_from_slice(&solution);
+        let mut log = self.log.lock().expect("no panic while solving");
+        log.solves += 1;
+        log.iterations += stats.iterations;
+        log.last_iterations = stats.iterations;
+        log.capped += (stats.relative_residual > CG_TOLERANCE) as usize;
+        log.worst_residual = log.worst_residual.max(stats.relative_residual);
         *previous = Some(solution);
     }
 }
@@ -557,7 +734,56 @@ mod tests {
         (el, keys(times, poses, fixed, false))
     }
 
+    use crate::physics::pcg::SymmetricRows;
     use crate::spacetime::unknowns::KeyConstraints;
+
+    #[test]
+    fn the_cost_model_prefers_the_faster_solver_within_the_budget() {
+        // A small factor: direct. A factor with 100x the entries of all key blocks and 1e13
+        // flops: iterative. Over the budget: iterative whatever the time.
+        let small = Cost { flops: 1e9, entries: 1e6 };
+        let blocks = Cost { flops: 1e8, entries: 5e5 };
+        assert!(choose(&small, &blocks, true, u64::MAX).0);
+        let huge = Cost { flops: 1e13, entries: 5e7 };
+        let (direct, [(ds, db), (is, ib)]) = choose(&huge, &blocks, true, u64::MAX);
+        assert!(!direct && is < ds && ib < db, "{ds} {is}");
+        assert!(!choose(&small, &blocks, true, 1).0);
+    }
+
+    #[test]
+    fn the_kronecker_sum_is_the_assembled_matrix() {
+        // Supports (the bottom held at every key) and a key with extra held nodes: the
+        // operator must drop exactly the rows and columns the assembly drops.
+        let (el, mut k) = problem();
+        let bottom = k.fixed[0].clone();
+        for (f, v) in k.fixed.iter_mut().zip(k.fixed_velocity.iter_mut()) {
+            f.clone_from(&bottom);
+            v.clone_from(&bottom);
+        }
+        k.fixed[3].extend([40, 41, 42]);
+        k.fixed_velocity[5].extend([7, 8]);
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        assert!(obj.supports.iter().any(|&x| x), "the test needs supports");
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let c = TimeCoefficients::new(&obj, 1.0 / s.regularization.powi(4));
+        let a = assemble(&obj, &unknowns, &c);
+        let rows = SymmetricRows::from_lower(&a);
+        let op = KroneckerSum::new(&obj, &unknowns, &c);
+        let mut rng = Rng(3);
+        let x: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect();
+        let (mut y0, mut y1) = (vec![[0.0; 3]; x.len()], vec![[1.0; 3]; x.len()]);
+        rows.apply(&x, &mut y0);
+        SymmetricOperator::apply(&op, &x, &mut y1);
+        let scale = y0.iter().map(|p| crate::mesh::norm(*p)).fold(0.0, f64::max);
+        for (p, q) in y0.iter().zip(&y1) {
+            assert!(crate::mesh::norm(crate::mesh::sub(*p, *q)) <= 1e-12 * scale, "{p:?} vs {q:?}");
+        }
+        // The same bytes on one thread.
+        let mut y2 = vec![[0.0; 3]; x.len()];
+        rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| SymmetricOperator::apply(&op, &x, &mut y2));
+        assert_eq!(y1, y2);
+    }
 
     fn gradient(unknowns: &Unknowns) -> Vec<Vec<Point>> {
         let mut rng = Rng(7);
@@ -620,17 +846,6 @@ mod tests {
         }
     }
 
-    fn node_blocks(unknowns: &Unknowns) -> Vec<u32> {
-        let mut block_of = vec![0u32; unknowns.count()];
-        for a in 0..unknowns.nodes {
-            for s in 0..unknowns.slots.count() {
-                if let Some(u) = unknowns.get(a, s) {
-                    block_of[u] = a as u32;
-                }
-            }
-        }
-        block_of
-    }
 
     #[test]
     fn keys_as_separators_is_a_valid_order_that_solves_the_system() {
@@ -656,6 +871,61 @@ mod tests {
         rows.apply(&x, &mut ax);
         for (p, q) in ax.iter().zip(&b) {
             assert!(crate::mesh::norm(crate::mesh::sub(*p, *q)) < 1e-8 * (1.0 + crate::mesh::norm(*q)));
+        }
+    }
+}
+
+#[cfg(test)]
+mod experiment {
+    use super::*;
+    use crate::physics::elastic::Elastic;
+    use crate::spacetime::solver::objective;
+    use crate::spacetime::tests::{keys, material, settings};
+    use crate::testing::{cube_mesh, Rng};
+
+    /// `cargo test --release --lib cg_at_20_keys -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn cg_at_20_keys() {
+        let n: usize = std::env::var("CUBE").ok().and_then(|v| v.parse().ok()).unwrap_or(13);
+        let kc: usize = std::env::var("KEYS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
+        let mut mesh = cube_mesh(n);
+        for p in &mut mesh.positions {
+            *p = [p[0] * 1.2, p[1] * 3.6, p[2] * 1.2];
+        }
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let times: Vec<f64> = (0..kc).map(|k| 0.5 * k as f64).collect();
+        let poses = (0..kc).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * (k as f64).sin() * p[1] * p[1], p[1], p[2]]).collect()).collect();
+        let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
+        let k = keys(times, poses, vec![bottom; kc], false);
+        let mut s = settings();
+        s.damping = 0.1;
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let t = std::time::Instant::now();
+        let it = GlobalStep::within(&obj, unknowns.clone(), s.regularization, Some(1)).unwrap();
+        println!("{} nodes, {kc} keys, {} unknowns: iterative setup {:.2} s, predicted direct {:.3e} flops {:.1} GB {:.1} s", el.node_count(), it.stats.unknowns, t.elapsed().as_secs_f64(), it.stats.predicted_seconds * 6e10, it.stats.predicted_bytes / 1e9, it.stats.predicted_seconds);
+        if let Some(Inverse::Iterative(itr)) = &it.cholesky {
+            let x: Vec<Point> = (0..it.stats.unknowns).map(|i| [i as f64, 1.0, 2.0]).collect();
+            let mut y = x.clone();
+            let t = std::time::Instant::now();
+            for _ in 0..5 {
+                itr.operator.apply(&x, &mut y);
+            }
+            let mv = t.elapsed().as_secs_f64() / 5.0;
+            let t = std::time::Instant::now();
+            for _ in 0..5 {
+                itr.preconditioner.apply(&x, &mut y);
+            }
+            println!("matrix nnz {} factor nnz {}: matvec {:.4} s, preconditioner {:.4} s", it.stats.matrix_nnz, it.stats.factor_nnz, mv, t.elapsed().as_secs_f64() / 5.0);
+        }
+        let mut rng = Rng(7);
+        let g: Vec<Vec<Point>> = (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect();
+        for round in 0..3 {
+            let t = std::time::Instant::now();
+            let gg: Vec<Vec<Point>> = g.iter().map(|v| v.iter().map(|p| [p[0] + 0.01 * round as f64 * p[1], p[1], p[2]]).collect()).collect();
+            let _ = it.step(&gg);
+            println!("solve {round}: {:.2} s, {:?}", t.elapsed().as_secs_f64(), it.cg_log());
         }
     }
 }

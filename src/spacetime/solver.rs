@@ -41,7 +41,7 @@ use std::time::Instant;
 
 use super::active_set::{Preconditioner, Projection, Row, RowKind};
 use super::contact::{At, Check, Contacts};
-use super::global_step::GlobalStep;
+use super::global_step::{CgLog, GlobalStep};
 use super::objective::{Evaluation, Objective};
 use super::quasi_newton::{dot, Lbfgs};
 use super::sampling::{sample_counts, samples, TimeSlots};
@@ -156,6 +156,8 @@ pub struct Log {
     /// The smallest distance of any node to any obstacle at any check instant (none without
     /// obstacles).
     pub clearance: Option<f64>,
+    /// How the iterative global step's CG solves went (none for a direct step).
+    pub conjugate_gradients: Option<CgLog>,
 }
 
 /// A finished solve.
@@ -344,6 +346,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
         refactorizations: it.refactorizations,
         active_contacts: it.active.len(),
         clearance,
+        conjugate_gradients: solver.global.cg_log(),
         energy: it.energy,
     };
     Ok(Solved { trajectory: it.tr, log })

@@ -442,6 +442,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         refactorizations: 0,
         active_contacts: 0,
         clearance: None,
+        conjugate_gradients: None,
     };
     Ok((trajectory, log))
 }

@@ -19,7 +19,7 @@ use crate::spacetime::obstacles::Obstacle;
 use crate::spacetime::solver::{self, Settings};
 use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
-use crate::stage::{Body, KeyPoses, Solution, SolverLog};
+use crate::stage::{Body, CgSummary, KeyPoses, Solution, SolverLog};
 
 /// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
 /// the solution's scene records the method used.
@@ -81,6 +81,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 refactorizations: 0,
                 active_contacts: 0,
                 clearance: None,
+                conjugate_gradients: None,
             };
             (trajectory, log)
         }
@@ -112,7 +113,21 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 refactorizations: l.refactorizations,
                 active_contacts: l.active_contacts,
                 clearance: l.clearance,
+                conjugate_gradients: l.conjugate_gradients.map(|c| CgSummary {
+                    solves: c.solves,
+                    iterations: c.iterations,
+                    capped: c.capped,
+                    max_iterations: c.max_iterations,
+                    tolerance: c.tolerance,
+                    worst_residual: c.worst_residual,
+                }),
             };
+            if let Some(c) = log.conjugate_gradients.filter(|c| c.capped > 0) {
+                eprintln!(
+                    "blendsim: warning: {} of {} iterative global-step solves stopped at {} CG iterations with a relative residual up to {:.1e} (goal {:.0e}); the result may differ from the direct solve's. Fix: give the direct solver the memory (--max-memory), or use fewer keys or a coarser body",
+                    c.capped, c.solves, c.max_iterations, c.worst_residual, c.tolerance
+                );
+            }
             (solved.trajectory, log)
         }
         Method::MassSpring => super::blend::inbetween(&body, progress)?,
@@ -147,6 +162,7 @@ fn solve_fit(body: Body) -> Result<Solution> {
         refactorizations: 0,
         active_contacts: 0,
         clearance: None,
+        conjugate_gradients: None,
     };
     Ok(Solution { body, trajectory, log })
 }

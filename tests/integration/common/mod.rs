@@ -79,6 +79,7 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             refactorizations: 0,
             active_contacts: 0,
             clearance: None,
+            conjugate_gradients: None,
         },
         cache: None,
         cage: None,
