@@ -29,7 +29,7 @@ use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use bar::{bar, BarCache, BarSettings};
-use blendsim::cache::deviation::{cache_diagonal, deviation};
+use blendsim::cache::deviation::cache_diagonal;
 use blendsim::cache::fit::{fit, FitSettings};
 use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};

@@ -19,7 +19,7 @@ use crate::cache::keyframes::{select, AutoSettings};
 use crate::cache::{CacheFormat, CacheOptions, FrameRange, VertexCache};
 use crate::error::{Error, Result};
 use crate::mesh::{self, surface, Point, TriMesh};
-use crate::scene::{Basis, CacheKeys, CacheSpec, Method, Rest, SceneFile, Selection};
+use crate::scene::{CacheKeys, CacheSpec, Method, Rest, SceneFile, Selection};
 use crate::spacetime::trajectory::Trajectory;
 use crate::stage::{CacheRecord, CacheRecordOptions, Keyframes, Shape, VertexSet};
 
@@ -115,10 +115,6 @@ fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, Ca
     Ok((path, options))
 }
 
-fn key_share() -> f64 {
-    std::env::var("BLENDSIM_KEY_SHARE").ok().and_then(|s| s.parse().ok()).unwrap_or(0.5)
-}
-
 /// Read a `[cache]` scene: the keyframes stage data, with the record of the cache.
 pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     let scene = &scene_file.scene;
@@ -172,11 +168,8 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     let diagonal = cache_diagonal(cache.frames.as_mut())?;
     let (keys, selection) = match &spec.keyframes {
         CacheKeys::Auto => {
-            // A principal clip adds its own reduction error: the keys take a share of the
-            // tolerance and the rank the rest (formats/cache-keyframes.md).
-            let share = if scene.export.basis_for(method == Method::Fit) == Basis::Principal { key_share() } else { 1.0 };
             let settings = AutoSettings {
-                tolerance: spec.tolerance() * share,
+                tolerance: spec.tolerance(),
                 pinned: if fixed.iter().any(|&b| b) { fixed.clone() } else { Vec::new() },
                 window_bytes: usize::try_from(spec.window_bytes()).unwrap_or(usize::MAX),
                 ..AutoSettings::default()

@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use blendsim::cache::{CacheOptions, FrameSource, VertexCache};
+use blendsim::cache::{CacheOptions, VertexCache};
 use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
 use blendsim::stage::{OutputFile, OutputKind};
 use serde_json::{json, Value};
