@@ -15,8 +15,8 @@
 //! frames it held in memory at once.
 //!
 //! A second table compares what a user would do instead, per cache: bakes through the whole
-//! chain with `fit` and `spacetime` (keys, bytes, max error against the cache, bake time per
-//! cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
+//! chain with `fit` in both `[export] basis` forms (principal, the default, and per-key) and
+//! `spacetime` (keys, rank, bytes, max error against the cache, bake time per cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
 //! are sparse, so it is smaller than our exporter's full-frame glb), gltfpack 1.3.0 on that glb
 //! (`make deps-npm` installs it; bytes with `-cc`, error measured without `-c`), and a PCA basis
 //! meeting the same tolerance (bytes computed).
