@@ -134,7 +134,7 @@ impl Components {
             let out_slope: Vec<f64> = last.iter().map(|&k| self.slopes[j][k]).collect();
             let (lo, hi) = range(&times, &value, &out_slope, &in_slope);
             let span = hi - lo;
-            if !(span > 0.0) {
+            if span.is_nan() || span <= 0.0 {
                 // Constant: it is part of the base.
                 add(&mut base, &self.directions[j], lo);
                 continue;
