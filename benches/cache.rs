@@ -15,8 +15,8 @@
 //! frames it held in memory at once.
 //!
 //! A second table compares what a user would do instead, per cache: bakes through the whole
-//! chain with `fit` and `spacetime` (keys, bytes, max error against the cache, bake time per
-//! cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
+//! chain with `fit` in both `[export] basis` forms (principal, the default, and per-key) and
+//! `spacetime` (keys, rank, bytes, max error against the cache, bake time per cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
 //! are sparse, so it is smaller than our exporter's full-frame glb), gltfpack 1.3.0 on that glb
 //! (`make deps-npm` installs it; bytes with `-cc`, error measured without `-c`), and a PCA basis
 //! meeting the same tolerance (bytes computed).
@@ -29,7 +29,7 @@ use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use bar::{bar, BarCache, BarSettings};
-use blendsim::cache::deviation::{cache_diagonal, deviation};
+use blendsim::cache::deviation::cache_diagonal;
 use blendsim::cache::fit::{fit, FitSettings};
 use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
@@ -203,17 +203,18 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-/// One bake of the cache through the library's chain (as `blendsim bake`): seconds, keys,
-/// blendshape glb and usda bytes, max error against the cache.
-fn bake(dir: &Path, method: &str, weights: &str) -> (f64, usize, u64, u64, f64) {
+/// One bake of the cache through the library's chain (as `blendsim bake`) in `[export] basis`:
+/// seconds, keys, rank (principal), blendshape glb, usda and usdc bytes, max error against the
+/// cache.
+fn bake(dir: &Path, method: &str, weights: &str, basis: &str) -> (f64, usize, Option<usize>, u64, u64, u64, f64) {
     let physics = if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n[solver]\nmax_iterations = 15\n" };
     let text = format!(
-        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = false\nweights = \"{weights}\"\n",
+        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = false\nweights = \"{weights}\"\nbasis = \"{basis}\"\n",
         if method == "fit" { "[solver]\nmethod = \"fit\"\n" } else { "" }
     );
-    let scene_path = dir.join(format!("{method}-{weights}.toml"));
+    let scene_path = dir.join(format!("{method}-{weights}-{basis}.toml"));
     std::fs::write(&scene_path, text).unwrap();
-    let out = dir.join(format!("out-{method}-{weights}"));
+    let out = dir.join(format!("out-{method}-{weights}-{basis}"));
     let _ = std::fs::remove_dir_all(&out);
     let t = Instant::now();
     let scene = SceneFile::load(&scene_path).unwrap_or_else(|e| panic!("{e}"));
@@ -223,41 +224,7 @@ fn bake(dir: &Path, method: &str, weights: &str) -> (f64, usize, u64, u64, f64) 
     let seconds = t.elapsed().as_secs_f64();
     let bytes = |ext: &str| std::fs::metadata(out.join(format!("bar.{ext}"))).unwrap().len();
     let c = report.cache.expect("a cache report");
-    (seconds, c.keys.len(), bytes("glb"), bytes("usda"), c.error.max)
-}
-
-/// A proposal measured: the fit's clip with its shapes reduced to their principal components.
-/// The key positions (minus the first) and velocities (scaled by the mean key interval) of the
-/// fit on keys chosen for `tolerance / 2` form a 2K x 3V matrix; its rank-r truncation is again a
-/// Hermite trajectory, so a file stores r dense targets and r CUBICSPLINE weight curves (3
-/// floats per key per curve) exactly. Returns the smallest r meeting the tolerance, its f32
-/// bytes (base + r targets + curves + key times) and max error against the cache.
-fn reduced_clip(cache: &BarCache, diagonal: f64) -> (usize, usize, usize, f64) {
-    let mut frames = cache.frames.clone();
-    let auto = select(&mut frames, &AutoSettings { tolerance: TOLERANCE / 2.0, ..AutoSettings::default() }).expect("select");
-    let tr = &auto.trajectory;
-    let (k, n) = (tr.times.len(), 3 * tr.positions[0].len());
-    let h = (tr.times[k - 1] - tr.times[0]) / (k - 1) as f64;
-    let base = tr.positions[0].as_flattened().to_vec();
-    let a = faer::Mat::<f64>::from_fn(2 * k, n, |r, c| if r < k { tr.positions[r].as_flattened()[c] - base[c] } else { h * tr.velocities[r - k].as_flattened()[c] });
-    let svd = a.thin_svd().expect("SVD converges");
-    let (u, s, v) = (svd.U(), svd.S(), svd.V());
-    for rank in 1..=2 * k {
-        let row = |r: usize| -> Vec<[f64; 3]> {
-            let flat: Vec<f64> = (0..n).map(|c| (0..rank).map(|j| (u[(r, j)] * s[j]) as f32 as f64 * (v[(c, j)] as f32 as f64)).sum()).collect();
-            flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
-        };
-        let mut reduced = tr.clone();
-        for key in 0..k {
-            reduced.positions[key] = row(key).iter().zip(base.chunks_exact(3)).map(|(d, b)| [b[0] + d[0], b[1] + d[1], b[2] + d[2]]).collect();
-            reduced.velocities[key] = row(k + key).iter().map(|d| [d[0] / h, d[1] / h, d[2] / h]).collect();
-        }
-        let max = deviation(&mut frames, &reduced, diagonal).expect("deviation").max;
-        if max <= TOLERANCE {
-            return (rank, k, 4 * (n + rank * n + 3 * k * rank + k), max);
-        }
-    }
-    unreachable!("full rank reproduces the fit")
+    (seconds, c.keys.len(), report.rank, bytes("glb"), bytes("usda"), bytes("usdc"), c.error.max)
 }
 
 /// The comparison: per cache, fit and spacetime bakes (keys, bytes, max error, bake
@@ -275,30 +242,40 @@ fn compare(name: &str, cache: &BarCache) {
     let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
     let size = |p: &str| std::fs::metadata(dir.join(p)).unwrap().len();
     let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
-    let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, max: f64, ms: Option<f64>| {
+    let full_usdc = {
+        let path = dir.join("full.usdc");
+        blendsim::internals::usdc::convert(&dir.join("full.usda"), &path).expect("usd-core converts the full-frame usda");
+        size("full.usdc")
+    };
+    let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, usdc: Option<u64>, max: f64, ms: Option<f64>| {
+        let smaller = |full: u64, x: Option<u64>| x.map_or("-".into(), |x| format!("{:.1}x", full as f64 / x as f64));
         println!(
-            "| {name} | {what} | {keys} | {} | {} | {:.2e} | {:.1}x | {} | {} |",
+            "| {name} | {what} | {keys} | {} | {} | {} | {:.2e} | {:.1}x | {} | {} | {} |",
             kb(glb as usize),
             usda.map_or("-".into(), |u| kb(u as usize)),
+            usdc.map_or("-".into(), |u| kb(u as usize)),
             max,
             full_glb as f64 / glb as f64,
-            usda.map_or("-".into(), |u| format!("{:.1}x", full_usda as f64 / u as f64)),
+            smaller(full_usda, usda),
+            smaller(full_usdc, usdc),
             ms.map_or("-".into(), |m| format!("{m:.2}"))
         )
     };
-    row("full frame (the cache as glb / usda)", "-".into(), full_glb, Some(full_usda), 0.0, None);
-    for (method, weights) in [("fit", "bernstein"), ("fit", "signed"), ("spacetime", "bernstein")] {
-        let (s, keys, glb, usda, max) = bake(&dir, method, weights);
-        row(&format!("blendsim {method} ({weights} weights)"), keys.to_string(), glb, Some(usda), max, Some(1e3 * s / frames));
+    row("full frame (the cache as glb / usda / usdc)", "-".into(), full_glb, Some(full_usda), Some(full_usdc), 0.0, None);
+    for (method, weights, basis) in [("fit", "bernstein", "principal"), ("fit", "signed", "principal"), ("fit", "bernstein", "keys"), ("fit", "signed", "keys"), ("spacetime", "bernstein", "keys")] {
+        let (s, keys, rank, glb, usda, usdc, max) = bake(&dir, method, weights, basis);
+        let form = match rank {
+            Some(r) => format!("blendsim {method}, principal rank {r} ({weights} weights)"),
+            None => format!("blendsim {method}, per-key shapes ({weights} weights)"),
+        };
+        row(&form, keys.to_string(), glb, Some(usda), Some(usdc), max, Some(1e3 * s / frames));
     }
     match gltfpack(&dir.join("full.glb"), cache, diagonal) {
-        Some(rows) => rows.into_iter().for_each(|(label, bytes, max)| row(label, "-".into(), bytes, None, max, None)),
-        None => println!("| {name} | gltfpack not installed (make deps-npm) | | | | | | | |"),
+        Some(rows) => rows.into_iter().for_each(|(label, bytes, max)| row(label, "-".into(), bytes, None, None, max, None)),
+        None => println!("| {name} | gltfpack not installed (make deps-npm) | | | | | | | | |"),
     }
     let (rank, pca_bytes, pca_max) = pca_baseline(&cache.frames, diagonal);
-    row(&format!("PCA rank {rank}, f32 (bytes computed)"), "-".into(), pca_bytes as u64, None, pca_max, None);
-    let (rank, keys, bytes, max) = reduced_clip(cache, diagonal);
-    row(&format!("proposal: fit clip reduced to rank {rank} (f32, bytes computed)"), keys.to_string(), bytes as u64, None, max, None);
+    row(&format!("PCA rank {rank}, f32 (bytes computed)"), "-".into(), pca_bytes as u64, None, None, pca_max, None);
 }
 
 fn main() {
@@ -320,8 +297,8 @@ fn main() {
     println!();
     println!("What a user would do instead (tolerance {TOLERANCE}; KB; \"smaller\" is the full-frame file of the same format over this; bake ms per cache frame, load average {}):", load());
     println!();
-    println!("| cache | form | keys | glb KB | usda KB | max error | glb smaller | usda smaller | bake ms/frame |");
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("| cache | form | keys | glb KB | usda KB | usdc KB | max error | glb smaller | usda smaller | usdc smaller | bake ms/frame |");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, settings) in cases.iter().take(2).filter(|(n, _)| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| n.contains(only.as_str()))) {
         compare(name, &bar(settings));
     }

@@ -146,5 +146,5 @@ fn mutated_stage_files_fail_cleanly_or_run() {
     run("keyframes", keys, |v| check::<Keyframes>(v, |k| crate::stages::tetrahedralize(k, &progress).map(drop)));
     run("body", body, |v| check::<Body>(v, |b| crate::stages::solve(b, Some(Method::Hermite), &progress).map(drop)));
     run("solution", solution, |v| check::<Solution>(v, |s| crate::stages::embed(s).map(drop)));
-    run("animation", animation, |v| check::<Animation>(v, |a| crate::stages::report(a, &Outputs { files: vec![] }).map(drop)));
+    run("animation", animation, |v| check::<Animation>(v, |a| crate::stages::report(a, &Outputs { files: vec![], rank: None }).map(drop)));
 }

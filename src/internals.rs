@@ -6,6 +6,7 @@
 pub use crate::export::fullframe::FullFrame;
 pub use crate::export::glb::{self, Placement};
 pub use crate::export::usda::{self, UsdSettings};
+pub use crate::export::usdc;
 pub use crate::physics::elastic::{Elastic, Material as ElasticMaterial};
 pub use crate::physics::vibration::{natural_vibration, RestStiffness, Vibration};
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};

@@ -288,6 +288,25 @@ pub struct Export {
     /// normals (three.js, engines); Blender recomputes them. Off by default: it adds about as
     /// many bytes as the POSITION targets (README, "Animated normals").
     pub gltf_morph_normals: bool,
+    /// The shapes of the blendshape files (`None`: [`Export::basis_for`] decides by the input).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub basis: Option<Basis>,
+    /// For `basis = "principal"`: the number of components (`None`: the smallest meeting the
+    /// tolerance, see `formats/scene.md`). Positive.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rank: Option<usize>,
+}
+
+/// The shapes of the blendshape files (`[export] basis`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Basis {
+    /// A shape per key pose and per key velocity or control point (sparse): editable per key.
+    #[default]
+    Keys,
+    /// A few principal components of those shapes (dense), chosen to meet the tolerance: the
+    /// smallest files of long motions. The default for a `[cache]` scene.
+    Principal,
 }
 
 /// The interpolation of the blendshape glTF's weight animation.
@@ -343,6 +362,8 @@ impl Default for Export {
             weights: Weights::Bernstein,
             gltf_interpolation: GltfInterpolation::Cubicspline,
             gltf_morph_normals: false,
+            basis: None,
+            rank: None,
         }
     }
 }
@@ -879,7 +900,22 @@ impl Export {
         if self.formats.is_empty() {
             return invalid("[export] formats is empty".into(), "list at least one of \"usda\", \"usdc\", \"glb\"");
         }
+        match (self.rank, self.basis) {
+            (Some(0), _) => return invalid("[export] rank = 0".into(), "give at least 1 component, or remove rank to choose it by the tolerance"),
+            (Some(r), Some(Basis::Keys)) => {
+                return invalid(format!("[export] rank = {r} is given, but basis = \"keys\" has no rank"), "remove rank, or set basis = \"principal\"");
+            }
+            _ => {}
+        }
         Ok(())
+    }
+
+    /// The basis of the blendshape files: as given, else `principal` when `cache_fit` (the
+    /// least-squares fit of a cache: measured 3-6x smaller files than `keys` at the same
+    /// tolerance on the rapier bars, README) or a `rank` is given, and `keys` otherwise
+    /// (keyframe scenes, and simulated caches, whose keys stay exact and editable).
+    pub fn basis_for(&self, cache_fit: bool) -> Basis {
+        self.basis.unwrap_or(if cache_fit || self.rank.is_some() { Basis::Principal } else { Basis::Keys })
     }
 }
 
@@ -939,6 +975,25 @@ times = [0.0, 0.5]
         assert!(s.export.full_frame);
         assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
         assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Key(0));
+    }
+
+    #[test]
+    fn the_export_basis_follows_the_input_unless_given() {
+        let e = Scene::parse(MINIMAL).unwrap().export;
+        assert_eq!((e.basis, e.rank, e.basis_for(false), e.basis_for(true)), (None, None, Basis::Keys, Basis::Principal));
+        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nbasis = \"keys\"\n")).unwrap().export;
+        assert_eq!(e.basis_for(true), Basis::Keys);
+        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nrank = 3\n")).unwrap().export;
+        assert_eq!((e.basis_for(false), e.rank), (Basis::Principal, Some(3)), "a rank asks for the principal basis");
+        for (extra, says) in [
+            ("rank = 0\n", "[export] rank = 0"),
+            ("basis = \"keys\"\nrank = 2\n", "basis = \"keys\" has no rank"),
+            ("basis = \"pca\"\n", "unknown variant `pca`"),
+            ("rank = -1\n", "invalid value"),
+        ] {
+            let e = Scene::parse(&(MINIMAL.to_string() + "[export]\n" + extra)).unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains("(fix: "), "{extra}: {e}");
+        }
     }
 
     #[test]

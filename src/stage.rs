@@ -319,6 +319,10 @@ pub struct OutputFile {
 pub struct Outputs {
     /// The files, blendshapes first, then full-frame, each in the order usda, usdc, glb.
     pub files: Vec<OutputFile>,
+    /// With `[export] basis = "principal"`: the number of components the blendshape files hold
+    /// (chosen by the tolerance or given), so the report measures the same clip.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rank: Option<usize>,
 }
 
 /// Names the stage a file holds, so a wrong file passed to a subcommand is caught at once.
@@ -422,6 +426,9 @@ impl StageData for Outputs {
     const STAGE: &'static str = "outputs";
     const WRITER: &'static str = "blendsim export";
     fn validate(&self) -> Result<()> {
+        if self.rank == Some(0) {
+            return Check(Self::WRITER, 0).fail("rank is 0 (a principal clip has at least one component)".into());
+        }
         for (i, f) in self.files.iter().enumerate() {
             let plain = !f.path.is_empty() && !f.path.starts_with('.') && !f.path.contains(['/', '\\']) && !f.path.chars().any(char::is_control);
             if !plain {

@@ -10,6 +10,7 @@
 //! gets is decided by the export stage (`crate::stages::export`).
 
 mod bernstein;
+pub mod principal;
 mod usda_attributes;
 pub mod clip;
 pub mod fullframe;

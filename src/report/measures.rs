@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use super::{Deviation, VolumeRange};
-use crate::export::clip::{BlendShapeClip, Weights};
+use crate::export::clip::BlendShapeClip;
 use crate::mesh::{norm, sub, surface, Point};
 use crate::scene::Format;
 use crate::spacetime::trajectory::Trajectory;
@@ -32,10 +32,9 @@ pub fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal
     }
 }
 
-/// The blendshape clip of `tr` in the form `weights` as the files store it (f32 shapes, f32
-/// weights sampled at `frames`) against the trajectory itself at those frames.
-pub fn blendshape_error(tr: &Trajectory, weights: Weights, frames: &[(i64, f64)], diagonal: f64) -> Deviation {
-    let clip = BlendShapeClip::new(tr, weights);
+/// The blendshape `clip` of `tr` as the files store it (f32 shapes, f32 weights sampled at
+/// `frames`) against the trajectory itself at those frames.
+pub fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> Deviation {
     // As USD stores it: f32 weights sampled at frames.
     let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
     deviation(frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))), diagonal)

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 use crate::output::Staging;
-use crate::scene::Format;
+use crate::scene::{Basis, Format};
 use crate::stage::{CageInfo, OutputFile, SolverLog};
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
@@ -101,6 +101,13 @@ pub struct Report {
     /// closely the embedded cage keys reproduce the input keyframes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cage: Option<CageInfo>,
+    /// The shapes of the blendshape files (`[export] basis`, resolved; reports written before
+    /// it existed had `keys`).
+    #[serde(default)]
+    pub basis: Basis,
+    /// For the principal basis: the components the files hold.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rank: Option<usize>,
 }
 
 impl Report {

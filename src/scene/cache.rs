@@ -57,7 +57,15 @@ pub struct CacheSpec {
     /// The USD Mesh prim (default: the only animated Mesh).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prim: Option<String>,
+    /// For `"auto"`: bytes of cache frames the key selection may hold at once (default
+    /// [`DEFAULT_WINDOW_BYTES`], 256 MiB). It bounds the selection's memory, not its result
+    /// unless a swing between two keys needs more frames than fit (at least 8 always do).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window_bytes: Option<u64>,
 }
+
+/// The default frame window of `keyframes = "auto"`: 256 MiB.
+pub const DEFAULT_WINDOW_BYTES: u64 = 256 << 20;
 
 fn minus_one() -> i64 {
     -1
@@ -117,6 +125,11 @@ impl CacheSpec {
         self.tolerance.unwrap_or(DEFAULT_TOLERANCE)
     }
 
+    /// The frame window of `"auto"`, in bytes.
+    pub fn window_bytes(&self) -> u64 {
+        self.window_bytes.unwrap_or(DEFAULT_WINDOW_BYTES)
+    }
+
     /// The `fixed` selection for `method`: as given, else "all" (the keys are the cache's
     /// frames) for spacetime and hermite, "none" (least squares places the keys) for fit.
     pub fn fixed_for(&self, method: Method) -> Selection {
@@ -142,6 +155,9 @@ impl CacheSpec {
             (CacheKeys::Frames(_), Some(_)) => {
                 return invalid("[cache] tolerance is given, but keyframes lists the frames".into(), "remove tolerance, or set keyframes = \"auto\"");
             }
+            (CacheKeys::Frames(_), None) if self.window_bytes.is_some() => {
+                return invalid("[cache] window_bytes is given, but keyframes lists the frames".into(), "remove window_bytes (it bounds the automatic selection), or set keyframes = \"auto\"");
+            }
             (CacheKeys::Frames(f), None) => {
                 if f.len() < 2 {
                     return invalid(format!("[cache] keyframes lists {} frame(s)", f.len()), "list at least two frame indices, or use \"auto\"");
@@ -154,6 +170,9 @@ impl CacheSpec {
                 }
             }
             _ => {}
+        }
+        if self.window_bytes == Some(0) {
+            return invalid("[cache] window_bytes = 0".into(), "give the bytes of frames the key selection may hold, e.g. 268435456 (256 MiB, the default)");
         }
         for (what, sel) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
             if let Some(sel) = sel {
@@ -200,6 +219,8 @@ mod tests {
         let c = s.cache.unwrap();
         assert_eq!((c.start, c.end, &c.keyframes, c.tolerance()), (0, -1, &CacheKeys::Auto, DEFAULT_TOLERANCE));
         assert_eq!(c.rest, Some(Rest::Mesh("bar.obj".into())));
+        assert_eq!(c.window_bytes(), 256 << 20);
+        assert_eq!(Scene::parse(&(CACHE.to_string() + "window_bytes = 1048576\n")).unwrap().cache.unwrap().window_bytes(), 1 << 20);
         assert_eq!((c.fixed_for(Method::Spacetime), c.fixed_for(Method::Fit)), (Selection::All, Selection::None));
         let listed = Scene::parse(&(CACHE.to_string() + "keyframes = [0, 10, 20]\nfixed = { axis = \"x\", max = 0.0 }\n[solver]\nmethod = \"fit\"\n")).unwrap();
         let c = listed.cache.clone().unwrap();
@@ -225,6 +246,10 @@ mod tests {
             (CACHE.to_string() + "keyframes = \"every\"\n", "expected \"auto\""),
             (CACHE.replace("fps = 60", "fps = 0"), "fps = 0 must be positive"),
             (CACHE.to_string() + "speed = 2\n", "unknown field `speed`"),
+            (CACHE.to_string() + "window_bytes = 0\n", "window_bytes = 0"),
+            (CACHE.to_string() + "window_bytes = -5\n", "integer `-5`, expected u64"),
+            (CACHE.to_string() + "window_bytes = \"1G\"\n", "expected u64"),
+            (CACHE.to_string() + "keyframes = [0, 5]\nwindow_bytes = 1000000\n", "window_bytes is given, but keyframes lists"),
             (CACHE.to_string() + "fixed = [\"all\", { axis = \"x\", min = 2.0, max = 1.0 }]\n", "[cache] fixed: a slab has bounds"),
             (CACHE.to_string() + "[embed]\nsurface = \"fine.obj\"\n", "[embed] surface is set"),
             ("name = \"k\"\n".to_string() + keys + "[solver]\nmethod = \"fit\"\n", "fits a vertex cache"),

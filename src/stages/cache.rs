@@ -168,7 +168,12 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     let diagonal = cache_diagonal(cache.frames.as_mut())?;
     let (keys, selection) = match &spec.keyframes {
         CacheKeys::Auto => {
-            let settings = AutoSettings { tolerance: spec.tolerance(), pinned: if fixed.iter().any(|&b| b) { fixed.clone() } else { Vec::new() }, ..AutoSettings::default() };
+            let settings = AutoSettings {
+                tolerance: spec.tolerance(),
+                pinned: if fixed.iter().any(|&b| b) { fixed.clone() } else { Vec::new() },
+                window_bytes: usize::try_from(spec.window_bytes()).unwrap_or(usize::MAX),
+                ..AutoSettings::default()
+            };
             let auto = select(cache.frames.as_mut(), &settings).map_err(|e| e.with_path(&path))?;
             (auto.keys, Some(auto.stats))
         }

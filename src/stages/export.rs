@@ -11,13 +11,16 @@
 //! and keeps the report and other scenes' files. The layouts are specified in
 //! `formats/usd.md` and `formats/gltf.md`.
 
+use super::cache::error_against;
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
 use crate::export::fullframe::FullFrame;
+use crate::export::principal::{smallest_rank, Components};
 use crate::export::{glb, texture, usda, usdc};
-use crate::mesh::Axis;
+use crate::mesh::{bbox_diagonal, Axis};
 use crate::output::Staging;
-use crate::scene::{Format, GltfInterpolation};
+use crate::report::measures::deviation;
+use crate::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
 use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
@@ -40,7 +43,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     };
     let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
 
-    let clip = BlendShapeClip::new(trajectory, scene.export.weights);
+    let (clip, rank) = blendshape_clip(animation, None)?;
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
     let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
@@ -106,7 +109,47 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
         }
     }
-    Ok(Outputs { files })
+    Ok(Outputs { files, rank })
+}
+
+/// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
+/// the trajectory to f32 precision, of the bounding-box diagonal.
+pub const PRINCIPAL_EXACT: f64 = 1e-6;
+
+/// The blendshape clip of `animation` in the scene's `[export] basis` and `weights`, and for a
+/// principal basis its rank: `rank` when given (the report rebuilding the exported clip), else
+/// `[export] rank`, else the smallest rank that meets
+/// - for a cache: the tolerance (`[cache] tolerance`, its default for listed keys) against
+///   every cache frame, or, when the unreduced animation is itself farther from the cache than
+///   that (spacetime), the tolerance against the unreduced animation at every frame;
+/// - for keyframes: [`PRINCIPAL_EXACT`] against the animation at every frame.
+pub fn blendshape_clip(animation: &Animation, rank: Option<usize>) -> Result<(BlendShapeClip, Option<usize>)> {
+    let export = &animation.scene.export;
+    let tr = &animation.trajectory;
+    if export.basis_for(animation.cache.is_some() && animation.log.method == Method::Fit) == Basis::Keys {
+        return Ok((BlendShapeClip::new(tr, export.weights), None));
+    }
+    let components = Components::new(tr);
+    let rank = match rank.or(export.rank) {
+        Some(r) => r.min(components.len().max(1)),
+        None => {
+            let frames = tr.frames(animation.scene.fps);
+            let diagonal = bbox_diagonal(&animation.mesh.positions);
+            let from_animation = |clip: &BlendShapeClip| deviation(frames.iter().map(|&(_, t)| (clip.points_at(t), tr.evaluate(t))), diagonal).max;
+            match &animation.cache {
+                Some(record) => {
+                    let tolerance = record.tolerance.unwrap_or(DEFAULT_TOLERANCE);
+                    if error_against(record, tr)?.max <= tolerance {
+                        smallest_rank(&components, export.weights, |clip| Ok(error_against(record, &clip.played(&tr.times))?.max <= tolerance))?
+                    } else {
+                        smallest_rank::<Error>(&components, export.weights, |clip| Ok(from_animation(clip) <= tolerance))?
+                    }
+                }
+                None => smallest_rank::<Error>(&components, export.weights, |clip| Ok(from_animation(clip) <= PRINCIPAL_EXACT))?,
+            }
+        }
+    };
+    Ok((components.clip(rank, export.weights), Some(rank)))
 }
 
 /// The invariants the writers rely on; an animation file that breaks them was not written by

@@ -3,7 +3,7 @@
 use crate::error::Result;
 use crate::mesh::{bbox_diagonal, surface};
 use crate::report::cache::{cache_ratios, CacheReport};
-use crate::scene::Method;
+use crate::scene::{Basis, Method};
 use crate::stage::CacheRecord;
 use crate::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
 use crate::report::{Report, Volume};
@@ -17,7 +17,9 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
-    let error = blendshape_error(tr, scene.export.weights, &frames, diagonal);
+    // The clip the blendshape files hold (a principal one at the rank export chose).
+    let (clip, rank) = super::export::blendshape_clip(animation, outputs.rank)?;
+    let error = blendshape_error(&clip, tr, &frames, diagonal);
     // The input keys: every key of the trajectory, or every `stride`-th when it also holds
     // in-betweens (mass-spring: `inbetweens + 1`).
     let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
@@ -34,7 +36,9 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
             hermite: volume_range(&hermite, &frames, triangles, rest_volume),
         }
     });
-    let cache = animation.cache.as_ref().map(|record| cache_report(animation, record, outputs)).transpose()?;
+    // A principal clip plays its own trajectory: that is what the files hold.
+    let played = rank.map(|_| clip.played(&tr.times));
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record, outputs)).transpose()?;
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -53,14 +57,17 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         volume,
         cache,
         cage: animation.cage.clone(),
+        basis: if rank.is_some() { Basis::Principal } else { Basis::Keys },
+        rank,
     })
 }
 
-/// The cache part of the report: the animation (as the trajectory of the exported surface,
-/// whose vertices are the cache's) against every cache frame, and for the simulated methods
+/// The cache part of the report: the animation the blendshape files play (`played`: the
+/// trajectory of the exported surface, whose vertices are the cache's, or its principal clip)
+/// against every cache frame, and for the simulated methods
 /// the least-squares fit on the same keys and `fixed` constraints.
-fn cache_report(animation: &Animation, record: &CacheRecord, outputs: &Outputs) -> Result<CacheReport> {
-    let error = super::cache::error_against(record, &animation.trajectory)?;
+fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord, outputs: &Outputs) -> Result<CacheReport> {
+    let error = super::cache::error_against(record, played)?;
     let fit_error = match animation.log.method {
         Method::Fit => None,
         Method::Hermite | Method::Spacetime | Method::MassSpring => {

@@ -11,6 +11,7 @@ mod attributes;
 mod blend;
 mod blender;
 mod cache_bake;
+mod cache_clip;
 mod cache_fit;
 mod cli_budget;
 mod cli_contacts;

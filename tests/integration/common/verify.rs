@@ -82,16 +82,27 @@ pub fn output_files(list: &Value) -> Vec<OutputFile> {
 /// converted to `.usdc` by usd-core and re-checked when the scene asks for no `.usdc` of its
 /// own. Returns each file's checker summary.
 pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Vec<(String, Value)> {
+    check_outputs_ranked(dir, anim, outputs, None)
+}
+
+/// [`check_outputs`] for files of `[export] basis = "principal"` at `rank` (the report's):
+/// the blendshape files must play that clip, the full-frame files the unreduced trajectory.
+pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile], rank: Option<usize>) -> Vec<(String, Value)> {
     assert!(!outputs.is_empty(), "no output files to check");
     let tr = &anim.trajectory;
     let fps = anim.scene.fps;
     let export = &anim.scene.export;
-    let clip = BlendShapeClip::new(tr, export.weights);
+    let clip = match rank {
+        Some(_) => blendsim::stages::export::blendshape_clip(anim, rank).unwrap().0,
+        None => BlendShapeClip::new(tr, export.weights),
+    };
+    // The trajectory the clip plays: the animation's, or its principal projection.
+    let played = if rank.is_some() { clip.played(&tr.times) } else { tr.clone() };
     let frames: Vec<f64> = tr.frames(fps).iter().map(|f| f.1).collect();
     // Our two evaluations agree before either is compared with a file.
     let diagonal = bbox_diagonal(&tr.positions.concat());
     for &t in &glb_times(anim) {
-        let d = max_distance(&clip.points_at(t), &tr.evaluate(t));
+        let d = max_distance(&clip.points_at(t), &played.evaluate(t));
         assert!(d <= 1e-6 * diagonal, "blendshape clip and trajectory differ by {d:e} at t = {t}");
     }
     let decorate = |mut e: Expected, kind: &str| {

@@ -1,0 +1,276 @@
+//! Cache bakes through the CLI, as files other tools play: the principal-component clip (the
+//! default for a `fit` of a cache) opened by usd-core, the Khronos validator, three.js and
+//! Blender; a skinned glTF clip baked through `blendsim bake` and played by three.js; the
+//! `[cache] window_bytes` key.
+
+use std::path::Path;
+use std::process::Command;
+
+use blendsim::cache::{CacheOptions, VertexCache};
+use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
+use blendsim::stage::{OutputFile, OutputKind};
+use serde_json::{json, Value};
+
+use crate::cache_bake::{scene, write_cache};
+use crate::common::bar::{bar, BarSettings};
+use crate::common::checkers::{check_blender, Expected};
+use crate::common::cli::{read_json, run, TempDir};
+use crate::common::verify::{check_outputs_ranked, library_animation, output_files};
+
+/// The bar's PC2 baked with `fit` and the default (principal) basis, in every format, and
+/// again with LINEAR glTF weights: the blendshape files play the clip the report measured
+/// (UsdSkel at and between frames, the validator and three.js at keys, in-betweens and frames),
+/// every weight stays in [0, 1], and Blender 4.2 at default settings plays the usda, usdc and
+/// LINEAR glb within 1e-5 of it at every frame, which is within the tolerance of the cache.
+#[test]
+fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
+    let cache = bar(&BarSettings::default());
+    let dir = TempDir::new("cache-principal-tools");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let base = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.005")
+        .replace("[\"usda\", \"glb\"]", "[\"usda\", \"usdc\", \"glb\"]");
+    std::fs::write(dir.join("scene.toml"), &base).unwrap();
+    std::fs::write(dir.join("linear.toml"), base.clone() + "gltf_interpolation = \"linear\"\n").unwrap();
+    let mut played_frames = None;
+    for name in ["scene", "linear"] {
+        run(&dir.path, &["bake", &format!("{name}.toml"), "--out", name, "--quiet"]).success();
+        let report = read_json(&dir.join(format!("{name}/report.json")));
+        assert_eq!(report["basis"], "principal", "the default for a fit of a cache");
+        let rank = report["rank"].as_u64().expect("a rank") as usize;
+        let error = &report["cache"]["error"];
+        assert!(error["per_frame"].as_array().unwrap().iter().all(|e| e.as_f64().unwrap() <= 0.005), "{error}");
+        let anim = library_animation(&dir.join(format!("{name}.toml")));
+        let (clip, chosen) = blendsim::stages::export::blendshape_clip(&anim, None).unwrap();
+        assert_eq!(chosen, Some(rank), "the library chooses the rank the CLI wrote");
+        assert_eq!(clip.targets.len(), rank);
+        // Every weight in [0, 1]: the stored key values, and the curves at every frame and
+        // between frames (the range is exact per interval, not sampled).
+        let frames: Vec<f64> = anim.trajectory.frames(anim.scene.fps).iter().map(|f| f.1).collect();
+        assert!(clip.curves.iter().flat_map(|c| &c.values).all(|w| (0.0..=1.0).contains(w)));
+        for i in 0..4 * frames.len() {
+            let t = frames[0] + (frames[frames.len() - 1] - frames[0]) * i as f64 / (4 * frames.len() - 1) as f64;
+            assert!(clip.weights_at(t).iter().all(|w| (0.0..=1.0).contains(w)), "t = {t}: {:?}", clip.weights_at(t));
+        }
+        let outputs: Vec<OutputFile> = output_files(&report["outputs"]).into_iter().filter(|f| f.kind == OutputKind::Blendshape).collect();
+        let summaries = check_outputs_ranked(&dir.join(name), &anim, &outputs, Some(rank));
+        assert_eq!(summaries.len(), 3);
+        let size = |f: &str| report["outputs"].as_array().unwrap().iter().find(|o| o["path"] == f).unwrap()["bytes"].as_f64().unwrap();
+        println!(
+            "{name}: rank {rank} ({} keys), cache error max {:.3e}; usda {:.1} KB ({:.1}x), usdc {:.1} KB ({:.1}x), glb {:.1} KB ({:.1}x smaller than full frame)",
+            anim.trajectory.key_count(),
+            error["max"].as_f64().unwrap(),
+            size("bar.usda") / 1024.0,
+            size("bar.full.usda") / size("bar.usda"),
+            size("bar.usdc") / 1024.0,
+            size("bar.full.usdc") / size("bar.usdc"),
+            size("bar.glb") / 1024.0,
+            size("bar.full.glb") / size("bar.glb"),
+        );
+        played_frames = Some((frames, clip, anim.scene.fps));
+    }
+    // Blender: its importers at default settings, the mesh through the depsgraph at every frame.
+    let (frames, clip, fps) = played_frames.unwrap();
+    let mut expected = Expected::at(&frames, fps, |t| clip.points_at(t));
+    (expected.fps, expected.up_axis, expected.meters_per_unit) = (Some(fps), Some("y".into()), Some(1.0));
+    let files = [dir.join("scene/bar.usda"), dir.join("scene/bar.usdc"), dir.join("linear/bar.glb")];
+    let summary = check_blender(&files.iter().map(|f| (f.as_path(), &expected)).collect::<Vec<_>>());
+    for f in summary["files"].as_array().unwrap() {
+        println!("blender {}: max error {} of the bbox diagonal, {} shape keys", f["file"], f["max_error"], f["shape_keys"]);
+        assert_eq!(f["ok"], true, "Blender must play {}: {f}", f["file"]);
+        assert!(f["max_error"].as_f64().unwrap() < 1e-5, "{f}");
+    }
+}
+
+/// A ribbon along y skinned to a chain of three joints (LINEAR and CUBICSPLINE rotations, a
+/// STEP translation), 1 s, written by hand as a glb with zero validator issues.
+fn skinned_glb(path: &Path) {
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut push = |bytes: Vec<u8>, target: Option<u32>, accessor: Value| {
+        let offset = bin.len();
+        bin.extend_from_slice(&bytes);
+        bin.resize(bin.len().next_multiple_of(4), 0);
+        let mut view = json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() });
+        if let Some(t) = target {
+            view["target"] = json!(t);
+        }
+        views.push(view);
+        let mut a = accessor;
+        a["bufferView"] = json!(views.len() - 1);
+        accessors.push(a);
+        accessors.len() - 1
+    };
+    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let u16s = |v: &[u16]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let (mut positions, mut joints, mut weights, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for row in 0..9u16 {
+        let y = 0.375 * row as f32;
+        for x in [-0.2f32, 0.2] {
+            positions.extend([x, y, 0.1 * x]);
+            let (j, f) = ((y.floor() as u16).min(2), y - y.floor().min(2.0));
+            if j < 2 && f > 0.0 {
+                joints.extend([j, j + 1, 0, 0]);
+                weights.extend([1.0 - f, f, 0.0, 0.0]);
+            } else {
+                joints.extend([j, 0, 0, 0]);
+                weights.extend([1.0, 0.0, 0.0, 0.0]);
+            }
+        }
+        if row > 0 {
+            let a = 2 * (row - 1);
+            indices.extend([a, a + 1, a + 3, a, a + 3, a + 2]);
+        }
+    }
+    let n = positions.len() / 3;
+    let bound = |k: usize, pick: fn(f32, f32) -> f32| positions.iter().skip(k).step_by(3).copied().reduce(pick).unwrap();
+    let (lo, hi) = ([0, 1, 2].map(|k| bound(k, f32::min)), [0, 1, 2].map(|k| bound(k, f32::max)));
+    let position = push(f32s(&positions), Some(34962), json!({ "componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi }));
+    let index = push(u16s(&indices), Some(34963), json!({ "componentType": 5123, "count": indices.len(), "type": "SCALAR" }));
+    let joint = push(u16s(&joints), Some(34962), json!({ "componentType": 5123, "count": n, "type": "VEC4" }));
+    let weight = push(f32s(&weights), Some(34962), json!({ "componentType": 5126, "count": n, "type": "VEC4" }));
+    // Inverse bind matrices: the joints' rest globals are translations by (0, j, 0).
+    let ibm: Vec<f32> = (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -(j as f32), 0.0, 1.0]).collect();
+    let ibm = push(f32s(&ibm), None, json!({ "componentType": 5126, "count": 3, "type": "MAT4" }));
+    let quat = |axis: [f32; 3], degrees: f32| {
+        let (s, c) = (degrees.to_radians() / 2.0).sin_cos();
+        [axis[0] * s, axis[1] * s, axis[2] * s, c]
+    };
+    let mut time = |t: &[f32]| push(f32s(t), None, json!({ "componentType": 5126, "count": t.len(), "type": "SCALAR", "min": [t[0]], "max": [t[t.len() - 1]] }));
+    let (t3, t2) = (time(&[0.0, 0.5, 1.0]), time(&[0.0, 1.0]));
+    let swing = [quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 35.0), quat([1.0, 0.0, 0.0], 30.0)].concat();
+    let swing = push(f32s(&swing), None, json!({ "componentType": 5126, "count": 3, "type": "VEC4" }));
+    // CUBICSPLINE: in-tangent, value, out-tangent per key.
+    let whip = [[0.0; 4], quat([0.0, 0.0, 1.0], 0.0), [0.0, 0.0, 0.3, 0.0], [0.0, 0.0, 0.2, -0.1], quat([0.0, 0.0, 1.0], 50.0), [0.0; 4]].concat();
+    let whip = push(f32s(&whip), None, json!({ "componentType": 5126, "count": 6, "type": "VEC4" }));
+    let step = push(f32s(&[0.0, 0.0, 0.0, 0.1, 0.0, 0.0]), None, json!({ "componentType": 5126, "count": 2, "type": "VEC3" }));
+    let doc = json!({
+        "asset": { "version": "2.0", "generator": "blendsim tests" },
+        "scene": 0,
+        "scenes": [{ "nodes": [0, 1] }],
+        "nodes": [
+            { "name": "ribbon", "mesh": 0, "skin": 0 },
+            { "name": "armature", "translation": [0.0, 0.0, 0.0], "children": [2] },
+            { "name": "j0", "children": [3] },
+            { "name": "j1", "translation": [0.0, 1.0, 0.0], "children": [4] },
+            { "name": "j2", "translation": [0.0, 1.0, 0.0] }
+        ],
+        "meshes": [{ "primitives": [{ "attributes": { "POSITION": position, "JOINTS_0": joint, "WEIGHTS_0": weight }, "indices": index }] }],
+        "skins": [{ "inverseBindMatrices": ibm, "joints": [2, 3, 4], "skeleton": 2 }],
+        "animations": [{
+            "name": "swing",
+            "samplers": [
+                { "input": t3, "output": swing, "interpolation": "LINEAR" },
+                { "input": t2, "output": whip, "interpolation": "CUBICSPLINE" },
+                { "input": t2, "output": step, "interpolation": "STEP" }
+            ],
+            "channels": [
+                { "sampler": 0, "target": { "node": 3, "path": "rotation" } },
+                { "sampler": 1, "target": { "node": 4, "path": "rotation" } },
+                { "sampler": 2, "target": { "node": 2, "path": "translation" } }
+            ]
+        }],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{ "byteLength": bin.len() }]
+    });
+    let mut text = serde_json::to_vec(&doc).unwrap();
+    text.resize(text.len().next_multiple_of(4), b' ');
+    let mut out = b"glTF".to_vec();
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend((text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend((bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    std::fs::write(path, out).unwrap();
+}
+
+/// three.js (GLTFLoader + AnimationMixer, after the Khronos validator) plays `file` at `times`
+/// within `tolerance` of `points` (of their bbox diagonal). Returns its summary.
+fn three_js_plays(file: &Path, times: &[f64], points: &[Vec<Point>], tolerance: f64) -> Value {
+    let checkers = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers");
+    for package in ["gltf-validator", "three"] {
+        assert!(checkers.join("node_modules").join(package).join("package.json").is_file(), "{package} is missing: run `make test-deps`");
+    }
+    let expected = file.with_extension("expected.json");
+    std::fs::write(&expected, json!({ "animation": null, "times": times, "points": points, "tolerance": tolerance }).to_string()).unwrap();
+    let output = Command::new("node").arg(checkers.join("gltf_cache_check.mjs")).arg(file).arg(&expected).output().expect("run node: install Node.js 20, then `make test-deps`");
+    let (stdout, stderr) = (String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    assert!(output.status.success(), "three.js on {}:\n{stdout}\n{stderr}", file.display());
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
+fn every_frame(path: &Path, fps: f64) -> (Vec<f64>, Vec<Vec<Point>>) {
+    let mut cache = VertexCache::open(path, &CacheOptions { fps: Some(fps), ..CacheOptions::default() }).unwrap();
+    let frames = cache.frames.as_mut();
+    let times = (0..frames.frame_count()).map(|f| frames.time(f)).collect();
+    let points = (0..frames.frame_count())
+        .map(|f| {
+            let mut p = vec![[0.0; 3]; frames.vertex_count()];
+            frames.read_frame(f, &mut p).unwrap();
+            p
+        })
+        .collect();
+    (times, points)
+}
+
+/// A skinned glTF clip through the CLI: `blendsim import --cache-out` writes our evaluation
+/// of it, which three.js matches at every frame (1e-5 of the diagonal); `blendsim bake` of the
+/// `[cache]` scene naming it meets the tolerance at every frame in its report, and three.js
+/// plays the baked blendshape glb within that tolerance of the skinned clip it plays.
+#[test]
+fn a_skinned_clip_bakes_through_the_cli_and_matches_three_js() {
+    let dir = TempDir::new("cache-skinned-cli");
+    skinned_glb(&dir.join("skinned.glb"));
+    let text = "name = \"ribbon\"\n[cache]\npath = \"skinned.glb\"\nfps = 30\nkeyframes = \"auto\"\ntolerance = 0.005\n[solver]\nmethod = \"fit\"\n[export]\nformats = [\"usda\", \"glb\"]\n";
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    // Our evaluation, through the CLI, written as a morph clip; three.js on the skinned file.
+    run(&dir.path, &["import", "scene.toml", "--cache-out", "evaluated.glb"]).success();
+    let (times, points) = every_frame(&dir.join("evaluated.glb"), 30.0);
+    assert_eq!(times.len(), 31);
+    let diagonal = bbox_diagonal(&points.concat());
+    let moved = points.iter().flat_map(|f| f.iter().zip(&points[0]).map(|(p, q)| norm(sub(*p, *q)))).fold(0.0, f64::max);
+    assert!(moved > 0.2 * diagonal, "the skin really moves: {moved} of {diagonal}");
+    let summary = three_js_plays(&dir.join("skinned.glb"), &times, &points, 1e-5);
+    assert_eq!(summary["skinned"], true, "{summary}");
+    println!("three.js on the skinned clip: {summary}");
+    // The bake through the CLI.
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let c = &report["cache"];
+    assert_eq!((c["format"].as_str(), c["frames"].as_u64()), (Some("gltf"), Some(31)), "{c}");
+    assert!(c["error"]["per_frame"].as_array().unwrap().iter().all(|e| e.as_f64().unwrap() <= 0.005), "{c}");
+    let summary = three_js_plays(&dir.join("out/ribbon.glb"), &times, &points, 0.005 + 1e-6);
+    println!("three.js on the baked clip ({} keys, rank {}): {summary}", c["keys"].as_array().unwrap().len(), report["rank"]);
+    // The error three.js sees is the one the report states.
+    let seen = summary["max_error"].as_f64().unwrap();
+    assert!((seen - c["error"]["max"].as_f64().unwrap()).abs() < 1e-4, "three.js {seen} vs report {}", c["error"]["max"]);
+}
+
+/// `[cache] window_bytes` reaches the key selection: a window of a few frames still meets
+/// the tolerance at every frame (the selection re-reads frames instead of holding them).
+#[test]
+fn window_bytes_bounds_the_selection_and_keeps_the_tolerance() {
+    let cache = bar(&BarSettings { duration: 1.0, ..BarSettings::default() });
+    let dir = TempDir::new("cache-window-bytes");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let keys = |name: &str, extra: &str| {
+        let text = scene("bar.pc2", &format!("fps = 60\nrest = \"rest.obj\"\n{extra}"), "fit", "keyframes = \"auto\"\ntolerance = 0.005");
+        std::fs::write(dir.join(format!("{name}.toml")), text).unwrap();
+        run(&dir.path, &["bake", &format!("{name}.toml"), "--out", name, "--quiet"]).success();
+        let r = read_json(&dir.join(format!("{name}/report.json")));
+        assert!(r["cache"]["error"]["max"].as_f64().unwrap() <= 0.005, "{name}: {}", r["cache"]["error"]);
+        r["cache"]["keys"].clone()
+    };
+    let default = keys("default", "");
+    // 8 frames of 514 vertices (72 bytes each per frame) is the floor: 1 byte means that.
+    let small = keys("small", "window_bytes = 1\n");
+    println!("keys with the default window: {default}; with an 8-frame window: {small}");
+    std::fs::write(dir.join("zero.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\nwindow_bytes = 0\n", "fit", "keyframes = \"auto\"")).unwrap();
+    let r = run(&dir.path, &["bake", "zero.toml", "--out", "zero", "--quiet"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert!(r.stderr.contains("window_bytes = 0") && r.stderr.contains("fix:") && !dir.join("zero").exists(), "{r}");
+}
