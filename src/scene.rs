@@ -327,7 +327,7 @@ impl Default for Solver {
             keep_duration: false,
             fixed_times: Vec::new(),
             min_interval: 1e-3,
-            model_hessian: "auto".to_string(),
+            model_hessian: "projective".to_string(),
         }
     }
 }

@@ -79,7 +79,9 @@ pub struct Settings {
     pub timing: Option<TimingSettings>,
     /// Obstacles the nodes may not enter.
     pub contacts: Option<Contacts>,
-    /// The quasi-Newton phase's model Hessian (its preconditioner).
+    /// The quasi-Newton phase's model Hessian (its preconditioner). Default: projective (the
+    /// tangent one lowers W further on a small-motion bar, but does not yet reach the minimum
+    /// there and is unmeasured elsewhere).
     pub model_hessian: ModelHessian,
 }
 
@@ -87,12 +89,13 @@ pub struct Settings {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModelHessian {
     /// [`ModelHessian::Tangent`] when every key stays within [`LINEAR_REGIME`] of the body's
-    /// size of its rest shape (where the rest tangent stiffness is the body's), else
-    /// [`ModelHessian::Projective`].
+    /// size of its rest shape (where the rest tangent stiffness is the body's) and its
+    /// factorization succeeds, else [`ModelHessian::Projective`].
     Auto,
     /// The global step's matrix (projective stiffness `L`), factorized anyway for phase 1.
     Projective,
-    /// The same normal matrix with the rest tangent stiffness ([`super::tangent_step`]).
+    /// The same normal matrix with the rest tangent stiffness ([`super::tangent_step`]);
+    /// not with obstacles (the projective one is used there).
     Tangent,
 }
 
@@ -130,7 +133,7 @@ impl Settings {
             max_memory: None,
             timing: None,
             contacts: None,
-            model_hessian: ModelHessian::Auto,
+            model_hessian: ModelHessian::Projective,
         }
     }
 }
@@ -317,8 +320,15 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let unknowns = Unknowns::new(keys, elastic.node_count());
     let global = GlobalStep::within(&objective, unknowns, settings.regularization, settings.max_memory)?;
     let global_unknowns = global.unknowns().clone();
+    // The active-set projection solves with the preconditioner per coordinate: with obstacles
+    // the quasi-Newton phase keeps the global step's matrix.
     let tangent = match settings.model_hessian.resolve(elastic, keys) {
-        ModelHessian::Tangent if global_unknowns.count() > 0 => Some(TangentStep::new(&objective, &global_unknowns)?),
+        _ if global_unknowns.count() == 0 || settings.contacts.is_some() => None,
+        // Chosen: its errors are the solve's.
+        ModelHessian::Tangent if settings.model_hessian == ModelHessian::Tangent => Some(TangentStep::new(&objective, &global_unknowns)?),
+        // Guessed: without the proximal term a free drift can cost nothing, and then the
+        // global step's matrix (which has it) is kept.
+        ModelHessian::Tangent => TangentStep::new(&objective, &global_unknowns).ok(),
         _ => None,
     };
     let precompute_seconds = start.elapsed().as_secs_f64();
