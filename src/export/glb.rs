@@ -15,6 +15,7 @@ use serde_json::{json as value, Value};
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
 use super::sparse_is_smaller;
+use super::texture::Texture;
 use crate::mesh::attributes::{split_at_seams, CornerAttributes};
 use crate::mesh::Bounds;
 
@@ -33,8 +34,10 @@ pub struct Placement {
 /// no way to say "a weights channel over zero targets".
 ///
 /// `attributes` add `TEXCOORD_0`, `NORMAL` and one primitive per material group (vertices split
-/// at UV and normal seams, see `File::new`); without them the file is as before.
-pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, name: &str, placement: Placement) -> Vec<u8> {
+/// at UV and normal seams, see `File::new`); without them the file is as before. `textures`
+/// (per material group, `texture::load`; may be empty) are embedded and become the groups'
+/// `baseColorTexture` when the surface has UVs.
+pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
     let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
     let curves = &clip.curves;
     let mut output = Vec::with_capacity(3 * times.len() * curves.len());
@@ -43,7 +46,7 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Op
         output.extend(curves.iter().map(|c| c.values[k]));
         output.extend(curves.iter().map(|c| c.out_tangents[k]));
     }
-    with_weights(clip, (triangles, attributes), name, placement, &times, &output, Interpolation::CubicSpline)
+    with_weights(clip, surface, name, placement, &times, &output, Interpolation::CubicSpline)
 }
 
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
@@ -52,14 +55,13 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Op
 pub fn blendshapes_sampled(
     clip: &BlendShapeClip,
     frame_times: &[f64],
-    triangles: &[[u32; 3]],
-    attributes: Option<&CornerAttributes>,
+    surface: Surface,
     name: &str,
     placement: Placement,
 ) -> Vec<u8> {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
-    with_weights(clip, (triangles, attributes), name, placement, &times, &output, Interpolation::Linear)
+    with_weights(clip, surface, name, placement, &times, &output, Interpolation::Linear)
 }
 
 fn with_weights(
@@ -73,8 +75,15 @@ fn with_weights(
 ) -> Vec<u8> {
     let mut file = File::new(name, surface, &clip.base, placement);
     let n = clip.vertex_count();
-    let targets: Vec<(String, Index<json::Accessor>)> =
-        clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets))).collect();
+    let mut targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)> =
+        clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets), None)).collect();
+    if let Some(triangles) = file.normal_triangles.clone() {
+        let deltas = morph_normal_deltas(clip, &triangles, file.sources.as_deref());
+        let vertices = file.sources.as_ref().map_or(n, Vec::len);
+        for (target, (indices, offsets)) in targets.iter_mut().zip(deltas) {
+            target.2 = Some(file.morph_target(vertices, &indices, &offsets));
+        }
+    }
     if !targets.is_empty() {
         file.morph(targets, times, output, interpolation);
     }
@@ -83,9 +92,9 @@ fn with_weights(
 
 /// One morph target per frame (the offset of that frame from frame 0) with one-hot LINEAR
 /// weights: what a vertex cache looks like in glTF.
-pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, name: &str, placement: Placement) -> Vec<u8> {
+pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
     let base = &frames.points[0];
-    let mut file = File::new(name, (triangles, attributes), base, placement);
+    let mut file = File::new(name, surface, base, placement);
     let mut targets = Vec::with_capacity(frames.frames.len());
     for (frame, points) in frames.frames.iter().zip(&frames.points) {
         let (mut indices, mut offsets) = (Vec::new(), Vec::new());
@@ -96,7 +105,7 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
                 offsets.push(d);
             }
         }
-        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets)));
+        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets), None));
     }
     let times: Vec<f32> = frames.times.iter().map(|&t| t as f32).collect();
     let count = times.len();
@@ -106,6 +115,56 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
     }
     file.morph(targets, &times, &output, Interpolation::Linear);
     file.finish()
+}
+
+/// Area-weighted unit normals of the glTF vertices (`sources[j]`: the point vertex `j` shows;
+/// `None`: vertex `j` is point `j`), each from the triangles that use that vertex: what a
+/// renderer computes on the file's vertices (three.js `computeVertexNormals`).
+fn vertex_normals(points: &[[f64; 3]], triangles: &[[u32; 3]], sources: Option<&[u32]>) -> Vec<[f64; 3]> {
+    let point = |j: u32| points[sources.map_or(j, |s| s[j as usize]) as usize];
+    let mut n = vec![[0.0; 3]; sources.map_or(points.len(), <[u32]>::len)];
+    for t in triangles {
+        let p = t.map(point);
+        let f = crate::mesh::cross(crate::mesh::sub(p[1], p[0]), crate::mesh::sub(p[2], p[0]));
+        for &j in t {
+            let x = &mut n[j as usize];
+            *x = [x[0] + f[0], x[1] + f[1], x[2] + f[2]];
+        }
+    }
+    n.into_iter()
+        .map(|x| {
+            let l = crate::mesh::norm(x);
+            if l > 0.0 { x.map(|c| c / l) } else { x }
+        })
+        .collect()
+}
+
+/// Per target, the glTF vertices whose normal changes and by how much: the normals of the
+/// target's shape (base + offsets) minus the base's, both recomputed on the file's vertices. A
+/// renderer adds them with the target weights and renormalizes: the normals of the blended
+/// shape to first order (README, "Animated normals", measures how close).
+pub fn morph_normal_deltas(clip: &BlendShapeClip, triangles: &[[u32; 3]], sources: Option<&[u32]>) -> Vec<(Vec<u32>, Vec<[f32; 3]>)> {
+    let base: Vec<[f64; 3]> = clip.base.iter().map(|p| p.map(f64::from)).collect();
+    let rest = vertex_normals(&base, triangles, sources);
+    clip.targets
+        .iter()
+        .map(|t| {
+            let mut shape = base.clone();
+            for (&i, o) in t.indices.iter().zip(&t.offsets) {
+                let p = &mut shape[i as usize];
+                *p = [p[0] + o[0] as f64, p[1] + o[1] as f64, p[2] + o[2] as f64];
+            }
+            let mut out = (Vec::new(), Vec::new());
+            for (j, (a, b)) in vertex_normals(&shape, triangles, sources).iter().zip(&rest).enumerate() {
+                let d = [(a[0] - b[0]) as f32, (a[1] - b[1]) as f32, (a[2] - b[2]) as f32];
+                if d != [0.0; 3] {
+                    out.0.push(j as u32);
+                    out.1.push(d);
+                }
+            }
+            out
+        })
+        .collect()
 }
 
 /// The binary data, one buffer view per kind, in this order.
@@ -122,8 +181,30 @@ enum Block {
 }
 const BLOCKS: usize = 6;
 
-/// The surface's triangles and its corner attributes.
-type Surface<'a> = (&'a [[u32; 3]], Option<&'a CornerAttributes>);
+/// A material group's primitive: its name, triangles (over glTF vertices) and texture.
+type Group<'t> = (String, Vec<[u32; 3]>, Option<&'t Texture>);
+
+/// The surface a file shows: its triangles, corner attributes, and per material group its
+/// diffuse texture (empty: none).
+#[derive(Debug, Clone, Copy)]
+pub struct Surface<'a> {
+    /// Triangles over the animated points.
+    pub triangles: &'a [[u32; 3]],
+    /// UVs, normals and material groups, per corner.
+    pub attributes: Option<&'a CornerAttributes>,
+    /// Per material group, its diffuse texture (may be shorter than the groups, or empty).
+    pub textures: &'a [Option<Texture>],
+    /// Morph targets carry NORMAL deltas (and the base gets recomputed `NORMAL`s if the
+    /// surface has none): see [`morph_normal_deltas`].
+    pub morph_normals: bool,
+}
+
+impl<'a> Surface<'a> {
+    /// Triangles only: no UVs, normals, groups or textures.
+    pub fn plain(triangles: &'a [[u32; 3]]) -> Surface<'a> {
+        Surface { triangles, attributes: None, textures: &[], morph_normals: false }
+    }
+}
 
 /// A glTF file under construction: one node, one mesh with one primitive per material group
 /// (all sharing the vertex attributes and morph targets).
@@ -134,6 +215,10 @@ struct File {
     sources: Option<Vec<u32>>,
     /// Morph target names, for the mesh's `extras`.
     target_names: Vec<String>,
+    /// Embedded images (one buffer view each, after the blocks), in `images` order.
+    images: Vec<Vec<u8>>,
+    /// The triangles over glTF vertices (split at seams), kept when morph normals are asked.
+    normal_triangles: Option<Vec<[u32; 3]>>,
 }
 
 fn f32x3_value(v: [f32; 3]) -> Value {
@@ -204,8 +289,15 @@ impl File {
     /// `base.len()` glTF vertices are the points in order, the seam copies follow, and
     /// `extras.seamSources` lists the point each copy shows.
     fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement) -> File {
-        let (triangles, attributes) = surface;
-        let mut f = File { root: json::Root::default(), blocks: Default::default(), sources: None, target_names: Vec::new() };
+        let Surface { triangles, attributes, textures, morph_normals } = surface;
+        let mut f = File {
+            root: json::Root::default(),
+            blocks: Default::default(),
+            sources: None,
+            target_names: Vec::new(),
+            images: Vec::new(),
+            normal_triangles: None,
+        };
         f.root.asset = json::Asset {
             copyright: None,
             extensions: None,
@@ -223,7 +315,14 @@ impl File {
         }
         let position = f.positions(base);
         let mut attributes_json = vec![(Valid(json::mesh::Semantic::Positions), position)];
-        if let Some(normals) = split.as_ref().and_then(|s| s.normals.as_ref()) {
+        if morph_normals {
+            f.normal_triangles = Some(triangles.to_vec());
+        }
+        let recomputed: Option<Vec<[f64; 3]>> = (morph_normals && split.as_ref().and_then(|s| s.normals.as_ref()).is_none()).then(|| {
+            let points: Vec<[f64; 3]> = base.iter().map(|p| p.map(f64::from)).collect();
+            vertex_normals(&points, triangles, f.sources.as_deref())
+        });
+        if let Some(normals) = split.as_ref().and_then(|s| s.normals.as_ref()).or(recomputed.as_ref()) {
             let unit: Vec<[f32; 3]> = normals
                 .iter()
                 .map(|n| {
@@ -241,30 +340,44 @@ impl File {
             let offset = f.push(Block::Texcoords, &bytes);
             attributes_json.push((Valid(json::mesh::Semantic::TexCoords(0)), f.root.push(accessor(Some((Block::Texcoords, offset)), uvs.len(), ComponentType::F32, Type::Vec2))));
         }
+        let has_uvs = split.as_ref().is_some_and(|s| s.uvs.is_some());
         let vertex_count = split.as_ref().map_or(base.len(), |s| s.sources.len());
         let (component, size) = index_type(vertex_count, false);
         // One primitive per material group, its triangles in surface order.
-        let groups: Vec<(String, Vec<[u32; 3]>)> = match attributes.filter(|a| !a.groups.is_empty()) {
+        let groups: Vec<Group> = match attributes.filter(|a| !a.groups.is_empty()) {
             Some(a) => a
                 .groups
                 .iter()
                 .enumerate()
                 .map(|(g, group)| {
                     let tris = triangles.iter().zip(&a.triangle_groups).filter(|(_, &x)| x as usize == g).map(|(t, _)| *t).collect();
-                    (group.clone(), tris)
+                    (group.clone(), tris, textures.get(g).and_then(Option::as_ref).filter(|_| has_uvs))
                 })
-                .filter(|(_, tris): &(String, Vec<[u32; 3]>)| !tris.is_empty())
+                .filter(|(_, tris, _): &Group| !tris.is_empty())
                 .collect(),
-            None => vec![(name.to_string(), triangles.to_vec())],
+            None => vec![(name.to_string(), triangles.to_vec(), None)],
         };
         let mut primitives = Vec::with_capacity(groups.len());
-        for (material_name, tris) in groups {
+        // Texture index per image file name: groups sharing an image share its texture.
+        let mut texture_of: Vec<(String, Index<json::Texture>)> = Vec::new();
+        for (material_name, tris, texture) in groups {
             let offset = f.push(Block::Indices, &index_bytes(tris.iter().flatten().copied(), size));
             let indices = f.root.push(accessor(Some((Block::Indices, offset)), tris.len() * 3, component, Type::Scalar));
             // glTF's default material is fully metallic, which renders black without an
             // environment map; a plain dielectric reads in every viewer.
             let mut material = json::Material { name: Some(material_name), ..Default::default() };
             material.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
+            if let Some(texture) = texture {
+                let index = match texture_of.iter().find(|(n, _)| *n == texture.file_name) {
+                    Some(&(_, i)) => i,
+                    None => {
+                        let i = f.texture(texture);
+                        texture_of.push((texture.file_name.clone(), i));
+                        i
+                    }
+                };
+                material.pbr_metallic_roughness.base_color_texture = Some(json::texture::Info { index, tex_coord: 0, extensions: None, extras: None });
+            }
             let material = f.root.push(material);
             primitives.push(json::mesh::Primitive {
                 attributes: attributes_json.iter().cloned().collect(),
@@ -289,6 +402,21 @@ impl File {
         let scene = f.root.push(json::Scene { extensions: None, extras: None, name: Some(name.into()), nodes: vec![node] });
         f.root.scene = Some(scene);
         f
+    }
+
+    /// An embedded image and the texture showing it (default sampler: repeat, linear).
+    /// The image's buffer view is its place in `images` until `finish` lays them out.
+    fn texture(&mut self, texture: &Texture) -> Index<json::Texture> {
+        let image = self.root.push(json::Image {
+            buffer_view: Some(Index::new(self.images.len() as u32)),
+            mime_type: Some(json::image::MimeType(texture.mime.into())),
+            name: Some(texture.file_name.clone()),
+            uri: None,
+            extensions: None,
+            extras: None,
+        });
+        self.images.push(texture.bytes.clone());
+        self.root.push(json::Texture { name: None, sampler: None, source: image, extensions: None, extras: None })
     }
 
     /// Append `bytes` to a block at a 4-byte boundary; returns their offset in the block.
@@ -390,13 +518,13 @@ impl File {
     }
 
     /// Attach named morph targets (default weights 0) and their weights animation.
-    fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
-        self.target_names = targets.iter().map(|(n, _)| n.clone()).collect();
+    fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
+        self.target_names = targets.iter().map(|(n, _, _)| n.clone()).collect();
         let mesh = &mut self.root.meshes[0];
         mesh.weights = Some(vec![0.0; targets.len()]);
         for primitive in &mut mesh.primitives {
             primitive.targets =
-                Some(targets.iter().map(|&(_, a)| json::mesh::MorphTarget { positions: Some(a), normals: None, tangents: None }).collect());
+                Some(targets.iter().map(|&(_, a, normals)| json::mesh::MorphTarget { positions: Some(a), normals, tangents: None }).collect());
         }
         let input = self.floats(times, true);
         let output = self.floats(output, false);
@@ -460,6 +588,25 @@ impl File {
                 extras: None,
             }));
             bin.extend_from_slice(data);
+        }
+        // Images after the blocks, one view each (a view holding an image holds nothing else).
+        let mut image_views = Vec::with_capacity(self.images.len());
+        for data in &self.images {
+            image_views.push(self.root.push(json::buffer::View {
+                buffer: Index::new(0),
+                byte_length: USize64(data.len() as u64),
+                byte_offset: (!bin.is_empty()).then_some(USize64(bin.len() as u64)),
+                byte_stride: None,
+                name: None,
+                target: None,
+                extensions: None,
+                extras: None,
+            }));
+            bin.extend_from_slice(data);
+            bin.resize(bin.len().next_multiple_of(4), 0);
+        }
+        for image in &mut self.root.images {
+            image.buffer_view = image.buffer_view.map(|i| image_views[i.value()]);
         }
         let view = |i: Index<json::buffer::View>| view_of[i.value()].expect("a used block has a view");
         for a in &mut self.root.accessors {
@@ -552,7 +699,7 @@ mod tests {
     #[test]
     fn glb_chunks_and_accessors_are_aligned() {
         // 3 triangles = 9 u16 indices = 18 bytes: the next block must still start aligned.
-        let glb = blendshapes(&clip(), &[[0, 1, 2], [2, 1, 3], [3, 4, 5]], None, "box", Y_UP);
+        let glb = blendshapes(&clip(), Surface::plain(&[[0, 1, 2], [2, 1, 3], [3, 4, 5]]), "box", Y_UP);
         let (root, _) = chunks(&glb);
         assert!(matches!(root.accessors[1].component_type, Valid(GenericComponentType(ComponentType::U16))));
         for v in &root.buffer_views {
@@ -574,7 +721,7 @@ mod tests {
 
     #[test]
     fn cubicspline_output_groups_in_tangents_values_out_tangents_per_key() {
-        let (root, bin) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], None, "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::CubicSpline));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.5, 1.25]);
@@ -593,7 +740,7 @@ mod tests {
     fn linear_output_is_the_weights_at_every_frame() {
         let c = clip();
         let frames = [0.0, 0.25, 0.5, 1.0];
-        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, &[[0, 1, 2]], None, "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::Linear));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.25, 0.5, 1.0]);
@@ -610,7 +757,7 @@ mod tests {
         assert!(!sparse_is_smaller(75, 100, 4));
         assert!(sparse_is_smaller(85, 100, 2));
         assert!(!sparse_is_smaller(86, 100, 2));
-        let (root, _) = chunks(&blendshapes(&clip(), &[[0, 1, 2]], None, "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         let one = &root.accessors[targets[0].positions.unwrap().value()];
         let s = one.sparse.as_ref().expect("a target moving 1 of 100 vertices is sparse");
@@ -630,7 +777,7 @@ mod tests {
             times: vec![0.0, 0.5, 1.0],
             points: vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[1.0; 3], [1.0; 3]]],
         };
-        let (root, bin) = chunks(&full_frame(&ff, &[[0, 1, 1]], None, "ff", Placement { z_up: true, meters_per_unit: 0.01 }));
+        let (root, bin) = chunks(&full_frame(&ff, Surface::plain(&[[0, 1, 1]]), "ff", Placement { z_up: true, meters_per_unit: 0.01 }));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         assert_eq!(targets.len(), 3);
         let frame0 = &root.accessors[targets[0].positions.unwrap().value()];
@@ -648,7 +795,7 @@ mod tests {
         let mut c = clip();
         c.targets.clear();
         c.curves.clear();
-        let (root, _) = chunks(&blendshapes(&c, &[[0, 1, 2]], None, "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&c, Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
         assert!(root.animations.is_empty());
         assert!(root.meshes[0].weights.is_none() && root.meshes[0].primitives[0].targets.is_none());
     }

@@ -3,7 +3,8 @@
 //! - [`clip`]: the blendshape form of a Hermite trajectory (base, targets, weight curves), in
 //!   the signed form or the Bernstein form of `bernstein` (every weight in [0, 1]);
 //! - [`fullframe`]: one pose per frame (what a vertex cache holds);
-//! - [`usda`] (written natively), [`usdc`] (converted by usd-core), [`glb`]: the files.
+//! - [`usda`] (written natively), [`usdc`] (converted by usd-core), [`glb`]: the files;
+//! - [`texture`]: the material groups' diffuse textures they carry.
 //!
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
 //! gets is decided by the export stage (`crate::stages::export`).
@@ -13,6 +14,7 @@ mod usda_attributes;
 pub mod clip;
 pub mod fullframe;
 pub mod glb;
+pub mod texture;
 pub mod usda;
 pub mod usdc;
 

@@ -80,19 +80,41 @@ pub(crate) fn push_subsets(out: &mut String, attributes: &CornerAttributes, root
     }
 }
 
-/// The placeholder materials the subsets bind (a grey UsdPreviewSurface each, named after the
-/// OBJ's `usemtl`): importers create material slots only for bound materials.
+/// The materials the subsets bind, named after the OBJ's `usemtl` (importers create material
+/// slots only for bound materials): a UsdPreviewSurface each, grey, or with the group's
+/// texture (`map_Kd`, copied beside the file by the export stage: `@./NAME@`) read by a
+/// UsdUVTexture at `primvars:st` (when the surface has UVs).
 pub(crate) fn push_materials(out: &mut String, attributes: &CornerAttributes, root: &str) {
+    let textures = super::texture::file_names(&attributes.textures);
+    let has_uvs = !attributes.uv_corners.is_empty();
     out.push_str("\n    def Scope \"Materials\"\n    {\n");
     for (i, name) in group_prim_names(attributes).iter().enumerate() {
         if i > 0 {
             out.push('\n');
         }
+        let path = format!("/{root}/Materials/{name}");
+        let texture = textures.get(i).and_then(Option::as_ref).filter(|_| has_uvs);
         let _ = writeln!(out, "        def Material \"{name}\"\n        {{");
-        let _ = writeln!(out, "            token outputs:surface.connect = </{root}/Materials/{name}/Surface.outputs:surface>\n");
+        let _ = writeln!(out, "            token outputs:surface.connect = <{path}/Surface.outputs:surface>\n");
         out.push_str("            def Shader \"Surface\"\n            {\n                uniform token info:id = \"UsdPreviewSurface\"\n");
-        out.push_str("                color3f inputs:diffuseColor = (0.8, 0.8, 0.8)\n                float inputs:roughness = 0.5\n");
-        out.push_str("                token outputs:surface\n            }\n        }\n");
+        match texture {
+            Some(_) => {
+                let _ = writeln!(out, "                color3f inputs:diffuseColor.connect = <{path}/Texture.outputs:rgb>");
+            }
+            None => out.push_str("                color3f inputs:diffuseColor = (0.8, 0.8, 0.8)\n"),
+        }
+        out.push_str("                float inputs:roughness = 0.5\n                token outputs:surface\n            }\n");
+        if let Some(file) = texture {
+            // The asset path is relative to the layer, so the folder can move as a whole.
+            out.push_str("\n            def Shader \"Texture\"\n            {\n                uniform token info:id = \"UsdUVTexture\"\n");
+            let _ = writeln!(out, "                asset inputs:file = @./{file}@");
+            let _ = writeln!(out, "                float2 inputs:st.connect = <{path}/St.outputs:result>");
+            out.push_str("                token inputs:wrapS = \"repeat\"\n                token inputs:wrapT = \"repeat\"\n");
+            out.push_str("                float3 outputs:rgb\n            }\n");
+            out.push_str("\n            def Shader \"St\"\n            {\n                uniform token info:id = \"UsdPrimvarReader_float2\"\n");
+            out.push_str("                string inputs:varname = \"st\"\n                float2 outputs:result\n            }\n");
+        }
+        out.push_str("        }\n");
     }
     out.push_str("    }\n");
 }

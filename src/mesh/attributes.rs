@@ -3,7 +3,8 @@
 //!
 //! Invariants of [`CornerAttributes`] (checked by [`CornerAttributes::check`]): `uv_corners`
 //! and `normal_corners` are empty or have one entry per triangle, every entry indexing `uvs`
-//! / `normals`; `triangle_groups` is empty or has one entry per triangle, indexing `groups`.
+//! / `normals`; `triangle_groups` is empty or has one entry per triangle, indexing `groups`;
+//! `textures` is empty or has one entry per group.
 //! Attributes are per triangle *corner*, so vertex renumbering (`surface::compact`) leaves
 //! them valid; reversing a triangle's winding must swap its corners too
 //! ([`CornerAttributes::swap_corners`]).
@@ -33,6 +34,10 @@ pub struct CornerAttributes {
     /// Per triangle, its index in `groups` (empty: no groups).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub triangle_groups: Vec<u32>,
+    /// Per group, the diffuse texture its material names (the `.mtl`'s `map_Kd`, an absolute
+    /// path), or `None`; empty when no group has one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub textures: Vec<Option<String>>,
 }
 
 impl CornerAttributes {
@@ -72,6 +77,9 @@ impl CornerAttributes {
         if self.triangle_groups.iter().any(|&g| g as usize >= self.groups.len()) {
             return Err(format!("has a triangle in a group beyond its {} groups", self.groups.len()));
         }
+        if !self.textures.is_empty() && self.textures.len() != self.groups.len() {
+            return Err(format!("has {} group textures for {} groups", self.textures.len(), self.groups.len()));
+        }
         Ok(())
     }
 
@@ -79,6 +87,11 @@ impl CornerAttributes {
     /// same UV value. `vertices` is the vertex count, `triangles` the surface's triangles.
     pub fn uvs_per_vertex(&self, triangles: &[[u32; 3]], vertices: usize) -> Option<Vec<[f64; 2]>> {
         per_vertex(triangles, vertices, &self.uv_corners, &self.uvs)
+    }
+
+    /// The texture of each group, `None` for groups without one (or without textures at all).
+    pub fn texture(&self, group: usize) -> Option<&str> {
+        self.textures.get(group).and_then(|t| t.as_deref())
     }
 
     /// Whether one normal per vertex describes the normals (no crease), as for UVs.

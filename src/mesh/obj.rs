@@ -14,6 +14,12 @@
 //! UV layout to carry, and such files were read before, so they still are (without UVs).
 //! Faces before the first `usemtl` form the group `default`.
 //!
+//! Textures ([`read`] only, which knows the file's folder): the `.mtl` files of `mtllib` lines
+//! are read for each group's `map_Kd` (diffuse texture; its last token is the file, options
+//! before it are ignored), kept as absolute paths in [`CornerAttributes::textures`]. A missing
+//! `.mtl` is ignored (exporters often name one they did not write, and the geometry does not
+//! need it); a `map_Kd` naming a missing file is an error, since the result would be untextured.
+//!
 //! Extra columns after `v x y z` (a `w` weight or per-vertex colours) are ignored. Face
 //! indices must refer to vertices defined above the face, as every exporter writes them:
 //! that is what makes a relative index well defined.
@@ -31,7 +37,58 @@ use crate::error::{quoted, Error, Result};
 /// replaced, not refused: only the ASCII keywords and numbers matter.
 pub fn read(path: &Path) -> Result<TriMesh> {
     let bytes = crate::input::read_bytes(path, "the OBJ surface")?;
-    parse(&String::from_utf8_lossy(&bytes)).map_err(|e| e.with_path(path))
+    let text = String::from_utf8_lossy(&bytes);
+    let mut mesh = parse(&text).map_err(|e| e.with_path(path))?;
+    if let Some(a) = mesh.attributes.as_mut().filter(|a| !a.groups.is_empty()) {
+        let folder = path.parent().unwrap_or(Path::new("."));
+        let mut found: Vec<(String, String)> = Vec::new();
+        for line in text.lines() {
+            let mut tokens = line.split('#').next().unwrap_or("").split_whitespace();
+            if tokens.next() == Some("mtllib") {
+                // A library name may contain spaces; exporters write one file per line.
+                let name = tokens.collect::<Vec<_>>().join(" ");
+                found.extend(read_mtl_textures(&folder.join(name))?);
+            }
+        }
+        let textures: Vec<Option<String>> =
+            a.groups.iter().map(|g| found.iter().find(|(m, _)| m == g).map(|(_, t)| t.clone())).collect();
+        if textures.iter().any(Option::is_some) {
+            a.textures = textures;
+        }
+    }
+    Ok(mesh)
+}
+
+/// `(material, absolute texture path)` for each `newmtl` of a `.mtl` file with a `map_Kd`;
+/// nothing when the file does not exist.
+fn read_mtl_textures(mtl: &Path) -> Result<Vec<(String, String)>> {
+    let Ok(bytes) = std::fs::read(mtl) else { return Ok(Vec::new()) };
+    let folder = mtl.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    let mut material: Option<String> = None;
+    for (number, line) in String::from_utf8_lossy(&bytes).lines().enumerate() {
+        let mut tokens = line.split('#').next().unwrap_or("").split_whitespace();
+        match tokens.next() {
+            Some("newmtl") => material = Some(tokens.collect::<Vec<_>>().join(" ")),
+            Some(key) if key.eq_ignore_ascii_case("map_Kd") => {
+                let (Some(m), Some(file)) = (&material, tokens.last()) else { continue };
+                // Exporters on Windows write backslashes.
+                let texture = folder.join(file.replace('\\', "/"));
+                if !texture.is_file() {
+                    return Err(Error::in_file(
+                        mtl,
+                        format!("line {}: map_Kd names the texture {}, which does not exist", number + 1, quoted(file)),
+                        "put the texture beside the .mtl (paths are relative to it), or remove the map_Kd line",
+                    ));
+                }
+                let absolute = texture.canonicalize().map_err(|e| Error::io(&texture, &e, "resolve the texture path"))?;
+                out.retain(|(x, _): &(String, String)| x != m);
+                out.push((m.clone(), absolute.to_string_lossy().into_owned()));
+            }
+            _ => {}
+        }
+    }
+    Ok(out)
 }
 
 /// Parse OBJ text (see the module contract). Errors carry no path; their problem starts with
@@ -255,6 +312,30 @@ pub fn write(mesh: &TriMesh) -> String {
 mod tests {
     use super::*;
     use crate::testing::paper_asset;
+
+    #[test]
+    fn map_kd_of_the_mtl_gives_each_group_its_texture() {
+        let dir = std::env::temp_dir().join(format!("blendsim-obj-mtl-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tex")).unwrap();
+        std::fs::write(dir.join("tex/wood.png"), b"png").unwrap();
+        let obj = "mtllib a.mtl\nmtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n\
+                   usemtl wood\nf 1/1 2/1 3/1\nusemtl plain\nf 2/1 4/1 3/1\n";
+        std::fs::write(dir.join("m.obj"), obj).unwrap();
+        // Options before the file name, a backslash path, a material without a map.
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nKd 1 1 1\nmap_Kd -bm 1 tex\\wood.png\nnewmtl plain\nKd 0.5 0.5 0.5\n").unwrap();
+        let a = read(&dir.join("m.obj")).unwrap().attributes.unwrap();
+        let wood = dir.join("tex/wood.png").canonicalize().unwrap();
+        assert_eq!(a.textures, vec![Some(wood.to_string_lossy().into_owned()), None]);
+        assert_eq!((a.texture(0).is_some(), a.texture(1)), (true, None));
+        // A map naming a missing file: the .mtl, its line, the fix.
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nmap_Kd gone.png\n").unwrap();
+        let e = read(&dir.join("m.obj")).unwrap_err().to_string();
+        assert!(e.contains("a.mtl") && e.contains("line 2: map_Kd names the texture") && e.contains("fix:"), "{e}");
+        // No textures at all: the field stays empty (the stage file is as before).
+        std::fs::write(dir.join("a.mtl"), "newmtl wood\nKd 1 0 0\n").unwrap();
+        assert!(read(&dir.join("m.obj")).unwrap().attributes.unwrap().textures.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn parse_err(text: &str) -> String {
         let e = parse(text).expect_err("malformed OBJ must not parse");

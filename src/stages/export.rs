@@ -7,13 +7,14 @@
 //! Returns the list of staged files with their sizes. The files (and whatever the caller
 //! stages after them, e.g. `NAME.outputs.json`) are in the staging group `export:NAME`: a
 //! commit removes the files an earlier export of the same scene wrote that this one did not,
+//! (the USD files' textures, copied beside them, are in the group but not in `Outputs`),
 //! and keeps the report and other scenes' files. The layouts are specified in
 //! `formats/usd.md` and `formats/gltf.md`.
 
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
 use crate::export::fullframe::FullFrame;
-use crate::export::{glb, usda, usdc};
+use crate::export::{glb, texture, usda, usdc};
 use crate::mesh::Axis;
 use crate::output::Staging;
 use crate::scene::{Format, GltfInterpolation};
@@ -41,6 +42,19 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
 
     let clip = BlendShapeClip::new(trajectory, scene.export.weights);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
+    // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
+    let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
+    let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
+    let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
+    if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {
+        let mut copied: Vec<&str> = Vec::new();
+        for t in textures.iter().flatten() {
+            if !copied.contains(&t.file_name.as_str()) {
+                staging.write(&t.file_name, &t.bytes)?;
+                copied.push(&t.file_name);
+            }
+        }
+    }
     let mut forms = vec![(OutputKind::Blendshape, String::new())];
     if full.is_some() {
         forms.push((OutputKind::FullFrame, ".full".into()));
@@ -79,12 +93,12 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                 }
                 Format::Glb => {
                     let bytes = match (&kind, &full) {
-                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, triangles, attributes, &scene.name, placement),
+                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
                             let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(&clip, &frame_times, triangles, attributes, &scene.name, placement)
+                            glb::blendshapes_sampled(&clip, &frame_times, blendshape_surface, &scene.name, placement)
                         }
-                        _ => glb::blendshapes(&clip, triangles, attributes, &scene.name, placement),
+                        _ => glb::blendshapes(&clip, blendshape_surface, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;
                 }

@@ -25,8 +25,16 @@ Blender session:
    relative to the expected one, and `unscaled_error`, the error once that size is undone
    (right up to its units).
 
+6. With EXPECTED `corners` (per triangle, three [point, u, v], v up as in OBJ) and
+   `triangle_materials` (per triangle, its material name): Blender's active UV layer must give
+   every face corner the expected UV (within 1e-5; faces matched by their points' set), its
+   material slots must be the expected names, and each face's material (slot of its
+   material_index) its triangle's. With `map_vertices`, Blender's vertices may be more than the
+   points (an importer that keeps glTF seam copies): each is matched to the nearest expected
+   point at the first time, and must follow it at every time.
+
 EXPECTED.json is the format of README.md (times, timecodes, points, tolerance, fps, up_axis,
-meters_per_unit).
+meters_per_unit), plus the optional corners, triangle_materials and map_vertices above.
 
 Prints issues to stderr, one JSON line per file, and a last one-line JSON summary to stdout
 ({"ok": ..., "files": [...]}); exit code 0 when everything passes, 1 otherwise. Blender 4.2.0
@@ -103,6 +111,53 @@ def evaluate(obj, frame):
     return local.reshape(-1, 3) @ world[:3, :3].T + world[:3, 3], world
 
 
+def nearest_points(got, want):
+    """For each Blender vertex, the index of the nearest expected point (brute force: test meshes)."""
+    d = np.linalg.norm(got[:, None, :] - want[None, :, :], axis=2)
+    return d.argmin(axis=1)
+
+
+def check_corners(obj, expected, mapping, summary):
+    """UVs per face corner, material slots and per-face materials against the expected ones."""
+    mesh = obj.data
+    slots = [s.material.name if s.material else None for s in obj.material_slots]
+    summary["uv_layers"] = [l.name for l in mesh.uv_layers]
+    summary["material_slots"] = slots
+    want = {}
+    for corners, material in zip(expected["corners"], expected["triangle_materials"]):
+        want[tuple(sorted(int(c[0]) for c in corners))] = (sorted((int(c[0]), c[1], c[2]) for c in corners), material)
+    if sorted(set(slots)) != sorted(set(expected["triangle_materials"])):
+        summary["issues"].append(f"material slots {slots}, expected {sorted(set(expected['triangle_materials']))}")
+    layer = mesh.uv_layers.active
+    if layer is None:
+        summary["issues"].append("no UV layer")
+        return
+    worst_uv, wrong_material, unmatched = 0.0, 0, 0
+    for poly in mesh.polygons:
+        corners = []
+        for loop in poly.loop_indices:
+            v = mesh.loops[loop].vertex_index
+            point = int(mapping[v]) if mapping is not None else v
+            u, w = layer.data[loop].uv
+            corners.append((point, float(u), float(w)))
+        key = tuple(sorted(c[0] for c in corners))
+        if key not in want:
+            unmatched += 1
+            continue
+        expected_corners, material = want[key]
+        for (_, u, w), (_, eu, ew) in zip(sorted(corners), expected_corners):
+            worst_uv = max(worst_uv, abs(u - eu), abs(w - ew))
+        got_material = slots[poly.material_index] if poly.material_index < len(slots) else None
+        wrong_material += got_material != material
+    summary.update(uv_error=worst_uv, faces=len(mesh.polygons), faces_unmatched=unmatched, faces_wrong_material=wrong_material)
+    if len(mesh.polygons) != len(want) or unmatched:
+        summary["issues"].append(f"{len(mesh.polygons)} faces ({unmatched} not among the expected triangles), expected {len(want)}")
+    if worst_uv > 1e-5:
+        summary["issues"].append(f"a face corner's UV is {worst_uv:.3g} from the expected one")
+    if wrong_material:
+        summary["issues"].append(f"{wrong_material} faces have another material than expected")
+
+
 def check(path, expected):
     summary = {"file": path, "issues": []}
     objects = import_file(path, expected)
@@ -128,9 +183,17 @@ def check(path, expected):
     want_world = want_local @ place.T
     scale = max(diagonal(want_world), 1e-30)
     worst, worst_local, worst_unscaled, worst_frame, world, size = 0.0, 0.0, 0.0, None, None, None
+    mapping = None
     for i, want in enumerate(want_world):
         frame = frame_of(path, expected, i)
         got, world = evaluate(obj, frame)
+        if i == 0 and expected.get("map_vertices"):
+            mapping = nearest_points(got, want)
+        if mapping is not None:
+            want = want[mapping]
+            want_local_i = want_local[i][mapping]
+        else:
+            want_local_i = want_local[i]
         if len(got) != len(want):
             summary["issues"].append(f"frame {frame}: {len(got)} points, expected {len(want)}")
             return summary
@@ -142,7 +205,7 @@ def check(path, expected):
         if size is None:
             size = diagonal(got) / max(diagonal(want), 1e-30)
         worst_unscaled = max(worst_unscaled, max_distance(got / size, want) / scale)
-        local = max_distance(got @ unplace.T, want_local[i]) / scale * expected.get("meters_per_unit", 1.0)
+        local = max_distance(got @ unplace.T, want_local_i) / scale * expected.get("meters_per_unit", 1.0)
         worst_local = max(worst_local, local)
         if error >= worst:
             worst, worst_frame = error, frame
@@ -155,6 +218,8 @@ def check(path, expected):
         unscaled_error=worst_unscaled,
         matrix_world=[[round(float(x), 6) for x in row] for row in world],
     )
+    if "corners" in expected:
+        check_corners(obj, expected, mapping, summary)
     tolerance = expected.get("tolerance", 1e-5)
     if worst > tolerance:
         summary["issues"].append(

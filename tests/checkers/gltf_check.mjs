@@ -6,7 +6,7 @@
 //
 // 1. gltf-validator validateBytes: zero errors AND zero warnings (a wrong animation channel
 //    path is only a warning), every issue printed otherwise.
-// 2. three.js GLTFLoader.parse (plain Node, no DOM) + AnimationMixer: for each EXPECTED time,
+// 2. three.js GLTFLoader.parse (plain Node, no DOM; textures are not decoded) + AnimationMixer: for each EXPECTED time,
 //    mixer.setTime(t), then the morphed positions on the CPU from the geometry's
 //    morphAttributes and the mesh's morphTargetInfluences (glTF targets are relative), in the
 //    mesh's local space (scene units). The largest distance to the EXPECTED points divided by
@@ -45,7 +45,10 @@ async function validate(bytes, summary) {
 
 function parse(bytes) {
   const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
-  return new Promise((resolve, reject) => new GLTFLoader().parse(buffer, '', resolve, reject));
+  // Plain Node cannot decode images (no DOM): textures load as empty placeholders. The
+  // validator checks the embedded images; texture_check.mjs renders them in Chromium.
+  const loader = new GLTFLoader().register(() => ({ name: 'blendsim_no_image_decoding', loadTexture: () => Promise.resolve(new THREE.Texture()) }));
+  return new Promise((resolve, reject) => loader.parse(buffer, '', resolve, reject));
 }
 
 /** The kind of animation the file holds, from its JSON: full-frame files are LINEAR with one

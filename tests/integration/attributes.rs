@@ -16,12 +16,12 @@ use serde_json::Value;
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
-const SIDES: usize = 8;
-const RINGS: usize = 3;
+pub(crate) const SIDES: usize = 8;
+pub(crate) const RINGS: usize = 3;
 
 /// The prism as OBJ, stretched along y by `stretch`: ring vertices, then the two cap centres;
 /// UV columns 0..=SIDES per ring (column SIDES repeats column 0's vertices at u = 1: the seam).
-fn prism_obj(stretch: f64) -> String {
+pub(crate) fn prism_obj(stretch: f64) -> String {
     let mut s = String::from("# blendsim attributes test\n");
     let angle = |k: usize| 2.0 * std::f64::consts::PI * k as f64 / SIDES as f64;
     for r in 0..=RINGS {
@@ -59,7 +59,7 @@ fn prism_obj(stretch: f64) -> String {
     s
 }
 
-const SCENE: &str = r#"name = "uvprism"
+pub(crate) const SCENE: &str = r#"name = "uvprism"
 fps = 24
 
 [keyframes]
@@ -107,7 +107,7 @@ print(json.dumps({
 
 /// The OBJ's (vertex, u, v) at every corner of every triangle (fans of its quads), as sets per
 /// triangle, so a reversed winding still compares equal.
-fn obj_corner_uvs(text: &str) -> Vec<Vec<(u64, i64, i64)>> {
+pub(crate) fn obj_corner_uvs(text: &str) -> Vec<Vec<(u64, i64, i64)>> {
     let mesh = blendsim::mesh::obj::parse(text).unwrap();
     let a = mesh.attributes.unwrap();
     let key = |v: u32, uv: [f64; 2]| (v as u64, (uv[0] * 1e6).round() as i64, (uv[1] * 1e6).round() as i64);
@@ -205,13 +205,13 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
 }
 
 /// The JSON and BIN chunks of a GLB, read by hand (the point is not to trust our writer's types).
-struct Glb {
-    json: Value,
-    bin: Vec<u8>,
+pub(crate) struct Glb {
+    pub json: Value,
+    pub bin: Vec<u8>,
 }
 
 impl Glb {
-    fn parse(bytes: &[u8]) -> Glb {
+    pub fn parse(bytes: &[u8]) -> Glb {
         let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap()) as usize;
         let json_len = u32_at(12);
         let json = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
@@ -219,20 +219,20 @@ impl Glb {
     }
 
     /// Where accessor `a`'s data starts, and its element stride.
-    fn start(&self, a: u64) -> (usize, usize, usize) {
+    pub fn start(&self, a: u64) -> (usize, usize, usize) {
         let acc = &self.json["accessors"][a as usize];
         let view = &self.json["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
         let start = view["byteOffset"].as_u64().unwrap_or(0) + acc["byteOffset"].as_u64().unwrap_or(0);
         (start as usize, view["byteStride"].as_u64().unwrap_or(0) as usize, acc["count"].as_u64().unwrap() as usize)
     }
 
-    fn floats(&self, a: u64, width: usize) -> Vec<f32> {
+    pub fn floats(&self, a: u64, width: usize) -> Vec<f32> {
         let (start, stride, count) = self.start(a);
         let stride = if stride == 0 { 4 * width } else { stride };
         (0..count).flat_map(|i| (0..width).map(move |k| start + i * stride + 4 * k)).map(|o| f32::from_le_bytes(self.bin[o..o + 4].try_into().unwrap())).collect()
     }
 
-    fn indices(&self, a: u64) -> Vec<usize> {
+    pub fn indices(&self, a: u64) -> Vec<usize> {
         let (start, _, count) = self.start(a);
         match self.json["accessors"][a as usize]["componentType"].as_u64().unwrap() {
             5123 => (0..count).map(|i| u16::from_le_bytes(self.bin[start + 2 * i..start + 2 * i + 2].try_into().unwrap()) as usize).collect(),

@@ -37,7 +37,7 @@ use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// A copy of `scene` in `dir` whose file paths are absolute and whose `[export]` table starts
 /// with `export` (TOML lines): the same animation, exported another way.
-fn scene_variant(scene: &Path, dir: &Path, name: &str, export: &str) -> PathBuf {
+pub(crate) fn scene_variant(scene: &Path, dir: &Path, name: &str, export: &str) -> PathBuf {
     let text = std::fs::read_to_string(scene).unwrap();
     let folder = scene.parent().unwrap();
     // Every quoted string naming a file beside the scene becomes that file's absolute path.
@@ -282,5 +282,36 @@ fn up_axis_and_units_arrive_in_blender() {
             assert!((scale * meters - 1.0).abs() < 1e-6, "Blender 4.2 imports the stage in scene units: {f}");
             assert!(f["unscaled_error"].as_f64().unwrap() < 1e-5, "standing up right and animated right, only the size differs: {f}");
         }
+    }
+}
+
+/// UVs and material slots read back by Blender: the textured prism of `texture` (a UV seam, two
+/// material groups, a PNG per group), baked to usda, usdc and the LINEAR glb and imported at
+/// default settings. Against the OBJ itself (not our animation's copy of it): every face
+/// corner's UV, the slot names (the OBJ's `usemtl` groups) and each face's material; the glb's
+/// seam copies are matched to their points by position (Blender keeps them as vertices).
+#[test]
+fn uvs_and_material_slots_arrive_in_blender() {
+    let dir = TempDir::new("blender-uvs");
+    crate::texture::textured_prism(&dir.path, "gltf_interpolation = \"linear\"\nfull_frame = false");
+    run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
+    let anim = library_animation(&dir.join("scene.toml"));
+    let obj = blendsim::mesh::obj::parse(&std::fs::read_to_string(dir.join("rest.obj")).unwrap()).unwrap();
+    let a = obj.attributes.as_ref().unwrap();
+    let mut expected = every_frame(&anim);
+    expected.corners = Some(obj.triangles.iter().zip(&a.uv_corners).map(|(t, c)| [0, 1, 2].map(|k| (t[k], a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))).collect());
+    expected.triangle_materials = Some(a.triangle_groups.iter().map(|&g| a.groups[g as usize].clone()).collect());
+    let mut seam_copies = expected.clone();
+    seam_copies.map_vertices = Some(true);
+    let out = dir.join("out");
+    let (usda, usdc, glb) = (out.join("uvprism.usda"), out.join("uvprism.usdc"), out.join("uvprism.glb"));
+    let summary = check_blender(&[(&usda, &expected), (&usdc, &expected), (&glb, &seam_copies)]);
+    for f in summary["files"].as_array().unwrap() {
+        eprintln!(
+            "blender {}: max error {}, {} vertices, UV layers {}, UV error {}, slots {}, faces with another material {}",
+            f["file"], f["max_error"], f["vertices"], f["uv_layers"], f["uv_error"], f["material_slots"], f["faces_wrong_material"]
+        );
+        assert_eq!(f["ok"], true, "{f}");
+        assert_eq!(f["faces"], obj.triangles.len(), "{f}");
     }
 }

@@ -33,6 +33,17 @@ pub struct Expected {
     /// USD `metersPerUnit`; glTF node scale.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub meters_per_unit: Option<f64>,
+    /// Per triangle, its corners' (point, u, v), v up (OBJ's convention): the UVs a consumer
+    /// must read back (Blender checker).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub corners: Option<Vec<[(u32, f64, f64); 3]>>,
+    /// Per triangle, its material's name (Blender checker).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub triangle_materials: Option<Vec<String>>,
+    /// The file may have more vertices than points (glTF seam copies): match each to the
+    /// nearest point at the first time (Blender checker).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub map_vertices: Option<bool>,
 }
 
 impl Expected {
@@ -47,6 +58,9 @@ impl Expected {
             fps: None,
             up_axis: None,
             meters_per_unit: None,
+            corners: None,
+            triangle_materials: None,
+            map_vertices: None,
         }
     }
 }
@@ -148,6 +162,30 @@ pub fn render_glb(file: &Path, out_dir: &Path, times: Option<[f64; 2]>) -> Value
     }
     let output = cmd.output().expect("run render_check.mjs");
     summary(&format!("render_check.mjs {}", file.display()), output).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `texture_check.mjs`: each glb rendered by three.js in headless Chromium at each pose's time
+/// with its own texture, against the pose's OBJ keyframe loaded by OBJLoader with `texture`
+/// (unlit, same camera, looking along `view`). Returns the summary whatever the verdict
+/// (`files`: one entry per glb, each with its own `ok` and per-time `mismatch`); the caller
+/// decides which files must pass.
+pub fn check_texture(files: &[&Path], texture: &Path, out_dir: &Path, poses: &[(f64, &Path)], view: [f64; 3]) -> Value {
+    require_node_modules(&["three", "playwright-core"]);
+    assert!(Path::new("/usr/bin/chromium").is_file(), "/usr/bin/chromium is missing: run `make test-deps` (apt-get install chromium)");
+    let list: Vec<String> = files.iter().map(|f| f.to_string_lossy().into_owned()).collect();
+    let mut cmd = Command::new("node");
+    cmd.arg(checkers_dir().join("texture_check.mjs")).arg(list.join(",")).arg(texture).arg(out_dir);
+    for (t, obj) in poses {
+        cmd.arg(format!("{t}={}", obj.display()));
+    }
+    cmd.arg(format!("--view={},{},{}", view[0], view[1], view[2]));
+    let output = cmd.output().expect("run texture_check.mjs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let last = stdout.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    match serde_json::from_str::<Value>(last) {
+        Ok(v) if v["files"].as_array().is_some_and(|f| f.len() == files.len()) => v,
+        _ => panic!("texture_check.mjs gave no summary ({}):\n--- stdout\n{stdout}--- stderr\n{}", output.status, String::from_utf8_lossy(&output.stderr)),
+    }
 }
 
 /// The Python that has Blender's `bpy`: `$BLENDSIM_BLENDER_PYTHON`, or the venv `make
