@@ -226,6 +226,9 @@ pub struct Solver {
     pub fixed_times: Vec<usize>,
     /// With `optimize_timing`: the shortest interval (seconds).
     pub min_interval: f64,
+    /// The quasi-Newton phase's model Hessian: `"auto"`, `"projective"` or `"tangent"`
+    /// (see `spacetime::solver::ModelHessian`).
+    pub model_hessian: String,
 }
 
 /// The `[embed]` table.
@@ -348,6 +351,7 @@ impl Default for Solver {
             keep_duration: false,
             fixed_times: Vec::new(),
             min_interval: 1e-3,
+            model_hessian: "projective".to_string(),
         }
     }
 }
@@ -853,6 +857,9 @@ impl Solver {
         }
         if let Some((k, keys)) = keys.and_then(|keys| self.fixed_times.iter().find(|&&k| k >= keys).map(|&k| (k, keys))) {
             return invalid(format!("[solver] fixed_times lists key {k}, but there are {keys} keys"), "list key indices from 0, as in [keyframes] times");
+        }
+        if !["auto", "projective", "tangent"].contains(&self.model_hessian.as_str()) {
+            return invalid(format!("[solver] model_hessian = {:?} is not a model", self.model_hessian), "use \"auto\", \"projective\" or \"tangent\"");
         }
         if !(self.min_interval.is_finite() && self.min_interval > 0.0) {
             return invalid(format!("[solver] min_interval = {} must be positive", self.min_interval), "use a small length in seconds, e.g. 0.001");

@@ -106,23 +106,16 @@ pub fn natural_vibration_with(
     Ok(Vibration { eigenvalues, shapes, zero_modes, method })
 }
 
-/// `M^{-1/2} K M^{-1/2}` over the coordinates of the free nodes (node-major, 3 per node), full
-/// symmetric storage; and the free nodes.
-fn scaled_stiffness(el: &Elastic, held: &[bool], stiffness: RestStiffness) -> (Csr, Vec<usize>) {
-    let mut index = vec![u32::MAX; el.node_count()];
-    let free_nodes: Vec<usize> = (0..el.node_count()).filter(|&a| !held[a]).collect();
-    for (f, &a) in free_nodes.iter().enumerate() {
-        index[a] = f as u32;
-    }
+/// The rest stiffness `K` of every node's coordinates (node-major, 3 per node, `3a + i`),
+/// full symmetric storage, unscaled. The tangent one is `∇²E` at rest: positive semidefinite,
+/// since the rest shape minimizes every element's energy (zero there).
+pub fn rest_stiffness(el: &Elastic, stiffness: RestStiffness) -> Csr {
     let share = el.strain_share();
     let mut triplets = Vec::with_capacity(144 * el.tet_count());
     for (e, tet) in el.tets.iter().enumerate() {
         let (g, w) = (&el.grads[e], el.weights[e]);
         let jac = (stiffness == RestStiffness::Tangent).then(|| project_with_jacobian(&el.deformation_gradient(e, &el.rest), share).1);
         for (lb, &b) in tet.iter().enumerate() {
-            if index[b as usize] == u32::MAX {
-                continue;
-            }
             for j in 0..3 {
                 // Column (b, j): the force change for a unit move of node b along j, whose
                 // deformation-gradient change is e_j g_bᵀ.
@@ -132,21 +125,43 @@ fn scaled_stiffness(el: &Elastic, held: &[bool], stiffness: RestStiffness) -> (C
                     jac.apply(&df)
                 });
                 for (la, &a) in tet.iter().enumerate() {
-                    if index[a as usize] == u32::MAX {
-                        continue;
-                    }
                     let gab = crate::mesh::dot(g[la], g[lb]);
                     for i in 0..3 {
                         let mut v = if i == j { gab } else { 0.0 };
                         if let Some(dp) = &dp {
                             v -= dp[i][0] * g[la][0] + dp[i][1] * g[la][1] + dp[i][2] * g[la][2];
                         }
-                        let v = w * v / (el.mass[a as usize] * el.mass[b as usize]).sqrt();
                         if v != 0.0 {
-                            triplets.push((3 * index[a as usize] + i as u32, 3 * index[b as usize] + j as u32, v));
+                            triplets.push((3 * a + i as u32, 3 * b + j as u32, w * v));
                         }
                     }
                 }
+            }
+        }
+    }
+    Csr::from_triplets(3 * el.node_count(), triplets)
+}
+
+/// `M^{-1/2} K M^{-1/2}` over the coordinates of the free nodes (node-major, 3 per node), full
+/// symmetric storage; and the free nodes.
+fn scaled_stiffness(el: &Elastic, held: &[bool], stiffness: RestStiffness) -> (Csr, Vec<usize>) {
+    let mut index = vec![u32::MAX; el.node_count()];
+    let free_nodes: Vec<usize> = (0..el.node_count()).filter(|&a| !held[a]).collect();
+    for (f, &a) in free_nodes.iter().enumerate() {
+        index[a] = f as u32;
+    }
+    let k = rest_stiffness(el, stiffness);
+    let mut triplets = Vec::with_capacity(k.nnz());
+    for r in 0..k.n {
+        let (a, i) = (r / 3, r % 3);
+        if index[a] == u32::MAX {
+            continue;
+        }
+        for (c, v) in k.row(r) {
+            let (b, j) = (c / 3, c % 3);
+            if index[b] != u32::MAX {
+                let v = v / (el.mass[a] * el.mass[b]).sqrt();
+                triplets.push((3 * index[a] + i as u32, 3 * index[b] + j as u32, v));
             }
         }
     }

@@ -7,7 +7,9 @@
 //! - [`objective`]: W, its gradient, and the local step over all samples;
 //! - [`global_step`]: the normal matrix, assembled and factorized once (refactorized on the
 //!   kept symbolic analysis when the key times move);
-//! - [`quasi_newton`]: L-BFGS preconditioned by the global step;
+//! - [`quasi_newton`]: L-BFGS preconditioned by the global step or the tangent model;
+//! - [`tangent_step`]: the normal matrix with the rest tangent stiffness (a Newton model for
+//!   small motions about the rest shape);
 //! - [`solver`]: the two phases of the iteration (local/global, then quasi-Newton);
 //! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step;
 //! - [`obstacles`]: planes and spheres the body may not enter;
@@ -26,6 +28,7 @@ pub mod obstacles;
 pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;
+pub mod tangent_step;
 pub mod timing;
 pub mod trajectory;
 pub mod unknowns;

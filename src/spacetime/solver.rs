@@ -45,6 +45,7 @@ use super::global_step::{CgLog, GlobalStep};
 use super::objective::{Evaluation, Objective};
 use super::quasi_newton::{dot, Lbfgs};
 use super::sampling::{sample_counts, samples, TimeSlots};
+use super::tangent_step::TangentStep;
 use super::timing::{safe_curvature, Blocks, ProjectionMode, Timing, TimingSettings};
 use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
@@ -78,6 +79,44 @@ pub struct Settings {
     pub timing: Option<TimingSettings>,
     /// Obstacles the nodes may not enter.
     pub contacts: Option<Contacts>,
+    /// The quasi-Newton phase's model Hessian (its preconditioner). Default: projective (the
+    /// tangent one lowers W further on a small-motion bar, but does not yet reach the minimum
+    /// there and is unmeasured elsewhere).
+    pub model_hessian: ModelHessian,
+}
+
+/// The quasi-Newton phase's initial inverse Hessian.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelHessian {
+    /// [`ModelHessian::Tangent`] when every key stays within [`LINEAR_REGIME`] of the body's
+    /// size of its rest shape (where the rest tangent stiffness is the body's) and its
+    /// factorization succeeds, else [`ModelHessian::Projective`].
+    Auto,
+    /// The global step's matrix (projective stiffness `L`), factorized anyway for phase 1.
+    Projective,
+    /// The same normal matrix with the rest tangent stiffness ([`super::tangent_step`]);
+    /// not with obstacles (the projective one is used there).
+    Tangent,
+}
+
+/// How far (relative to the body's bounding-box diagonal) every key may be from the rest shape
+/// for [`ModelHessian::Auto`] to choose the tangent model.
+pub const LINEAR_REGIME: f64 = 0.01;
+
+impl ModelHessian {
+    /// The model for `keys` on `elastic`: `Auto` decided.
+    pub fn resolve(self, elastic: &Elastic, keys: &KeyConstraints) -> ModelHessian {
+        if self != ModelHessian::Auto {
+            return self;
+        }
+        let size = crate::mesh::bbox_diagonal(&elastic.rest);
+        let far = keys.positions.iter().flatten().zip(elastic.rest.iter().cycle()).map(|(p, r)| crate::mesh::norm(crate::mesh::sub(*p, *r))).fold(0.0, f64::max);
+        if far <= LINEAR_REGIME * size {
+            ModelHessian::Tangent
+        } else {
+            ModelHessian::Projective
+        }
+    }
 }
 
 impl Settings {
@@ -94,6 +133,7 @@ impl Settings {
             max_memory: None,
             timing: None,
             contacts: None,
+            model_hessian: ModelHessian::Projective,
         }
     }
 }
@@ -284,6 +324,18 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
     let global = GlobalStep::within(&objective, unknowns, settings.regularization, settings.max_memory)?;
+    let global_unknowns = global.unknowns().clone();
+    // The active-set projection solves with the preconditioner per coordinate: with obstacles
+    // the quasi-Newton phase keeps the global step's matrix.
+    let tangent = match settings.model_hessian.resolve(elastic, keys) {
+        _ if global_unknowns.count() == 0 || settings.contacts.is_some() => None,
+        // Chosen: its errors are the solve's.
+        ModelHessian::Tangent if settings.model_hessian == ModelHessian::Tangent => Some(TangentStep::new(&objective, &global_unknowns)?),
+        // Guessed: without the proximal term a free drift can cost nothing, and then the
+        // global step's matrix (which has it) is kept.
+        ModelHessian::Tangent => TangentStep::new(&objective, &global_unknowns).ok(),
+        _ => None,
+    };
     let precompute_seconds = start.elapsed().as_secs_f64();
     let timing = Timing::new(elastic, keys, settings);
     // The optimized interval lengths: every interval of positive length.
@@ -302,6 +354,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let mut solver = Solver {
         timing,
         global,
+        tangent,
         settings,
         on_iteration,
         blocks,
@@ -375,6 +428,8 @@ fn prediction(energy: &[f64]) -> (f64, Option<f64>) {
 struct Solver<'a> {
     timing: Timing<'a>,
     global: GlobalStep,
+    /// The tangent model Hessian, when the quasi-Newton phase uses it.
+    tangent: Option<TangentStep>,
     settings: &'a Settings,
     on_iteration: &'a dyn Fn(usize, f64),
     /// The fixed-sum blocks of intervals, when the times are optimized.
@@ -469,9 +524,18 @@ impl<'a> Solver<'a> {
         rows
     }
 
-    /// The step preconditioner restricted to the rows of `it` (with the times when `times`).
-    fn projection(&self, it: &Iterate, times: bool) -> Projection {
-        let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+    /// The quasi-Newton phase's initial inverse Hessian on the keyframe unknowns.
+    fn model_inverse(&self, x: &mut [Point]) {
+        match &self.tangent {
+            Some(t) => t.apply_inverse(x),
+            None => self.global.apply_inverse(x),
+        }
+    }
+
+    /// The step preconditioner restricted to the rows of `it` (with the times when `times`):
+    /// the global step's, or the quasi-Newton model's when `model`.
+    fn projection(&self, it: &Iterate, times: bool, model: bool) -> Projection {
+        let solve = |x: &mut [Point]| if model { self.model_inverse(x) } else { self.global.apply_inverse(x) };
         let d_t: &[f64] = if times { &self.curvature } else { &[] };
         Projection::new(self.rows(it, times), &Preconditioner { unknowns: self.unknown_count(), solve: &solve, times: d_t })
     }
@@ -630,6 +694,9 @@ impl<'a> Solver<'a> {
             phase2 = self.quasi_newton(it, true)?;
         }
         let mut phases = format!("{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - local_global_iterations);
+        if self.tangent.is_some() {
+            phases += ", preconditioned by the tangent model Hessian";
+        }
         if self.blocks.is_some() {
             phases += &format!(", {} moving the key times, {} refactorizations", it.timing_iterations, it.refactorizations);
         }
@@ -655,13 +722,13 @@ impl<'a> Solver<'a> {
                 return Ok(PhaseEnd::OutOfIterations);
             }
             let mut d: Vec<f64> = self.global.gather(&it.eval.gradient).as_flattened().to_vec();
-            let mut projection = self.projection(it, false);
+            let mut projection = self.projection(it, false, false);
             let solve = |x: &mut [Point]| self.global.apply_inverse(x);
             let h0 = self.preconditioner(&solve, false);
             let g = d.clone();
             let lambda = projection.apply(&mut d, &h0);
             if self.release(it, &projection, &lambda, blocked) {
-                projection = self.projection(it, false);
+                projection = self.projection(it, false, false);
                 d.clone_from(&g);
                 projection.apply(&mut d, &h0);
             }
@@ -711,14 +778,14 @@ impl<'a> Solver<'a> {
             if !self.budget_left(it) {
                 return Ok(PhaseEnd::OutOfIterations);
             }
-            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let solve = |x: &mut [Point]| self.model_inverse(x);
             let h0 = self.preconditioner(&solve, times);
-            let mut projection = self.projection(it, times);
+            let mut projection = self.projection(it, times, true);
             if projection.rows.iter().any(|r| r.kind.is_inequality()) {
                 let mut pg = g.clone();
                 let lambda = projection.apply(&mut pg, &h0);
                 if self.release(it, &projection, &lambda, blocked) {
-                    projection = self.projection(it, times);
+                    projection = self.projection(it, times, true);
                 }
             }
             let precondition = |q: &mut [f64]| {
@@ -768,7 +835,11 @@ impl<'a> Solver<'a> {
                     then > 0.0 && ((now - then) / then).abs() > REFACTOR_CHANGE
                 });
                 if moved {
-                    self.global.retime(&self.objective(&it.tr.times), self.settings.regularization)?;
+                    let objective = self.objective(&it.tr.times);
+                    self.global.retime(&objective, self.settings.regularization)?;
+                    if let Some(tangent) = self.tangent.as_mut() {
+                        tangent.retime(&objective, self.global.unknowns())?;
+                    }
                     self.factored_times.clone_from(&it.tr.times);
                     self.update_curvature(&it.tr, &it.eval);
                     it.refactorizations += 1;

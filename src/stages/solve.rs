@@ -16,7 +16,7 @@ use crate::progress::Progress;
 use crate::scene::{Method, ObstacleSpec, Scene};
 use crate::spacetime::contact::Contacts;
 use crate::spacetime::obstacles::Obstacle;
-use crate::spacetime::solver::{self, Settings};
+use crate::spacetime::solver::{self, ModelHessian, Settings};
 use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
 use crate::stage::{Body, CgSummary, KeyPoses, Solution, SolverLog};
@@ -184,6 +184,11 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         damping: scene.material.damping,
         gravity: scene.material.gravity,
         max_memory: None,
+        model_hessian: match s.model_hessian.as_str() {
+            "projective" => ModelHessian::Projective,
+            "tangent" => ModelHessian::Tangent,
+            _ => ModelHessian::Auto,
+        },
         timing: s.optimize_timing.then(|| TimingSettings {
             min_interval: s.min_interval,
             keep_duration: s.keep_duration,
