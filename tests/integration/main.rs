@@ -18,6 +18,7 @@ mod cli_errors;
 mod cli_interrupt;
 mod cli_output;
 mod cli_physics;
+mod cli_scale;
 mod cli_stages;
 mod cli_timing;
 mod export_formats;
