@@ -14,6 +14,7 @@ mod cache_bake;
 mod cache_fit;
 mod cli_budget;
 mod cli_cage;
+mod cli_degenerate;
 mod cli_errors;
 mod cli_interrupt;
 mod cli_output;
