@@ -116,18 +116,10 @@ pub fn predicted_peak_bytes(cost: &Cost) -> f64 {
 /// in 1.4 s parallel, 2.3 s sequential).
 const FACTOR_FLOPS_PER_SECOND: [f64; 2] = [3.7e10, 6.0e10];
 
-/// The fraction of the machine's available memory a solve may use when no budget is given.
-pub const DEFAULT_MEMORY_FRACTION: f64 = 0.6;
-
-/// The default memory budget: [`DEFAULT_MEMORY_FRACTION`] of `MemAvailable` (Linux), or 4 GiB
-/// when that cannot be read.
+/// The default memory budget: the bake's one budget ([`crate::resources::memory_budget`]:
+/// `--max-memory`, else 60% of `MemAvailable`), or 4 GiB when that cannot be read.
 pub fn default_memory_budget() -> u64 {
-    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
-        let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-        let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-        Some(kb * 1024)
-    });
-    available.map_or(4 << 30, |bytes| (bytes as f64 * DEFAULT_MEMORY_FRACTION) as u64)
+    crate::resources::memory_budget().map_or(4 << 30, |bytes| bytes as u64)
 }
 
 /// The smallest proximal weight relative to the body's stiffest rate `ω⁴ = max_i (L_ii / m_i)²`
