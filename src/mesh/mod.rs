@@ -172,7 +172,7 @@ impl TetMesh {
             .filter_map(|t| {
                 let rest = self.signed_volume_at(&self.positions, t);
                 let ratio = self.signed_volume_at(positions, t) / rest;
-                (rest > 0.0 && !(ratio >= min_ratio)).then_some((t, ratio))
+                (rest > 0.0 && (ratio.is_nan() || ratio < min_ratio)).then_some((t, ratio))
             })
             .collect()
     }
