@@ -84,6 +84,19 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// Seconds of CPU this process has used (user + system, all threads): what the work costs
+/// whatever else the machine runs (wall-clock seconds grow with the load average on a shared
+/// machine; CPU seconds do not, and for one thread they are the wall time on an idle core).
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage only writes the struct it is given.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+        return f64::NAN;
+    }
+    let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    seconds(usage.ru_utime) + seconds(usage.ru_stime)
+}
+
 fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_else(|_| "?".into())
 }
@@ -189,8 +202,8 @@ fn main() {
     println!("Ma et al. 2012, Table I: seconds per interpolation step (36 steps, rest -> 90° bend), default anchor, 2-ring bending");
     println!("machine: {} logical CPUs; load average at start {}", std::thread::available_parallelism().map_or(0, |n| n.get()), load_average());
     println!();
-    println!("| shape | n_v paper / ours | n_s paper / ours | paper CPU | paper GPU | ours warm (median / mean) | vs CPU | per step: Newton / factor. / CG | ours cold (median) | build | factor nnz | load |");
-    println!("|---|---|---|---:|---:|---:|---:|---|---:|---:|---:|---|");
+    println!("| shape | n_v paper / ours | n_s paper / ours | paper CPU | paper GPU | ours warm (median / mean) | vs CPU | ours warm CPU s (median) | vs CPU | per step: Newton / factor. / CG | ours cold (median) | build | factor nnz | load |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---|");
     for row in ROWS.iter().filter(|r| filter.as_deref().is_none_or(|f| r.name.to_lowercase().contains(&f.to_lowercase()))) {
         let surface = figure(row.boxes, row.cells, 0.1);
         let options = TetgenOptions { quality: row.quality, max_volume: row.max_volume, timeout: 300.0 };
@@ -209,14 +222,16 @@ fn main() {
         let n_v = summary.surface_vertices + summary.interior_vertices + summary.anchor_points;
         let alphas: Vec<f64> = (0..36).map(|k| k as f64 / 35.0).collect();
         let mut warm = Vec::new();
+        let mut warm_cpu = Vec::new();
         let mut iterations = Vec::new();
         let (mut factorizations, mut cg) = (0usize, 0usize);
         let mut shapes = Vec::new();
         for (k, &a) in alphas.iter().enumerate() {
-            let t1 = Instant::now();
+            let (t1, c1) = (Instant::now(), cpu_seconds());
             let shape = model.blend(&[1.0 - a, a], &[]).expect("blend");
             if k > 0 {
                 warm.push(t1.elapsed().as_secs_f64());
+                warm_cpu.push(cpu_seconds() - c1);
                 iterations.push(shape.report.iterations as f64);
                 factorizations += shape.report.work.factorizations;
                 cg += shape.report.work.cg_iterations;
@@ -246,7 +261,7 @@ fn main() {
         let warm_median = median(warm.clone());
         let warm_mean = warm.iter().sum::<f64>() / warm.len() as f64;
         println!(
-            "| {}{same} | {} / {} | {} / {} | {:.2} s | {:.2} s | {:.3} / {:.3} s | {:.0}x | {:.1} / {:.2} / {:.1} | {:.3} s | {:.2} s | {:.1}M ({}) | {} |",
+            "| {}{same} | {} / {} | {} / {} | {:.2} s | {:.2} s | {:.3} / {:.3} s | {:.0}x | {:.3} s | {:.0}x | {:.1} / {:.2} / {:.1} | {:.3} s | {:.2} s | {:.1}M ({}) | {} |",
             row.name,
             row.verts,
             n_v,
@@ -257,6 +272,8 @@ fn main() {
             warm_median,
             warm_mean,
             row.cpu / warm_median,
+            median(warm_cpu.clone()),
+            row.cpu / median(warm_cpu.clone()),
             iterations.iter().sum::<f64>() / iterations.len() as f64,
             factorizations as f64 / warm.len() as f64,
             cg as f64 / warm.len() as f64,

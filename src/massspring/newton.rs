@@ -272,9 +272,16 @@ impl Newton {
 
     /// Factorize again at the next linear solve: the caller is at a new start point, which the
     /// following iterations stay near. (Keeping a factorization across blends costs more than
-    /// it saves: on the Man-size benchmark a factorization costs about 17 CG iterations, and a
-    /// warm step takes 5.4 CG iterations with a factorization at its start point, but 23.3 and
-    /// 0.54 factorizations when it keeps the previous one until CG slows down.)
+    /// it saves: on the Man-size benchmark a factorization costs about 10 to 17 CG iterations,
+    /// and a warm step takes 5.4 CG iterations with a factorization at its start point, but
+    /// 22.7 CG and 0.54 factorizations when it refactorizes every other blend. Rotating the
+    /// kept factorization to the iterates, `R H⁰⁻¹ Rᵀ` with `R` the per-vertex best-fit
+    /// rotations of each vertex's spring neighbourhood (a spring's stiffness block turns with
+    /// it), helps but not enough: every other blend 13.4 CG and 0.54 factorizations per step,
+    /// 0.031 CPU seconds against 0.022 with a factorization per blend; every third 17.7 and
+    /// 0.37; kept until CG slows down 20.8 and 0.29, and on the Face-size model 31.1 and 0.80
+    /// against 16.2 and 1.26. Between blends more changes than the rotation: the rest
+    /// lengths, hence every spring's tension and stiffness.)
     pub fn refresh(&mut self) {
         self.stale = true;
     }

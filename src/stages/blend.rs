@@ -15,7 +15,8 @@
 //! differ in shape, not timing. Each shape's velocity is `dX/dα · dα/dt` (`dX/dα` by central
 //! differences over the interval's shapes, zero at the keys like the baseline's), and the
 //! trajectory is the cubic Hermite curve through keys and in-betweens: every in-between is an
-//! exact equilibrium, frames between them are interpolated. Vertices held at EVERY key (and not
+//! exact equilibrium, frames between them are interpolated (the log's stop reason says how
+//! many frames are; with keys on frames and `inbetweens` = frames per interval - 1, none). Vertices held at EVERY key (and not
 //! the whole surface) follow the eased linear blend as fixed vertices; otherwise the body hangs
 //! on the paper's default anchor. The tet body's edges are the internal springs and every
 //! node's keyframe pose (interior nodes from the quasi-static fit) is its target pose.
@@ -393,6 +394,15 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         *positions.last_mut().expect("keys") = first;
     }
     let trajectory = Trajectory { times, positions, velocities };
+    // Say whether the exported frames are equilibria: frames on a key or an in-between are,
+    // frames between them are Hermite-interpolated.
+    let frames = trajectory.frames(scene.fps);
+    let between = frames.iter().filter(|(_, t)| !trajectory.times.iter().any(|k| (k - t).abs() <= 1e-9 / scene.fps)).count();
+    let frames_note = if between == 0 {
+        "; every frame is an equilibrium (a key or an in-between)".to_string()
+    } else {
+        format!("; {between} of {} frames fall between in-betweens and are Hermite-interpolated (for an equilibrium at every frame, keys on frames and inbetweens = frames per interval - 1)", frames.len())
+    };
     // W on the spacetime scale: the trajectory's keys (in-betweens included) as the keys of
     // the objective, so its samples cover every sub-interval.
     let elastic = Elastic::new(mesh, &super::elastic_material(&scene.material))?;
@@ -417,7 +427,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         halvings: 0,
         converged: true,
         stop_reason: format!(
-            "mass-spring: {} in-betweens per interval, each the equilibrium of the blended springs ({} springs, {}; {iterations} Newton iterations in all{})",
+            "mass-spring: {} in-betweens per interval, each the equilibrium of the blended springs ({} springs, {}; {iterations} Newton iterations in all{}){frames_note}",
             spec.inbetweens,
             summary.springs,
             if matches!(boundary, Boundary::Fixed(_)) { "vertices held at every key follow the linear blend" } else { "default anchor" },

@@ -241,3 +241,112 @@ fn mass_spring_scene_keeps_volume_and_its_files_pass_the_checkers() {
     // chain of subcommands gives the bake's bytes.
     crate::common::cli::assert_chain_gives_bake_bytes(&dir.path, "bend.toml", "out", &["bend.usda", "bend.glb"]);
 }
+
+/// The straight bar at t = 0 and bent by 90° at t = 1, at 24 frames per second, with
+/// `inbetweens` mass-spring in-betweens and the given `[[obstacle]]` tables; the default anchor
+/// holds it (no fixed vertices).
+fn obstacle_scene(inbetweens: usize, obstacles: &str) -> String {
+    format!(
+        "name = \"bend\"\nfps = 24.0\n[keyframes]\nmeshes = [\"a.obj\", \"b.obj\"]\ntimes = [0.0, 1.0]\n[tet]\nmax_volume = 0.0003\n[solver]\nmethod = \"mass-spring\"\n[mass_spring]\ninbetweens = {inbetweens}\n{obstacles}\n[export]\nformats = [\"usda\", \"glb\"]\nfull_frame = true\n"
+    )
+}
+
+/// The direction (in the bend's plane) in which the bending bar reaches further between the
+/// keys than at either key: its support along it is 1.89 at both keys and 2.04 at a 50° bend
+/// (measured on the constant-length bend of `bent`).
+fn sweep_direction() -> Point {
+    let a = 62f64.to_radians();
+    [a.cos(), a.sin(), 0.0]
+}
+
+/// Deepest penetration (positive inside) of the surface into the obstacle `inside` (signed
+/// distance, negative inside) over every frame of the trajectory.
+fn deepest(anim: &blendsim::stage::Animation, signed: impl Fn(Point) -> f64) -> f64 {
+    let tr = &anim.trajectory;
+    tr.frames(anim.scene.fps).iter().flat_map(|&(_, t)| tr.evaluate(t)).map(|p| -signed(p)).fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Frames between the in-betweens are Hermite-interpolated; with an in-between at every frame
+/// (`inbetweens` = frames per interval - 1) every exported frame is an equilibrium. Measured
+/// here: how far the interpolated frames of 3 in-betweens per interval are from those
+/// equilibria, and how deep they enter an obstacle that every equilibrium stays out of.
+#[test]
+fn interpolated_frames_deviate_from_the_per_frame_equilibria_by_a_measured_amount() {
+    let dir = TempDir::new("blend-frames");
+    targets(&dir);
+    let n = sweep_direction();
+    let (centre, radius) = (n.map(|c| 2.2 * c), 0.3);
+    let sphere = format!("[[obstacle]]\nkind = \"sphere\"\ncenter = {centre:?}\nradius = {radius}\n");
+    let mut measured = Vec::new();
+    for (name, obstacles) in [("free", String::new()), ("sphere", sphere)] {
+        let anim = |inbetweens: usize| {
+            let scene = dir.join(format!("{name}-{inbetweens}.toml"));
+            std::fs::write(&scene, obstacle_scene(inbetweens, &obstacles)).unwrap();
+            library_animation_with(&scene, None)
+        };
+        let (coarse, every) = (anim(3), anim(23));
+        assert_eq!(every.trajectory.key_count(), 25, "an equilibrium at every frame");
+        // The log says which frames are equilibria.
+        assert!(every.log.stop_reason.contains("every frame is an equilibrium"), "{}", every.log.stop_reason);
+        assert!(coarse.log.stop_reason.contains("20 of 25 frames fall between in-betweens and are Hermite-interpolated"), "{}", coarse.log.stop_reason);
+        let size = blendsim::mesh::bbox_diagonal(&every.trajectory.positions[0]);
+        let deviation = coarse.trajectory.frames(24.0).iter().map(|&(_, t)| max_distance(&coarse.trajectory.evaluate(t), &every.trajectory.evaluate(t))).fold(0.0, f64::max) / size;
+        let depth = |a: &blendsim::stage::Animation| deepest(a, |p| norm(sub(p, centre)) - radius) / size;
+        eprintln!("{name}: interpolated frames (3 in-betweens) vs an equilibrium per frame: max deviation {:.3e} of the size; deepest in the sphere: {:.3e} (3 in-betweens), {:.3e} (every frame)", deviation, depth(&coarse), depth(&every));
+        measured.push((deviation, depth(&coarse), depth(&every)));
+    }
+    let (free, pushed) = (measured[0], measured[1]);
+    // Without obstacles the interpolated frames are close to equilibria: the in-betweens
+    // follow a smooth family of shapes.
+    assert!(free.0 > 0.0 && free.0 < 0.02, "free bend: {free:?}");
+    // With the sphere, frames between the in-betweens cut into it, equilibria at every frame do not.
+    assert!(pushed.1 > 1e-3, "the interpolated frames enter the sphere: {pushed:?}");
+    assert!(pushed.2 <= 1e-6, "an equilibrium at every frame stays out: {pushed:?}");
+}
+
+/// A mass-spring scene on the default anchor with a plane and then a sphere in the bending
+/// bar's way (but clear of both keys), an equilibrium at every frame: the obstacle pushes the
+/// in-betweens, no surface vertex is inside it at any frame of the exported animation, and
+/// every file passes usd-core, the glTF validator and three.js and plays that animation.
+#[test]
+fn mass_spring_scene_with_a_plane_or_a_sphere_keeps_every_frame_outside() {
+    let dir = TempDir::new("blend-obstacles");
+    targets(&dir);
+    let n = sweep_direction();
+    let level = 1.95;
+    let (centre, radius) = (n.map(|c| 2.2 * c), 0.3);
+    let plane = format!("[[obstacle]]\nkind = \"plane\"\npoint = {:?}\nnormal = {:?}\n", n.map(|c| level * c), n.map(|c| -c));
+    let sphere = format!("[[obstacle]]\nkind = \"sphere\"\ncenter = {centre:?}\nradius = {radius}\n");
+    let free = {
+        std::fs::write(dir.join("free.toml"), obstacle_scene(23, "")).unwrap();
+        library_animation_with(&dir.join("free.toml"), None)
+    };
+    let plane_signed = |p: Point| level - (p[0] * n[0] + p[1] * n[1] + p[2] * n[2]);
+    let sphere_signed = |p: Point| norm(sub(p, centre)) - radius;
+    let size = blendsim::mesh::bbox_diagonal(&free.trajectory.positions[0]);
+    for (name, obstacle, signed) in [("plane", plane, &plane_signed as &dyn Fn(Point) -> f64), ("sphere", sphere, &sphere_signed)] {
+        // Without the obstacle the bar would enter it between the keys; the keys are clear.
+        let free_depth = deepest(&free, signed);
+        assert!(free_depth > 0.05, "{name}: the free bend enters the obstacle by {free_depth}");
+        for key in &free.input_keys {
+            assert!(key.iter().all(|&p| signed(p) > 0.0), "{name}: the keys are outside");
+        }
+        let scene = format!("{name}.toml");
+        std::fs::write(dir.join(&scene), obstacle_scene(23, &obstacle)).unwrap();
+        let out = format!("out-{name}");
+        run(&dir.path, &["bake", "-q", &scene, "--out", &out]).success();
+        let report = read_json(&dir.join(&out).join("report.json"));
+        assert_eq!(report["solver"]["method"], "mass-spring");
+        let stop = report["solver"]["stop_reason"].as_str().unwrap();
+        assert!(stop.contains("default anchor") && stop.contains("vertex holds on obstacles"), "{name}: {stop}");
+        let anim = library_animation_with(&dir.join(&scene), None);
+        let depth = deepest(&anim, signed);
+        eprintln!("{name}: deepest surface vertex over the frames {depth:.3e} (free bend: {free_depth:.3e}); {stop}");
+        assert!(depth <= 1e-6 * size, "{name}: a surface vertex is {depth} inside at some frame");
+        let moved = anim.trajectory.frames(24.0).iter().map(|&(_, t)| max_distance(&anim.trajectory.evaluate(t), &free.trajectory.evaluate(t))).fold(0.0, f64::max);
+        assert!(moved > 0.03, "{name}: the obstacle pushed the bar ({moved})");
+        let deviation = report["keyframe_deviation"]["max"].as_f64().unwrap();
+        assert!(deviation < 1e-9, "{name}: keys {deviation}");
+        check_outputs(&dir.join(&out), &anim, &output_files(&report["outputs"]));
+    }
+}
