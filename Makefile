@@ -23,11 +23,12 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test fuzz test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
+	@echo "make tables   print the reliability tables: the bad-input corpus (input, exit 1, message) and the kill tests (signal x phase -> folder)"
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
@@ -100,6 +101,16 @@ demo: build deps-tetgen deps-usd
 test: test-deps
 	@echo "==> running the test suite (release build)"
 	$(CARGO) test --release --locked
+
+# The closing tables of the reliability work (issue 7), printed by the tests that check them:
+# every bad input of the corpus with its one-line message (each exits 1 and leaves the output
+# folder as it was), every bad stage file, and the kill tests (SIGINT, SIGTERM, SIGKILL at every
+# phase of a bake -> the state of the output folder, the child process, the leftovers).
+tables: test-deps
+	@echo "==> the bad-input corpus, the bad stage files, the kill tests (tables on stderr)"
+	$(CARGO) test --release --locked --test integration -- --nocapture --test-threads=1 --exact \
+		cli_errors::corpus_of_bad_inputs cli_errors::corpus_of_bad_stage_files \
+		cli_interrupt::sigint_at_every_phase cli_interrupt::sigterm_at_every_phase cli_interrupt::sigkill_at_every_phase
 
 # The readers' property tests (src/fuzz.rs) run 10,000 cases per property in `make test`;
 # this runs many more (random bytes and mutations of valid files, with shrinking). The filter

@@ -10,17 +10,20 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 #[derive(Debug, Clone)]
 pub struct Progress {
     visible: bool,
+    /// Warnings go to stderr (the CLI, quiet or not); the library's hidden progress keeps them
+    /// in the stage data only.
+    warnings: bool,
 }
 
 impl Progress {
     /// Visible when stderr is a terminal and not `quiet`.
     pub fn new(quiet: bool) -> Progress {
-        Progress { visible: !quiet && std::io::stderr().is_terminal() }
+        Progress { visible: !quiet && std::io::stderr().is_terminal(), warnings: true }
     }
 
     /// Never drawn (library use, tests).
     pub fn hidden() -> Progress {
-        Progress { visible: false }
+        Progress { visible: false, warnings: false }
     }
 
     fn target(&self) -> ProgressDrawTarget {
@@ -28,6 +31,15 @@ impl Progress {
             ProgressDrawTarget::stderr()
         } else {
             ProgressDrawTarget::hidden()
+        }
+    }
+
+    /// One warning line on stderr, `blendsim: warning: LINE` (control characters folded), shown
+    /// even with `--quiet`; the stage data keep it for the report.
+    pub fn warn(&self, line: &str) {
+        if self.warnings {
+            let line: String = line.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
+            eprintln!("blendsim: warning: {line}");
         }
     }
 

@@ -17,11 +17,37 @@ const BYTES_PER_FRAME: f64 = 16.0;
 /// deformation gradient, and the optional projection Jacobian the timing derivatives keep.
 const BYTES_PER_SAMPLE_TET: f64 = 4.0 * 72.0;
 
-/// The memory a bake may use, in bytes: the machine's available memory (`MemAvailable` in
-/// `/proc/meminfo`), or `None` where that is unknown (no check). The one place a budget is
-/// read, so a `--max-memory` flag can be routed here.
+/// The fraction of the machine's available memory a bake may use when no `--max-memory` is
+/// given (the rest is for the process's other arrays, the OS and other programs).
+pub const DEFAULT_MEMORY_FRACTION: f64 = 0.6;
+
+/// `--max-memory`, once the CLI has read it (see [`set_max_memory`]).
+static MAX_MEMORY: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+
+/// Route the CLI's `--max-memory` (bytes) here: from then on it is the one budget of every
+/// estimate ([`check`]) and of the solver's direct factorization. Set once per process.
+pub fn set_max_memory(bytes: u64) {
+    let _ = MAX_MEMORY.set(bytes);
+}
+
+/// The one memory budget of a bake, in bytes: `--max-memory` when given, else
+/// [`DEFAULT_MEMORY_FRACTION`] of the machine's available memory (`MemAvailable` in
+/// `/proc/meminfo`), or `None` where that is unknown (no check). Every pre-allocation estimate
+/// and the global step's choice between its direct and iterative solve read it here.
 pub fn memory_budget() -> Option<f64> {
-    available_memory()
+    match MAX_MEMORY.get() {
+        Some(&bytes) => Some(bytes as f64),
+        None => available_memory().map(|m| DEFAULT_MEMORY_FRACTION * m),
+    }
+}
+
+/// Where the budget came from, for messages.
+fn budget_source() -> &'static str {
+    if MAX_MEMORY.get().is_some() {
+        "the --max-memory budget"
+    } else {
+        "the memory budget (60% of the available memory; --max-memory sets it)"
+    }
 }
 
 /// `MemAvailable` of `/proc/meminfo`, in bytes.
@@ -46,8 +72,8 @@ pub fn check(bytes: f64, what: &str, fix: &str) -> Result<()> {
 fn check_against(bytes: f64, budget: Option<f64>, what: &str, fix: &str) -> Result<()> {
     match budget {
         Some(budget) if bytes.is_nan() || bytes > budget => Err(Error::general(
-            format!("the scene would need about {} of memory for {what}, more than the {} available", gb(bytes), gb(budget)),
-            fix,
+            format!("the scene would need about {} of memory for {what}, more than {} of {}", gb(bytes), budget_source(), gb(budget)),
+            format!("{fix}; or raise --max-memory"),
         )),
         _ => Ok(()),
     }
@@ -55,7 +81,9 @@ fn check_against(bytes: f64, budget: Option<f64>, what: &str, fix: &str) -> Resu
 
 fn gb(bytes: f64) -> String {
     let g = bytes / 1e9;
-    if g < 1e6 {
+    if g < 0.1 {
+        format!("{:.1} MB", bytes / 1e6)
+    } else if g < 1e6 {
         format!("{g:.1} GB")
     } else {
         format!("{g:.1e} GB")
@@ -90,7 +118,8 @@ mod tests {
     #[test]
     fn estimates_over_the_budget_fail_with_the_estimate() {
         let e = check_against(3.0e10, Some(2.0e10), "x", "y").unwrap_err();
-        assert_eq!(e.problem, "the scene would need about 30.0 GB of memory for x, more than the 20.0 GB available");
+        assert!(e.problem.starts_with("the scene would need about 30.0 GB of memory for x, more than the "), "{}", e.problem);
+        assert!(e.problem.ends_with(" of 20.0 GB"), "{}", e.problem);
         assert!(check_against(1.0e9, Some(2.0e10), "x", "y").is_ok());
         assert!(check_against(f64::INFINITY, Some(2.0e10), "x", "y").is_err());
         assert!(check_against(f64::NAN, Some(2.0e10), "x", "y").is_err());

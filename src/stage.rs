@@ -165,6 +165,10 @@ pub struct Body {
     /// When `mesh` is a generated cage around the keyframe surface: how it was made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cage: Option<CageInfo>,
+    /// What `tetrahedralize` warned about (one line each, the file first): tets of a key that
+    /// the interior fit left inverted or flattened, a `max_volume` TetGen could not honour.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// What the solver did.
@@ -254,7 +258,7 @@ pub struct Solution {
 }
 
 /// Sizes of the problem, for the report.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Counts {
     /// Vertices of the exported surface.
     pub vertices: usize,
@@ -266,6 +270,10 @@ pub struct Counts {
     pub tets: usize,
     /// Keyframes.
     pub keyframes: usize,
+    /// The largest rest volume of a tet of the body (compared with `[tet] max_volume` in the
+    /// report).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub largest_tet_volume: Option<f64>,
 }
 
 /// Output of `embed`: the exported surface and its exact trajectory.
@@ -289,6 +297,9 @@ pub struct Animation {
     /// The cage the surface was simulated on, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cage: Option<CageInfo>,
+    /// The body's warnings ([`Body::warnings`]), for the report.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// The two forms of the animation in the files.

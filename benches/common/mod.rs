@@ -50,7 +50,7 @@ pub fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new() }
 }
 
 /// CHEB-size: the paper's CHEB jump (922 nodes, 3125 tets, 10 keys of 0.3 s, 10 samples per
@@ -94,5 +94,5 @@ pub fn cheb_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 10],
         cyclic: false,
     };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new() }
 }

@@ -25,7 +25,8 @@ pub struct Args {
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Memory the solve's global step may use (e.g. 4G, 512M); past it the step is solved
-    /// iteratively instead of by a sparse factorization. Default: 60% of the available memory.
+    /// iteratively instead of by a sparse factorization; every other memory estimate (frames,
+    /// samples) must fit in it too. Default: 60% of the available memory.
     #[arg(long, value_parser = super::parse_bytes)]
     max_memory: Option<u64>,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
@@ -41,6 +42,9 @@ impl Args {
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let start = Instant::now();
+    if let Some(bytes) = args.max_memory {
+        blendsim::resources::set_max_memory(bytes);
+    }
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;

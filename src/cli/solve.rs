@@ -22,7 +22,8 @@ pub struct Args {
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Memory the global step may use (e.g. 4G, 512M); past it the step is solved iteratively
-    /// instead of by a sparse factorization. Default: 60% of the available memory.
+    /// instead of by a sparse factorization; every other memory estimate must fit in it too.
+    /// Default: 60% of the available memory.
     #[arg(long, value_parser = super::parse_bytes)]
     max_memory: Option<u64>,
 }
@@ -34,6 +35,9 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
+    if let Some(bytes) = args.max_memory {
+        blendsim::resources::set_max_memory(bytes);
+    }
     let body: Body = stage::read(&args.body)?;
     stage::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)
 }

@@ -163,6 +163,49 @@ impl TetMesh {
         (0..self.tets.len()).map(|t| self.signed_volume_at(positions, t)).sum()
     }
 
+    /// The tets that `positions` invert or flatten against the rest pose (`self.positions`,
+    /// positively oriented): `(tet, V / V_rest)` for every tet whose ratio is below
+    /// `min_ratio` (negative: inverted), in tet order. Tets flat at rest are skipped (the rest
+    /// shape's own checks report them).
+    pub fn collapsed_at(&self, positions: &[Point], min_ratio: f64) -> Vec<(usize, f64)> {
+        (0..self.tets.len())
+            .filter_map(|t| {
+                let rest = self.signed_volume_at(&self.positions, t);
+                let ratio = self.signed_volume_at(positions, t) / rest;
+                (rest > 0.0 && (ratio.is_nan() || ratio < min_ratio)).then_some((t, ratio))
+            })
+            .collect()
+    }
+
+    /// A fold of the mesh at rest, whatever the tets' vertex order: two tets sharing a face
+    /// with their opposite vertices on the same side of it (they overlap), as `(tet, other
+    /// tet, the shared face)`, the first in tet order. A valid tet mesh has none.
+    pub fn first_fold(&self) -> Option<(usize, usize, [u32; 3])> {
+        let mut faces: std::collections::HashMap<[u32; 3], (usize, u32)> = std::collections::HashMap::with_capacity(2 * self.tets.len());
+        let p = |v: u32| self.positions[v as usize];
+        let mut folds = Vec::new();
+        for (t, tet) in self.tets.iter().enumerate() {
+            for i in 0..4 {
+                let mut face = [tet[(i + 1) % 4], tet[(i + 2) % 4], tet[(i + 3) % 4]];
+                face.sort_unstable();
+                match faces.entry(face) {
+                    std::collections::hash_map::Entry::Vacant(e) => {
+                        e.insert((t, tet[i]));
+                    }
+                    std::collections::hash_map::Entry::Occupied(e) => {
+                        let (other, opposite) = *e.get();
+                        let [a, b, c] = face.map(p);
+                        let (s1, s2) = (tet_signed_volume(a, b, c, p(opposite)), tet_signed_volume(a, b, c, p(tet[i])));
+                        if s1 * s2 > 0.0 {
+                            folds.push((other, t, face));
+                        }
+                    }
+                }
+            }
+        }
+        folds.into_iter().min()
+    }
+
     /// Swap two vertices of every tet with negative signed volume, so all are positive.
     /// Returns how many were flipped.
     pub fn orient_positive(&mut self) -> usize {

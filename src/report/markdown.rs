@@ -24,6 +24,9 @@ pub fn render(report: &Report) -> String {
             ),
         );
     }
+    for w in &report.warnings {
+        push(&mut s, format!("| warning | {} |", w.replace('|', "/")));
+    }
     push(&mut s, format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames));
     let sv = &report.solver;
     let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));

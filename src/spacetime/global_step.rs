@@ -162,18 +162,32 @@ pub fn predicted_peak_bytes(cost: &Cost) -> f64 {
 /// in 1.4 s parallel, 2.3 s sequential).
 const FACTOR_FLOPS_PER_SECOND: [f64; 2] = [3.7e10, 6.0e10];
 
-/// The fraction of the machine's available memory a solve may use when no budget is given.
-pub const DEFAULT_MEMORY_FRACTION: f64 = 0.6;
-
-/// The default memory budget: [`DEFAULT_MEMORY_FRACTION`] of `MemAvailable` (Linux), or 4 GiB
-/// when that cannot be read.
+/// The default memory budget: the bake's one budget ([`crate::resources::memory_budget`]:
+/// `--max-memory`, else 60% of `MemAvailable`), or 4 GiB when that cannot be read.
 pub fn default_memory_budget() -> u64 {
-    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
-        let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-        let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-        Some(kb * 1024)
-    });
-    available.map_or(4 << 30, |bytes| (bytes as f64 * DEFAULT_MEMORY_FRACTION) as u64)
+    crate::resources::memory_budget().map_or(4 << 30, |bytes| bytes as u64)
+}
+
+/// The smallest proximal weight relative to the body's stiffest rate `ω⁴ = max_i (L_ii / m_i)²`
+/// (1/s⁴: the fourth power of its fastest vibration). In the matrix, translations of the free
+/// unknowns cost only inertia (`C_MM M`, since `L 1 = 0`) while every other motion costs
+/// `C_KK L M⁻¹ L ~ ω⁴ C_KK M`; when a scene is very stiff for its size and mass (a 1e-4 m box
+/// of density 1 and stiffness 70 is 1e16 times stiffer than its inertia) the translation pivots
+/// drown in round-off and Cholesky fails. Flooring `1/h⁴` at `1e-10 ω⁴` keeps those pivots
+/// above round-off whatever the units. The proximal term never moves the fixed point (see the
+/// module documentation); the floor is far below the default `1/h⁴` at ordinary scales
+/// (`1e-10 ω⁴ ≈ 1e-3` for the demo against `1/0.1⁴ = 1e4`), so it only acts in those extremes.
+pub const PROXIMAL_FLOOR: f64 = 1e-10;
+
+/// The proximal weight `1/h⁴` for the regularization time scale `h` (0 = off), floored by
+/// [`PROXIMAL_FLOOR`] times the body's stiffest rate.
+pub fn proximal_weight(objective: &Objective, regularization: f64) -> f64 {
+    if regularization <= 0.0 {
+        return 0.0;
+    }
+    let elastic = objective.elastic;
+    let rate = (0..elastic.node_count()).filter(|&i| elastic.mass[i] > 0.0).map(|i| (elastic.stiffness.get(i, i) / elastic.mass[i]).powi(2)).fold(0.0f64, f64::max);
+    (1.0 / regularization.powi(4)).max(PROXIMAL_FLOOR * rate)
 }
 
 /// The normal matrix as the Kronecker sum it is, `C_MM ⊗ M + C_ML ⊗ L + C_KK ⊗ L M⁻¹ L`
@@ -520,7 +534,7 @@ impl GlobalStep {
     /// [`default_memory_budget`]); otherwise prepare the iterative step.
     pub fn within(objective: &Objective, unknowns: Unknowns, regularization: f64, max_memory: Option<u64>) -> Result<GlobalStep> {
         let budget = max_memory.unwrap_or_else(default_memory_budget);
-        let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        let proximal = proximal_weight(objective, regularization);
         if proximal == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
             // Singular by construction; a factorization may still pass on roundoff pivots.
             return Err(Error::general(
@@ -593,7 +607,7 @@ impl GlobalStep {
     /// symbolic analysis. With a changed pattern it falls back to [`GlobalStep::new`].
     pub fn retime(&mut self, objective: &Objective, regularization: f64) -> Result<Retimed> {
         let t0 = std::time::Instant::now();
-        let proximal = if regularization > 0.0 { 1.0 / regularization.powi(4) } else { 0.0 };
+        let proximal = proximal_weight(objective, regularization);
         let coefficients = TimeCoefficients::new(objective, proximal);
         let Some(Inverse::Direct(cholesky)) = self.cholesky.as_mut().filter(|_| coupling(&coefficients) == self.coupling) else {
             *self = GlobalStep::within(objective, self.unknowns.clone(), regularization, Some(self.budget))?;

@@ -17,13 +17,14 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         // Nothing simulated (`fit`): the trajectory is the surface's own.
         return Ok(Animation {
             scene: body.scene.clone(),
-            counts: Counts { vertices: body.surface.positions.len(), faces: body.surface.triangles.len(), tet_nodes: 0, tets: 0, keyframes: body.keys.times.len() },
+            counts: Counts { vertices: body.surface.positions.len(), faces: body.surface.triangles.len(), tet_nodes: 0, tets: 0, keyframes: body.keys.times.len(), largest_tet_volume: None },
             mesh: body.surface.clone(),
             trajectory: solution.trajectory.clone(),
             input_keys: body.keys.positions.clone(),
             log: solution.log.clone(),
             cache: body.cache.clone(),
             cage: None,
+            warnings: body.warnings.clone(),
         });
     };
     let binding = Binding::compute(tets, &body.surface.positions);
@@ -36,6 +37,7 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
             tet_nodes: tets.positions.len(),
             tets: tets.tets.len(),
             keyframes: body.keys.times.len(),
+            largest_tet_volume: Some((0..tets.tets.len()).map(|t| tets.signed_volume_at(&tets.positions, t).abs()).fold(0.0, f64::max)),
         },
         mesh: body.surface.clone(),
         trajectory: solution.trajectory.map_linear(carry),
@@ -43,5 +45,6 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         log: solution.log.clone(),
         cache: body.cache.clone(),
         cage: body.cage.clone(),
+        warnings: body.warnings.clone(),
     })
 }

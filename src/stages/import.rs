@@ -251,6 +251,7 @@ impl KeyMeshes {
             }
             MeshFile::Volume(v) => {
                 let mut rest = TetMesh { positions: rest_positions, tets: v.tets.clone() };
+                check_rest_fold(&rest, &rest_source)?;
                 rest.orient_positive();
                 Shape::Volume(rest)
             }
@@ -272,6 +273,50 @@ impl KeyMeshes {
         }
         Ok(())
     }
+}
+
+/// A tet key's tet at this fraction of its rest volume or below is flattened.
+pub const FLAT_TET_RATIO: f64 = 1e-3;
+
+/// Tet numbers and vertices as the MEDIT file writes them (1-based).
+fn tet_in_file(mesh: &TetMesh, t: usize) -> String {
+    let [a, b, c, d] = mesh.tets[t].map(|v| v + 1);
+    format!("tet {} (vertices {a}, {b}, {c}, {d}; 1-based, as in the file)", t + 1)
+}
+
+/// A rest tet mesh that overlaps itself (two tets sharing a face lie on the same side of it:
+/// a tet turned inside out against its neighbours) is folded. The files' vertex order says
+/// nothing (the paper's meshes mix both orders; tets are oriented on load), so the test is
+/// geometric, on the faces.
+fn check_rest_fold(rest: &TetMesh, path: &Path) -> Result<()> {
+    let Some((t, u, face)) = rest.first_fold() else { return Ok(()) };
+    let [a, b, c] = face.map(|v| v + 1);
+    Err(Error::in_file(
+        path,
+        format!("the rest mesh is folded: {} and {} overlap across their shared face (vertices {a}, {b}, {c})", tet_in_file(rest, t), tet_in_file(rest, u)),
+        "untangle the rest mesh in the modeling tool so that no tet is turned inside out",
+    ))
+}
+
+/// A key of a tet mesh that inverts or flattens a tet (a local fold, even when the key's total
+/// volume is fine) is an error naming the key file and the tet: the key is a hard constraint,
+/// so the solver would have to keep the fold.
+fn check_key_tets(rest: &TetMesh, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    for (k, pose) in poses.iter().enumerate() {
+        let collapsed = rest.collapsed_at(pose, FLAT_TET_RATIO);
+        let Some(&(t, ratio)) = collapsed.first() else { continue };
+        let what = if ratio < 0.0 { "inverted" } else { "flattened" };
+        let others = match collapsed.len() - 1 {
+            0 => String::new(),
+            n => format!(" (and {n} more tets)"),
+        };
+        return Err(Error::in_file(
+            &paths[k],
+            format!("key {k} folds the body: {} is {what}, at {:.1}% of its rest volume{others}", tet_in_file(rest, t), 100.0 * ratio),
+            "re-export the key so that no tet is turned inside out or squashed flat",
+        ));
+    }
+    Ok(())
 }
 
 /// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or
@@ -306,5 +351,8 @@ fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> R
             "re-export the key from the same object without a zero or negative scale",
         ));
     }
-    Ok(())
+    match rest {
+        Shape::Volume(v) => check_key_tets(v, poses, paths),
+        Shape::Surface(_) => Ok(()),
+    }
 }

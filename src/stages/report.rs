@@ -46,6 +46,8 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         tet_nodes: animation.counts.tet_nodes,
         tets: animation.counts.tets,
         keyframes: animation.counts.keyframes,
+        largest_tet_volume: animation.counts.largest_tet_volume,
+        max_volume: (scene.tet.max_volume > 0.0 && animation.counts.largest_tet_volume.is_some()).then_some(scene.tet.max_volume),
         duration_s: tr.duration(),
         fps: scene.fps,
         frames: frames.len(),
@@ -59,6 +61,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         cage: animation.cage.clone(),
         basis: if rank.is_some() { Basis::Principal } else { Basis::Keys },
         rank,
+        warnings: animation.warnings.clone(),
     })
 }
 

@@ -14,8 +14,26 @@ fn demo_scene() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo/twist.toml")
 }
 
+/// The demo with 2 samples per interval, copied into `dir`: its spacetime samples (1.8 MB
+/// estimated) and frames (1.5 MB) fit in a 3 MB budget that its factor does not, so
+/// `--max-memory 3M` exercises the iterative step. (`--max-memory` is the one budget of every
+/// estimate, so the demo itself, at 9 MB of samples, is refused below that.)
+fn lean_demo(dir: &TempDir) -> PathBuf {
+    let from = demo_scene().parent().unwrap().to_path_buf();
+    let to = dir.join("lean");
+    std::fs::create_dir_all(&to).unwrap();
+    for e in std::fs::read_dir(&from).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+    }
+    let scene = std::fs::read_to_string(to.join("twist.toml")).unwrap();
+    assert!(scene.contains("\nsamples = 10\n"));
+    std::fs::write(to.join("twist.toml"), scene.replace("\nsamples = 10\n", "\nsamples = 2\n")).unwrap();
+    to.join("twist.toml")
+}
+
 fn bake(dir: &TempDir, out: &str, extra: &[&str]) -> Value {
-    let scene = demo_scene();
+    let scene = lean_demo(dir);
     let mut args = vec!["bake", "-q", scene.to_str().unwrap(), "--out", out];
     args.extend(extra);
     run(&dir.path, &args).success();
@@ -26,7 +44,7 @@ fn bake(dir: &TempDir, out: &str, extra: &[&str]) -> Value {
 fn over_the_memory_budget_the_iterative_step_gives_the_direct_result() {
     let dir = TempDir::new("budget");
     let direct = bake(&dir, "direct", &[]);
-    let iterative = bake(&dir, "iterative", &["--max-memory", "1K"]);
+    let iterative = bake(&dir, "iterative", &["--max-memory", "3M"]);
     assert_eq!(direct["solver"]["linear_solver"], "direct");
     assert_eq!(iterative["solver"]["linear_solver"], "iterative");
     let (a, b) = (energies(&direct), energies(&iterative));
@@ -35,14 +53,14 @@ fn over_the_memory_budget_the_iterative_step_gives_the_direct_result() {
         assert!((x - y).abs() <= 1e-8 * x.abs(), "W {x} (direct) vs {y} (iterative)");
     }
     // The iterative bake's files against the direct solve's animation (the library's default).
-    let anim = library_animation(&demo_scene());
+    let anim = library_animation(&lean_demo(&dir));
     assert_eq!(anim.log.linear_solver, "direct");
     assert_eq!(check_outputs(&dir.join("iterative"), &anim, &output_files(&iterative["outputs"])).len(), 6);
     // `solve` takes the flag too.
-    let scene = demo_scene();
+    let scene = lean_demo(&dir);
     run(&dir.path, &["import", scene.to_str().unwrap(), "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
-    run(&dir.path, &["solve", "body.json", "-o", "solution.json", "--max-memory", "0.5k"]).success();
+    run(&dir.path, &["solve", "body.json", "-o", "solution.json", "--max-memory", "3M"]).success();
     assert_eq!(read_json(&dir.join("solution.json"))["data"]["log"]["linear_solver"], "iterative");
     // A malformed amount is a usage error (exit 2) that says what to give.
     for bad in ["abc", "0", "4X"] {
@@ -50,5 +68,19 @@ fn over_the_memory_budget_the_iterative_step_gives_the_direct_result() {
         assert_eq!(r.code, Some(2), "{bad}: {r}");
         assert!(r.stderr.contains("--max-memory") && r.stderr.contains("4G"), "{bad}: {r}");
     }
+    assert!(!dir.join("never").exists());
+}
+
+#[test]
+fn max_memory_is_the_one_budget_of_every_estimate() {
+    // The demo needs about 9 MB for its spacetime samples and 1.5 MB for its frames: under a
+    // 1 MB budget the bake is the one-line estimate error, before any work, and writes nothing.
+    let dir = TempDir::new("budget-estimate");
+    let scene = demo_scene();
+    let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-memory", "1M"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.contains("twist.toml: the scene would need about ") && r.stderr.contains("more than the --max-memory budget of 1.0 MB"), "{r}");
+    assert!(r.stderr.contains("raise --max-memory"), "{r}");
     assert!(!dir.join("never").exists());
 }

@@ -618,7 +618,7 @@ fn corpus() -> Vec<Bad> {
         bad("key-flattened", key1(obj::write(&scaled(cube(), [1.0, 0.0, 1.0]))), "in/k1.obj", &["key 1 is flattened or collapsed: it encloses 0.0%"]),
         bad("key-collapsed", key1(obj::write(&scaled(cube(), [0.0, 0.0, 0.0]))), "in/k1.obj", &["key 1 is flattened or collapsed"]),
         // Beyond the machine's memory: once a capacity-overflow panic or an allocation abort.
-        bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "GB available", "lower [solver] samples"]),
+        bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "more than the memory budget (60% of the available memory; --max-memory sets it) of ", "lower [solver] samples"]),
         bad_scene("samples-1e9", table("[solver]\nsamples = 1000000000"), &["would need about 3456.0 GB of memory for 1000000000 samples per interval"]),
         bad_scene("samples-float", table("[solver]\nsamples = 1e9"), &["invalid type: floating point `1000000000.0`, expected usize"]),
         bad_scene("fps-1e9", base.replacen("[keyframes]", "fps = 1e9\n[keyframes]", 1), &["GB of memory for 1.000e9 frames (1 s at 1000000000 fps) of 26 vertices", "lower fps"]),

@@ -55,7 +55,7 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
     let scene = Scene::parse(&text).unwrap_or_else(|e| panic!("test scene does not parse: {e}\n{text}"));
     Animation {
         scene,
-        counts: Counts { vertices: mesh.positions.len(), faces: mesh.triangles.len(), tet_nodes: 0, tets: 0, keyframes: keys },
+        counts: Counts { vertices: mesh.positions.len(), faces: mesh.triangles.len(), tet_nodes: 0, tets: 0, keyframes: keys, largest_tet_volume: None },
         input_keys: trajectory.positions.clone(),
         mesh,
         trajectory,
@@ -83,5 +83,6 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
         },
         cache: None,
         cage: None,
+        warnings: Vec::new(),
     }
 }
