@@ -16,13 +16,23 @@ use crate::export::fullframe::FullFrame;
 use crate::export::{glb, usda, usdc};
 use crate::mesh::Axis;
 use crate::output::Staging;
+use crate::progress::Progress;
 use crate::scene::{Format, GltfInterpolation};
 use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
 /// in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
+    export_with(animation, staging, None, &Progress::hidden())
+}
+
+/// [`export`] converting the `.usdc` files with `converter` (one started earlier, so that its
+/// start-up overlapped other work) instead of a Python process started when the first is due,
+/// and showing a bar over the files on `progress`.
+pub fn export_with(animation: &Animation, staging: &mut Staging, converter: Option<usdc::Converter>, progress: &Progress) -> Result<Outputs> {
     check(animation)?;
+    // One Python process for every usdc file of the export.
+    let mut converter = converter;
     let scene = &animation.scene;
     staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
@@ -46,6 +56,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
         forms.push((OutputKind::FullFrame, ".full".into()));
     }
 
+    let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
@@ -55,6 +66,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
         };
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
+            bar.set_message(format!("export: {name}"));
             match format {
                 Format::Usda => staging.write(&name, usda_text().as_bytes())?,
                 Format::Usdc => {
@@ -69,7 +81,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                         temporary
                     };
                     // Errors name the file the user asked for, not its staging path.
-                    let converted = usdc::convert(&staging.path(&source), &staging.path(&name))
+                    let converted = converter.get_or_insert_with(usdc::Converter::start).convert(&staging.path(&source), &staging.path(&name))
                         .map_err(|e| Error { path: Some(staging.final_path(&name)), ..e });
                     if source.starts_with('.') {
                         let _ = std::fs::remove_file(staging.path(&source));
@@ -90,8 +102,10 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                 }
             }
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
+            bar.inc(1);
         }
     }
+    bar.finish_and_clear();
     Ok(Outputs { files })
 }
 
