@@ -79,7 +79,6 @@ impl Converter {
         )
         .ok()
         .map(|mut child| {
-            crate::interrupt::pause_point("usdc", &format!("(pid {})", child.id()));
             let stdin = child.child().stdin.take();
             let stdout = BufReader::new(child.child().stdout.take().expect("piped stdout"));
             let mut pipe = child.child().stderr.take().expect("piped stderr");
@@ -105,7 +104,11 @@ impl Converter {
         let (Some(a), Some(c)) = (usda.to_str(), usdc.to_str()) else {
             return Err(Error::in_file(usdc, "the path is not valid UTF-8, which usd-core's Python API needs", "write into a folder whose path is UTF-8"));
         };
-        running.used = true;
+        if !running.used {
+            // The interruption tests stop here: in the export, with Python running.
+            crate::interrupt::pause_point("usdc", &format!("(pid {})", running.child.id()));
+            running.used = true;
+        }
         let mut request = serde_json::to_string(&[a, c]).expect("strings serialize");
         request.push('\n');
         let sent = running.stdin.as_mut().map(|s| s.write_all(request.as_bytes()).and_then(|()| s.flush()));

@@ -9,7 +9,8 @@ use crate::export::usdc;
 use crate::scene::{Format, Method, SceneFile};
 use crate::stage::{Animation, Body};
 
-use super::{embed, export_with, import, report, solve_within, tetrahedralize};
+use super::report::{measure, with_outputs};
+use super::{embed, export_with, import, solve_within, tetrahedralize};
 
 /// A scene to bake, with the options the CLI gives (`--method`).
 #[derive(Debug, Clone)]
@@ -68,10 +69,19 @@ impl<'a> Bake<'a> {
         // Python's start-up and usd-core's import (about 0.3 s of CPU) overlap the solve.
         let converter = self.scene.scene.export.formats.contains(&Format::Usdc).then(usdc::Converter::start);
         let animation = self.animation()?;
-        let outputs = export_with(&animation, staging, converter, self.progress)?;
-        let bar = self.progress.stage("report");
-        let report = report(&animation, &outputs)?;
-        bar.finish_and_clear();
+        // The report's measures need no file: they run on a second thread while the files are
+        // written (mostly waiting for usd-core's Python), each computed as alone, so the same
+        // numbers. Export's error comes first, as when they ran one after the other.
+        let (outputs, measured) = std::thread::scope(|scope| {
+            let measuring = scope.spawn(|| measure(&animation));
+            let outputs = export_with(&animation, staging, converter, self.progress);
+            let bar = self.progress.stage("report");
+            let measured = measuring.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            bar.finish_and_clear();
+            (outputs, measured)
+        });
+        let outputs = outputs?;
+        let report = with_outputs(measured?, &outputs);
         report.write(staging)?;
         Ok(report)
     }

@@ -13,6 +13,13 @@ use crate::stage::{Animation, Outputs};
 /// The report of an animation and the files exported from it (for a cache, measured against
 /// the cache's frames, streamed again from it).
 pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
+    Ok(with_outputs(measure(animation)?, outputs))
+}
+
+/// The report's measures of the animation alone, without the files (no outputs, no size
+/// ratios): what takes time, so a bake measures while the files are written. [`with_outputs`]
+/// completes it.
+pub fn measure(animation: &Animation) -> Result<Report> {
     let scene = &animation.scene;
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
@@ -34,7 +41,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
             hermite: volume_range(&hermite, &frames, triangles, rest_volume),
         }
     });
-    let cache = animation.cache.as_ref().map(|record| cache_report(animation, record, outputs)).transpose()?;
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, record)).transpose()?;
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -46,8 +53,8 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         fps: scene.fps,
         frames: frames.len(),
         solver: animation.log.clone(),
-        outputs: outputs.files.clone(),
-        ratios: size_ratios(&outputs.files),
+        outputs: Vec::new(),
+        ratios: Default::default(),
         error,
         keyframe_deviation,
         volume,
@@ -56,10 +63,20 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     })
 }
 
+/// `report` (from [`measure`]) with the files of `outputs` and the size ratios they give.
+pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
+    report.outputs = outputs.files.clone();
+    report.ratios = size_ratios(&outputs.files);
+    if let Some(cache) = &mut report.cache {
+        cache.ratios = cache_ratios(cache.bytes, &outputs.files);
+    }
+    report
+}
+
 /// The cache part of the report: the animation (as the trajectory of the exported surface,
 /// whose vertices are the cache's) against every cache frame, and for the simulated methods
 /// the least-squares fit on the same keys and `fixed` constraints.
-fn cache_report(animation: &Animation, record: &CacheRecord, outputs: &Outputs) -> Result<CacheReport> {
+fn cache_report(animation: &Animation, record: &CacheRecord) -> Result<CacheReport> {
     let error = super::cache::error_against(record, &animation.trajectory)?;
     let fit_error = match animation.log.method {
         Method::Fit => None,
@@ -77,7 +94,7 @@ fn cache_report(animation: &Animation, record: &CacheRecord, outputs: &Outputs) 
         bytes: record.bytes,
         keys: record.keys.clone(),
         tolerance: record.tolerance,
-        ratios: cache_ratios(record.bytes, &outputs.files),
+        ratios: Default::default(),
         error: error.into(),
         fit_error,
     })
