@@ -360,6 +360,9 @@ pub struct DeformedMesh {
     /// A twist about an axis.
     #[serde(default)]
     pub twist: Option<Twist>,
+    /// A translation, applied after the twist (e.g. one mesh dropped from several heights).
+    #[serde(default, deserialize_with = "optional_offset")]
+    pub offset: Option<[f64; 3]>,
 }
 
 impl KeyMesh {
@@ -376,6 +379,14 @@ impl KeyMesh {
         match self {
             KeyMesh::Path(_) => None,
             KeyMesh::Deformed(d) => d.twist.as_ref(),
+        }
+    }
+
+    /// The translation, if any.
+    pub fn offset(&self) -> Option<[f64; 3]> {
+        match self {
+            KeyMesh::Path(_) => None,
+            KeyMesh::Deformed(d) => d.offset,
         }
     }
 }
@@ -479,6 +490,15 @@ fn three_components<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[f64
     let v = Vec::<f64>::deserialize(d)?;
     <[f64; 3]>::try_from(v.as_slice())
         .map_err(|_| de::Error::custom(format!("expected 3 components (x, y, z), found {}", v.len())))
+}
+
+/// A keyframe mesh's `offset`: three finite numbers.
+fn optional_offset<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<Option<[f64; 3]>, D::Error> {
+    let v = three_components(d)?;
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(de::Error::custom(format!("offset must be three finite numbers, found {v:?}")));
+    }
+    Ok(Some(v))
 }
 
 impl<'de> Deserialize<'de> for KeyMesh {
@@ -974,13 +994,20 @@ full_frame = true
         let text = r#"
 name = "t"
 [keyframes]
-meshes = ["a.mesh", { mesh = "a.mesh", twist = { axis = "y", degrees = 180.0, axial_scale = 0.8 } }, "a.mesh"]
+meshes = ["a.mesh", { mesh = "a.mesh", twist = { axis = "y", degrees = 180.0, axial_scale = 0.8 } }, { mesh = "a.mesh", offset = [0.0, 1.5, -2.0] }]
 times = [0.0, 0.5, 1.0]
 fixed = ["all", [{ axis = "y", max = 0.01 }, { axis = "y", min = 2.99 }], { file = "tail.dmat", invert = true }]
 rest = "rest.mesh"
 "#;
         let s = Scene::parse(text).unwrap();
         assert_eq!(s.keyframes.as_ref().unwrap().meshes[1].twist().unwrap().degrees, 180.0);
+        assert_eq!(s.keyframes.as_ref().unwrap().meshes[1].offset(), None);
+        assert_eq!(s.keyframes.as_ref().unwrap().meshes[2].offset(), Some([0.0, 1.5, -2.0]));
+        assert_eq!(s.keyframes.as_ref().unwrap().meshes[2].twist(), None);
+        for bad in ["[0.0, 1.0]", "[0.0, nan, 1.0]"] {
+            let e = Scene::parse(&text.replace("[0.0, 1.5, -2.0]", bad)).unwrap_err().to_string();
+            assert!(e.contains("expected 3 components") || e.contains("offset must be three finite numbers"), "{e}");
+        }
         assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Mesh("rest.mesh".into()));
         let fixed = s.keyframes.unwrap().fixed.unwrap();
         assert_eq!(

@@ -37,6 +37,14 @@ impl Obstacle {
         }
     }
 
+    /// The point of the surface nearest to `x` (`x` itself when it is on the surface): where
+    /// a penetrating node of a first guess is put.
+    pub fn project(&self, x: Point) -> Point {
+        let n = self.normal(x);
+        let d = self.distance(x);
+        std::array::from_fn(|c| x[c] - d * n[c])
+    }
+
     /// The outward unit normal at `x` (the gradient of [`Obstacle::distance`]); at a sphere's
     /// centre, where it is undefined, straight up along +y.
     pub fn normal(&self, x: Point) -> Point {
@@ -76,5 +84,21 @@ mod tests {
         let on_tangent = [x[0] + 0.7 * n[1], x[1] - 0.7 * n[0], x[2]];
         assert!(dot(n, sub(on_tangent, [1.0, 0.0, 0.0])) - dot(n, sub(x, [1.0, 0.0, 0.0])) < 1e-12);
         assert!(sphere.distance(on_tangent) >= sphere.distance(x));
+    }
+
+    #[test]
+    fn projections_land_on_the_surface_along_the_normal() {
+        let plane = Obstacle::plane([0.0, 1.0, 0.0], [0.0, 1.0, 1.0]);
+        let sphere = Obstacle::Sphere { center: [1.0, 0.0, 0.0], radius: 2.0 };
+        for x in [[0.3, -0.7, 0.2], [2.0, 0.5, -1.0], [1.0, 0.0, 0.0], [4.0, 3.0, 2.0]] {
+            for o in [plane, sphere] {
+                let p = o.project(x);
+                assert!(o.distance(p).abs() < 1e-14, "{o:?} {x:?}");
+                // The step is along the normal, and as long as the distance.
+                let step = sub(x, p);
+                assert!((norm(step) - o.distance(x).abs()).abs() < 1e-14);
+                assert!(norm(step) < 1e-15 || (dot(step, o.normal(p)).abs() - norm(step)).abs() < 1e-14);
+            }
+        }
     }
 }

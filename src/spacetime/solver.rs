@@ -40,7 +40,7 @@ use std::collections::BTreeSet;
 use std::time::Instant;
 
 use super::active_set::{Preconditioner, Projection, Row, RowKind};
-use super::contact::{Check, Contacts};
+use super::contact::{At, Check, Contacts};
 use super::global_step::GlobalStep;
 use super::objective::{Evaluation, Objective};
 use super::quasi_newton::{dot, Lbfgs};
@@ -223,6 +223,9 @@ const MAX_HALVINGS: usize = 8;
 /// Directions blocked at once in a row (each adding a row to the active set) before a phase
 /// gives up.
 const MAX_HOLDS: usize = 50;
+
+/// Rounds of [`Solver::make_feasible`]'s projection (each adds the checks still inside).
+const MAX_FEASIBILITY_ROUNDS: usize = 50;
 
 /// Curvature pairs kept by the quasi-Newton phase.
 const LBFGS_MEMORY: usize = 8;
@@ -500,23 +503,78 @@ impl<'a> Solver<'a> {
         released
     }
 
-    /// Move the initial guess out of the obstacles: the smallest step (in the global step's
-    /// metric) that puts every penetrating node on the surface, repeated while the step
-    /// pushes others in. Held positions inside an obstacle are an error.
+    /// Move the initial guess out of the obstacles. First every key pose: a node whose
+    /// position is free and inside an obstacle is put on the nearest point of its surface
+    /// (a keyframe sculpted into the floor becomes a contact pose); a held one is an error
+    /// naming the key's time and how deep the deepest held node is. Then the in-betweens:
+    /// the smallest step (in the global step's metric) that puts every penetrating node on
+    /// the surface, the projected nodes kept there, repeated while the step pushes others in.
     fn make_feasible(&self, contacts: &Contacts, tr: &mut Trajectory, active: &mut BTreeSet<Check>) -> Result<()> {
         let unknowns = self.global.unknowns();
+        let slots = &self.timing.slots;
+        let tolerance = 0.5 * self.clearance_tolerance;
+        // (depth, node, obstacle) of the deepest held node, and how many are held inside, per key.
+        let mut held: Vec<(usize, f64, usize, usize, usize)> = Vec::new();
+        for k in 0..tr.key_count() {
+            let s = slots.position(k);
+            if slots.keys_of(s).next() != Some(k) {
+                continue;
+            }
+            let mut deepest: Option<(f64, usize, usize)> = None;
+            let mut count = 0;
+            for node in 0..tr.positions[k].len() {
+                for (o, obstacle) in contacts.obstacles.iter().enumerate() {
+                    let x = tr.positions[k][node];
+                    let d = obstacle.distance(x);
+                    if d >= -tolerance {
+                        continue;
+                    }
+                    if unknowns.get(node, s).is_some() {
+                        let p = obstacle.project(x);
+                        for key in slots.keys_of(s) {
+                            tr.positions[key][node] = p;
+                        }
+                        active.insert(Check { at: At::Key(k), node: node as u32, obstacle: o as u16 });
+                    } else {
+                        count += 1;
+                        if deepest.is_none_or(|(depth, _, _)| -d > depth) {
+                            deepest = Some((-d, node, o));
+                        }
+                    }
+                }
+            }
+            if let Some((depth, node, o)) = deepest {
+                held.push((k, depth, node, o, count));
+            }
+        }
+        if let Some(&(k, depth, node, o, count)) = held.first() {
+            let others = if held.len() > 1 { format!(" (and the keys at {} s)", held[1..].iter().map(|h| format!("{:.4}", tr.times[h.0])).collect::<Vec<_>>().join(", ")) } else { String::new() };
+            return Err(Error::general(
+                format!(
+                    "the keyframe at t = {:.4} s holds {count} node(s) inside obstacle {} (a {}), node {node} deepest, by {depth:.4e}{others}; held positions cannot be moved out",
+                    tr.times[k],
+                    o + 1,
+                    match contacts.obstacles[o] {
+                        super::obstacles::Obstacle::Plane { .. } => "plane",
+                        super::obstacles::Obstacle::Sphere { .. } => "sphere",
+                    },
+                ),
+                "move that keyframe's mesh out of the obstacle, or free its vertices at that key (`fixed`) so the solver puts them on the surface",
+            ));
+        }
         let no_times = vec![None; self.vars.len()];
-        for _ in 0..20 {
-            let snap = contacts.snapshot(tr, &self.timing.slots);
-            let inside: Vec<(Check, f64)> = contacts.each(&snap).filter(|(_, _, d)| *d < -0.5 * self.clearance_tolerance).map(|(c, _, d)| (c, d)).collect();
+        for _ in 0..MAX_FEASIBILITY_ROUNDS {
+            let snap = contacts.snapshot(tr, slots);
+            let inside: Vec<(Check, f64)> = contacts.each(&snap).filter(|(_, _, d)| *d < -tolerance).map(|(c, _, d)| (c, d)).collect();
             if inside.is_empty() {
                 return Ok(());
             }
             for &(check, d) in &inside {
                 if contacts.row(check, tr, unknowns, &no_times, RowKind::Sum).is_none() {
+                    let t = snap.instants.iter().find(|i| i.0 == check.at).map_or(f64::NAN, |i| i.1);
                     return Err(Error::general(
-                        format!("node {} is inside obstacle {} by {:.4e} at {:?}, and it cannot move there (its position and the velocities around it are held)", check.node, check.obstacle, -d, check.at),
-                        "move that keyframe out of the obstacle, or free its vertices at that key (`fixed`)",
+                        format!("node {} is inside obstacle {} by {:.4e} at t = {t:.4} s between the keys, and nothing there may move (the positions and velocities around it are held)", check.node, check.obstacle + 1, -d),
+                        "move the keyframes around that time out of the obstacle, or free their vertices or velocities (`fixed`, `fixed_velocity`)",
                     ));
                 }
                 active.insert(check);
@@ -527,6 +585,8 @@ impl<'a> Solver<'a> {
                 if let Some((row, d)) = contacts.row(check, tr, unknowns, &no_times, RowKind::Contact(index)) {
                     rows.push(row);
                     targets.push(-d.min(0.0));
+                } else {
+                    targets.push(0.0);
                 }
             }
             let solve = |x: &mut [Point]| self.global.apply_inverse(x);
@@ -539,11 +599,11 @@ impl<'a> Solver<'a> {
             let step = projection.correction(&kept, 3 * self.unknown_count());
             let (u, _) = split(&step, self.unknown_count());
             let points: Vec<Point> = u.as_chunks::<3>().0.to_vec();
-            apply_step(tr, &self.timing.slots, &self.global.scatter(&points), 1.0);
+            apply_step(tr, slots, &self.global.scatter(&points), 1.0);
         }
         Err(Error::general(
-            "the keyframes cannot be moved out of the obstacles: every correction pushes other nodes in",
-            "check that the obstacles leave room for the body at every key",
+            "the first guess cannot be moved out of the obstacles: every correction pushes other nodes in",
+            "check that the obstacles leave room for the body at every key and between them",
         ))
     }
 

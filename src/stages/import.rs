@@ -226,10 +226,13 @@ impl KeyMeshes {
             if k > 0 {
                 check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
             }
-            let positions = match key.twist() {
+            let mut positions = match key.twist() {
                 Some(t) => crate::procedural::twist(m.positions(), t),
                 None => m.positions().to_vec(),
             };
+            if let Some(offset) = key.offset() {
+                positions.iter_mut().for_each(|p| *p = std::array::from_fn(|c| p[c] + offset[c]));
+            }
             poses.push(positions);
         }
         Ok(KeyMeshes { cache, paths, first, first_topology, poses })

@@ -13,6 +13,7 @@ mod blender;
 mod cache_bake;
 mod cache_fit;
 mod cli_budget;
+mod cli_contacts;
 mod cli_cage;
 mod cli_errors;
 mod cli_interrupt;
