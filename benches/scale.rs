@@ -6,7 +6,8 @@
 //! in-between volume loss. Medians of `SCALE_REPEATS` runs (default 1: these are long).
 //!
 //! `cargo bench --bench scale` (or `make bench-scale`); `cargo bench --bench scale -- 100k`
-//! runs only the scenes whose name contains an argument.
+//! runs only the scenes whose name contains an argument. `SCALE_KEEP=1` keeps the generated
+//! scenes and outputs (their folder is printed) for profiling a bake by hand.
 //!
 //! The rows answer the targets of the issue on production meshes: a 100k-vertex surface with
 //! 10 keys (under 60 s and 4 GB on 2 cores, embedded keys within 1% of the bbox diagonal), the
@@ -120,6 +121,7 @@ fn global_step(solver: &serde_json::Value) -> String {
 
 fn main() {
     let filters: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
+    let keep = std::env::var_os("SCALE_KEEP").is_some_and(|v| v != "0");
     let repeats: usize = std::env::var("SCALE_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
     let cases = [
         // The benchmark's ARMADILLO-size body (2645 TetGen nodes) with 20 keys.
@@ -173,7 +175,13 @@ fn main() {
             loss,
             load()
         );
-        let _ = std::fs::remove_dir_all(&dir);
+        if !keep {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
     }
-    let _ = std::fs::remove_dir_all(&scratch);
+    if keep {
+        println!("\nscenes kept in {}", scratch.display());
+    } else {
+        let _ = std::fs::remove_dir_all(&scratch);
+    }
 }

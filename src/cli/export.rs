@@ -34,9 +34,8 @@ impl Args {
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
-    let bar = progress.stage("export");
-    let outputs = stages::export(&animation, &mut staging)?;
+    let clip = stages::blendshape_clip(&animation, None)?;
+    let outputs = stages::export_with(&animation, &clip, &mut staging, None, progress)?;
     staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;
-    bar.finish_and_clear();
     staging.commit()
 }

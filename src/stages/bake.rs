@@ -5,10 +5,13 @@ use crate::error::Result;
 use crate::output::Staging;
 use crate::progress::Progress;
 use crate::report::Report;
-use crate::scene::{Method, SceneFile};
+use crate::export::usdc;
+use crate::scene::{Format, Method, SceneFile};
 use crate::stage::{Animation, Body};
 
-use super::{embed, export, import, report, solve_within, tetrahedralize};
+use super::export::blendshape_clip;
+use super::report::{measure, with_outputs};
+use super::{embed, export_with, import, solve_within, tetrahedralize};
 
 /// A scene to bake, with the options the CLI gives (`--method`).
 #[derive(Debug, Clone)]
@@ -43,7 +46,10 @@ impl<'a> Bake<'a> {
         if let Some(m) = self.method {
             scene.scene.solver.method = m;
         }
-        tetrahedralize(&import(&scene)?, self.progress)
+        let bar = self.progress.stage("import");
+        let keys = import(&scene)?;
+        bar.finish_and_clear();
+        tetrahedralize(&keys, self.progress)
     }
 
     /// ... `solve`, `embed`: the exported surface's animation.
@@ -51,15 +57,33 @@ impl<'a> Bake<'a> {
         let body = self.body()?;
         // The interruption tests stop here, between TetGen and the solver.
         crate::interrupt::pause_point("solve", "");
-        embed(&solve_within(&body, self.method, self.max_memory, self.progress)?)
+        let solution = solve_within(&body, self.method, self.max_memory, self.progress)?;
+        let bar = self.progress.stage("embed");
+        let animation = embed(&solution)?;
+        bar.finish_and_clear();
+        Ok(animation)
     }
 
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the
     /// report.
     pub fn files(&self, staging: &mut Staging) -> Result<Report> {
+        // Python's start-up and usd-core's import (about 0.3 s of CPU) overlap the solve.
+        let converter = self.scene.scene.export.formats.contains(&Format::Usdc).then(usdc::Converter::start);
         let animation = self.animation()?;
-        let outputs = export(&animation, staging)?;
-        let report = report(&animation, &outputs)?;
+        // The report's measures need no file: they run on a second thread while the files are
+        // written (mostly waiting for usd-core's Python), each computed as alone, so the same
+        // numbers. Export's error comes first, as when they ran one after the other.
+        let clip = blendshape_clip(&animation, None)?;
+        let (outputs, measured) = std::thread::scope(|scope| {
+            let measuring = scope.spawn(|| measure(&animation, &clip));
+            let outputs = export_with(&animation, &clip, staging, converter, self.progress);
+            let bar = self.progress.stage("report");
+            let measured = measuring.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            bar.finish_and_clear();
+            (outputs, measured)
+        });
+        let outputs = outputs?;
+        let report = with_outputs(measured?, &outputs);
         report.write(staging)?;
         Ok(report)
     }

@@ -19,6 +19,7 @@ use crate::export::principal::{smallest_rank, Components};
 use crate::export::{glb, texture, usda, usdc};
 use crate::mesh::{bbox_diagonal, Axis};
 use crate::output::Staging;
+use crate::progress::Progress;
 use crate::report::measures::deviation;
 use crate::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
 use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
@@ -27,6 +28,24 @@ use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 /// in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     check(animation)?;
+    let clip = blendshape_clip(animation, None)?;
+    export_with(animation, &clip, staging, None, &Progress::hidden())
+}
+
+/// [`export`] of `clip` (the animation's [`blendshape_clip`], chosen once by the caller, who
+/// may also measure it), converting the `.usdc` files with `converter` (one started earlier,
+/// so that its start-up overlapped other work) instead of a Python process started when the
+/// first is due, and showing a bar over the files on `progress`.
+pub fn export_with(
+    animation: &Animation,
+    clip: &(BlendShapeClip, Option<usize>),
+    staging: &mut Staging,
+    converter: Option<usdc::Converter>,
+    progress: &Progress,
+) -> Result<Outputs> {
+    check(animation)?;
+    // One Python process for every usdc file of the export.
+    let mut converter = converter;
     let scene = &animation.scene;
     staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
@@ -43,7 +62,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     };
     let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
 
-    let (clip, rank) = blendshape_clip(animation, None)?;
+    let (clip, rank) = (&clip.0, clip.1);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
     let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
@@ -63,15 +82,17 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
         forms.push((OutputKind::FullFrame, ".full".into()));
     }
 
+    let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
         let usda_text = || match (&kind, &full) {
             (OutputKind::FullFrame, Some(full)) => usda::full_frame(full, triangles, attributes, &usd),
-            _ => usda::blendshapes(&clip, triangles, attributes, &usd),
+            _ => usda::blendshapes(clip, triangles, attributes, &usd),
         };
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
+            bar.set_message(format!("export: {name}"));
             match format {
                 Format::Usda => staging.write(&name, usda_text().as_bytes())?,
                 Format::Usdc => {
@@ -86,7 +107,7 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                         temporary
                     };
                     // Errors name the file the user asked for, not its staging path.
-                    let converted = usdc::convert(&staging.path(&source), &staging.path(&name))
+                    let converted = converter.get_or_insert_with(usdc::Converter::start).convert(&staging.path(&source), &staging.path(&name))
                         .map_err(|e| Error { path: Some(staging.final_path(&name)), ..e });
                     if source.starts_with('.') {
                         let _ = std::fs::remove_file(staging.path(&source));
@@ -99,16 +120,18 @@ pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
                         (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
                             let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(&clip, &frame_times, blendshape_surface, &scene.name, placement)
+                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
                         }
-                        _ => glb::blendshapes(&clip, blendshape_surface, &scene.name, placement),
+                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
                     };
                     staging.write(&name, &bytes)?;
                 }
             }
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
+            bar.inc(1);
         }
     }
+    bar.finish_and_clear();
     Ok(Outputs { files, rank })
 }
 

@@ -7,6 +7,8 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::mesh::{self, surface, MeshFile, Point, TetMesh, TriMesh};
 use crate::scene::{Rest, SceneFile, Selection};
@@ -23,6 +25,17 @@ impl MeshCache {
             self.0.insert(path.to_path_buf(), m);
         }
         Ok(&self.0[path])
+    }
+
+    /// Read the files of `paths` not read yet, in parallel (each file parsed on its own, so the
+    /// same meshes). A file that fails is left out, for `get` to read again and report in key
+    /// order, as without the prefetch.
+    fn prefetch(&mut self, paths: &[PathBuf]) {
+        let mut todo: Vec<&PathBuf> = paths.iter().filter(|p| !self.0.contains_key(p.as_path())).collect();
+        todo.sort();
+        todo.dedup();
+        let read: Vec<(PathBuf, Result<MeshFile>)> = todo.into_par_iter().map(|p| (p.clone(), mesh::read(p))).collect();
+        self.0.extend(read.into_iter().filter_map(|(p, m)| Some((p, m.ok()?))));
     }
 }
 
@@ -204,6 +217,7 @@ impl KeyMeshes {
         let keys = scene_file.scene.keyframes.as_ref().expect("a keyframe scene");
         let mut cache = MeshCache::default();
         let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
+        cache.prefetch(&paths);
         let first = cache.get(&paths[0])?.clone();
         let first_topology = Topology::of(&first);
         let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());

@@ -34,7 +34,7 @@ pub mod tetrahedralize;
 pub use bake::{bake, Bake};
 pub use blend::blend;
 pub use embed::embed;
-pub use export::export;
+pub use export::{blendshape_clip, export, export_with};
 pub use import::import;
 pub use report::report;
 pub use solve::{solve, solve_within};

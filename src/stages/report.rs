@@ -1,6 +1,7 @@
 //! The `report` stage: measure an animation and the files exported from it.
 
 use crate::error::Result;
+use crate::export::clip::BlendShapeClip;
 use crate::mesh::{bbox_diagonal, surface};
 use crate::report::cache::{cache_ratios, CacheReport};
 use crate::scene::{Basis, Method};
@@ -13,13 +14,22 @@ use crate::stage::{Animation, Outputs};
 /// The report of an animation and the files exported from it (for a cache, measured against
 /// the cache's frames, streamed again from it).
 pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
+    let clip = super::export::blendshape_clip(animation, outputs.rank)?;
+    Ok(with_outputs(measure(animation, &clip)?, outputs))
+}
+
+/// The report's measures of the animation alone, without the files (no outputs, no size
+/// ratios): what takes time, so a bake measures while the files are written. [`with_outputs`]
+/// completes it. `clip` is the blendshape clip the files hold and its rank
+/// ([`super::export::blendshape_clip`]).
+pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)) -> Result<Report> {
     let scene = &animation.scene;
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
     let diagonal = bbox_diagonal(&animation.mesh.positions);
     // The clip the blendshape files hold (a principal one at the rank export chose).
-    let (clip, rank) = super::export::blendshape_clip(animation, outputs.rank)?;
-    let error = blendshape_error(&clip, tr, &frames, diagonal);
+    let (clip, rank) = (&clip.0, clip.1);
+    let error = blendshape_error(clip, tr, &frames, diagonal);
     // The input keys: every key of the trajectory, or every `stride`-th when it also holds
     // in-betweens (mass-spring: `inbetweens + 1`).
     let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
@@ -38,7 +48,7 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     });
     // A principal clip plays its own trajectory: that is what the files hold.
     let played = rank.map(|_| clip.played(&tr.times));
-    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record, outputs)).transpose()?;
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record)).transpose()?;
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -52,8 +62,8 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
         fps: scene.fps,
         frames: frames.len(),
         solver: animation.log.clone(),
-        outputs: outputs.files.clone(),
-        ratios: size_ratios(&outputs.files),
+        outputs: Vec::new(),
+        ratios: Default::default(),
         error,
         keyframe_deviation,
         volume,
@@ -65,11 +75,21 @@ pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
     })
 }
 
+/// `report` (from [`measure`]) with the files of `outputs` and the size ratios they give.
+pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
+    report.outputs = outputs.files.clone();
+    report.ratios = size_ratios(&outputs.files);
+    if let Some(cache) = &mut report.cache {
+        cache.ratios = cache_ratios(cache.bytes, &outputs.files);
+    }
+    report
+}
+
 /// The cache part of the report: the animation the blendshape files play (`played`: the
 /// trajectory of the exported surface, whose vertices are the cache's, or its principal clip)
 /// against every cache frame, and for the simulated methods
 /// the least-squares fit on the same keys and `fixed` constraints.
-fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord, outputs: &Outputs) -> Result<CacheReport> {
+fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord) -> Result<CacheReport> {
     let error = super::cache::error_against(record, played)?;
     let fit_error = match animation.log.method {
         Method::Fit => None,
@@ -87,7 +107,7 @@ fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord
         bytes: record.bytes,
         keys: record.keys.clone(),
         tolerance: record.tolerance,
-        ratios: cache_ratios(record.bytes, &outputs.files),
+        ratios: Default::default(),
         error: error.into(),
         fit_error,
     })

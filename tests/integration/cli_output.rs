@@ -194,3 +194,31 @@ fn folders_that_cannot_be_output_folders() {
     assert!(dir.join("real/box.glb").is_file());
     assert_eq!(names(&dir.path), set(&["file", "in", "link", "real"]));
 }
+
+/// Progress on a non-terminal stderr: forced by `BLENDSIM_PROGRESS=lines`, each stage of a bake
+/// names itself in plain lines (no cursor movements) and the solve's bar gives an estimate;
+/// `--quiet` silences everything; by default a pipe gets only the summary line.
+#[test]
+fn progress_lines_when_forced_and_nothing_with_quiet() {
+    let dir = TempDir::new("progress");
+    scene(&dir.path, "box.toml", "[\"usda\", \"usdc\", \"glb\"]");
+    let forced = [("BLENDSIM_PROGRESS", OsStr::new("lines"))];
+    let shown = run_env(&dir.path, &["bake", "in/box.toml", "--out", "out/a"], &forced).success();
+    for stage in ["import", "tetrahedralize", "solve", "embed", "export", "report"] {
+        assert!(shown.stderr.lines().any(|l| l.contains(stage)), "no progress line for {stage}:\n{shown}");
+    }
+    assert!(shown.stderr.lines().any(|l| l.contains("solve") && l.contains(" eta ")), "the solve's bar has no estimate:\n{shown}");
+    assert!(!shown.stderr.contains('\x1b') && !shown.stderr.contains('\r'), "progress lines must be plain text:\n{shown}");
+    assert!(shown.stderr.lines().last().unwrap().starts_with("blendsim: baked box"), "{shown}");
+
+    let quiet = run_env(&dir.path, &["bake", "in/box.toml", "--out", "out/b", "--quiet"], &forced).success();
+    assert_eq!(quiet.stderr, "", "--quiet must silence progress:\n{quiet}");
+    let piped = run(&dir.path, &["bake", "in/box.toml", "--out", "out/c"]).success();
+    assert_eq!(piped.stderr.lines().count(), 1, "no progress on a pipe unless asked:\n{piped}");
+    // The same files with or without progress, and usdc through the one Python process.
+    for file in ["box.usda", "box.usdc", "box.glb"] {
+        let a = std::fs::read(dir.join("out/a").join(file)).unwrap();
+        assert_eq!(a, std::fs::read(dir.join("out/b").join(file)).unwrap(), "{file}");
+        assert_eq!(a, std::fs::read(dir.join("out/c").join(file)).unwrap(), "{file}");
+    }
+}
