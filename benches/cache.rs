@@ -244,7 +244,7 @@ fn compare(name: &str, cache: &BarCache) {
     let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
     let full_usdc = {
         let path = dir.join("full.usdc");
-        blendsim::internals::usdc::convert(&dir.join("full.usda"), &path).expect("usd-core converts the full-frame usda");
+        blendsim::internals::usdc::Converter::start().convert(&dir.join("full.usda"), &path).expect("usd-core converts the full-frame usda");
         size("full.usdc")
     };
     let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, usdc: Option<u64>, max: f64, ms: Option<f64>| {
