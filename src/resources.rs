@@ -30,6 +30,56 @@ pub fn set_max_memory(bytes: u64) {
     let _ = MAX_MEMORY.set(bytes);
 }
 
+/// The `--max-time` budget: when it was set, and its seconds.
+static MAX_TIME: std::sync::OnceLock<(std::time::Instant, f64)> = std::sync::OnceLock::new();
+
+/// Route the CLI's `--max-time` (seconds, counted from this call) here: from then on the
+/// phases after TetGen check it ([`check_time`], [`check_predicted_time`]). Set once per process.
+pub fn set_max_time(seconds: f64) {
+    let _ = MAX_TIME.set((std::time::Instant::now(), seconds));
+}
+
+/// What to do when the time budget runs out (the same advice wherever it runs out).
+const TIME_FIX: &str = "raise --max-time, or make the problem smaller: raise [tet] max_volume, lower [solver] samples or max_iterations, or let [tet] cage simulate a coarser body";
+
+/// Err when the bake has run past `--max-time` (none set: always Ok). `phase` and `reached`
+/// say where it stopped, e.g. "solve" and "after 12 iterations".
+pub fn check_time(phase: &str, reached: impl FnOnce() -> String) -> Result<()> {
+    match MAX_TIME.get() {
+        Some(&(start, seconds)) if start.elapsed().as_secs_f64() > seconds => Err(Error::general(
+            format!("the bake ran past its --max-time budget of {seconds} s ({}) in the {phase}, {}", duration(start.elapsed().as_secs_f64()), reached()),
+            TIME_FIX,
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Err when `what` is predicted to take more than the time left of `--max-time` (before it
+/// starts; a budget already spent is [`check_time`]'s error).
+pub fn check_predicted_time(predicted_seconds: f64, what: &str) -> Result<()> {
+    check_time("solve", || "before its global step was built".into())?;
+    match MAX_TIME.get() {
+        Some(&(start, seconds)) if predicted_seconds > seconds - start.elapsed().as_secs_f64() => Err(Error::general(
+            format!(
+                "{what} would take about {}, more than the {} left of the --max-time budget of {seconds} s",
+                duration(predicted_seconds),
+                duration(seconds - start.elapsed().as_secs_f64())
+            ),
+            TIME_FIX,
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Seconds for a message: two decimals below ten seconds, whole seconds above.
+fn duration(seconds: f64) -> String {
+    if seconds < 10.0 {
+        format!("{seconds:.2} s")
+    } else {
+        format!("{seconds:.0} s")
+    }
+}
+
 /// The one memory budget of a bake, in bytes: `--max-memory` when given, else
 /// [`DEFAULT_MEMORY_FRACTION`] of the machine's available memory (`MemAvailable` in
 /// `/proc/meminfo`), or `None` where that is unknown (no check). Every pre-allocation estimate

@@ -29,6 +29,11 @@ pub struct Args {
     /// samples) must fit in it too. Default: 60% of the available memory.
     #[arg(long, value_parser = super::parse_bytes)]
     max_memory: Option<u64>,
+    /// Time the bake may take, in seconds (e.g. 600, 90s, 10m, 2h): the solve checks it
+    /// before its global step is built (against the predicted cost) and at every iteration,
+    /// and stops with an error (nothing written) once it is spent. Default: no limit.
+    #[arg(long, value_parser = super::parse_seconds)]
+    max_time: Option<f64>,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
@@ -44,6 +49,9 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let start = Instant::now();
     if let Some(bytes) = args.max_memory {
         blendsim::resources::set_max_memory(bytes);
+    }
+    if let Some(seconds) = args.max_time {
+        blendsim::resources::set_max_time(seconds);
     }
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.

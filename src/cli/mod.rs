@@ -98,6 +98,21 @@ pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     }
 }
 
+/// `--max-time`: seconds, or a number with `s`, `m` or `h`.
+pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
+    let t = text.trim();
+    let (number, scale) = match t.chars().last() {
+        Some('s') => (&t[..t.len() - 1], 1.0),
+        Some('m') => (&t[..t.len() - 1], 60.0),
+        Some('h') => (&t[..t.len() - 1], 3600.0),
+        _ => (t, 1.0),
+    };
+    match number.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x * scale),
+        _ => Err(format!("{text:?} is not a positive duration: give seconds, e.g. 600, 90s, 10m or 2h")),
+    }
+}
+
 pub fn main() -> ExitCode {
     // Before any thread starts, so every thread inherits the blocked signals.
     blendsim::interrupt::install();

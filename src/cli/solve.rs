@@ -26,6 +26,11 @@ pub struct Args {
     /// Default: 60% of the available memory.
     #[arg(long, value_parser = super::parse_bytes)]
     max_memory: Option<u64>,
+    /// Time the solve may take, in seconds (e.g. 600, 90s, 10m, 2h): the solve checks it
+    /// before its global step is built (against the predicted cost) and at every iteration,
+    /// and stops with an error (nothing written) once it is spent. Default: no limit.
+    #[arg(long, value_parser = super::parse_seconds)]
+    max_time: Option<f64>,
 }
 
 impl Args {
@@ -37,6 +42,9 @@ impl Args {
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     if let Some(bytes) = args.max_memory {
         blendsim::resources::set_max_memory(bytes);
+    }
+    if let Some(seconds) = args.max_time {
+        blendsim::resources::set_max_time(seconds);
     }
     let body: Body = stage::read(&args.body)?;
     stage::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)

@@ -576,6 +576,8 @@ impl GlobalStep {
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
             )
         };
+        let solver_name = if use_direct { "the solve's global steps (a sparse factorization and its solves)" } else { "the solve's global steps (conjugate gradients)" };
+        crate::resources::check_predicted_time(if use_direct { predicted_seconds } else { predicted_iterative_seconds }, solver_name)?;
         let (inverse, factor_nnz, ordering, linear_solver) = if use_direct {
             let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
             let nnz = cholesky.factor_nnz();

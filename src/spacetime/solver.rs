@@ -718,6 +718,7 @@ impl<'a> Solver<'a> {
     fn local_global(&self, it: &mut Iterate) -> Result<PhaseEnd> {
         let (mut blocked, mut holds) = (None, 0);
         loop {
+            crate::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
             if !self.budget_left(it) {
                 return Ok(PhaseEnd::OutOfIterations);
             }
@@ -775,6 +776,7 @@ impl<'a> Solver<'a> {
                     return Ok(PhaseEnd::Settled(change));
                 }
             }
+            crate::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
             if !self.budget_left(it) {
                 return Ok(PhaseEnd::OutOfIterations);
             }

@@ -84,3 +84,30 @@ fn max_memory_is_the_one_budget_of_every_estimate() {
     assert!(r.stderr.contains("raise --max-memory"), "{r}");
     assert!(!dir.join("never").exists());
 }
+
+#[test]
+fn max_time_stops_the_solve_with_one_line_and_writes_nothing() {
+    // A budget spent before the solve starts (TetGen alone takes longer): the solve refuses its
+    // global step or stops at its first iteration, with one line naming the scene and the fix.
+    let dir = TempDir::new("budget-time");
+    let scene = demo_scene();
+    let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "0.001"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.contains("twist.toml: ") && r.stderr.contains("--max-time budget of 0.001 s") && r.stderr.contains("raise --max-time"), "{r}");
+    assert!(!dir.join("never").exists());
+    // A generous budget changes nothing: the same bytes as without one.
+    let lean = lean_demo(&dir);
+    for (out, extra) in [("free", vec![]), ("timed", vec!["--max-time", "1h"])] {
+        let mut args = vec!["bake", "-q", lean.to_str().unwrap(), "--out", out];
+        args.extend(extra);
+        run(&dir.path, &args).success();
+    }
+    for file in ["twist.usda", "twist.glb"] {
+        assert_eq!(std::fs::read(dir.join("free").join(file)).unwrap(), std::fs::read(dir.join("timed").join(file)).unwrap(), "{file}");
+    }
+    // A malformed duration is a usage error.
+    let r = run(&dir.path, &["bake", lean.to_str().unwrap(), "--out", "x", "--max-time", "soon"]);
+    assert_eq!(r.code, Some(2), "{r}");
+    assert!(r.stderr.contains("is not a positive duration"), "{r}");
+}
