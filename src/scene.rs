@@ -392,7 +392,7 @@ pub struct DeformedMesh {
     #[serde(default)]
     pub twist: Option<Twist>,
     /// A translation, applied after the twist (e.g. one mesh dropped from several heights).
-    #[serde(default, deserialize_with = "optional_offset")]
+    #[serde(default, deserialize_with = "optional_offset", skip_serializing_if = "Option::is_none")]
     pub offset: Option<[f64; 3]>,
 }
 
