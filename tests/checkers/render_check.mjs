@@ -14,18 +14,10 @@
 // Writes OUT_DIR/render-0.png, OUT_DIR/render-1.png and OUT_DIR/render.json (the summary,
 // also printed as one line on stdout). Exit code 0 when everything passes, 1 otherwise.
 
-import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
-import { createServer } from 'node:http';
-import { tmpdir } from 'node:os';
-import { dirname, extname, join, resolve, sep } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { join, resolve } from 'node:path';
+import { IMPORT_MAP, inChromium, runChecker, serve } from './browser.mjs';
 
-const HERE = dirname(fileURLToPath(import.meta.url));
-const THREE_ROOT = join(HERE, 'node_modules', 'three');
-const CHROMIUM = '/usr/bin/chromium';
-// --user-data-dir is given through launchPersistentContext (playwright refuses it in args).
-const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 const SIZE = { width: 480, height: 360 };
 // Visible: the mesh covers between these fractions of the image. Moves: at least this
 // fraction of the pixels changes between the two times.
@@ -36,7 +28,7 @@ const TIMEOUT_MS = 120_000;
 const PAGE = `<!doctype html>
 <html><head><meta charset="utf-8"><title>blendsim render check</title><link rel="icon" href="data:,">
 <style>html, body { margin: 0; background: #000; }</style>
-<script type="importmap">{"imports": {"three": "/three/build/three.module.js", "three/addons/": "/three/examples/jsm/"}}</script>
+${IMPORT_MAP}
 </head><body>
 <script type="module">
 import * as THREE from 'three';
@@ -135,32 +127,6 @@ window.renderAt = (t) => {
 window.pageReady = true;
 </script></body></html>`;
 
-const TYPES = { '.js': 'text/javascript', '.html': 'text/html', '.glb': 'model/gltf-binary' };
-
-function serve(glb) {
-  const server = createServer((req, res) => {
-    const url = new URL(req.url, 'http://127.0.0.1');
-    let body = null;
-    let type = 'text/html';
-    if (url.pathname === '/') body = PAGE;
-    else if (url.pathname === '/model.glb') [body, type] = [glb, TYPES['.glb']];
-    else if (url.pathname.startsWith('/three/')) {
-      const path = resolve(THREE_ROOT, '.' + decodeURIComponent(url.pathname.slice('/three'.length)));
-      if (path.startsWith(THREE_ROOT + sep)) {
-        try {
-          [body, type] = [readFileSync(path), TYPES[extname(path)] ?? 'application/octet-stream'];
-        } catch {}
-      }
-    }
-    if (body === null) {
-      res.writeHead(404).end();
-      return;
-    }
-    res.writeHead(200, { 'Content-Type': type, 'Cache-Control': 'no-store' }).end(body);
-  });
-  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
-}
-
 async function main() {
   const positional = process.argv.slice(2).filter((a) => !a.startsWith('--'));
   const timesArg = process.argv.find((a) => a.startsWith('--times='));
@@ -172,16 +138,8 @@ async function main() {
   const times = timesArg ? timesArg.slice('--times='.length).split(',').map(Number) : null;
   mkdirSync(outDir, { recursive: true });
   const summary = { file, issues: [], screenshots: [] };
-  const server = await serve(readFileSync(file));
-  const profile = mkdtempSync(join(tmpdir(), 'blendsim-chromium-'));
-  let context;
-  try {
-    context = await chromium.launchPersistentContext(profile, { executablePath: CHROMIUM, headless: true, args: ARGS, viewport: SIZE });
-    const page = context.pages()[0] ?? (await context.newPage());
-    page.on('pageerror', (e) => summary.issues.push(`page error: ${e.message}`));
-    page.on('console', (m) => m.type() === 'error' && summary.issues.push(`console error: ${m.text()}`));
-    await page.goto(`http://127.0.0.1:${server.address().port}/`);
-    await page.waitForFunction(() => window.pageReady === true, null, { timeout: 60_000 });
+  const server = await serve(PAGE, (path) => (path === '/model.glb' ? [readFileSync(file), 'model/gltf-binary'] : null));
+  await inChromium(server, SIZE, summary.issues, async (page) => {
     Object.assign(summary, await page.evaluate((t) => window.prepare(t), times));
     summary.renders = [];
     for (const [i, t] of summary.times.entries()) {
@@ -197,11 +155,7 @@ async function main() {
     const changed = summary.renders.at(-1).changed;
     summary.changed = changed;
     if (!(changed >= CHANGED)) summary.issues.push(`only ${(100 * changed).toFixed(2)}% of the pixels change between ${summary.times.join(' s and ')} s: the animation does not move`);
-  } finally {
-    await context?.close();
-    server.close();
-    rmSync(profile, { recursive: true, force: true });
-  }
+  });
   summary.ok = summary.issues.length === 0;
   for (const issue of summary.issues) console.error(`${file}: ${issue}`);
   writeFileSync(join(outDir, 'render.json'), JSON.stringify(summary, null, 2) + '\n');
@@ -209,16 +163,4 @@ async function main() {
   return summary.ok ? 0 : 1;
 }
 
-const timer = setTimeout(() => {
-  console.error(`render_check.mjs: no result after ${TIMEOUT_MS / 1000} s`);
-  console.log(JSON.stringify({ ok: false, issues: ['timeout'] }));
-  process.exit(1);
-}, TIMEOUT_MS);
-main().then(
-  (code) => { clearTimeout(timer); process.exit(code); },
-  (e) => {
-    console.error(e?.stack ?? String(e));
-    console.log(JSON.stringify({ ok: false, issues: [String(e?.message ?? e)] }));
-    process.exit(1);
-  },
-);
+runChecker('render_check.mjs', main, TIMEOUT_MS);

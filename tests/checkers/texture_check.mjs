@@ -18,17 +18,10 @@
 // Writes OUT_DIR/texture-F-K-glb.png and -obj.png (F file, K time), OUT_DIR/texture.json
 // (summary, also printed as one line on stdout). Exit code 0 when every file passes, 1 otherwise.
 
-import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
-import { createServer } from 'node:http';
-import { tmpdir } from 'node:os';
-import { dirname, extname, join, resolve, sep } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
+import { join, resolve } from 'node:path';
+import { IMPORT_MAP, inChromium, runChecker, serve } from './browser.mjs';
 
-const HERE = dirname(fileURLToPath(import.meta.url));
-const THREE_ROOT = join(HERE, 'node_modules', 'three');
-const CHROMIUM = '/usr/bin/chromium';
-const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 const SIZE = { width: 400, height: 400 };
 const DIFF = 48;
 const MAX_MISMATCH = 0.02;
@@ -37,7 +30,7 @@ const TIMEOUT_MS = 180_000;
 const PAGE = `<!doctype html>
 <html><head><meta charset="utf-8"><title>blendsim texture check</title><link rel="icon" href="data:,">
 <style>html, body { margin: 0; background: #000; }</style>
-<script type="importmap">{"imports": {"three": "/three/build/three.module.js", "three/addons/": "/three/examples/jsm/"}}</script>
+${IMPORT_MAP}
 </head><body>
 <script type="module">
 import * as THREE from 'three';
@@ -131,32 +124,6 @@ window.compare = async (file, times) => {
 window.pageReady = true;
 </script></body></html>`;
 
-function serve(files, texture, objs) {
-  const server = createServer((req, res) => {
-    const url = new URL(req.url, 'http://127.0.0.1');
-    let body = null;
-    let type = 'text/html';
-    if (url.pathname === '/') body = PAGE;
-    else if (url.pathname === '/texture') [body, type] = [texture, 'image/png'];
-    else if (url.pathname.startsWith('/obj/')) [body, type] = [objs[Number(url.pathname.slice(5))] ?? null, 'text/plain'];
-    else if (url.pathname.startsWith('/glb/')) [body, type] = [files[Number(url.pathname.slice(5))] ?? null, 'model/gltf-binary'];
-    else if (url.pathname.startsWith('/three/')) {
-      const path = resolve(THREE_ROOT, '.' + decodeURIComponent(url.pathname.slice('/three'.length)));
-      if (path.startsWith(THREE_ROOT + sep)) {
-        try {
-          [body, type] = [readFileSync(path), extname(path) === '.js' ? 'text/javascript' : 'application/octet-stream'];
-        } catch {}
-      }
-    }
-    if (body === null) {
-      res.writeHead(404).end();
-      return;
-    }
-    res.writeHead(200, { 'Content-Type': type, 'Cache-Control': 'no-store' }).end(body);
-  });
-  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
-}
-
 async function main() {
   const view = (process.argv.find((a) => a.startsWith('--view='))?.slice(7) ?? '1,0.7,1.3').split(',').map(Number);
   const args = process.argv.slice(2).filter((a) => !a.startsWith('--'));
@@ -169,16 +136,14 @@ async function main() {
   const poses = args.slice(3).map((a) => { const i = a.indexOf('='); return { time: Number(a.slice(0, i)), obj: resolve(a.slice(i + 1)) }; });
   mkdirSync(outDir, { recursive: true });
   const summary = { texture, poses, view, issues: [], files: [] };
-  const server = await serve(files.map((f) => readFileSync(f)), readFileSync(texture), poses.map((p) => readFileSync(p.obj, 'utf8')));
-  const profile = mkdtempSync(join(tmpdir(), 'blendsim-chromium-'));
-  let context;
-  try {
-    context = await chromium.launchPersistentContext(profile, { executablePath: CHROMIUM, headless: true, args: ARGS, viewport: SIZE });
-    const page = context.pages()[0] ?? (await context.newPage());
-    page.on('pageerror', (e) => summary.issues.push(`page error: ${e.message}`));
-    page.on('console', (m) => m.type() === 'error' && summary.issues.push(`console error: ${m.text()}`));
-    await page.goto(`http://127.0.0.1:${server.address().port}/`);
-    await page.waitForFunction(() => window.pageReady === true, null, { timeout: 60_000 });
+  const [glbs, png, objs] = [files.map((f) => readFileSync(f)), readFileSync(texture), poses.map((p) => readFileSync(p.obj, 'utf8'))];
+  const server = await serve(PAGE, (path) => {
+    if (path === '/texture') return [png, 'image/png'];
+    if (path.startsWith('/obj/')) return [objs[Number(path.slice(5))] ?? null, 'text/plain'];
+    if (path.startsWith('/glb/')) return [glbs[Number(path.slice(5))] ?? null, 'model/gltf-binary'];
+    return null;
+  });
+  await inChromium(server, SIZE, summary.issues, async (page) => {
     Object.assign(summary, await page.evaluate((p) => window.prepare(...p), [poses.map((p) => ({ time: p.time })), view]));
     for (const [f, file] of files.entries()) {
       const r = await page.evaluate(([i, t]) => window.compare(i, t), [f, poses.map((p) => p.time)]);
@@ -195,11 +160,7 @@ async function main() {
       for (const issue of r.issues) console.error(`${file}: ${issue}`);
       summary.files.push(r);
     }
-  } finally {
-    await context?.close();
-    server.close();
-    rmSync(profile, { recursive: true, force: true });
-  }
+  });
   for (const issue of summary.issues) console.error(`${texture}: ${issue}`);
   summary.ok = summary.issues.length === 0 && summary.files.every((f) => f.ok);
   writeFileSync(join(outDir, 'texture.json'), JSON.stringify(summary, null, 2) + '\n');
@@ -207,16 +168,4 @@ async function main() {
   return summary.ok ? 0 : 1;
 }
 
-const timer = setTimeout(() => {
-  console.error(`texture_check.mjs: no result after ${TIMEOUT_MS / 1000} s`);
-  console.log(JSON.stringify({ ok: false, issues: ['timeout'], files: [] }));
-  process.exit(1);
-}, TIMEOUT_MS);
-main().then(
-  (code) => { clearTimeout(timer); process.exit(code); },
-  (e) => {
-    console.error(e?.stack ?? String(e));
-    console.log(JSON.stringify({ ok: false, issues: [String(e?.message ?? e)], files: [] }));
-    process.exit(1);
-  },
-);
+runChecker('texture_check.mjs', main, TIMEOUT_MS, { files: [] });
