@@ -14,8 +14,32 @@ const CHROMIUM = '/usr/bin/chromium';
 // --user-data-dir is given through launchPersistentContext (playwright refuses it in args).
 const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 
-/** The page's import map: `three` and `three/addons/` from the served node_modules. */
-export const IMPORT_MAP = '<script type="importmap">{"imports": {"three": "/three/build/three.module.js", "three/addons/": "/three/examples/jsm/"}}</script>';
+/**
+ * The start of a checker's page: the import map (`three` and `three/addons/` from the served
+ * node_modules), then a module script that imports THREE, GLTFLoader and `loaders` (names of
+ * three/addons/loaders modules, e.g. 'OBJLoader') and makes `W`, `H`, `renderer` (no
+ * antialiasing, a readable drawing buffer, pixel ratio 1), `gl` and `scene`. The page goes on
+ * with its own script and closes the script, body and html.
+ */
+export function pageStart(title, size, loaders = []) {
+  const imports = ['GLTFLoader', ...loaders].map((l) => `import { ${l} } from 'three/addons/loaders/${l}.js';`).join('\n');
+  return `<!doctype html>
+<html><head><meta charset="utf-8"><title>${title}</title><link rel="icon" href="data:,">
+<style>html, body { margin: 0; background: #000; }</style>
+<script type="importmap">{"imports": {"three": "/three/build/three.module.js", "three/addons/": "/three/examples/jsm/"}}</script>
+</head><body>
+<script type="module">
+import * as THREE from 'three';
+${imports}
+
+const W = ${size.width}, H = ${size.height};
+const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+renderer.setPixelRatio(1);
+renderer.setSize(W, H);
+document.body.appendChild(renderer.domElement);
+const gl = renderer.getContext();
+const scene = new THREE.Scene();`;
+}
 
 /**
  * Serve `page` at `/`, three.js under `/three/`, and whatever `route(pathname)` returns as

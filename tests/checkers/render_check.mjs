@@ -16,7 +16,7 @@
 
 import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join, resolve } from 'node:path';
-import { IMPORT_MAP, inChromium, runChecker, serve } from './browser.mjs';
+import { inChromium, pageStart, runChecker, serve } from './browser.mjs';
 
 const SIZE = { width: 480, height: 360 };
 // Visible: the mesh covers between these fractions of the image. Moves: at least this
@@ -25,22 +25,7 @@ const COVERAGE = [0.02, 0.9];
 const CHANGED = 0.005;
 const TIMEOUT_MS = 120_000;
 
-const PAGE = `<!doctype html>
-<html><head><meta charset="utf-8"><title>blendsim render check</title><link rel="icon" href="data:,">
-<style>html, body { margin: 0; background: #000; }</style>
-${IMPORT_MAP}
-</head><body>
-<script type="module">
-import * as THREE from 'three';
-import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-
-const W = ${SIZE.width}, H = ${SIZE.height};
-const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
-renderer.setPixelRatio(1);
-renderer.setSize(W, H);
-document.body.appendChild(renderer.domElement);
-const gl = renderer.getContext();
-const scene = new THREE.Scene();
+const PAGE = `${pageStart('blendsim render check', SIZE)}
 scene.background = new THREE.Color(0x202838);
 scene.add(new THREE.AmbientLight(0xffffff, 0.5));
 const sun = new THREE.DirectionalLight(0xffffff, 2.5);

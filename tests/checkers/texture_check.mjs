@@ -20,30 +20,14 @@
 
 import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join, resolve } from 'node:path';
-import { IMPORT_MAP, inChromium, runChecker, serve } from './browser.mjs';
+import { inChromium, pageStart, runChecker, serve } from './browser.mjs';
 
 const SIZE = { width: 400, height: 400 };
 const DIFF = 48;
 const MAX_MISMATCH = 0.02;
 const TIMEOUT_MS = 180_000;
 
-const PAGE = `<!doctype html>
-<html><head><meta charset="utf-8"><title>blendsim texture check</title><link rel="icon" href="data:,">
-<style>html, body { margin: 0; background: #000; }</style>
-${IMPORT_MAP}
-</head><body>
-<script type="module">
-import * as THREE from 'three';
-import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-import { OBJLoader } from 'three/addons/loaders/OBJLoader.js';
-
-const W = ${SIZE.width}, H = ${SIZE.height};
-const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
-renderer.setPixelRatio(1);
-renderer.setSize(W, H);
-document.body.appendChild(renderer.domElement);
-const gl = renderer.getContext();
-const scene = new THREE.Scene();
+const PAGE = `${pageStart('blendsim texture check', SIZE, ['OBJLoader'])}
 scene.background = new THREE.Color(0x000000);
 const camera = new THREE.PerspectiveCamera(35, W / H, 0.01, 100);
 let texture, objs = {}, framed = false;
