@@ -490,8 +490,10 @@ impl<'a> Solver<'a> {
         z
     }
 
-    fn budget_left(&self, it: &Iterate) -> bool {
-        it.energy.len() <= self.settings.max_iterations
+    /// Whether another iteration fits in `max_iterations`; an error once `--max-time` is spent.
+    fn budget_left(&self, it: &Iterate) -> Result<bool> {
+        crate::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
+        Ok(it.energy.len() <= self.settings.max_iterations)
     }
 
     /// The rows held in a step: the fixed sums of interval blocks, the intervals at their
@@ -718,8 +720,7 @@ impl<'a> Solver<'a> {
     fn local_global(&self, it: &mut Iterate) -> Result<PhaseEnd> {
         let (mut blocked, mut holds) = (None, 0);
         loop {
-            crate::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
-            if !self.budget_left(it) {
+            if !self.budget_left(it)? {
                 return Ok(PhaseEnd::OutOfIterations);
             }
             let mut d: Vec<f64> = self.global.gather(&it.eval.gradient).as_flattened().to_vec();
@@ -776,8 +777,7 @@ impl<'a> Solver<'a> {
                     return Ok(PhaseEnd::Settled(change));
                 }
             }
-            crate::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
-            if !self.budget_left(it) {
+            if !self.budget_left(it)? {
                 return Ok(PhaseEnd::OutOfIterations);
             }
             let solve = |x: &mut [Point]| self.model_inverse(x);

@@ -27,7 +27,6 @@ use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
 /// in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
-    check(animation)?;
     let clip = blendshape_clip(animation, None)?;
     export_with(animation, &clip, staging, None, &Progress::hidden())
 }

@@ -40,7 +40,7 @@ pub(crate) fn cube_medit(n: usize, place: impl Fn(Point) -> Point) -> String {
 }
 
 /// Write the scene and its meshes, run the first three stages, read the solution back.
-fn solve_scene(dir: &TempDir, meshes: &[(&str, String)], scene: &str) -> Solution {
+pub(crate) fn solve_scene(dir: &TempDir, meshes: &[(&str, String)], scene: &str) -> Solution {
     for (name, text) in meshes {
         std::fs::write(dir.join(name), text).unwrap();
     }

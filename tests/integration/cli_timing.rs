@@ -4,12 +4,13 @@
 
 use blendsim::internals::{natural_vibration, Elastic, ElasticMaterial, RestStiffness};
 use blendsim::mesh::{Point, TetMesh};
-use blendsim::stage::{self, Solution};
+use blendsim::stage::Solution;
 use serde_json::Value;
 
 use crate::common::bar::{bar, BarSettings};
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, max_distance, output_files};
+use crate::cli_physics::solve_scene;
 
 /// MEDIT text of `mesh` with its nodes at `positions`.
 fn medit(mesh: &TetMesh, positions: &[Point]) -> String {
@@ -22,18 +23,6 @@ fn medit(mesh: &TetMesh, positions: &[Point]) -> String {
         s += &format!("{} {} {} {} 0\n", t[0] + 1, t[1] + 1, t[2] + 1, t[3] + 1);
     }
     s + "End\n"
-}
-
-/// Write the scene and its meshes, run the first three stages, read the solution back.
-fn solve_scene(dir: &TempDir, meshes: &[(&str, String)], scene: &str) -> Solution {
-    for (name, text) in meshes {
-        std::fs::write(dir.join(name), text).unwrap();
-    }
-    std::fs::write(dir.join("scene.toml"), scene).unwrap();
-    run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
-    run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
-    run(&dir.path, &["solve", "body.json", "-o", "solution.json"]).success();
-    stage::read(&dir.join("solution.json")).unwrap()
 }
 
 /// The projective-dynamics constants with rapier's small-strain behaviour: the strain term
