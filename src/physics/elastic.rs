@@ -19,7 +19,7 @@ use super::csr::Csr;
 use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
-use super::projection::{project_batch, project_with_jacobian_batch, volume_preserving, ProjectionJacobian};
+use super::projection::{project_batch, project_with_jacobian_batch, project_with_jacobian_extend, volume_preserving, ProjectionJacobian};
 use super::lanes::BATCH;
 use super::svd3::svd3;
 use crate::error::{Error, Result};
@@ -224,11 +224,7 @@ impl Elastic {
         let (share, count) = (self.strain_share(), self.tet_count());
         let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
         for first in (0..count).step_by(BATCH) {
-            let pj = project_with_jacobian_batch(&self.deformation_gradients(first, x), share);
-            for (p, j) in pj.into_iter().take(BATCH.min(count - first)) {
-                targets.push(p);
-                jacobians.push(j);
-            }
+            project_with_jacobian_extend(&self.deformation_gradients(first, x), share, count - first, &mut targets, &mut jacobians);
         }
         (targets, jacobians)
     }
@@ -283,6 +279,26 @@ impl Elastic {
                 let o = &mut out[a as usize];
                 for i in 0..3 {
                     o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+        }
+    }
+
+    /// [`Elastic::apply_j_sequential_with`] with the targets computed [`BATCH`] tets at a time,
+    /// for vectorized kernels: `targets(first, batch)` fills the targets of tets `first..`
+    /// (entries past the last tet are ignored). The same sums in the same order.
+    pub fn apply_j_sequential_batched(&self, mut targets: impl FnMut(usize, &mut [Mat3; BATCH]), out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        let mut batch = [[[0.0; 3]; 3]; BATCH];
+        for first in (0..self.tet_count()).step_by(BATCH) {
+            targets(first, &mut batch);
+            for (e, p) in (first..self.tet_count()).zip(&batch) {
+                let w = self.weights[e];
+                for (&a, g) in self.tets[e].iter().zip(&self.grads[e]) {
+                    let o = &mut out[a as usize];
+                    for i in 0..3 {
+                        o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                    }
                 }
             }
         }
