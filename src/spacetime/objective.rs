@@ -187,16 +187,17 @@ impl<'a> Objective<'a> {
         Evaluation { value, elastic, gradient, exact_gradient, time_gradient }
     }
 
-    /// W alone, with the projections held at `p`: the value of [`Objective::evaluate`] to the
-    /// bit, without the gradients (what a line search on the key times needs).
-    pub fn value(&self, tr: &Trajectory, p: &Projections) -> f64 {
-        let per_sample: Vec<f64> = self.samples.par_iter().enumerate().map(|(k, s)| 0.5 * s.weight * self.residual(tr, s, &p.targets[k]).1).collect();
+    /// W alone with fresh projections: the value of [`Objective::evaluate`] after
+    /// [`Objective::local_step`] to the bit, without the gradients and without storing the
+    /// projections (what a line search on the key times needs).
+    pub fn fresh_value(&self, tr: &Trajectory) -> f64 {
+        let per_sample: Vec<f64> = self.samples.par_iter().map(|s| 0.5 * s.weight * self.residual(tr, s, None).1).collect();
         per_sample.into_iter().sum()
     }
 
     /// One sample's residual force `f` (zero at supports), `|f|²_{M⁻¹}` and `|L x - J p|²_{M⁻¹}`
-    /// (without the weight), with the projections held at `targets`.
-    fn residual(&self, tr: &Trajectory, s: &Sample, targets: &[Mat3]) -> (Vec<Point>, f64, f64) {
+    /// (without the weight), with the projections held at `targets`, or fresh ones.
+    fn residual(&self, tr: &Trajectory, s: &Sample, targets: Option<&[Mat3]>) -> (Vec<Point>, f64, f64) {
         let el = self.elastic;
         let n = el.node_count();
         let g = self.gravity;
@@ -208,7 +209,10 @@ impl<'a> Objective<'a> {
         let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
         // Samples run in parallel: the products run on this thread (same bytes).
         el.stiffness.mul_points_sequential(&x, &mut lx);
-        el.apply_j_sequential(targets, &mut jp);
+        match targets {
+            Some(targets) => el.apply_j_sequential(targets, &mut jp),
+            None => el.projected_forces_sequential(&x, &mut jp),
+        }
         let (mut w, mut w_el) = (0.0, 0.0);
         let mut f = vec![[0.0; 3]; n];
         for a in 0..n {
@@ -244,7 +248,7 @@ impl<'a> Objective<'a> {
             .enumerate()
             .map(|(k, s)| {
                 let u = Self::unknowns(tr, s);
-                let (f, w, w_el) = self.residual(tr, s, &p.targets[k]);
+                let (f, w, w_el) = self.residual(tr, s, Some(&p.targets[k]));
                 // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
                 let correction = p.jacobians.as_ref().map(|jac| {
                     let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();

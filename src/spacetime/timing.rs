@@ -70,8 +70,9 @@
 //! # Cost
 //!
 //! One *timing round* is one Newton iteration of [`Timing::optimize_times_from`]: the
-//! derivatives on every interval, then one W evaluation (samples, local step, residuals; no
-//! gradient, [`Objective::value`]) per line-search trial, starting from the W the caller has.
+//! derivatives on every interval, then one W evaluation (samples, fresh projections,
+//! residuals; no gradient, [`Objective::fresh_value`]) per line-search trial, starting from the
+//! W the caller has.
 //! The derivatives move every tet at every sample along its line in `T`: the projection, its
 //! two derivatives and their node forces run 16 tets at a time in SIMD lanes, the SVD included
 //! ([`project_along_forces`]), with the bytes of the scalar definition
@@ -203,8 +204,7 @@ impl<'a> Timing<'a> {
 
     /// W at `tr` (at its own times) with fresh projections.
     pub fn energy(&self, tr: &Trajectory) -> f64 {
-        let objective = self.objective(&tr.times);
-        objective.value(tr, &objective.local_step(tr, false))
+        self.objective(&tr.times).fresh_value(tr)
     }
 
     /// W and its exact derivatives in every `T_i` at `tr` (see the module documentation).
