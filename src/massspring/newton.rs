@@ -309,6 +309,8 @@ impl Newton {
         let mut exact = settings.start_exact;
         let mut previous_step = f64::INFINITY;
         for _ in 0..settings.max_iterations {
+            // `--max-time` (when the CLI set one): an equilibrium may take many iterations.
+            crate::resources::check_time("mass-spring blend", || format!("after {} Newton iterations of an equilibrium", report.iterations))?;
             let mut gradient = std::mem::take(&mut self.gradient);
             system.gradient(x, &mut gradient);
             for v in 0..n {
