@@ -212,7 +212,8 @@ pub struct Solver {
     pub samples: usize,
     /// Iterations before the solver stops unconverged.
     pub max_iterations: usize,
-    /// Stop when W changes by less than `tolerance` times its initial value.
+    /// Stop when W fell by less than `tolerance × (W + 0.001 S)` over the last 10 quasi-Newton
+    /// iterations (S: the force scale; `spacetime::solver`, "When it stops").
     pub tolerance: f64,
     /// Proximal regularization time scale h: adds (1/h⁴) Σ dτ BᵀMB (0 = off).
     pub regularization: f64,

@@ -205,6 +205,11 @@ pub struct SolverLog {
     /// when the last windows' decreases shrink geometrically.
     #[serde(default)]
     pub predicted_remaining: Option<f64>,
+    /// The force scale S at the solution (spacetime only): W with the forces the residual is
+    /// the sum of (inertia and damping, gravity, elasticity) squared one by one; `W / S` is the
+    /// squared relative size of the residual force.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_scale: Option<f64>,
     /// The key times given to the solver.
     #[serde(default)]
     pub input_times: Vec<f64>,

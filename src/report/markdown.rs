@@ -52,7 +52,9 @@ pub fn render(report: &Report) -> String {
     );
     if sv.method == crate::scene::Method::Spacetime && sv.iterations > 0 {
         let remaining = sv.predicted_remaining.map_or("no prediction (the last two windows' decreases do not shrink)".to_string(), |r| format!("predicted remaining decrease {:.3}%", 100.0 * r));
-        push(&mut s, format!("| convergence | W fell {:.3}% over the last iterations of the stopping window; {remaining} |", 100.0 * sv.last_decrease));
+        // W / S: the squared relative residual force (formats/scene.md, "When the solver stops").
+        let scale = sv.force_scale.filter(|s| *s > 0.0).map_or(String::new(), |s| format!("; W = {:.2e} S (S: the force scale)", sv.energy.last().copied().unwrap_or(0.0) / s));
+        push(&mut s, format!("| convergence | W fell {:.3}% over the last iterations of the stopping window; {remaining}{scale} |", 100.0 * sv.last_decrease));
     }
     if !sv.input_times.is_empty() && sv.times != sv.input_times {
         let list = |t: &[f64]| t.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");

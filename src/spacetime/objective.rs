@@ -75,6 +75,8 @@ struct Residual {
     w: f64,
     /// `dτ ½ |L x - J p|²_{M⁻¹}`.
     w_elastic: f64,
+    /// `dτ ½ (|M (ẍ + α ẋ)|² + |M g|² + |L x - J p|²)_{M⁻¹}`: the forces f is the sum of.
+    w_forces: f64,
     /// `J DP[dF(M⁻¹ f)]`, the exact gradient's correction (when the projections came with
     /// their Jacobians).
     correction: Option<Vec<Point>>,
@@ -89,6 +91,11 @@ pub struct Evaluation {
     pub value: f64,
     /// The elastic part `Σ dτ ½ |L x - J p|²_{M⁻¹}` (zero for rigid motion).
     pub elastic: f64,
+    /// The force scale `S = Σ dτ ½ (|M (ẍ + α ẋ)|² + |M g|² + |L x - J p|²)_{M⁻¹}`: W with
+    /// the forces that make up the residual squared one by one instead of summed, so that
+    /// `0 <= W <= 3 S`, and `W / S` is the squared relative size of the residual (what the
+    /// forces fail to cancel). It does not depend on the units or on how W started.
+    pub force_scale: f64,
     /// `∂W/∂u` with the projections held fixed (the global step's model), for every slot
     /// (fixed entries included: callers mask them), `[slot][node]`.
     pub gradient: Vec<Vec<Point>>,
@@ -175,6 +182,7 @@ impl<'a> Objective<'a> {
         let residuals = self.residuals(tr, p);
         let value = residuals.iter().map(|r| r.w).sum();
         let elastic = residuals.iter().map(|r| r.w_elastic).sum();
+        let force_scale = residuals.iter().map(|r| r.w_forces).sum();
         let gradient = self.model_gradient(&residuals);
         let exact_gradient = p.jacobians.as_ref().map(|_| self.exact_gradient(&gradient, &residuals));
         let time_gradient = residuals.first().is_some_and(|r| r.time_derivative.is_some()).then(|| {
@@ -184,7 +192,7 @@ impl<'a> Objective<'a> {
             }
             g
         });
-        Evaluation { value, elastic, gradient, exact_gradient, time_gradient }
+        Evaluation { value, elastic, force_scale, gradient, exact_gradient, time_gradient }
     }
 
     /// W alone with fresh projections: the value of [`Objective::evaluate`] after
@@ -195,9 +203,10 @@ impl<'a> Objective<'a> {
         per_sample.into_iter().sum()
     }
 
-    /// One sample's residual force `f` (zero at supports), `|f|²_{M⁻¹}` and `|L x - J p|²_{M⁻¹}`
-    /// (without the weight), with the projections held at `targets`, or fresh ones.
-    fn residual(&self, tr: &Trajectory, s: &Sample, targets: Option<&[Mat3]>) -> (Vec<Point>, f64, f64) {
+    /// One sample's residual force `f` (zero at supports), `|f|²_{M⁻¹}`, `|L x - J p|²_{M⁻¹}` and
+    /// the three forces squared apart, `|M a|² + |M g|² + |L x - J p|²` in `M⁻¹` (the force scale's
+    /// share; all without the weight), with the projections held at `targets`, or fresh ones.
+    fn residual(&self, tr: &Trajectory, s: &Sample, targets: Option<&[Mat3]>) -> (Vec<Point>, f64, f64, f64) {
         let el = self.elastic;
         let n = el.node_count();
         let g = self.gravity;
@@ -213,7 +222,7 @@ impl<'a> Objective<'a> {
             Some(targets) => el.apply_j_sequential(targets, &mut jp),
             None => el.projected_forces_sequential(&x, &mut jp),
         }
-        let (mut w, mut w_el) = (0.0, 0.0);
+        let (mut w, mut w_el, mut w_forces) = (0.0, 0.0, 0.0);
         let mut f = vec![[0.0; 3]; n];
         for a in 0..n {
             if self.supports[a] {
@@ -225,9 +234,10 @@ impl<'a> Objective<'a> {
                 f[a][d] = m * (acc[a][d] - g[d]) + e;
                 w += f[a][d] * f[a][d] / m;
                 w_el += e * e / m;
+                w_forces += m * (acc[a][d] * acc[a][d] + g[d] * g[d]) + e * e / m;
             }
         }
-        (f, w, w_el)
+        (f, w, w_el, w_forces)
     }
 
     /// `DP_e[dF_e(u)]` of the [`BATCH`] tets from `first` (vectorized; the bytes of
@@ -248,7 +258,7 @@ impl<'a> Objective<'a> {
             .enumerate()
             .map(|(k, s)| {
                 let u = Self::unknowns(tr, s);
-                let (f, w, w_el) = self.residual(tr, s, Some(&p.targets[k]));
+                let (f, w, w_el, w_forces) = self.residual(tr, s, Some(&p.targets[k]));
                 // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
                 let correction = p.jacobians.as_ref().map(|jac| {
                     let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
@@ -275,7 +285,7 @@ impl<'a> Objective<'a> {
                     }
                     0.5 * s.weight / t_len * w + s.weight * ftf
                 });
-                Residual { force: f, w: 0.5 * s.weight * w, w_elastic: 0.5 * s.weight * w_el, correction, time_derivative }
+                Residual { force: f, w: 0.5 * s.weight * w, w_elastic: 0.5 * s.weight * w_el, w_forces: 0.5 * s.weight * w_forces, correction, time_derivative }
             })
             .collect()
     }

@@ -8,13 +8,31 @@
 //!
 //! # When it stops
 //!
-//! When W decreased by less than `tolerance × W` over the last [`WINDOW`] quasi-Newton
-//! iterations: a relative rate that does not depend on how bad the first guess was (a test
-//! against the initial W stops a solve that started far away early, and one that started
-//! close never). The log carries the decrease of that last window and a prediction of what is
-//! left: the decreases of the last two windows extrapolated as a geometric series (the
-//! iteration converges linearly there). The default tolerance is chosen by measurement (see
-//! `formats/scene.md`).
+//! When W decreased by less than `tolerance × (W + negligible × S)` over the last [`WINDOW`]
+//! quasi-Newton iterations. S is the force scale ([`Evaluation::force_scale`]): the residual
+//! `f = M (ẍ + α ẋ) - M g + (L x - J p)` is a sum of three forces, and S is W with each of
+//! them squared on its own, `Σ dτ ½ (|M (ẍ + α ẋ)|² + |M g|² + |L x - J p|²)_{M⁻¹}`. So
+//! `0 <= W <= 3 S`, and `W / S` is the squared size of what the forces fail to cancel relative
+//! to the forces themselves: a number free of units and of the first guess.
+//!
+//! - Where the keys cannot be joined by exact dynamics (every paper scene but the bounces),
+//!   W levels off at a sizeable part of S (measured `W / S` 0.3 to 1.0 at the stop), the floor
+//!   `negligible × S` (1e-3 S) is far below W, and the rule is the relative rate: W fell by
+//!   less than `tolerance` of itself. It does not depend on how bad the first guess was (a test
+//!   against the initial W stops a solve that started far away early, and one that started
+//!   close never).
+//! - Where they can (a free fall fitted exactly: BALL, SPOT, a ballistic jump), W goes to 0 and
+//!   keeps falling by a large fraction of itself, so a relative rate never fires. Below the
+//!   floor W is negligible against the forces of the scene: the rule then asks for a decrease
+//!   below `tolerance × negligible × S` over the window, which (W never being negative) it
+//!   meets at the latest a window after `W <= tolerance × negligible × S` (by default 1e-6 S:
+//!   a residual force of 1e-3 of the forces); a slow solve stops earlier, once its progress
+//!   over the window is that small.
+//!
+//! The log carries the decrease of that last window and a prediction of what is left (the
+//! decreases of the last two windows extrapolated as a geometric series; the iteration
+//! converges linearly there), both relative to `W + negligible × S`, and S. The defaults are
+//! chosen by measurement (see `formats/scene.md`).
 //!
 //! # Key times
 //!
@@ -62,9 +80,12 @@ pub struct Settings {
     pub contact_samples: usize,
     /// Iterations (of both phases together) before the solve gives up.
     pub max_iterations: usize,
-    /// Stop when W decreased by less than `tolerance × W` over the last [`WINDOW`]
-    /// quasi-Newton iterations.
+    /// Stop when W decreased by less than `tolerance × (W + negligible × S)` over the last
+    /// [`WINDOW`] quasi-Newton iterations (S: the force scale, module documentation).
     pub tolerance: f64,
+    /// The part of the force scale S below which W counts as zero in the stopping rule (0: the
+    /// purely relative rule, which never fires where W can reach 0).
+    pub negligible: f64,
     /// Proximal time scale h (0 = off).
     pub regularization: f64,
     /// Rayleigh mass damping α (D = α M), per second.
@@ -127,6 +148,7 @@ impl Settings {
             contact_samples: 2 * samples,
             max_iterations: DEFAULT_MAX_ITERATIONS,
             tolerance: DEFAULT_TOLERANCE,
+            negligible: NEGLIGIBLE,
             regularization: 0.1,
             damping,
             gravity,
@@ -140,6 +162,8 @@ impl Settings {
 
 /// The default of [`Settings::tolerance`] (measured: see `formats/scene.md`).
 pub const DEFAULT_TOLERANCE: f64 = 1e-3;
+/// The default of [`Settings::negligible`] (module documentation).
+pub const NEGLIGIBLE: f64 = 1e-3;
 /// The default of [`Settings::max_iterations`].
 pub const DEFAULT_MAX_ITERATIONS: usize = 1000;
 /// Iterations over which the stopping rule measures the decrease of W.
@@ -178,12 +202,16 @@ pub struct Log {
     pub stop_reason: String,
     /// How the global step was solved: `direct` or `iterative` (over the memory budget).
     pub linear_solver: String,
-    /// W's relative decrease over the last [`WINDOW`] iterations when the solve stopped.
+    /// W's decrease over the last [`WINDOW`] iterations when the solve stopped, relative to
+    /// the stopping rule's reference `W + negligible × S`.
     pub last_decrease: f64,
-    /// The predicted further decrease of W, relative to the final W, had the iteration gone on
-    /// (the last two windows' decreases extrapolated geometrically; `None` when they do not
-    /// shrink, or the solve stopped before two windows).
+    /// The predicted further decrease of W, relative to the same reference, had the iteration
+    /// gone on (the last two windows' decreases extrapolated geometrically; `None` when they
+    /// do not shrink, or the solve stopped before two windows).
     pub predicted_remaining: Option<f64>,
+    /// The force scale S at the final iterate ([`Evaluation::force_scale`]): `W / S` is the
+    /// squared relative size of the residual force.
+    pub force_scale: f64,
     /// Quasi-Newton iterations that moved the key times.
     pub timing_iterations: usize,
     /// With the key times optimized: the key times after each iteration, starting with the
@@ -380,7 +408,8 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let (converged, stop_reason) = solver.iterate(&mut it)?;
     let iterations = it.energy.len() - 1;
     let iteration_time = t_iterations.elapsed().as_secs_f64();
-    let (last_decrease, predicted_remaining) = prediction(&it.energy);
+    let force_scale = it.eval.force_scale;
+    let (last_decrease, predicted_remaining) = prediction(&it.energy, settings.negligible * force_scale);
     let clearance = settings.contacts.as_ref().map(|c| c.clearance(&c.snapshot(&it.tr, &solver.timing.slots)));
     let log = Log {
         iterations,
@@ -400,21 +429,22 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
         active_contacts: it.active.len(),
         clearance,
         conjugate_gradients: solver.global.cg_log(),
+        force_scale,
         energy: it.energy,
     };
     Ok(Solved { trajectory: it.tr, log })
 }
 
-/// The relative decrease of W over the last window, and the geometric extrapolation of the
-/// last two windows' decreases (module documentation).
-fn prediction(energy: &[f64]) -> (f64, Option<f64>) {
+/// The decrease of W over the last window, and the geometric extrapolation of the last two
+/// windows' decreases (module documentation), both relative to `W + floor`.
+fn prediction(energy: &[f64], floor: f64) -> (f64, Option<f64>) {
     let k = energy.len() - 1;
-    let w = energy[k];
+    let w = energy[k] + floor;
     if w <= 0.0 || k == 0 {
         return (0.0, None);
     }
     let window = WINDOW.min(k);
-    let last = energy[k - window] - w;
+    let last = energy[k - window] - energy[k];
     if k < 2 * WINDOW {
         return (last / w, None);
     }
@@ -459,6 +489,11 @@ impl<'a> Solver<'a> {
         let mut o = self.timing.objective(times);
         o.time_gradient = self.blocks.is_some();
         o
+    }
+
+    /// The stopping rule's floor `negligible × S` at the current iterate.
+    fn floor(&self, it: &Iterate) -> f64 {
+        self.settings.negligible * it.eval.force_scale
     }
 
     fn unknown_count(&self) -> usize {
@@ -704,10 +739,11 @@ impl<'a> Solver<'a> {
         }
         let tolerance = self.settings.tolerance;
         Ok(match phase2 {
-            PhaseEnd::Settled(change) => (
-                true,
-                format!("W decreased by {change:.3e} of itself over the last {WINDOW} iterations, below the tolerance {tolerance} ({phases})"),
-            ),
+            PhaseEnd::Settled(change) => {
+                let (w, scale) = (*it.energy.last().expect("W"), it.eval.force_scale);
+                let of = if self.settings.negligible > 0.0 && scale > 0.0 { format!("of W + {:e} S (W = {:.2e} S, S the force scale)", self.settings.negligible, w / scale) } else { "of itself".to_string() };
+                (true, format!("W decreased by {change:.3e} {of} over the last {WINDOW} iterations, below the tolerance {tolerance} ({phases})"))
+            }
             PhaseEnd::Stalled => (true, format!("W is stationary: no step along its quasi-Newton direction decreases it ({phases})")),
             PhaseEnd::OutOfIterations => {
                 (false, format!("stopped after max_iterations = {} before W settled ({phases})", self.settings.max_iterations))
@@ -751,8 +787,9 @@ impl<'a> Solver<'a> {
             holds = 0;
             blocked = step.blocked;
             let w_new = *it.energy.last().expect("accepted");
-            if (w - w_new) < PHASE1_SWITCH * w_new {
-                return Ok(PhaseEnd::Settled((w - w_new) / w_new));
+            let reference = w_new + self.floor(it);
+            if (w - w_new) < PHASE1_SWITCH * reference {
+                return Ok(PhaseEnd::Settled((w - w_new) / reference));
             }
         }
     }
@@ -772,7 +809,7 @@ impl<'a> Solver<'a> {
             let k = it.energy.len() - 1;
             if k >= since + WINDOW {
                 let w = it.energy[k];
-                let change = (it.energy[k - WINDOW] - w) / w;
+                let change = (it.energy[k - WINDOW] - w) / (w + self.floor(it));
                 if change <= self.settings.tolerance {
                     return Ok(PhaseEnd::Settled(change));
                 }

@@ -347,3 +347,63 @@ fn singular_system_is_a_clear_error() {
     let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("singular") && e.contains("regularization"), "{e}");
 }
+
+#[test]
+fn force_scale_bounds_w_and_measures_the_forces() {
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let g = [0.0, -9.81, 0.0];
+    // An exact free fall over T = 0.8: W = 0, and the inertia and gravity terms are each
+    // |M g|² at every sample, so S = Σ dτ ½ 2 m g² = m g² T (the quadrature weights sum to T).
+    let t = 0.8;
+    let fallen: Vec<Point> = mesh.positions.iter().map(|&p| add(p, [0.0, -0.5 * 9.81 * t * t, 0.0])).collect();
+    let tr = Trajectory { times: vec![0.0, t], positions: vec![mesh.positions.clone(), fallen], velocities: vec![vec![[0.0; 3]; mesh.positions.len()], vec![[0.0, -9.81 * t, 0.0]; mesh.positions.len()]] };
+    let k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 2], false);
+    let obj = objective(&el, &k, &Settings { gravity: g, ..settings() });
+    let e = obj.evaluate(&tr, &obj.local_step(&tr, false));
+    let m: f64 = el.mass.iter().sum();
+    assert!(e.value < 1e-20 * e.force_scale, "W = {:e}, S = {:e}", e.value, e.force_scale);
+    assert!((e.force_scale / (m * 9.81 * 9.81 * t) - 1.0).abs() < 1e-12, "S = {} vs m g² T = {}", e.force_scale, m * 9.81 * 9.81 * t);
+
+    // On a trajectory that is no motion of anything, 0 < W <= 3 S (|a + b + c|² <= 3 (|a|² +
+    // |b|² + |c|²)), with damping and gravity; and W / S does not change when every force is
+    // scaled (density and weights together), nor when the trajectory moves rigidly.
+    let tr = wobbly(&mesh.positions, false);
+    let k4 = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], false);
+    let ratio = |scale: f64, tr: &Trajectory| {
+        let material = Material { stiffness: 70.0 * scale, volume: 70.0 * scale, density: scale };
+        let el = Elastic::new(&mesh, &material).unwrap();
+        let obj = objective(&el, &k4, &Settings { gravity: g, damping: 0.3, ..settings() });
+        let e = obj.evaluate(tr, &obj.local_step(tr, false));
+        assert!(e.value > 0.0 && e.value <= 3.0 * e.force_scale, "W = {:e}, S = {:e}", e.value, e.force_scale);
+        e.value / e.force_scale
+    };
+    let r = ratio(1.0, &tr);
+    assert!(r > 1e-3, "W / S = {r}");
+    assert!((ratio(1e3, &tr) / r - 1.0).abs() < 1e-10);
+    let moved = Trajectory { times: tr.times.clone(), positions: tr.positions.iter().map(|p| p.iter().map(|&x| add(x, [5.0, 1.0, -2.0])).collect()).collect(), velocities: tr.velocities.clone() };
+    assert!((ratio(1.0, &moved) / r - 1.0).abs() < 1e-10);
+}
+
+#[test]
+fn a_free_fall_converges_by_default_where_the_relative_rule_never_settles() {
+    // W of a free fall goes to 0 and keeps falling by a large part of itself per iteration: the
+    // relative rule alone (negligible = 0) never settles (here it stops only when round-off
+    // stalls the line search; BALL went 624 iterations so), the default rule stops once W is
+    // negligible against the force scale (measured: 13 iterations, W = 2e-27 S).
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let n = mesh.positions.len();
+    let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![all(n), Nodes::default()], false);
+    let default = Settings { gravity: [0.0, -9.81, 0.0], regularization: 0.5, ..Settings::new(6, 0.0, [0.0; 3]) };
+    let solved = solve(&el, &k, &default, &|_, _| {}).unwrap();
+    let log = &solved.log;
+    let w = *log.energy.last().unwrap();
+    println!("default: {} iterations, W {:e} = {:e} S: {}", log.iterations, w, w / log.force_scale, log.stop_reason);
+    assert!(log.converged && log.stop_reason.contains("below the tolerance"), "{}", log.stop_reason);
+    assert!(w <= default.tolerance * default.negligible * log.force_scale, "W = {:e} S", w / log.force_scale);
+    let relative = Settings { negligible: 0.0, max_iterations: 2 * log.iterations, ..default };
+    let solved = solve(&el, &k, &relative, &|_, _| {}).unwrap();
+    println!("relative only: {} iterations, W {:e}: {}", solved.log.iterations, solved.log.energy.last().unwrap(), solved.log.stop_reason);
+    assert!(!solved.log.stop_reason.contains("below the tolerance"), "{}", solved.log.stop_reason);
+}

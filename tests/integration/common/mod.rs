@@ -73,6 +73,7 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             linear_solver: String::new(),
             last_decrease: 0.0,
             predicted_remaining: None,
+            force_scale: None,
             input_times: Vec::new(),
             times: Vec::new(),
             timing_iterations: 0,
