@@ -35,3 +35,5 @@ pub mod unknowns;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod cantilever_tests;
