@@ -31,3 +31,9 @@ pub fn solver_inputs(body: &Body) -> Result<(Elastic, KeyConstraints, Settings)>
 pub mod massspring {
     pub use crate::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
 }
+
+/// glTF clips written for tests (the skinned ribbon the clip reader's unit tests and the
+/// integration tests both bake).
+pub mod gltf_fixtures {
+    pub use crate::cache::gltf_clip::fixtures::skinned_clip;
+}
