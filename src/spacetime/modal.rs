@@ -94,13 +94,8 @@ impl Modes {
     }
 
     /// Nodes of the basis.
-    pub fn len(&self) -> usize {
+    pub fn node_count(&self) -> usize {
         self.nodes.len()
-    }
-
-    /// Whether the basis is empty (every node a support).
-    pub fn is_empty(&self) -> bool {
-        self.nodes.is_empty()
     }
 }
 
@@ -128,7 +123,7 @@ fn small_cholesky(a: &mut [f64], n: usize) -> bool {
         for k in 0..j {
             d -= a[j * n + k] * a[j * n + k];
         }
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return false;
         }
         let d = d.sqrt();
@@ -196,7 +191,7 @@ impl ModalStep {
                 }
             }
         }
-        let n = step.modes.len();
+        let n = step.modes.node_count();
         let rows: Vec<usize> = step.held_nodes.iter().map(|&a| step.modes.nodes.binary_search(&a).expect("a basis node")).collect();
         step.phi_held = Mat::from_fn(rows.len(), n, |r, i| step.modes.phi[(rows[r], i)]);
         step.retime(c)?;
@@ -206,7 +201,7 @@ impl ModalStep {
     /// New time coefficients (the key times moved): the per-mode inverses and the capacitance
     /// matrix, on the same modes.
     pub fn retime(&mut self, c: &TimeCoefficients) -> Result<(), ModalFailure> {
-        let (slots, n) = (self.slots, self.modes.len());
+        let (slots, n) = (self.slots, self.modes.node_count());
         assert_eq!(c.slots, slots, "the same time slots");
         let inverses: Vec<Option<Vec<f64>>> = self
             .modes
@@ -263,17 +258,6 @@ impl ModalStep {
         Ok(())
     }
 
-    /// Bytes held by the step (the basis, the per-mode inverses, the capacitance factor).
-    pub fn bytes(&self) -> usize {
-        let n = self.modes.len();
-        8 * (n * n + self.inverse.len() + self.phi_held.nrows() * n + self.held.len() * self.held.len())
-    }
-
-    /// Entries held in the basis' nodes (the size of the capacitance matrix).
-    pub fn held_entries(&self) -> usize {
-        self.held.len()
-    }
-
     /// `y ← B_i⁻¹ y` for every mode (`y` is `3 slots × n`, column `i` the mode's `(slot, coordinate)` values).
     fn per_mode(&self, y: &mut Mat<f64>) {
         let ss = self.slots * self.slots;
@@ -304,7 +288,7 @@ impl ModalStep {
 
     /// `x ← A⁻¹ x` on the free unknowns (three coordinates as three right-hand sides).
     pub fn solve(&self, unknowns: &Unknowns, x: &mut [Point]) {
-        let (slots, n) = (self.slots, self.modes.len());
+        let (slots, n) = (self.slots, self.modes.node_count());
         let rows = 3 * slots;
         // Rᵀ: (slot, coordinate) × basis node, zero at held entries.
         let r = Mat::from_fn(rows, n, |row, j| unknowns.get(self.modes.nodes[j] as usize, row / 3).map_or(0.0, |u| x[u][row % 3]));
