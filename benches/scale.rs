@@ -50,6 +50,8 @@ struct Case {
     keys: usize,
     /// Lines of the `[tet]` table.
     tet: &'static str,
+    /// Lines of the `[solver]` table.
+    solver: &'static str,
     /// Hold the bottom face at every key.
     hold_bottom: bool,
     /// Extra `bake` arguments.
@@ -81,14 +83,18 @@ fn write_scene(case: &Case, dir: &Path) -> PathBuf {
         std::fs::write(dir.join("bottom.txt"), bottom).unwrap();
         text.push_str(&format!("fixed = [{}]\n", vec!["\"bottom.txt\""; case.keys].join(", ")));
     }
+    if !case.solver.is_empty() {
+        text.push_str(&format!("[solver]\n{}\n", case.solver));
+    }
     text.push_str(&format!("[tet]\n{}\n[export]\nformats = [\"usdc\", \"glb\"]\nfull_frame = false\n", case.tet));
     let scene = dir.join("scene.toml");
     std::fs::write(&scene, text).unwrap();
     scene
 }
 
-/// Bake `scene` under `/usr/bin/time -v`: (seconds, peak KiB of the process tree, report).
-fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value) {
+/// Bake `scene` under `/usr/bin/time -v`: (seconds, peak KiB of the process tree, report, CPU
+/// seconds (user + system)).
+fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value, f64) {
     let output = Command::new("/usr/bin/time")
         .arg("-v")
         .arg(env!("CARGO_BIN_EXE_blendsim"))
@@ -103,19 +109,20 @@ fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value
     let wall = field("Elapsed (wall clock) time (h:mm:ss or m:ss): ");
     let seconds = wall.split(':').fold(0.0, |acc, part| acc * 60.0 + part.parse::<f64>().unwrap());
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    (seconds, peak, report)
+    let cpu = ["User time (seconds): ", "System time (seconds): "].iter().map(|f| field(f).parse::<f64>().unwrap_or(0.0)).sum();
+    (seconds, peak, report, cpu)
 }
 
 /// The global step's solver, with the CG solves and their mean iterations when iterative.
 fn global_step(solver: &serde_json::Value) -> String {
-    let name = solver["linear_solver"].as_str().unwrap_or("-");
+    let name = format!("{}, {} iterations", solver["linear_solver"].as_str().unwrap_or("-"), solver["iterations"]);
     let cg = &solver["conjugate_gradients"];
     match (cg["solves"].as_u64(), cg["iterations"].as_u64()) {
         (Some(solves), Some(iterations)) if solves > 0 => {
             let capped = cg["capped"].as_u64().unwrap_or(0);
             format!("{name} ({solves} CG solves x {:.0} iterations{})", iterations as f64 / solves as f64, if capped > 0 { format!(", {capped} capped") } else { String::new() })
         }
-        _ => name.to_string(),
+        _ => name,
     }
 }
 
@@ -124,35 +131,48 @@ fn main() {
     let keep = std::env::var_os("SCALE_KEEP").is_some_and(|v| v != "0");
     let repeats: usize = std::env::var("SCALE_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
     let cases = [
-        // The benchmark's ARMADILLO-size body (2645 TetGen nodes) with 20 keys.
-        Case { name: "2.6k-nodes-20-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", hold_bottom: true, args: &[] },
+        // The benchmark's ARMADILLO-size body (2645 TetGen nodes) with 20 keys: the global step
+        // the cost model chooses (the modes), then each of the other two forced.
+        Case { name: "2.6k-nodes-20-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver: "", hold_bottom: true, args: &[] },
         Case {
-            name: "2.6k-nodes-20-keys-2G",
+            name: "2.6k-nodes-20-keys-direct",
             size: [1.2, 3.6, 1.2],
             divisions: [12, 36, 12],
             keys: 20,
             tet: "max_volume = 0.003",
+            solver: "global_step = \"direct\"",
+            hold_bottom: true,
+            args: &[],
+        },
+        Case {
+            name: "2.6k-nodes-20-keys-iterative-2G",
+            size: [1.2, 3.6, 1.2],
+            divisions: [12, 36, 12],
+            keys: 20,
+            tet: "max_volume = 0.003",
+            solver: "global_step = \"iterative\"",
             hold_bottom: true,
             args: &["--max-memory", "2G"],
         },
-        Case { name: "2.6k-nodes-5-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 5, tet: "max_volume = 0.003", hold_bottom: true, args: &[] },
+        Case { name: "2.6k-nodes-5-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 5, tet: "max_volume = 0.003", solver: "", hold_bottom: true, args: &[] },
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
-        Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", hold_bottom: true, args: &[] },
-        Case { name: "6.8k-full", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "cage = false", hold_bottom: true, args: &[] },
-        Case { name: "25k-cage", size: [1.0, 3.0, 1.0], divisions: [42, 130, 42], keys: 10, tet: "", hold_bottom: false, args: &[] },
-        Case { name: "100k-cage", size: [1.0, 3.0, 1.0], divisions: [85, 260, 85], keys: 10, tet: "", hold_bottom: false, args: &[] },
+        Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold_bottom: true, args: &[] },
+        Case { name: "6.8k-full", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold_bottom: true, args: &[] },
+        Case { name: "25k-cage", size: [1.0, 3.0, 1.0], divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold_bottom: false, args: &[] },
+        Case { name: "100k-cage", size: [1.0, 3.0, 1.0], divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold_bottom: false, args: &[] },
     ];
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
     println!("machine: {} threads, load average {}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
     println!();
-    println!("| scene | surface vertices | body nodes | cage | keys | global step | bake s | peak MB | cage key error max | in-between volume loss | load |");
-    println!("|---|---:|---:|---|---:|---|---:|---:|---:|---:|---|");
+    println!("| scene | surface vertices | body nodes | cage | keys | global step | bake s | CPU s | peak MB | cage key error max | in-between volume loss | load |");
+    println!("|---|---:|---:|---|---:|---|---:|---:|---:|---:|---:|---|");
     for case in cases.iter().filter(|c| filters.is_empty() || filters.iter().any(|f| c.name.contains(f.as_str()))) {
         let dir = scratch.join(case.name);
         let scene = write_scene(case, &dir);
-        let runs: Vec<(f64, u64, serde_json::Value)> = (0..repeats).map(|r| bake(&scene, &dir.join(format!("out{r}")), case.args)).collect();
+        let runs: Vec<(f64, u64, serde_json::Value, f64)> = (0..repeats).map(|r| bake(&scene, &dir.join(format!("out{r}")), case.args)).collect();
         let seconds = median(runs.iter().map(|r| r.0).collect());
         let peak = median(runs.iter().map(|r| r.1 as f64).collect());
+        let cpu = median(runs.iter().map(|r| r.3).collect());
         let report = &runs[0].2;
         let cage = &report["cage"];
         let (cage_text, key_error) = if cage.is_null() {
@@ -162,7 +182,7 @@ fn main() {
         };
         let loss = report["volume"]["animation"]["in_between_loss"].as_f64().map_or("-".into(), |l| format!("{:.2}%", 100.0 * l));
         println!(
-            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.0} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
             case.name,
             report["vertices"],
             report["tet_nodes"],
@@ -170,6 +190,7 @@ fn main() {
             case.keys,
             global_step(&report["solver"]),
             seconds,
+            cpu,
             peak / 1024.0,
             key_error,
             loss,

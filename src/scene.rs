@@ -230,6 +230,9 @@ pub struct Solver {
     /// The quasi-Newton phase's model Hessian: `"auto"`, `"projective"` or `"tangent"`
     /// (see `spacetime::solver::ModelHessian`).
     pub model_hessian: String,
+    /// How the global step is inverted: `"auto"` (the cheapest predicted within the memory
+    /// budget), `"direct"`, `"modal"` or `"iterative"` (see `spacetime::global_step::Method`).
+    pub global_step: String,
 }
 
 /// The `[embed]` table.
@@ -353,6 +356,7 @@ impl Default for Solver {
             fixed_times: Vec::new(),
             min_interval: 1e-3,
             model_hessian: "projective".to_string(),
+            global_step: "auto".to_string(),
         }
     }
 }
@@ -861,6 +865,9 @@ impl Solver {
         }
         if !["auto", "projective", "tangent"].contains(&self.model_hessian.as_str()) {
             return invalid(format!("[solver] model_hessian = {:?} is not a model", self.model_hessian), "use \"auto\", \"projective\" or \"tangent\"");
+        }
+        if !["auto", "direct", "modal", "iterative"].contains(&self.global_step.as_str()) {
+            return invalid(format!("[solver] global_step = {:?} is not a way to solve the global step", self.global_step), "use \"auto\", \"direct\", \"modal\" or \"iterative\"");
         }
         if !(self.min_interval.is_finite() && self.min_interval > 0.0) {
             return invalid(format!("[solver] min_interval = {} must be positive", self.min_interval), "use a small length in seconds, e.g. 0.001");

@@ -37,6 +37,7 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::Par;
 use rayon::prelude::*;
 
+use super::modal::{ModalStep, Modes};
 use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
@@ -105,6 +106,10 @@ pub struct GlobalStats {
     pub predicted_iterative_bytes: f64,
     /// See `predicted_iterative_bytes`.
     pub predicted_iterative_seconds: f64,
+    /// The modal step's predicted peak memory and time (see [`choose`]; 0 when not weighed).
+    pub predicted_modal_bytes: f64,
+    /// See `predicted_modal_bytes`.
+    pub predicted_modal_seconds: f64,
 }
 
 /// Seconds per stored factor entry of one solve with three right-hand sides (both sweeps read
@@ -122,17 +127,81 @@ const ASSUMED_CG_ITERATIONS: f64 = 40.0;
 /// the vector updates add about 30%, measured).
 const CG_ITERATION_PER_SWEEP: f64 = 1.3;
 
+/// The global step's three ways to invert its matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Sparse Cholesky of the assembled matrix.
+    Direct,
+    /// The body's vibration modes ([`super::modal`]).
+    Modal,
+    /// Conjugate gradients with the per-key blocks.
+    Iterative,
+}
+
+/// The size of the modal step: basis nodes, time slots, held entries in the basis and the
+/// nodes they are on (see [`super::modal`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModalSize {
+    pub nodes: usize,
+    pub slots: usize,
+    pub held: usize,
+    pub held_nodes: usize,
+}
+
+impl ModalSize {
+    /// Predicted (seconds, peak bytes) of building the modal step and [`ASSUMED_SOLVES`] solves.
+    pub fn predicted(&self) -> (f64, f64) {
+        let (n, s, c, h) = (self.nodes as f64, self.slots as f64, self.held as f64, self.held_nodes as f64);
+        let setup = EIGEN_FLOPS_PER_NODE3 * n * n * n + c * c * n + c * c * c / 3.0;
+        let solve = 2.0 * 2.0 * n * n * 3.0 * s + 2.0 * 2.0 * h * n * 3.0 * s + 2.0 * 3.0 * c * c + 2.0 * 2.0 * 3.0 * n * s * s;
+        let seconds = setup / DENSE_FLOPS_PER_SECOND + ASSUMED_SOLVES * solve / DENSE_FLOPS_PER_SECOND;
+        let bytes = 8.0 * (MODAL_COPIES * n * n + n * s * s + c * c + h * n + 2.0 * 3.0 * s * n);
+        (seconds, bytes)
+    }
+}
+
+/// The dense eigendecomposition's flops per cubed node count (tridiagonalization, the
+/// divide-and-conquer eigenvectors and their back-transformation).
+const EIGEN_FLOPS_PER_NODE3: f64 = 9.0;
+/// Predicted seconds of the direct step below which the modal step is not weighed.
+pub const MODAL_MIN_DIRECT_SECONDS: f64 = 2.0;
+/// Dense flops per second on 2 cores (faer's blocked kernels).
+const DENSE_FLOPS_PER_SECOND: f64 = 2.0e10;
+/// `n × n` matrices alive at the modal step's peak (the eigenproblem, its eigenvectors and
+/// the decomposition's workspace).
+const MODAL_COPIES: f64 = 3.0;
+
 /// The cost model: predicted (seconds, bytes) of a bake's global steps, direct (factorize
-/// once, then [`ASSUMED_SOLVES`] solves) and iterative (the per-key blocks factorized once,
-/// then [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each). Returns
-/// whether to factorize directly: when its peak fits in `budget` and it is predicted faster.
-pub fn choose(direct: &Cost, blocks: &Cost, parallel: bool, budget: u64) -> (bool, [(f64, f64); 2]) {
+/// once, then [`ASSUMED_SOLVES`] solves), iterative (the per-key blocks factorized once, then
+/// [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each) and, when
+/// `modal` is given, modal ([`ModalSize::predicted`]). Returns the fastest whose peak fits in
+/// `budget` (the iterative step when none does), and the (seconds, bytes) of the three (the
+/// modal ones 0 when not weighed).
+pub fn choose(direct: &Cost, blocks: &Cost, modal: Option<&ModalSize>, parallel: bool, budget: u64) -> (Method, [(f64, f64); 3]) {
     let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
     let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY;
     let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY;
     let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
-    let use_direct = direct_bytes <= budget as f64 && (direct_seconds <= iterative_seconds || iterative_bytes > budget as f64);
-    (use_direct, [(direct_seconds, direct_bytes), (iterative_seconds, iterative_bytes)])
+    // The modes only where the direct step is slow: below that, the direct step costs little
+    // anyway.
+    let modal_cost = modal.map(ModalSize::predicted).filter(|_| direct_seconds > MODAL_MIN_DIRECT_SECONDS);
+    let candidates = [(Method::Direct, direct_seconds, direct_bytes), (Method::Modal, modal_cost.map_or(f64::INFINITY, |c| c.0), modal_cost.map_or(f64::INFINITY, |c| c.1)), (Method::Iterative, iterative_seconds, iterative_bytes)];
+    let method = candidates.iter().filter(|c| c.2 <= budget as f64).min_by(|a, b| a.1.total_cmp(&b.1)).map_or(Method::Iterative, |c| c.0);
+    let modal_cost = modal_cost.unwrap_or((0.0, 0.0));
+    (method, [(direct_seconds, direct_bytes), modal_cost, (iterative_seconds, iterative_bytes)])
+}
+
+/// The modal step's size for these unknowns.
+fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSize {
+    let slots = unknowns.slots.count();
+    let (mut nodes, mut held, mut held_nodes) = (0, 0, 0);
+    for a in (0..unknowns.nodes).filter(|&a| !objective.supports[a]) {
+        nodes += 1;
+        let h = (0..slots).filter(|&s| unknowns.get(a, s).is_none()).count();
+        held += h;
+        held_nodes += (h > 0) as usize;
+    }
+    ModalSize { nodes, slots, held, held_nodes }
 }
 
 /// The order of every key's block in the iterative step's preconditioner, and the blocks'
@@ -311,6 +380,7 @@ const CG_MAX_ITERATIONS: usize = 5000;
 /// How the global step is inverted.
 enum Inverse {
     Direct(Box<Cholesky>),
+    Modal(Box<ModalStep>),
     Iterative(Box<Iterative>),
 }
 
@@ -533,6 +603,12 @@ impl GlobalStep {
     /// Assemble, and factorize when the predicted peak fits in `max_memory` bytes (default:
     /// [`default_memory_budget`]); otherwise prepare the iterative step.
     pub fn within(objective: &Objective, unknowns: Unknowns, regularization: f64, max_memory: Option<u64>) -> Result<GlobalStep> {
+        GlobalStep::build(objective, unknowns, regularization, max_memory, None)
+    }
+
+    /// [`GlobalStep::within`], inverted by `method` when given (whatever the cost model says).
+    pub fn build(objective: &Objective, unknowns: Unknowns, regularization: f64, max_memory: Option<u64>, method: Option<Method>) -> Result<GlobalStep> {
+        let forced = method;
         let budget = max_memory.unwrap_or_else(default_memory_budget);
         let proximal = proximal_weight(objective, regularization);
         if proximal == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
@@ -558,6 +634,8 @@ impl GlobalStep {
                 linear_solver: "none",
                 predicted_iterative_bytes: 0.0,
                 predicted_iterative_seconds: 0.0,
+                predicted_modal_bytes: 0.0,
+                predicted_modal_seconds: 0.0,
             };
             return Ok(GlobalStep { unknowns, cholesky: None, budget, coupling: coupling(&coefficients), stats });
         }
@@ -569,23 +647,47 @@ impl GlobalStep {
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
         let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
-        let (use_direct, [(predicted_seconds, predicted_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, parallel, budget);
+        let size = modal_size(objective, &unknowns);
+        let (mut method, [(predicted_seconds, predicted_bytes), (predicted_modal_seconds, predicted_modal_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, Some(&size), parallel, budget);
+        if let Some(forced) = forced {
+            method = forced;
+        }
         let singular = || {
             Error::general(
                 "the spacetime system is singular: some motion (e.g. drifting or spinning freely) costs nothing",
                 "fix some vertices at one key (`fixed`), or set [solver] regularization > 0 (e.g. 0.1)",
             )
         };
-        let solver_name = if use_direct { "the solve's global steps (a sparse factorization and its solves)" } else { "the solve's global steps (conjugate gradients)" };
-        crate::resources::check_predicted_time(if use_direct { predicted_seconds } else { predicted_iterative_seconds }, solver_name)?;
-        let (inverse, factor_nnz, ordering, linear_solver) = if use_direct {
-            let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
-            let nnz = cholesky.factor_nnz();
-            (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
-        } else {
-            let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
-            let nnz = iterative.preconditioner.factor_nnz();
-            (Inverse::Iterative(Box::new(iterative)), nnz, "per-key blocks (preconditioner)", "iterative")
+        let (solver_name, predicted) = match method {
+            Method::Direct => ("the solve's global steps (a sparse factorization and its solves)", predicted_seconds),
+            Method::Modal => ("the solve's global steps (the body's vibration modes)", predicted_modal_seconds),
+            Method::Iterative => ("the solve's global steps (conjugate gradients)", predicted_iterative_seconds),
+        };
+        crate::resources::check_predicted_time(predicted, solver_name)?;
+        let mut modal = None;
+        if method == Method::Modal {
+            // A failed eigendecomposition (or a mode that costs nothing) falls back to the
+            // next best way.
+            modal = Modes::new(objective.elastic, &objective.supports, Par::rayon(0)).and_then(|modes| ModalStep::new(modes, &coefficients, &unknowns, Par::rayon(0))).ok();
+            if modal.is_none() {
+                if forced.is_some() {
+                    return Err(singular());
+                }
+                method = if predicted_bytes <= budget as f64 && predicted_seconds <= predicted_iterative_seconds { Method::Direct } else { Method::Iterative };
+            }
+        }
+        let (inverse, factor_nnz, ordering, linear_solver) = match method {
+            Method::Direct => {
+                let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
+                let nnz = cholesky.factor_nnz();
+                (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
+            }
+            Method::Modal => (Inverse::Modal(Box::new(modal.expect("built above"))), 0, "vibration modes", "modal"),
+            Method::Iterative => {
+                let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
+                let nnz = iterative.preconditioner.factor_nnz();
+                (Inverse::Iterative(Box::new(iterative)), nnz, "per-key blocks (preconditioner)", "iterative")
+            }
         };
         let stats = GlobalStats {
             unknowns: dim,
@@ -599,6 +701,8 @@ impl GlobalStep {
             linear_solver,
             predicted_iterative_bytes,
             predicted_iterative_seconds,
+            predicted_modal_bytes,
+            predicted_modal_seconds,
         };
         Ok(GlobalStep { unknowns, cholesky: Some(inverse), budget, coupling: coupling(&coefficients), stats })
     }
@@ -611,6 +715,13 @@ impl GlobalStep {
         let t0 = std::time::Instant::now();
         let proximal = proximal_weight(objective, regularization);
         let coefficients = TimeCoefficients::new(objective, proximal);
+        if let Some(Inverse::Modal(modal)) = self.cholesky.as_mut() {
+            // The modes do not depend on the times: only the per-mode systems change.
+            modal.retime(&coefficients).map_err(|_| {
+                Error::general("the spacetime system became singular at the new key times", "keep [solver] regularization > 0, or raise the minimum interval length")
+            })?;
+            return Ok(Retimed { assemble_seconds: 0.0, factor_seconds: t0.elapsed().as_secs_f64(), reused_symbolic: true });
+        }
         let Some(Inverse::Direct(cholesky)) = self.cholesky.as_mut().filter(|_| coupling(&coefficients) == self.coupling) else {
             *self = GlobalStep::within(objective, self.unknowns.clone(), regularization, Some(self.budget))?;
             let s = self.stats;
@@ -674,6 +785,7 @@ impl GlobalStep {
         match &self.cholesky {
             None => {}
             Some(Inverse::Direct(chol)) => chol.solve_rows3(x),
+            Some(Inverse::Modal(modal)) => modal.solve(&self.unknowns, x),
             Some(Inverse::Iterative(it)) => it.solve(x),
         }
     }
@@ -759,11 +871,21 @@ mod tests {
         // flops: iterative. Over the budget: iterative whatever the time.
         let small = Cost { flops: 1e9, entries: 1e6 };
         let blocks = Cost { flops: 1e8, entries: 5e5 };
-        assert!(choose(&small, &blocks, true, u64::MAX).0);
+        assert_eq!(choose(&small, &blocks, None, true, u64::MAX).0, Method::Direct);
         let huge = Cost { flops: 1e13, entries: 5e7 };
-        let (direct, [(ds, db), (is, ib)]) = choose(&huge, &blocks, true, u64::MAX);
-        assert!(!direct && is < ds && ib < db, "{ds} {is}");
-        assert!(!choose(&small, &blocks, true, 1).0);
+        let (method, [(ds, db), _, (is, ib)]) = choose(&huge, &blocks, None, true, u64::MAX);
+        assert!(method == Method::Iterative && is < ds && ib < db, "{ds} {is}");
+        assert_eq!(choose(&small, &blocks, None, true, 1).0, Method::Iterative);
+        // A body of 2.6k nodes with 20 keys (40 slots) and 3.4k held entries on 169 nodes: the
+        // modes beat both (predicted), within a budget that holds them but not the factor.
+        let modal = ModalSize { nodes: 2600, slots: 40, held: 3400, held_nodes: 170 };
+        let (modal_seconds, modal_bytes) = modal.predicted();
+        let key_blocks = Cost { flops: 1e11, entries: 7e7 };
+        assert_eq!(choose(&small, &blocks, Some(&modal), true, u64::MAX).0, Method::Direct, "a fast direct step is kept");
+        let (method, [_, (ms, mb), _]) = choose(&huge, &key_blocks, Some(&modal), true, u64::MAX);
+        assert_eq!((method, ms, mb), (Method::Modal, modal_seconds, modal_bytes));
+        assert!(modal_bytes < 1e9, "{modal_bytes}");
+        assert_eq!(choose(&huge, &key_blocks, Some(&modal), true, (modal_bytes * 0.9) as u64).0, Method::Iterative);
     }
 
     #[test]
@@ -825,6 +947,57 @@ mod tests {
             for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
                 assert!(crate::mesh::norm(crate::mesh::sub(*x, *y)) <= 1e-7 * scale, "{x:?} vs {y:?}");
             }
+        }
+    }
+
+    /// The modal step is the direct step: with positions held at every key (velocities free),
+    /// with supports and a few extra held entries, at the first times and after a retime; the
+    /// same bytes when built twice and on one thread.
+    #[test]
+    fn the_modal_step_gives_the_direct_step() {
+        for variant in 0..2 {
+            let (el, mut k) = problem();
+            let bottom = k.fixed[0].clone();
+            for f in k.fixed.iter_mut() {
+                f.clone_from(&bottom);
+            }
+            if variant == 1 {
+                for v in k.fixed_velocity.iter_mut() {
+                    v.clone_from(&bottom);
+                }
+                k.fixed[3].extend([40, 41, 42]);
+                k.fixed_velocity[5].extend([60, 61]);
+            }
+            let s = settings();
+            let obj = objective(&el, &k, &s);
+            assert_eq!(obj.supports.iter().any(|&x| x), variant == 1);
+            let unknowns = Unknowns::new(&k, el.node_count());
+            let direct = GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Direct)).unwrap();
+            let mut modal = GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap();
+            assert_eq!((direct.stats.linear_solver, modal.stats.linear_solver), ("direct", "modal"));
+            let g = gradient(&unknowns);
+            let close = |a: &[Vec<Point>], b: &[Vec<Point>]| {
+                let scale = a.iter().flatten().map(|p| crate::mesh::norm(*p)).fold(0.0, f64::max);
+                for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
+                    assert!(crate::mesh::norm(crate::mesh::sub(*x, *y)) <= 1e-9 * scale, "variant {variant}: {x:?} vs {y:?}");
+                }
+            };
+            let step = modal.step(&g);
+            close(&direct.step(&g), &step);
+            // Held entries stay zero (the step is scattered from the free ones only) and the
+            // free ones solve the system: checked through the direct step above.
+            let again = GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap();
+            assert_eq!(again.step(&g), step);
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            let single = one.install(|| GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap().step(&g));
+            close(&single, &step);
+            // New key times: the same modes, new per-mode systems.
+            let mut k2 = k.clone();
+            k2.times = k.times.iter().enumerate().map(|(i, t)| t * (1.0 + 0.05 * (i % 3) as f64)).collect();
+            let obj2 = objective(&el, &k2, &s);
+            modal.retime(&obj2, s.regularization).unwrap();
+            let fresh = GlobalStep::build(&obj2, unknowns.clone(), s.regularization, None, Some(Method::Direct)).unwrap();
+            close(&fresh.step(&g), &modal.step(&g));
         }
     }
 
@@ -937,6 +1110,16 @@ mod experiment {
         }
         let mut rng = Rng(7);
         let g: Vec<Vec<Point>> = (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect();
+        let t = std::time::Instant::now();
+        let modal = GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap();
+        println!("modal setup {:.2} s (predicted {:.1} s, {:.0} MB)", t.elapsed().as_secs_f64(), modal.stats.predicted_modal_seconds, modal.stats.predicted_modal_bytes / 1e6);
+        let t = std::time::Instant::now();
+        let by_modes = modal.step(&g);
+        println!("modal solve {:.3} s", t.elapsed().as_secs_f64());
+        let by_cg = it.step(&g);
+        let scale = by_cg.iter().flatten().map(|p| crate::mesh::norm(*p)).fold(0.0, f64::max);
+        let diff = by_cg.iter().flatten().zip(by_modes.iter().flatten()).map(|(a, b)| crate::mesh::norm(crate::mesh::sub(*a, *b))).fold(0.0, f64::max);
+        println!("modal vs CG: max difference {:.2e} of the largest entry", diff / scale);
         for round in 0..3 {
             let t = std::time::Instant::now();
             let gg: Vec<Vec<Point>> = g.iter().map(|v| v.iter().map(|p| [p[0] + 0.01 * round as f64 * p[1], p[1], p[2]]).collect()).collect();

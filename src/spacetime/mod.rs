@@ -7,6 +7,7 @@
 //! - [`objective`]: W, its gradient, and the local step over all samples;
 //! - [`global_step`]: the normal matrix, assembled and factorized once (refactorized on the
 //!   kept symbolic analysis when the key times move);
+//! - [`modal`]: the global step solved exactly in the body's vibration modes (many keys);
 //! - [`quasi_newton`]: L-BFGS preconditioned by the global step or the tangent model;
 //! - [`tangent_step`]: the normal matrix with the rest tangent stiffness (a Newton model for
 //!   small motions about the rest shape);
@@ -23,6 +24,7 @@
 pub mod active_set;
 pub mod contact;
 pub mod global_step;
+pub mod modal;
 pub mod objective;
 pub mod obstacles;
 pub mod quasi_newton;

@@ -104,6 +104,9 @@ pub struct Settings {
     /// tangent one finds the small-motion cyclic bar's period in 17-18 iterations, where the
     /// projective one barely moves its bending; it is unmeasured elsewhere).
     pub model_hessian: ModelHessian,
+    /// How the global step is inverted; `None`: the cheapest predicted within the memory
+    /// budget ([`super::global_step::choose`]).
+    pub global_step: Option<super::global_step::Method>,
 }
 
 /// The quasi-Newton phase's initial inverse Hessian.
@@ -156,6 +159,7 @@ impl Settings {
             timing: None,
             contacts: None,
             model_hessian: ModelHessian::Projective,
+            global_step: None,
         }
     }
 }
@@ -351,7 +355,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     let blocks = settings.timing.as_ref().map(|t| Blocks::new(&keys.times, t)).transpose()?;
     let objective = objective(elastic, keys, settings);
     let unknowns = Unknowns::new(keys, elastic.node_count());
-    let global = GlobalStep::within(&objective, unknowns, settings.regularization, settings.max_memory)?;
+    let global = GlobalStep::build(&objective, unknowns, settings.regularization, settings.max_memory, settings.global_step)?;
     let global_unknowns = global.unknowns().clone();
     // The active-set projection solves with the preconditioner per coordinate: with obstacles
     // the quasi-Newton phase keeps the global step's matrix.

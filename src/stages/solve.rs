@@ -15,6 +15,7 @@ use crate::physics::elastic::Elastic;
 use crate::progress::Progress;
 use crate::scene::{Method, ObstacleSpec, Scene};
 use crate::spacetime::contact::Contacts;
+use crate::spacetime::global_step::Method as GlobalMethod;
 use crate::spacetime::obstacles::Obstacle;
 use crate::spacetime::solver::{self, ModelHessian, Settings};
 use crate::spacetime::timing::TimingSettings;
@@ -192,6 +193,12 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
             "projective" => ModelHessian::Projective,
             "tangent" => ModelHessian::Tangent,
             _ => ModelHessian::Auto,
+        },
+        global_step: match s.global_step.as_str() {
+            "direct" => Some(GlobalMethod::Direct),
+            "modal" => Some(GlobalMethod::Modal),
+            "iterative" => Some(GlobalMethod::Iterative),
+            _ => None,
         },
         timing: s.optimize_timing.then(|| TimingSettings {
             min_interval: s.min_interval,
