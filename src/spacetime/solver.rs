@@ -424,6 +424,35 @@ fn prediction(energy: &[f64]) -> (f64, Option<f64>) {
     (last / w, remaining)
 }
 
+/// The iterations left before the stopping rule stops a solve whose W went through `energy`
+/// (one entry per iteration, the first guess first), for a progress estimate: the same
+/// geometric extrapolation of the last two windows' decreases as [`Log::predicted_remaining`],
+/// run forward until the window's decrease falls to `tolerance` of the W it levels off at.
+/// `None` before two windows, or when the decreases do not shrink (or W heads to zero, where a
+/// relative rule has no predictable end); `Some(0)` once the last window is within tolerance.
+pub fn predicted_iterations(energy: &[f64], tolerance: f64) -> Option<usize> {
+    let k = energy.len().checked_sub(1)?;
+    if k < 2 * WINDOW {
+        return None;
+    }
+    let last = energy[k - WINDOW] - energy[k];
+    let before = energy[k - 2 * WINDOW] - energy[k - WINDOW];
+    if last <= tolerance * energy[k] {
+        return Some(0);
+    }
+    let ratio = last / before;
+    if !(before > 0.0 && ratio > 0.0 && ratio < 1.0) {
+        return None;
+    }
+    // Decreases over a sliding window shrink by `ratio` every WINDOW iterations.
+    let settled = energy[k] - last * ratio / (1.0 - ratio);
+    if !(settled > 0.0) {
+        return None;
+    }
+    let windows = (tolerance * settled / last).ln() / ratio.ln();
+    Some((WINDOW as f64 * windows).ceil().max(0.0) as usize)
+}
+
 /// The objective, the factorized global step and the constraints of one solve.
 struct Solver<'a> {
     timing: Timing<'a>,

@@ -347,3 +347,27 @@ fn singular_system_is_a_clear_error() {
     let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("singular") && e.contains("regularization"), "{e}");
 }
+
+/// The progress estimate of the iterations left: on W = c + a r^k (the linear convergence the
+/// extrapolation assumes) it predicts where the stopping rule, run on the same sequence, stops.
+#[test]
+fn predicted_iterations_match_the_stopping_rule_on_linear_convergence() {
+    use super::solver::{predicted_iterations, WINDOW};
+    let stops = |e: &[f64], tol: f64| (WINDOW..e.len()).find(|&k| e[k - WINDOW] - e[k] <= tol * e[k]).expect("stops");
+    for (a, r, c, tol) in [(1e4, 0.97, 2e2, 1e-3), (5.0, 0.9, 1.0, 1e-3), (1e3, 0.99, 10.0, 1e-4), (1.0, 0.95, 3.0, 1e-2)] {
+        let energy: Vec<f64> = (0..3000).map(|k| c + a * f64::powi(r, k)).collect();
+        let end = stops(&energy, tol);
+        for k in (2 * WINDOW..=end).step_by(7) {
+            let left = predicted_iterations(&energy[..=k], tol).expect("a prediction after two windows");
+            assert!((k + left).abs_diff(end) <= 1, "a {a} r {r} c {c}: at {k} predicted {} stop, the rule stops at {end}", k + left);
+        }
+        assert_eq!(predicted_iterations(&energy[..=end], tol), Some(0));
+        assert_eq!(predicted_iterations(&energy[..2 * WINDOW], tol), None, "no prediction before two windows");
+    }
+    // W heading to zero: the relative decrease never falls, nothing to predict.
+    let to_zero: Vec<f64> = (0..100).map(|k| 0.9f64.powi(k)).collect();
+    assert_eq!(predicted_iterations(&to_zero, 1e-3), None);
+    // Decreases that grow: no geometric end.
+    let speeding: Vec<f64> = (0..60).map(|k| 100.0 - 0.01 * (k * k) as f64).collect();
+    assert_eq!(predicted_iterations(&speeding, 1e-3), None);
+}

@@ -86,8 +86,21 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             (trajectory, log)
         }
         Method::Spacetime => {
-            let bar = progress.bar(scene.solver.max_iterations as u64, "solve: spacetime");
+            // The total is the stopping rule's own prediction from the W so far
+            // (`solver::predicted_iterations`; not max_iterations, which a converging solve
+            // never reaches), capped by max_iterations.
+            let bar = progress.iterations("solve: spacetime");
+            let energy = std::sync::Mutex::new(Vec::new());
             let solved = solver::solve(&elastic, &keys, &settings, &|k, w| {
+                let mut energy = energy.lock().unwrap_or_else(|e| e.into_inner());
+                energy.push(w);
+                // Without a new prediction (the last windows' decreases did not shrink), the
+                // last one stands while the solve has not passed it.
+                match solver::predicted_iterations(&energy, settings.tolerance) {
+                    Some(left) => bar.set_length((k + left).min(settings.max_iterations) as u64),
+                    None if bar.length().is_some_and(|n| n >= k as u64) => {}
+                    None => bar.unset_length(),
+                }
                 bar.set_position(k as u64);
                 bar.set_message(format!("solve: spacetime W = {w:.4e}"));
             })?;
