@@ -19,7 +19,7 @@ use super::csr::Csr;
 use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
-use super::projection::{project_batch, project_with_jacobian_batch, volume_preserving, ProjectionJacobian};
+use super::projection::{project_batch, project_with_jacobian_batch_into, volume_preserving, ProjectionJacobian};
 use super::lanes::BATCH;
 use super::svd3::svd3;
 use crate::error::{Error, Result};
@@ -200,10 +200,7 @@ impl Elastic {
     pub fn local_step_with_jacobians(&self, x: &[Point], targets: &mut [Mat3], jacobians: &mut [ProjectionJacobian]) {
         let share = self.strain_share();
         targets.par_chunks_mut(BATCH).zip(jacobians.par_chunks_mut(BATCH)).enumerate().with_min_len(4).for_each(|(c, (out, jac))| {
-            let pj = project_with_jacobian_batch(&self.deformation_gradients(c * BATCH, x), share);
-            for (l, (p, j)) in pj.into_iter().take(out.len()).enumerate() {
-                (out[l], jac[l]) = (p, j);
-            }
+            project_with_jacobian_batch_into(&self.deformation_gradients(c * BATCH, x), share, out, jac);
         });
     }
 
@@ -222,13 +219,9 @@ impl Elastic {
     /// [`Elastic::local_step_with_jacobians`] on the calling thread, into new vectors.
     pub fn local_step_with_jacobians_sequential(&self, x: &[Point]) -> (Vec<Mat3>, Vec<ProjectionJacobian>) {
         let (share, count) = (self.strain_share(), self.tet_count());
-        let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
-        for first in (0..count).step_by(BATCH) {
-            let pj = project_with_jacobian_batch(&self.deformation_gradients(first, x), share);
-            for (p, j) in pj.into_iter().take(BATCH.min(count - first)) {
-                targets.push(p);
-                jacobians.push(j);
-            }
+        let (mut targets, mut jacobians) = (vec![[[0.0; 3]; 3]; count], vec![ProjectionJacobian::default(); count]);
+        for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.chunks_mut(BATCH)).enumerate() {
+            project_with_jacobian_batch_into(&self.deformation_gradients(c * BATCH, x), share, out, jac);
         }
         (targets, jacobians)
     }
