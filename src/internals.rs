@@ -38,3 +38,9 @@ pub use crate::cage::{fit::CageFit, voxel_cage};
 pub use crate::embed::Binding;
 pub use crate::cage::predicted_seconds as cage_seconds;
 pub use crate::tetgen::predicted_seconds as tetgen_seconds;
+
+/// glTF clips written for tests (the skinned ribbon the clip reader's unit tests and the
+/// integration tests both bake).
+pub mod gltf_fixtures {
+    pub use crate::cache::gltf_clip::fixtures::skinned_clip;
+}

@@ -33,8 +33,9 @@ pub fn set_max_memory(bytes: u64) {
 /// The `--max-time` budget: when it was set, and its seconds.
 static MAX_TIME: std::sync::OnceLock<(std::time::Instant, f64)> = std::sync::OnceLock::new();
 
-/// Route the CLI's `--max-time` (seconds, counted from this call) here: from then on the
-/// phases after TetGen check it ([`check_time`], [`check_predicted_time`]). Set once per process.
+/// Route the CLI's `--max-time` (seconds, counted from this call) here: from then on TetGen
+/// is bounded by what is left of it ([`time_left`]) and the solve, the cache fit and the
+/// mass-spring blend check it ([`check_time`], [`check_predicted_time`]). Set once per process.
 pub fn set_max_time(seconds: f64) {
     let _ = MAX_TIME.set((std::time::Instant::now(), seconds));
 }
@@ -46,12 +47,22 @@ const TIME_FIX: &str = "raise --max-time, or make the problem smaller: raise [te
 /// say where it stopped, e.g. "solve" and "after 12 iterations".
 pub fn check_time(phase: &str, reached: impl FnOnce() -> String) -> Result<()> {
     match MAX_TIME.get() {
-        Some(&(start, seconds)) if start.elapsed().as_secs_f64() > seconds => Err(Error::general(
-            format!("the bake ran past its --max-time budget of {seconds} s ({}) in the {phase}, {}", duration(start.elapsed().as_secs_f64()), reached()),
-            TIME_FIX,
-        )),
+        Some(&(start, seconds)) if start.elapsed().as_secs_f64() > seconds => Err(time_spent(phase, &reached())),
         _ => Ok(()),
     }
+}
+
+/// Seconds left of `--max-time` (negative once spent), `None` when none was set. A process
+/// the bake waits for (TetGen) is given at most this long.
+pub fn time_left() -> Option<f64> {
+    MAX_TIME.get().map(|&(start, seconds)| seconds - start.elapsed().as_secs_f64())
+}
+
+/// [`check_time`]'s error, for a caller that stopped the work itself when [`time_left`] ran
+/// out (a killed TetGen). No budget set: an error saying so (callers only use it with one).
+pub fn time_spent(phase: &str, reached: &str) -> Error {
+    let (elapsed, seconds) = MAX_TIME.get().map_or((0.0, 0.0), |&(start, seconds)| (start.elapsed().as_secs_f64(), seconds));
+    Error::general(format!("blendsim ran past its --max-time budget of {seconds} s ({}) in the {phase}, {reached}", duration(elapsed)), TIME_FIX)
 }
 
 /// Err when `what` is predicted to take more than the time left of `--max-time` (before it

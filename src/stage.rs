@@ -10,7 +10,7 @@
 //! is a clear error. Numbers are written with shortest round-trip formatting: a chain of
 //! subcommands gives the same bytes as `bake`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -346,11 +346,30 @@ pub trait StageData: Serialize + DeserializeOwned {
     /// increasing times, finite numbers, the embedded scene), checked when a file is read, so a
     /// hand-edited or damaged file fails here with one line instead of deep inside a stage.
     fn validate(&self) -> Result<()>;
+    /// The surfaces the data carries, whose texture paths (absolute in memory) the file holds
+    /// relative to its own folder ([`write`], [`read`]), so a staged folder can be moved.
+    fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
+        Vec::new()
+    }
+    /// Whether any surface has a texture (so [`write`] has paths to rewrite).
+    fn has_textures(&self) -> bool {
+        false
+    }
 }
 
 impl StageData for Keyframes {
     const STAGE: &'static str = "keyframes";
     const WRITER: &'static str = "blendsim import";
+    fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
+        let rest = match &mut self.rest {
+            Shape::Surface(m) => Some(m),
+            Shape::Volume(_) => None,
+        };
+        rest.into_iter().chain(self.display.as_mut()).collect()
+    }
+    fn has_textures(&self) -> bool {
+        matches!(&self.rest, Shape::Surface(m) if textured(m)) || self.display.as_ref().is_some_and(textured)
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
         rerun.scene(&self.scene)?;
@@ -378,6 +397,12 @@ impl StageData for Keyframes {
 impl StageData for Body {
     const STAGE: &'static str = "body";
     const WRITER: &'static str = "blendsim tetrahedralize";
+    fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
+        vec![&mut self.surface]
+    }
+    fn has_textures(&self) -> bool {
+        textured(&self.surface)
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
         rerun.scene(&self.scene)?;
@@ -394,6 +419,12 @@ impl StageData for Body {
 impl StageData for Solution {
     const STAGE: &'static str = "solution";
     const WRITER: &'static str = "blendsim solve";
+    fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
+        vec![&mut self.body.surface]
+    }
+    fn has_textures(&self) -> bool {
+        textured(&self.body.surface)
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.body.scene));
         rerun.scene(&self.body.scene)?;
@@ -410,6 +441,12 @@ impl StageData for Solution {
 impl StageData for Animation {
     const STAGE: &'static str = "animation";
     const WRITER: &'static str = "blendsim embed";
+    fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
+        vec![&mut self.mesh]
+    }
+    fn has_textures(&self) -> bool {
+        textured(&self.mesh)
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
         rerun.scene(&self.scene)?;
@@ -626,16 +663,67 @@ pub fn to_json<T: StageData>(value: &T) -> Vec<u8> {
     bytes
 }
 
-/// Write a stage file atomically.
-pub fn write<T: StageData>(path: &Path, value: &T) -> Result<()> {
-    crate::output::write_atomic(path, &to_json(value))
+/// Write a stage file atomically. Texture paths are written relative to the file's folder.
+pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
+    let mut value = std::borrow::Cow::Borrowed(value);
+    if value.has_textures() {
+        let folder = stage_folder(path)?;
+        for mesh in value.to_mut().surfaces_mut() {
+            for texture in textures_mut(mesh) {
+                *texture = relative_to(&folder, Path::new(texture.as_str())).to_string_lossy().into_owned();
+            }
+        }
+    }
+    crate::output::write_atomic(path, &to_json(value.as_ref()))
 }
 
 /// Read a stage file, checking that it holds the expected stage and that its data keeps the
-/// stage's invariants ([`StageData::validate`]).
+/// stage's invariants ([`StageData::validate`]). Relative texture paths are resolved against
+/// the file's folder.
 pub fn read<T: StageData>(path: &Path) -> Result<T> {
     let bytes = crate::input::read_bytes(path, &format!("the {} file", T::STAGE))?;
-    from_json(&bytes, path)
+    let mut value: T = from_json(&bytes, path)?;
+    let mut surfaces = value.surfaces_mut();
+    if surfaces.iter_mut().any(|m| textures_mut(m).any(|t| Path::new(t.as_str()).is_relative())) {
+        let folder = stage_folder(path)?;
+        for mesh in surfaces {
+            for texture in textures_mut(mesh).filter(|t| Path::new(t.as_str()).is_relative()) {
+                let joined = folder.join(texture.as_str());
+                *texture = joined.canonicalize().unwrap_or(joined).to_string_lossy().into_owned();
+            }
+        }
+    }
+    Ok(value)
+}
+
+/// Whether a surface's material groups name a texture.
+fn textured(mesh: &TriMesh) -> bool {
+    mesh.attributes.as_ref().is_some_and(|a| a.textures.iter().any(Option::is_some))
+}
+
+/// The texture paths of a surface's material groups.
+fn textures_mut(mesh: &mut TriMesh) -> impl Iterator<Item = &mut String> {
+    mesh.attributes.iter_mut().flat_map(|a| a.textures.iter_mut().flatten())
+}
+
+/// The folder of a stage file, absolute and with symbolic links resolved (as texture paths
+/// are), so a path relative to it means the same file to the OS.
+fn stage_folder(path: &Path) -> Result<PathBuf> {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    folder.canonicalize().map_err(|e| Error::io(folder, &e, "resolve the stage file's folder"))
+}
+
+/// `path` relative to the folder `from` (both absolute): `..` up to their common ancestor,
+/// then down to `path`.
+fn relative_to(from: &Path, path: &Path) -> PathBuf {
+    let (a, b): (Vec<_>, Vec<_>) = (from.components().collect(), path.components().collect());
+    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut out: PathBuf = a[common..].iter().map(|_| std::path::Component::ParentDir).collect();
+    out.extend(&b[common..]);
+    out
 }
 
 /// Parse and validate the bytes of a stage file; `path` is named in errors.

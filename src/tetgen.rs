@@ -81,11 +81,18 @@ pub(crate) fn run_with(
             "set [tet] timeout to a number of seconds, e.g. 120",
         )
     })?;
+    // `--max-time` bounds TetGen too: it gets what is left of the budget when that is less.
+    let left = crate::resources::time_left();
+    if left.is_some_and(|l| l <= 0.0) {
+        return Err(crate::resources::time_spent("tetrahedralization", "before TetGen started"));
+    }
+    let by_max_time = left.is_some_and(|l| l < timeout.as_secs_f64());
+    let timeout = left.filter(|_| by_max_time).map_or(timeout, Duration::from_secs_f64);
     let dir =
         WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
     let input = dir.path.join(INPUT);
     std::fs::write(&input, write_smesh(surface)).map_err(|e| Error::io(&input, &e, "write the TetGen input"))?;
-    let run = run_process(program, &switches(options), &dir.path, timeout, source)?;
+    let run = run_process(program, &switches(options), &dir.path, timeout, by_max_time, source)?;
     if !run.status.success() {
         return Err(diagnose_failure(program, surface, &run, &dir.path, timeout, source));
     }
@@ -238,7 +245,7 @@ fn diagnose_failure(
     timeout: Duration,
     source: &Path,
 ) -> Error {
-    let pairs = run_process(program, "-dz", dir, timeout, source)
+    let pairs = run_process(program, "-dz", dir, timeout, false, source)
         .map(|check| intersecting_pairs(&check.stdout, surface.triangles.len()))
         .unwrap_or_default();
     if let Some(&(s, t)) = pairs.first() {
@@ -312,8 +319,9 @@ struct Finished {
     stderr: String,
 }
 
-/// Run `program switches surface.smesh` in `dir`, killing it after `timeout`.
-fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, source: &Path) -> Result<Finished> {
+/// Run `program switches surface.smesh` in `dir`, killing it after `timeout` (what was left of
+/// `--max-time` when `by_max_time`, which then names the budget in the error).
+fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, by_max_time: bool, source: &Path) -> Result<Finished> {
     // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
     let mut guard = crate::interrupt::spawn(
         Command::new(program).args([switches, INPUT]).current_dir(dir).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
@@ -361,6 +369,7 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, s
                         format!("lost track of the TetGen process: {e}"),
                         "retry; if it persists, check the system's process limits",
                     ),
+                    _ if by_max_time => crate::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64())),
                     _ => Error::in_file(
                         source,
                         format!("TetGen did not finish within {} s and was stopped", timeout.as_secs_f64()),

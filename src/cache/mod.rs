@@ -18,7 +18,7 @@ pub mod fit;
 pub mod keyframes;
 #[cfg(test)]
 mod fuzz;
-mod gltf_clip;
+pub(crate) mod gltf_clip;
 mod mdd;
 mod pc2;
 mod range;

@@ -29,9 +29,11 @@ pub struct Args {
     /// samples) must fit in it too. Default: 60% of the available memory.
     #[arg(long, value_parser = super::parse_bytes)]
     max_memory: Option<u64>,
-    /// Time the bake may take, in seconds (e.g. 600, 90s, 10m, 2h): the solve checks it
-    /// before its global step is built (against the predicted cost) and at every iteration,
-    /// and stops with an error (nothing written) once it is spent. Default: no limit.
+    /// Time the bake may take, in seconds (e.g. 600, 90s, 10m, 2h): TetGen gets at most what
+    /// is left of it (or [tet] timeout, the smaller); the solve checks it before its global
+    /// step is built (against the predicted cost) and at every iteration, a cache's key
+    /// selection and fit at every frame they read, the mass-spring blend at every Newton
+    /// iteration; the bake stops with an error (nothing written) once it is spent. Default: no limit.
     #[arg(long, value_parser = super::parse_seconds)]
     max_time: Option<f64>,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).

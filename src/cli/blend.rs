@@ -50,6 +50,11 @@ pub struct Args {
     /// Write the linear blend of the positions instead (the baseline, for comparison).
     #[arg(long)]
     linear: bool,
+    /// Time the blend may take, in seconds (e.g. 600, 90s, 10m, 2h): TetGen gets at most what
+    /// is left of it, every equilibrium checks it at each Newton iteration, and the blend
+    /// stops with an error (nothing written) once it is spent. Default: no limit.
+    #[arg(long, value_parser = super::parse_seconds)]
+    max_time: Option<f64>,
 }
 
 impl Args {
@@ -60,6 +65,9 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
+    if let Some(seconds) = args.max_time {
+        blendsim::resources::set_max_time(seconds);
+    }
     let job = BlendJob {
         targets: args.targets,
         weights: match (args.weights, args.weights_file) {

@@ -131,7 +131,7 @@ impl SpringSystem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::massspring::testing::Rng;
+    use crate::massspring::testing::{hessian_columns, Rng};
 
     /// Central differences of `f` along coordinate `c` of vertex `v`.
     fn central(x: &[Point], v: usize, c: usize, h: f64, f: impl Fn(&[Point]) -> f64) -> f64 {
@@ -219,27 +219,20 @@ mod tests {
             }
         }
         // Column (v, c) of H = d g / d x[v][c].
-        let mut e = vec![[0.0; 3]; n];
-        let mut hv = vec![[0.0; 3]; n];
-        for v in 0..n {
-            for c in 0..3 {
-                e.fill([0.0; 3]);
-                e[v][c] = 1.0;
-                sys.hessian_apply(&x, &e, Definiteness::Exact, &mut hv);
-                let (mut xp, mut xm) = (x.clone(), x.clone());
-                xp[v][c] += h;
-                xm[v][c] -= h;
-                let (mut gp, mut gm) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                sys.gradient(&xp, &mut gp);
-                sys.gradient(&xm, &mut gm);
-                for w in 0..n {
-                    for r in 0..3 {
-                        let fd = (gp[w][r] - gm[w][r]) / (2.0 * h);
-                        assert!((fd - hv[w][r]).abs() < 1e-6 * (1.0 + hv[w][r].abs()), "H[({w},{r}),({v},{c})]: {} vs {fd}", hv[w][r]);
-                    }
+        hessian_columns(&sys, &x, Definiteness::Exact, |v, c, hv| {
+            let (mut xp, mut xm) = (x.clone(), x.clone());
+            xp[v][c] += h;
+            xm[v][c] -= h;
+            let (mut gp, mut gm) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+            sys.gradient(&xp, &mut gp);
+            sys.gradient(&xm, &mut gm);
+            for w in 0..n {
+                for r in 0..3 {
+                    let fd = (gp[w][r] - gm[w][r]) / (2.0 * h);
+                    assert!((fd - hv[w][r]).abs() < 1e-6 * (1.0 + hv[w][r].abs()), "H[({w},{r}),({v},{c})]: {} vs {fd}", hv[w][r]);
                 }
             }
-        }
+        });
     }
 
     #[test]

@@ -309,6 +309,8 @@ impl Newton {
         let mut exact = settings.start_exact;
         let mut previous_step = f64::INFINITY;
         for _ in 0..settings.max_iterations {
+            // `--max-time` (when the CLI set one): an equilibrium may take many iterations.
+            crate::resources::check_time("mass-spring blend", || format!("after {} Newton iterations of an equilibrium", report.iterations))?;
             let mut gradient = std::mem::take(&mut self.gradient);
             system.gradient(x, &mut gradient);
             for v in 0..n {
@@ -729,7 +731,7 @@ mod tests {
     use super::*;
     use crate::massspring::energy::Definiteness;
     use crate::massspring::springs::{Bending, Springs};
-    use crate::massspring::testing::Rng;
+    use crate::massspring::testing::{hessian_columns, Rng};
     use crate::mesh::sub;
     use crate::procedural::icosphere;
 
@@ -757,21 +759,14 @@ mod tests {
                     dense[c][ri[k]] = a.val()[k];
                 }
             }
-            let mut e = vec![[0.0; 3]; n];
-            let mut hv = vec![[0.0; 3]; n];
-            for v in 0..n {
-                for c in 0..3 {
-                    e.fill([0.0; 3]);
-                    e[v][c] = 1.0;
-                    sys.hessian_apply(&x, &e, definiteness, &mut hv);
-                    for w in 0..n {
-                        for r in 0..3 {
-                            let expected = if fixed[v] || fixed[w] { if (v, c) == (w, r) { 1.0 } else { 0.0 } } else { hv[w][r] };
-                            assert!((dense[3 * w + r][3 * v + c] - expected).abs() < 1e-12, "({w},{r}),({v},{c})");
-                        }
+            hessian_columns(&sys, &x, definiteness, |v, c, hv| {
+                for w in 0..n {
+                    for r in 0..3 {
+                        let expected = if fixed[v] || fixed[w] { if (v, c) == (w, r) { 1.0 } else { 0.0 } } else { hv[w][r] };
+                        assert!((dense[3 * w + r][3 * v + c] - expected).abs() < 1e-12, "({w},{r}),({v},{c})");
                     }
                 }
-            }
+            });
         }
     }
 

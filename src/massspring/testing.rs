@@ -1,5 +1,6 @@
 //! Test helpers shared by the mass-spring tests.
 
+use super::energy::{Definiteness, SpringSystem};
 use crate::mesh::Point;
 
 /// A small deterministic generator (SplitMix64).
@@ -42,4 +43,21 @@ pub fn bend(points: &[Point], length: f64, angle: f64, axis_x: f64) -> Vec<Point
             [centre_x - rho * phi.cos(), rho * phi.sin(), p[2]]
         })
         .collect()
+}
+
+/// Every column of the network's Hessian at `x` (`definiteness` as the solver assembles it):
+/// `check(v, c, column)` gets `H e_vc`, the product with the unit vector of vertex `v`'s
+/// coordinate `c`, so a test can compare it entry by entry with another form of `H`.
+pub fn hessian_columns(system: &SpringSystem, x: &[Point], definiteness: Definiteness, mut check: impl FnMut(usize, usize, &[Point])) {
+    let n = x.len();
+    let mut e = vec![[0.0; 3]; n];
+    let mut column = vec![[0.0; 3]; n];
+    for v in 0..n {
+        for c in 0..3 {
+            e.fill([0.0; 3]);
+            e[v][c] = 1.0;
+            system.hessian_apply(x, &e, definiteness, &mut column);
+            check(v, c, &column);
+        }
+    }
 }

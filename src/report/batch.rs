@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use super::Report;
 use crate::error::{Error, Result};
-use crate::scene::Format;
+use crate::scene::{Basis, Format};
 use crate::stage::OutputKind;
 
 /// The `report.json` files of `dirs`: each folder's own, else those of its immediate
@@ -35,8 +35,8 @@ pub fn read(path: &Path) -> Result<Report> {
     serde_json::from_slice(&bytes).map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }
 
-const COLUMNS: [&str; 18] = [
-    "bake", "scene", "method", "vertices", "tets", "keys", "frames", "cache_format", "cache_bytes", "usda_bytes", "full_usda_bytes",
+const COLUMNS: [&str; 20] = [
+    "bake", "scene", "method", "vertices", "tets", "keys", "frames", "basis", "rank", "cache_format", "cache_bytes", "usda_bytes", "full_usda_bytes",
     "glb_bytes", "full_glb_bytes", "usda_ratio", "glb_ratio", "error_max", "error_rms", "fit_error_max",
 ];
 
@@ -62,6 +62,11 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
                 r.tets.to_string(),
                 r.keyframes.to_string(),
                 r.frames.to_string(),
+                match r.basis {
+                    Basis::Keys => "keys".into(),
+                    Basis::Principal => "principal".into(),
+                },
+                r.rank.map_or(String::new(), |k| k.to_string()),
                 cache.map_or(String::new(), |c| c.format.clone()),
                 cache.map_or(String::new(), |c| c.bytes.to_string()),
                 bytes(Format::Usda, OutputKind::Blendshape),

@@ -28,6 +28,7 @@ pub fn render(report: &Report) -> String {
         push(&mut s, format!("| warning | {} |", w.replace('|', "/")));
     }
     push(&mut s, format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames));
+    push(&mut s, format!("| basis | {} |", basis(report)));
     let sv = &report.solver;
     let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));
     let change = if w0 > 0.0 { format!(" ({:+.1}%)", 100.0 * (w1 - w0) / w0) } else { String::new() };
@@ -114,6 +115,16 @@ pub fn render(report: &Report) -> String {
         s.push_str(&super::cache::markdown(c, &report.outputs));
     }
     s
+}
+
+/// The blendshape files' shapes as report.json's `basis` and `rank` say: `keys`, or
+/// `principal, rank 3`.
+pub fn basis(report: &Report) -> String {
+    match (report.basis, report.rank) {
+        (crate::scene::Basis::Keys, _) => "keys".into(),
+        (crate::scene::Basis::Principal, Some(rank)) => format!("principal, rank {rank}"),
+        (crate::scene::Basis::Principal, None) => "principal".into(),
+    }
 }
 
 /// `1.2 MB`, `45.3 KB`, `812 B` (decimal units, as file managers show).

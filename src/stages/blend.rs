@@ -189,7 +189,8 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
     let bar = progress.bar(weights.len() as u64, "blend: equilibria");
     let mut shapes = Vec::with_capacity(weights.len());
     let mut iterations = 0;
-    for w in &weights {
+    for (done, w) in weights.iter().enumerate() {
+        crate::resources::check_time("mass-spring blend", || format!("after {done} of {} blends", weights.len()))?;
         let shape = model.blend(w, &obstacles).map_err(|e| in_targets(e, &job.targets))?;
         iterations += shape.report.iterations;
         shapes.push(shape.surface().to_vec());
@@ -359,6 +360,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         let mut alphas = vec![0.0];
         let mut shapes = vec![keys.positions[k].clone()];
         for i in 1..steps {
+            crate::resources::check_time("mass-spring in-betweens", || format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens))?;
             let (alpha, _) = ease(i as f64 / steps as f64);
             let mut w = vec![0.0; key_count];
             w[k] = 1.0 - alpha;

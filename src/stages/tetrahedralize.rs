@@ -94,8 +94,9 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
 }
 
 /// A largest tet this many times over `[tet] max_volume` is a warning. TetGen keeping the
-/// surface (`-Y`) cannot split a tet whose corners all lie on it, so tets next to the surface
-/// may exceed the bound by a small factor (the demo's largest is 2.5x; the report lists the
+/// surface (`-Y`) inserts no point that would split a surface triangle, so tets next to the
+/// surface are as large as its triangles make them and may exceed the bound by a small factor
+/// (the demo's largest is 2.5x, 161 of 777 over; `formats/scene.md`; the report lists the
 /// largest volume always); an order of magnitude means the bound is far below what the
 /// surface's own triangles allow (a box with max_volume = 1e-9 kept tets of 0.02).
 pub const MAX_VOLUME_WARNING_FACTOR: f64 = 10.0;

@@ -18,38 +18,8 @@
 // to stdout; exit code 0 when everything passes, 1 otherwise.
 
 import { readFileSync } from 'node:fs';
-import { createRequire } from 'node:module';
 import * as THREE from 'three';
-import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-
-const require = createRequire(import.meta.url);
-const validator = require('gltf-validator');
-
-const SEVERITY = ['error', 'warning', 'info', 'hint'];
-
-async function validate(bytes, summary) {
-  const report = await validator.validateBytes(bytes, { maxIssues: 0, writeTimestamp: false });
-  const i = report.issues;
-  summary.validator = {
-    version: report.validatorVersion,
-    errors: i.numErrors,
-    warnings: i.numWarnings,
-    infos: i.numInfos,
-    hints: i.numHints,
-    info_codes: [...new Set(i.messages.filter((m) => m.severity >= 2).map((m) => m.code))],
-  };
-  for (const m of i.messages.filter((m) => m.severity <= 1)) {
-    summary.issues.push(`validator ${SEVERITY[m.severity]} ${m.code} at ${m.pointer ?? m.offset}: ${m.message}`);
-  }
-}
-
-function parse(bytes) {
-  const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
-  // Plain Node cannot decode images (no DOM): textures load as empty placeholders. The
-  // validator checks the embedded images; texture_check.mjs renders them in Chromium.
-  const loader = new GLTFLoader().register(() => ({ name: 'blendsim_no_image_decoding', loadTexture: () => Promise.resolve(new THREE.Texture()) }));
-  return new Promise((resolve, reject) => loader.parse(buffer, '', resolve, reject));
-}
+import { compare, finish, maxDistance, parse, play, run, validate } from './gltf_eval.mjs';
 
 /** The kind of animation the file holds, from its JSON: full-frame files are LINEAR with one
  *  target per frame (`frame_N`); blendshape files are CUBICSPLINE, or LINEAR samples of the
@@ -87,22 +57,6 @@ function morphedPositions(mesh) {
   return out;
 }
 
-function diagonal(frames) {
-  const lo = [Infinity, Infinity, Infinity];
-  const hi = [-Infinity, -Infinity, -Infinity];
-  for (const f of frames) for (const p of f) for (let d = 0; d < 3; d++) {
-    lo[d] = Math.min(lo[d], p[d]);
-    hi[d] = Math.max(hi[d], p[d]);
-  }
-  return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
-}
-
-function maxDistance(a, b) {
-  let worst = 0;
-  for (let i = 0; i < a.length; i++) worst = Math.max(worst, Math.hypot(a[i][0] - b[i][0], a[i][1] - b[i][1], a[i][2] - b[i][2]));
-  return worst;
-}
-
 /** The world matrix a scene with this up axis and unit must get in glTF. */
 function expectedWorld(expected) {
   const m = new THREE.Matrix4().makeScale(...Array(3).fill(expected.meters_per_unit ?? 1));
@@ -118,11 +72,10 @@ async function main() {
   }
   const bytes = new Uint8Array(readFileSync(file));
   const expected = JSON.parse(readFileSync(expectedPath, 'utf8'));
-  const tolerance = expected.tolerance ?? 1e-5;
   const summary = { file, issues: [] };
-  await validate(bytes, summary);
+  await validate(bytes, file, summary);
 
-  const gltf = await parse(bytes);
+  const gltf = await parse(bytes, file);
   const meshes = [];
   gltf.scene.traverse((o) => o.isMesh && meshes.push(o));
   // One glTF mesh; three.js makes one Mesh per primitive (one per material group), which must
@@ -154,49 +107,12 @@ async function main() {
     if (off > 1e-6) summary.issues.push(`node world matrix ${got.map((x) => +x.toFixed(6))} does not map scene units to y-up meters (expected ${want.map((x) => +x.toFixed(6))})`);
   }
 
-  const mixer = new THREE.AnimationMixer(gltf.scene);
-  const actions = gltf.animations.map((clip) => {
-    const action = mixer.clipAction(clip);
-    // Hold the last pose at the end instead of wrapping to the start.
-    action.setLoop(THREE.LoopOnce);
-    action.clampWhenFinished = true;
-    return action.play();
-  });
-  const scale = Math.max(diagonal(expected.points), 1e-30);
-  let worst = 0;
-  let worstTime = null;
-  expected.times.forEach((t, i) => {
-    actions.forEach((a) => a.reset());
-    mixer.setTime(t);
+  compare(expected, summary, play(gltf.scene, gltf.animations), (t, i) => {
     const gots = meshes.map(morphedPositions);
-    const got = gots[0];
-    const want = expected.points[i].concat(seamSources.map((j) => expected.points[i][j]));
-    for (const other of gots.slice(1)) if (maxDistance(other, got) > 0) summary.issues.push(`time ${t}: primitives of one mesh morph differently`);
-    if (got.length !== want.length) {
-      summary.issues.push(`time ${t}: ${got.length} points, expected ${want.length}`);
-      return;
-    }
-    const error = maxDistance(got, want) / scale;
-    if (Number.isNaN(error)) summary.issues.push(`time ${t}: a point is NaN`);
-    if (error > worst) [worst, worstTime] = [error, t];
+    for (const other of gots.slice(1)) if (maxDistance(other, gots[0]) > 0) summary.issues.push(`time ${t}: primitives of one mesh morph differently`);
+    return [gots[0], expected.points[i].concat(seamSources.map((j) => expected.points[i][j]))];
   });
-  Object.assign(summary, { times: expected.times.length, max_error: worst, worst_time: worstTime });
-  if (worst > tolerance) summary.issues.push(`max error ${worst.toPrecision(3)} (relative to the bbox diagonal) at ${worstTime} s exceeds ${tolerance}`);
   return finish(summary);
 }
 
-function finish(summary) {
-  summary.ok = summary.issues.length === 0;
-  for (const issue of summary.issues) console.error(`${summary.file}: ${issue}`);
-  console.log(JSON.stringify(summary));
-  return summary.ok ? 0 : 1;
-}
-
-main().then(
-  (code) => process.exit(code),
-  (e) => {
-    console.error(e?.stack ?? String(e));
-    console.log(JSON.stringify({ ok: false, issues: [String(e)] }));
-    process.exit(1);
-  },
-);
+run(main);

@@ -105,17 +105,28 @@ print(json.dumps({
 }))
 "#;
 
-/// The OBJ's (vertex, u, v) at every corner of every triangle (fans of its quads), as sets per
-/// triangle, so a reversed winding still compares equal.
+/// Triangles given as the (point, u, v) of their corners, in a form that compares equal
+/// whatever the triangle order and winding: UVs rounded to 1e-6, each triangle's corners
+/// sorted, the triangles sorted.
+pub(crate) fn corner_uv_sets(triangles: impl IntoIterator<Item = [(u64, f64, f64); 3]>) -> Vec<Vec<(u64, i64, i64)>> {
+    let mut out: Vec<Vec<_>> = triangles
+        .into_iter()
+        .map(|t| {
+            let mut t: Vec<_> = t.iter().map(|&(p, u, v)| (p, (u * 1e6).round() as i64, (v * 1e6).round() as i64)).collect();
+            t.sort();
+            t
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+/// The OBJ's (vertex, u, v) at every corner of every triangle (fans of its quads), as
+/// [`corner_uv_sets`].
 pub(crate) fn obj_corner_uvs(text: &str) -> Vec<Vec<(u64, i64, i64)>> {
     let mesh = blendsim::mesh::obj::parse(text).unwrap();
     let a = mesh.attributes.unwrap();
-    let key = |v: u32, uv: [f64; 2]| (v as u64, (uv[0] * 1e6).round() as i64, (uv[1] * 1e6).round() as i64);
-    let mut out: Vec<Vec<_>> =
-        mesh.triangles.iter().zip(&a.uv_corners).map(|(t, c)| (0..3).map(|k| key(t[k], a.uvs[c[k] as usize])).collect()).collect();
-    out.iter_mut().for_each(|t: &mut Vec<_>| t.sort());
-    out.sort();
-    out
+    corner_uv_sets(mesh.triangles.iter().zip(&a.uv_corners).map(|(t, c)| std::array::from_fn(|k| (t[k] as u64, a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))))
 }
 
 #[test]
@@ -146,18 +157,8 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
         let v: Value = serde_json::from_slice(&probe.stdout).unwrap();
         assert_eq!((v["st"].as_str(), v["indexed"].as_bool()), (Some("faceVarying"), Some(true)), "{}: a seam needs faceVarying", file.path);
         let corners = v["corners"].as_array().unwrap();
-        let mut got: Vec<Vec<(u64, i64, i64)>> = corners
-            .chunks(3)
-            .map(|t| {
-                let mut t: Vec<_> = t
-                    .iter()
-                    .map(|c| (c[0].as_u64().unwrap(), (c[1].as_f64().unwrap() * 1e6).round() as i64, (c[2].as_f64().unwrap() * 1e6).round() as i64))
-                    .collect();
-                t.sort();
-                t
-            })
-            .collect();
-        got.sort();
+        let corner = |c: &Value| (c[0].as_u64().unwrap(), c[1].as_f64().unwrap(), c[2].as_f64().unwrap());
+        let got = corner_uv_sets(corners.chunks(3).map(|t| std::array::from_fn(|k| corner(&t[k]))));
         assert_eq!(got, want, "{}: the UV of every corner is the OBJ's", file.path);
         // Side normals are smooth around the prism but differ from the caps': faceVarying.
         assert_eq!((v["normals"].as_str(), v["normal_count"].as_u64()), (Some("faceVarying"), Some(corners.len() as u64)), "{}", file.path);
@@ -188,17 +189,9 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
         let sources: Vec<u64> = mesh["extras"]["seamSources"].as_array().expect("seam copies need extras.seamSources").iter().map(|x| x.as_u64().unwrap()).collect();
         let point_of = |j: usize| if j < points { j as u64 } else { sources[j - points] };
         // Corner UVs (v flipped back), through the file's own mapping, equal the OBJ's.
-        let mut got: Vec<Vec<(u64, i64, i64)>> = Vec::new();
-        for p in primitives {
-            let idx = glb.indices(p["indices"].as_u64().unwrap());
-            for t in idx.chunks(3) {
-                let mut t: Vec<_> =
-                    t.iter().map(|&j| (point_of(j), (uvs[2 * j] as f64 * 1e6).round() as i64, ((1.0 - uvs[2 * j + 1] as f64) * 1e6).round() as i64)).collect();
-                t.sort();
-                got.push(t);
-            }
-        }
-        got.sort();
+        let corner = |j: usize| (point_of(j), uvs[2 * j] as f64, 1.0 - uvs[2 * j + 1] as f64);
+        let indices: Vec<usize> = primitives.iter().flat_map(|p| glb.indices(p["indices"].as_u64().unwrap())).collect();
+        let got = corner_uv_sets(indices.chunks(3).map(|t| std::array::from_fn(|k| corner(t[k]))));
         assert_eq!(got, want, "{}: the UV of every corner is the OBJ's", file.path);
     }
     assert!(outputs.iter().any(|f| f.kind == OutputKind::FullFrame && f.path.ends_with(".glb")));

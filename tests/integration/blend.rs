@@ -37,7 +37,7 @@ fn bent(points: &[Point], degrees: f64) -> Vec<Point> {
 }
 
 /// Write the straight bar as a.obj, bent by 90° as b.obj and by -60° as c.obj.
-fn targets(dir: &TempDir) -> TriMesh {
+pub(crate) fn targets(dir: &TempDir) -> TriMesh {
     let mesh = bar();
     for (name, degrees) in [("a.obj", 0.0), ("b.obj", 90.0), ("c.obj", -60.0)] {
         let positions = if degrees == 0.0 { mesh.positions.clone() } else { bent(&mesh.positions, degrees) };

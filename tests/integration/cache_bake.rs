@@ -71,6 +71,7 @@ fn the_bar_in_every_format_bakes_within_the_tolerance() {
     let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
     let dir = TempDir::new("cache-bake-formats");
     let mut keys_seen = None;
+    let mut ranks = Vec::new();
     for (label, path, extra) in FORMATS {
         let sub_dir = dir.join(label);
         std::fs::create_dir_all(&sub_dir).unwrap();
@@ -111,7 +112,12 @@ fn the_bar_in_every_format_bakes_within_the_tolerance() {
         );
         assert!(measured <= 0.005 + 1e-6, "{label}: the written glb is {measured} from the cache");
         assert!((measured - c["error"]["max"].as_f64().unwrap()).abs() < 1e-5, "{label}: report {} vs re-read {measured}", c["error"]["max"]);
-        assert!(out.join("report.md").is_file());
+        // report.md and the summary below carry report.json's basis and rank.
+        assert_eq!(r["basis"], "principal");
+        let rank = r["rank"].as_u64().unwrap_or_else(|| panic!("{label}: a principal bake has a rank: {r}"));
+        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        assert!(md.contains(&format!("\n| basis | principal, rank {rank} |\n")), "{md}");
+        ranks.push(rank);
     }
     // The five bakes in one summary.
     let dirs: Vec<String> = FORMATS.iter().map(|f| format!("{}/out", f.0)).collect();
@@ -121,9 +127,9 @@ fn the_bar_in_every_format_bakes_within_the_tolerance() {
     let csv = std::fs::read_to_string(dir.join("summary/summary.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 6, "{csv}");
-    assert!(lines[0].starts_with("bake,scene,method,"), "{csv}");
-    for (line, (label, _, _)) in lines[1..].iter().zip(FORMATS) {
-        assert!(line.starts_with(&format!("{label}/out,bar,fit,514,0,")) && line.contains(&format!(",{label},")), "{line}");
+    assert!(lines[0].starts_with("bake,scene,method,vertices,tets,keys,frames,basis,rank,cache_format,"), "{csv}");
+    for ((line, (label, _, _)), rank) in lines[1..].iter().zip(FORMATS).zip(&ranks) {
+        assert!(line.starts_with(&format!("{label}/out,bar,fit,514,0,")) && line.contains(&format!(",principal,{rank},{label},")), "{line}");
     }
     let md = std::fs::read_to_string(dir.join("summary/summary.md")).unwrap();
     assert_eq!(md.lines().filter(|l| l.starts_with("| ")).count(), 6, "{md}");

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::process::Command;
 
 use blendsim::cache::{CacheOptions, VertexCache};
+use blendsim::internals::gltf_fixtures::skinned_clip;
 use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
 use blendsim::stage::{OutputFile, OutputKind};
 use serde_json::{json, Value};
@@ -81,113 +82,6 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
     }
 }
 
-/// A ribbon along y skinned to a chain of three joints (LINEAR and CUBICSPLINE rotations, a
-/// STEP translation), 1 s, written by hand as a glb with zero validator issues.
-fn skinned_glb(path: &Path) {
-    let mut bin: Vec<u8> = Vec::new();
-    let mut views = Vec::new();
-    let mut accessors = Vec::new();
-    let mut push = |bytes: Vec<u8>, target: Option<u32>, accessor: Value| {
-        let offset = bin.len();
-        bin.extend_from_slice(&bytes);
-        bin.resize(bin.len().next_multiple_of(4), 0);
-        let mut view = json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() });
-        if let Some(t) = target {
-            view["target"] = json!(t);
-        }
-        views.push(view);
-        let mut a = accessor;
-        a["bufferView"] = json!(views.len() - 1);
-        accessors.push(a);
-        accessors.len() - 1
-    };
-    let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let u16s = |v: &[u16]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    let (mut positions, mut joints, mut weights, mut indices) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for row in 0..9u16 {
-        let y = 0.375 * row as f32;
-        for x in [-0.2f32, 0.2] {
-            positions.extend([x, y, 0.1 * x]);
-            let (j, f) = ((y.floor() as u16).min(2), y - y.floor().min(2.0));
-            if j < 2 && f > 0.0 {
-                joints.extend([j, j + 1, 0, 0]);
-                weights.extend([1.0 - f, f, 0.0, 0.0]);
-            } else {
-                joints.extend([j, 0, 0, 0]);
-                weights.extend([1.0, 0.0, 0.0, 0.0]);
-            }
-        }
-        if row > 0 {
-            let a = 2 * (row - 1);
-            indices.extend([a, a + 1, a + 3, a, a + 3, a + 2]);
-        }
-    }
-    let n = positions.len() / 3;
-    let bound = |k: usize, pick: fn(f32, f32) -> f32| positions.iter().skip(k).step_by(3).copied().reduce(pick).unwrap();
-    let (lo, hi) = ([0, 1, 2].map(|k| bound(k, f32::min)), [0, 1, 2].map(|k| bound(k, f32::max)));
-    let position = push(f32s(&positions), Some(34962), json!({ "componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi }));
-    let index = push(u16s(&indices), Some(34963), json!({ "componentType": 5123, "count": indices.len(), "type": "SCALAR" }));
-    let joint = push(u16s(&joints), Some(34962), json!({ "componentType": 5123, "count": n, "type": "VEC4" }));
-    let weight = push(f32s(&weights), Some(34962), json!({ "componentType": 5126, "count": n, "type": "VEC4" }));
-    // Inverse bind matrices: the joints' rest globals are translations by (0, j, 0).
-    let ibm: Vec<f32> = (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -(j as f32), 0.0, 1.0]).collect();
-    let ibm = push(f32s(&ibm), None, json!({ "componentType": 5126, "count": 3, "type": "MAT4" }));
-    let quat = |axis: [f32; 3], degrees: f32| {
-        let (s, c) = (degrees.to_radians() / 2.0).sin_cos();
-        [axis[0] * s, axis[1] * s, axis[2] * s, c]
-    };
-    let mut time = |t: &[f32]| push(f32s(t), None, json!({ "componentType": 5126, "count": t.len(), "type": "SCALAR", "min": [t[0]], "max": [t[t.len() - 1]] }));
-    let (t3, t2) = (time(&[0.0, 0.5, 1.0]), time(&[0.0, 1.0]));
-    let swing = [quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 35.0), quat([1.0, 0.0, 0.0], 30.0)].concat();
-    let swing = push(f32s(&swing), None, json!({ "componentType": 5126, "count": 3, "type": "VEC4" }));
-    // CUBICSPLINE: in-tangent, value, out-tangent per key.
-    let whip = [[0.0; 4], quat([0.0, 0.0, 1.0], 0.0), [0.0, 0.0, 0.3, 0.0], [0.0, 0.0, 0.2, -0.1], quat([0.0, 0.0, 1.0], 50.0), [0.0; 4]].concat();
-    let whip = push(f32s(&whip), None, json!({ "componentType": 5126, "count": 6, "type": "VEC4" }));
-    let step = push(f32s(&[0.0, 0.0, 0.0, 0.1, 0.0, 0.0]), None, json!({ "componentType": 5126, "count": 2, "type": "VEC3" }));
-    let doc = json!({
-        "asset": { "version": "2.0", "generator": "blendsim tests" },
-        "scene": 0,
-        "scenes": [{ "nodes": [0, 1] }],
-        "nodes": [
-            { "name": "ribbon", "mesh": 0, "skin": 0 },
-            { "name": "armature", "translation": [0.0, 0.0, 0.0], "children": [2] },
-            { "name": "j0", "children": [3] },
-            { "name": "j1", "translation": [0.0, 1.0, 0.0], "children": [4] },
-            { "name": "j2", "translation": [0.0, 1.0, 0.0] }
-        ],
-        "meshes": [{ "primitives": [{ "attributes": { "POSITION": position, "JOINTS_0": joint, "WEIGHTS_0": weight }, "indices": index }] }],
-        "skins": [{ "inverseBindMatrices": ibm, "joints": [2, 3, 4], "skeleton": 2 }],
-        "animations": [{
-            "name": "swing",
-            "samplers": [
-                { "input": t3, "output": swing, "interpolation": "LINEAR" },
-                { "input": t2, "output": whip, "interpolation": "CUBICSPLINE" },
-                { "input": t2, "output": step, "interpolation": "STEP" }
-            ],
-            "channels": [
-                { "sampler": 0, "target": { "node": 3, "path": "rotation" } },
-                { "sampler": 1, "target": { "node": 4, "path": "rotation" } },
-                { "sampler": 2, "target": { "node": 2, "path": "translation" } }
-            ]
-        }],
-        "accessors": accessors,
-        "bufferViews": views,
-        "buffers": [{ "byteLength": bin.len() }]
-    });
-    let mut text = serde_json::to_vec(&doc).unwrap();
-    text.resize(text.len().next_multiple_of(4), b' ');
-    let mut out = b"glTF".to_vec();
-    out.extend(2u32.to_le_bytes());
-    out.extend(((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
-    out.extend((text.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&text);
-    out.extend((bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    std::fs::write(path, out).unwrap();
-}
-
 /// three.js (GLTFLoader + AnimationMixer, after the Khronos validator) plays `file` at `times`
 /// within `tolerance` of `points` (of their bbox diagonal). Returns its summary.
 fn three_js_plays(file: &Path, times: &[f64], points: &[Vec<Point>], tolerance: f64) -> Value {
@@ -224,7 +118,9 @@ fn every_frame(path: &Path, fps: f64) -> (Vec<f64>, Vec<Vec<Point>>) {
 #[test]
 fn a_skinned_clip_bakes_through_the_cli_and_matches_three_js() {
     let dir = TempDir::new("cache-skinned-cli");
-    skinned_glb(&dir.join("skinned.glb"));
+    // The clip reader's own skinned test clip (STEP, LINEAR and CUBICSPLINE joint TRS and a
+    // morph target under a translated armature).
+    skinned_clip(&dir.join("skinned.glb"));
     let text = "name = \"ribbon\"\n[cache]\npath = \"skinned.glb\"\nfps = 30\nkeyframes = \"auto\"\ntolerance = 0.005\n[solver]\nmethod = \"fit\"\n[export]\nformats = [\"usda\", \"glb\"]\n";
     std::fs::write(dir.join("scene.toml"), text).unwrap();
     // Our evaluation, through the CLI, written as a morph clip; three.js on the skinned file.

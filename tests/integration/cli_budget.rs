@@ -87,8 +87,8 @@ fn max_memory_is_the_one_budget_of_every_estimate() {
 
 #[test]
 fn max_time_stops_the_solve_with_one_line_and_writes_nothing() {
-    // A budget spent before the solve starts (TetGen alone takes longer): the solve refuses its
-    // global step or stops at its first iteration, with one line naming the scene and the fix.
+    // A budget spent before the work starts: TetGen is not started (it is bounded by what is
+    // left of the budget), one line naming the scene and the fix.
     let dir = TempDir::new("budget-time");
     let scene = demo_scene();
     let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "0.001"]);
@@ -110,4 +110,79 @@ fn max_time_stops_the_solve_with_one_line_and_writes_nothing() {
     let r = run(&dir.path, &["bake", lean.to_str().unwrap(), "--out", "x", "--max-time", "soon"]);
     assert_eq!(r.code, Some(2), "{r}");
     assert!(r.stderr.contains("is not a positive duration"), "{r}");
+}
+
+/// A bake refused by `--max-time`: exit 1, one line naming `file`, the budget and the fix,
+/// with `phase` (where it ran out), and no output folder.
+fn out_of_time(dir: &TempDir, args: &[&str], file: &str, phase: &str) {
+    let r = run(&dir.path, args);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.contains(&format!("{file}: ")) && r.stderr.contains("--max-time budget of ") && r.stderr.contains("raise --max-time"), "{r}");
+    assert!(r.stderr.contains(phase), "expected {phase:?}: {r}");
+    assert!(!dir.join("never").exists() && !dir.join("never.obj").exists());
+}
+
+#[test]
+fn max_time_bounds_tetgen_by_what_is_left_of_it() {
+    // The demo asking TetGen for tets of 1e-8 (millions of them: minutes of TetGen) with the
+    // default [tet] timeout of 120 s: a 2 s budget stops TetGen after what is left of it.
+    let dir = TempDir::new("budget-tetgen");
+    let scene = lean_demo(&dir);
+    let text = std::fs::read_to_string(&scene).unwrap();
+    std::fs::write(&scene, text.replace("max_volume = 0.005", "max_volume = 1e-8")).unwrap();
+    let start = std::time::Instant::now();
+    let args = ["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "2"];
+    out_of_time(&dir, &args, "twist.toml", "in the tetrahedralization, TetGen stopped after ");
+    assert!(start.elapsed().as_secs_f64() < 60.0, "stopped by the budget, not by [tet] timeout: {:?}", start.elapsed());
+    // The smaller bound wins: [tet] timeout below the budget is TetGen's own error.
+    std::fs::write(&scene, text.replace("max_volume = 0.005", "max_volume = 1e-8\ntimeout = 1")).unwrap();
+    let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1h"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert!(r.stderr.contains("TetGen did not finish within 1 s and was stopped") && r.stderr.contains("raise [tet] timeout"), "{r}");
+    // A budget spent before TetGen starts (1 ns: spent by the time the scene is read, so every
+    // phase below meets it at its first check).
+    out_of_time(&dir, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1e-9"], "twist.toml", "in the tetrahedralization, before TetGen started");
+}
+
+#[test]
+fn max_time_stops_the_cache_fit_and_its_key_selection() {
+    use crate::cache_bake::{scene, write_cache};
+    let dir = TempDir::new("budget-cache");
+    write_cache(&dir.path, &crate::common::bar::bar(&Default::default()), "bar.pc2");
+    let extra = "fps = 60\nrest = \"rest.obj\"\n";
+    std::fs::write(dir.join("listed.toml"), scene("bar.pc2", extra, "fit", "keyframes = [0, 60, 120, 180]\n")).unwrap();
+    std::fs::write(dir.join("auto.toml"), scene("bar.pc2", extra, "fit", "keyframes = \"auto\"\n")).unwrap();
+    // Nothing else checks the budget on the way (no TetGen, no solver): the fit must, at its
+    // first frame.
+    out_of_time(&dir, &["bake", "listed.toml", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache fit, after reading 0 cache frames");
+    out_of_time(&dir, &["bake", "auto.toml", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache key selection, after reading ");
+    // A generous budget changes nothing.
+    for (out, extra) in [("free", vec![]), ("timed", vec!["--max-time", "1h"])] {
+        let mut args = vec!["bake", "-q", "auto.toml", "--out", out];
+        args.extend(extra);
+        run(&dir.path, &args).success();
+    }
+    assert_eq!(std::fs::read(dir.join("free/bar.glb")).unwrap(), std::fs::read(dir.join("timed/bar.glb")).unwrap());
+}
+
+#[test]
+fn max_time_stops_the_mass_spring_blend() {
+    // Tet-mesh keys: no TetGen, so the mass-spring model (its first equilibrium, built with it)
+    // is the first to check the budget.
+    let dir = TempDir::new("budget-mass-spring");
+    let cube = crate::cli_physics::cube_medit(2, |p| p);
+    let sheared = crate::cli_physics::cube_medit(2, |p| [p[0] + 0.3 * p[1], p[1], p[2]]);
+    std::fs::write(dir.join("a.mesh"), cube).unwrap();
+    std::fs::write(dir.join("b.mesh"), sheared).unwrap();
+    let scene = "name = \"shear\"\nfps = 24.0\n[keyframes]\nmeshes = [\"a.mesh\", \"b.mesh\"]\ntimes = [0.0, 1.0]\n[solver]\nmethod = \"mass-spring\"\n[mass_spring]\ninbetweens = 3\n[export]\nformats = [\"usda\"]\n";
+    std::fs::write(dir.join("shear.toml"), scene).unwrap();
+    out_of_time(&dir, &["bake", "shear.toml", "--out", "never", "--max-time", "1e-9"], "shear.toml", "in the mass-spring blend, after 0 Newton iterations");
+    run(&dir.path, &["bake", "-q", "shear.toml", "--out", "timed", "--max-time", "1h"]).success();
+    // `blend` takes the budget too: its equilibria, and TetGen for the body.
+    crate::blend::targets(&dir);
+    let blend = |out: &'static str, extra: &[&'static str]| -> Vec<&'static str> { [&["blend", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--out", out][..], extra].concat() };
+    out_of_time(&dir, &blend("never.obj", &["--no-body", "--max-time", "1e-9"]), "a.obj", "in the mass-spring blend, after 0 ");
+    out_of_time(&dir, &blend("never.obj", &["--max-time", "1e-9"]), "a.obj", "in the tetrahedralization, before TetGen started");
+    run(&dir.path, &blend("shape.obj", &["-q", "--max-time", "1h"])).success();
 }

@@ -157,6 +157,8 @@ fn a_messy_teapot_bakes_on_a_cage_and_every_file_passes_the_checkers() {
     assert!(key_error > 0.0 && key_error < 1e-2, "cage keys reproduce the input keys to {key_error}");
     let md = std::fs::read_to_string(dir.join("out/report.md")).unwrap();
     assert!(md.contains("| cage | ") && md.contains("because the surface is open"), "{md}");
+    assert_eq!(report["basis"], "keys");
+    assert!(md.contains("\n| basis | keys |\n"), "report.json's basis: {md}");
 }
 
 #[test]

@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use crate::cli_physics::cube_medit;
 use crate::common::assets::paper_scene;
-use crate::common::cli::{read_json, run, TempDir};
+use crate::common::cli::{key_times, read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// The smallest `distance` of any exported vertex at any frame of the full-frame output.
@@ -28,7 +28,7 @@ fn diagonal(points: &[Point]) -> f64 {
 }
 
 /// Bake `scene` (in `cwd`) into `cwd/out` and check every file against the library's animation.
-fn bake_and_check(cwd: &Path, scene: &Path) -> (Value, Animation) {
+pub(crate) fn bake_and_check(cwd: &Path, scene: &Path) -> (Value, Animation) {
     let r = run(cwd, &["bake", scene.to_str().unwrap(), "--out", "out"]).success();
     eprintln!("{}", r.stderr.trim_end());
     let report = read_json(&cwd.join("out/report.json"));
@@ -37,9 +37,11 @@ fn bake_and_check(cwd: &Path, scene: &Path) -> (Value, Animation) {
     (report, anim)
 }
 
-fn times(report: &Value) -> Vec<f64> {
-    report["solver"]["times"].as_array().map_or_else(Vec::new, |a| a.iter().map(|t| t.as_f64().unwrap()).collect())
-}
+/// A soft body falling freely under gravity (no damping): the material of the drop scenes.
+pub(crate) const FALLING: &str = "[material]\nstiffness = 60.0\nvolume = 60.0\ndamping = 0.0\ngravity = [0.0, -9.81, 0.0]\n";
+
+/// The floor `y = 0` as a scene's obstacle.
+pub(crate) const FLOOR: &str = "[[obstacle]]\nkind = \"plane\"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n";
 
 /// A unit cube of 3 x 3 x 3 cells with its lowest corner at `at`.
 fn cube_at(at: Point) -> String {
@@ -62,19 +64,10 @@ times = [0.0, 0.5, 1.0]
 contact = [1]
 fixed = ["all", "{contact_fixed}", "all"]
 fixed_velocity = ["all", "none", "none"]
-[material]
-stiffness = 60.0
-volume = 60.0
-damping = 0.0
-gravity = [0.0, -9.81, 0.0]
-[solver]
+{FALLING}[solver]
 samples = 10
 max_iterations = 100
-[[obstacle]]
-kind = "plane"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 1.0, 0.0]
-[export]
+{FLOOR}[export]
 formats = ["usda", "glb"]
 "#
     );
@@ -159,7 +152,7 @@ fn paper_bounce(name: &str) {
     let Some(scene) = paper_scene(name) else { return };
     let dir = TempDir::new(&format!("paper-{name}"));
     let (report, anim) = bake_and_check(&dir.path, &scene);
-    let t = times(&report);
+    let t = key_times(&report);
     let g = 9.81;
     let drop = anim.trajectory.positions[0].iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
     let parabola = (2.0 * drop / g).sqrt();

@@ -8,9 +8,10 @@ use blendsim::stage::Solution;
 use serde_json::Value;
 
 use crate::common::bar::{bar, BarSettings};
-use crate::common::cli::{read_json, run, TempDir};
-use crate::common::verify::{check_outputs, library_animation, max_distance, output_files};
+use crate::cli_contacts::{bake_and_check, FALLING, FLOOR};
 use crate::cli_physics::solve_scene;
+use crate::common::cli::{energies, key_times, TempDir};
+use crate::common::verify::max_distance;
 
 /// MEDIT text of `mesh` with its nodes at `positions`.
 fn medit(mesh: &TetMesh, positions: &[Point]) -> String {
@@ -177,11 +178,6 @@ optimize_timing = true
     assert!((found[0] / found[1] - 1.0).abs() < 0.01, "the two starts end at {found:?}");
 }
 
-/// The report of a bake in `dir`.
-fn report(dir: &TempDir) -> Value {
-    read_json(&dir.join("out/report.json"))
-}
-
 #[test]
 fn a_ballistic_jump_with_keep_duration_finds_the_parabola_times() {
     // A rigid cube thrown up and caught a second later: every key's pose is held at a point of
@@ -217,11 +213,11 @@ tolerance = 1e-6
 formats = ["usda", "glb"]
 "#;
     std::fs::write(dir.join("scene.toml"), scene).unwrap();
-    run(&dir.path, &["bake", "scene.toml", "--out", "out"]).success();
-    let report = report(&dir);
+    // Every file, opened by usd-core, the glTF validator and three.js, plays the animation
+    // computed in this process (checked below to be the exact parabola to 1e-4 of the size).
+    let (report, anim) = bake_and_check(&dir.path, &dir.join("scene.toml"));
     let solver = &report["solver"];
-    let times: Vec<f64> = solver["times"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
-    let energy: Vec<f64> = solver["energy"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
+    let (times, energy) = (key_times(&report), energies(&report));
     println!("optimized times {times:?}, W {:.3e} -> {:.3e}, {}", energy[0], energy.last().unwrap(), solver["stop_reason"]);
     assert_eq!(times[4], 1.0, "the duration is kept to the bit");
     for (t, want) in times.iter().zip(truth) {
@@ -234,16 +230,12 @@ formats = ["usda", "glb"]
     let glb = std::fs::read(dir.join("out/jump.glb")).unwrap();
     let input = gltf_sampler_input(&glb);
     assert_eq!(input, times.iter().map(|&t| t as f32).collect::<Vec<_>>());
-    // Every file, opened by usd-core, the glTF validator and three.js, plays the parabola: the
-    // same animation computed in this process (it is the exact parabola to 1e-4 of the size).
-    let anim = library_animation(&dir.join("scene.toml"));
     assert_eq!(anim.trajectory.times, times);
     for &t in &[0.05, 0.3, 0.5, 0.77] {
         let want: Vec<Point> = anim.trajectory.positions[0].iter().map(|p| [p[0] + vx * t, p[1] + vy * t - 0.5 * g * t * t, p[2]]).collect();
         let d = max_distance(&anim.trajectory.evaluate(t), &want);
         assert!(d < 1e-4, "{d} off the parabola at t = {t}");
     }
-    check_outputs(&dir.join("out"), &anim, &output_files(&report["outputs"]));
 }
 
 /// The input accessor of the first animation sampler of a GLB, as floats.
@@ -284,7 +276,8 @@ fn a_dropped_ball_bounces_off_the_plane_at_the_parabola_time() {
     for (name, text) in [("high.obj", &high), ("low.obj", &low)] {
         std::fs::write(dir.join(name), text).unwrap();
     }
-    let scene = r#"
+    let scene = format!(
+        r#"
 name = "ball"
 fps = 60
 [keyframes]
@@ -294,44 +287,32 @@ contact = [1]
 fixed_velocity = ["all", "none", "none"]
 [tet]
 max_volume = 0.01
-[material]
-stiffness = 60.0
-volume = 60.0
-damping = 0.0
-gravity = [0.0, -9.81, 0.0]
-[solver]
+{FALLING}[solver]
 samples = 20
 optimize_timing = true
 fixed_times = [0]
-[[obstacle]]
-kind = "plane"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 1.0, 0.0]
-[export]
+{FLOOR}[export]
 formats = ["usda", "glb"]
-"#;
+"#
+    );
     std::fs::write(dir.join("scene.toml"), scene).unwrap();
-    run(&dir.path, &["bake", "scene.toml", "--out", "out"]).success();
-    let report = report(&dir);
+    // The files (usd-core, glTF validator, three.js) play exactly the animation checked below.
+    let (report, anim) = bake_and_check(&dir.path, &dir.join("scene.toml"));
     let solver = &report["solver"];
-    let times: Vec<f64> = solver["times"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
-    let energy: Vec<f64> = solver["energy"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
+    let (times, energy) = (key_times(&report), energies(&report));
     let parabola = (2.0 / g).sqrt();
     println!("ball: times {times:?} (parabola meets the plane at {parabola:.6}), W {:.3e} -> {:.3e}, clearance {}, {}", energy[0], energy.last().unwrap(), solver["clearance"], solver["stop_reason"]);
     assert_eq!(times.len(), 4, "the contact key is duplicated");
     assert_eq!(times[1], times[2], "a contact is a zero-length interval");
     assert!((times[1] - parabola).abs() < 1e-3, "contact at {} vs {parabola}", times[1]);
     assert!(solver["clearance"].as_f64().unwrap() >= -1e-4);
-    // No vertex below the plane at any frame of the full-frame output (1e-4 of the diameter),
-    // and the files (usd-core, glTF validator, three.js) play exactly this animation.
-    let anim = library_animation(&dir.join("scene.toml"));
+    // No vertex below the plane at any frame of the full-frame output (1e-4 of the diameter).
     assert_eq!(anim.trajectory.times, times);
     let lowest = anim.trajectory.frames(60.0).iter().map(|(_, t)| anim.trajectory.evaluate(*t).iter().map(|p| p[1]).fold(f64::INFINITY, f64::min)).fold(f64::INFINITY, f64::min);
     println!("lowest vertex over the frames: {lowest:.3e}");
     assert!(lowest >= -1e-4, "a vertex at {lowest}");
     let glb = std::fs::read(dir.join("out/ball.glb")).unwrap();
     assert_eq!(gltf_sampler_input(&glb).len(), 3, "the contact is one glTF key");
-    check_outputs(&dir.join("out"), &anim, &output_files(&report["outputs"]));
     // The stage files of a contact scene (a key time repeated) pass the stage readers' checks,
     // and the chain of subcommands gives the bake's bytes.
     crate::common::cli::assert_chain_gives_bake_bytes(&dir.path, "scene.toml", "out", &["ball.usda", "ball.glb"]);

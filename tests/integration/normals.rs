@@ -262,3 +262,51 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
         eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (texture not embedded)", size(true), size(false));
     }
 }
+
+/// `gltf_check.mjs` reports max_error 0 on the blendshape glb (with or without NORMAL deltas):
+/// three.js and `BlendShapeClip::points_at` evaluate the same stored f32 base, deltas and
+/// CUBICSPLINE weight keys with the same f64 arithmetic (glTF's Hermite basis), so they agree to
+/// the bit at every time, not only at keys. That the comparison measures something: the
+/// animation moves at the checked times, and the same file with every weight key scaled by
+/// (1 + 1e-6) gives a small nonzero error (under the 1e-5 tolerance), by (1 + 1e-2) a failure.
+#[test]
+fn gltf_check_agrees_exactly_with_the_stored_clip_and_sees_a_perturbed_weight() {
+    use crate::common::checkers::{try_check_glb, Expected};
+    let dir = TempDir::new("normals-exact");
+    crate::texture::textured_prism(&dir.path, "gltf_morph_normals = true");
+    run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
+    let anim = library_animation(&dir.join("scene.toml"));
+    let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
+    let times = crate::common::verify::glb_times(&anim);
+    let expected = Expected::at(&times, anim.scene.fps, |t| clip.points_at(t));
+    let file = dir.join("out/uvprism.glb");
+    let exact = try_check_glb(&file, &expected).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("as written: {exact}");
+    assert_eq!(exact["max_error"], 0.0, "{exact}");
+    assert!(exact["moving_times"].as_u64().unwrap() + 2 >= times.len() as u64, "the prism moves at the checked times: {exact}");
+    let scaled = |factor: f32| {
+        let mut bytes = std::fs::read(&file).unwrap();
+        let glb = Glb::parse(&bytes);
+        let bin = bytes.len() - glb.bin.len();
+        let samplers = glb.json["animations"][0]["samplers"].as_array().unwrap();
+        assert!(samplers.iter().all(|s| s["interpolation"] == "CUBICSPLINE"));
+        for s in samplers {
+            let a = s["output"].as_u64().unwrap();
+            let values = glb.floats(a, 1);
+            let (start, stride, _) = glb.start(a);
+            for (i, w) in values.iter().enumerate() {
+                let at = bin + start + i * stride.max(4);
+                bytes[at..at + 4].copy_from_slice(&(w * factor).to_le_bytes());
+            }
+        }
+        let path = dir.join(format!("scaled-{factor}.glb"));
+        std::fs::write(&path, bytes).unwrap();
+        try_check_glb(&path, &expected)
+    };
+    let slightly = scaled(1.0 + 1e-6).unwrap_or_else(|e| panic!("{e}"));
+    eprintln!("weights x (1 + 1e-6): {slightly}");
+    let error = slightly["max_error"].as_f64().unwrap();
+    assert!(error > 0.0 && error < 1e-5, "{slightly}");
+    let failure = scaled(1.0 + 1e-2).expect_err("weights 1% off must fail the check");
+    assert!(failure.contains("exceeds 0.00001"), "{failure}");
+}

@@ -248,3 +248,29 @@ fn missing_or_unsupported_textures_are_one_line_errors() {
     assert!(r.stderr.contains("uvgrid.gif: is not a PNG or JPEG image"), "{r}");
     assert!(!dir.join("out").exists(), "no partial output");
 }
+
+#[test]
+fn a_staged_folder_with_textures_can_be_moved_and_resumed() {
+    // Stage files name textures relative to their own folder: a folder staged by `import` and
+    // `tetrahedralize`, moved elsewhere, resumes (`solve`, `embed`, `export`) to the bake's bytes.
+    let dir = TempDir::new("texture-moved");
+    let staged = dir.join("staged");
+    std::fs::create_dir_all(staged.join("stages")).unwrap();
+    textured_prism(&staged, "");
+    run(&staged, &["import", "scene.toml", "-o", "keys.json"]).success();
+    run(&staged, &["tetrahedralize", "keys.json", "-o", "stages/body.json"]).success();
+    let canonical = staged.canonicalize().unwrap();
+    for (file, texture) in [("keys.json", "\"uvgrid.png\""), ("stages/body.json", "\"../uvgrid.png\"")] {
+        let text = std::fs::read_to_string(staged.join(file)).unwrap();
+        assert!(text.contains(texture) && !text.contains(canonical.to_str().unwrap()), "{file}: the texture relative to it, no absolute path");
+    }
+    let moved = dir.join("moved");
+    std::fs::rename(&staged, &moved).unwrap();
+    run(&moved, &["solve", "stages/body.json", "-o", "stages/solution.json"]).success();
+    run(&moved, &["embed", "stages/solution.json", "-o", "animation.json"]).success();
+    run(&moved, &["export", "animation.json", "--out", "out"]).success();
+    run(&moved, &["bake", "scene.toml", "--out", "baked"]).success();
+    for file in ["uvprism.glb", "uvprism.usda", "uvgrid.png"] {
+        assert_eq!(std::fs::read(moved.join("out").join(file)).unwrap(), std::fs::read(moved.join("baked").join(file)).unwrap(), "{file}");
+    }
+}

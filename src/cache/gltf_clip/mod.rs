@@ -24,6 +24,8 @@
 //! target per frame costs one or two targets of memory per frame.
 
 mod data;
+#[doc(hidden)]
+pub mod fixtures;
 pub mod sampler;
 #[cfg(test)]
 mod tests;

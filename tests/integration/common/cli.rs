@@ -150,6 +150,11 @@ pub fn energies(report: &Value) -> Vec<f64> {
     report["solver"]["energy"].as_array().expect("solver.energy is an array").iter().map(|w| w.as_f64().unwrap()).collect()
 }
 
+/// The solver's key times of a report (`solver.times`: optimized, when the scene optimizes them).
+pub fn key_times(report: &Value) -> Vec<f64> {
+    report["solver"]["times"].as_array().expect("solver.times is an array").iter().map(|t| t.as_f64().unwrap()).collect()
+}
+
 /// Run `blendsim ARGS` in `cwd` with extra environment, failing the test if it has not ended
 /// within `seconds` (a hang is a failure, not a stuck test run).
 pub fn run_timeout<S: AsRef<OsStr>>(cwd: &Path, args: &[S], env: &[(&str, &OsStr)], seconds: f64) -> Run {
