@@ -243,3 +243,33 @@ impl TermLike for Lines {
         self.emit(&line)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `warn` takes the bar being drawn off the terminal: the last unfinished visible one.
+    #[test]
+    fn warnings_suspend_the_bar_being_drawn() {
+        let progress = Progress { mode: Mode::Lines, warnings: false, bars: Arc::default() };
+        assert!(progress.drawn().is_none());
+        let outer = progress.stage("outer");
+        let inner = progress.predicted("inner", 1.0);
+        assert_eq!(progress.drawn().map(|b| b.message()).as_deref(), Some("inner"));
+        inner.finish_and_clear();
+        assert_eq!(progress.drawn().map(|b| b.message()).as_deref(), Some("outer"), "a finished bar is not drawn");
+        drop(inner);
+        outer.finish_and_clear();
+        assert!(progress.drawn().is_none());
+        let hidden = Progress::hidden();
+        let _bar = hidden.bar(3, "hidden");
+        assert!(hidden.drawn().is_none(), "hidden bars are never drawn");
+    }
+
+    #[test]
+    fn short_durations() {
+        assert_eq!(short(Duration::from_millis(430)), "0.4s");
+        assert_eq!(short(Duration::from_secs(42)), "42s");
+        assert_eq!(short(Duration::from_secs(185)), "3m05s");
+    }
+}
