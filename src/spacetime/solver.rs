@@ -446,7 +446,7 @@ pub fn predicted_iterations(energy: &[f64], tolerance: f64) -> Option<usize> {
     }
     // Decreases over a sliding window shrink by `ratio` every WINDOW iterations.
     let settled = energy[k] - last * ratio / (1.0 - ratio);
-    if !(settled > 0.0) {
+    if settled.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let windows = (tolerance * settled / last).ln() / ratio.ln();
