@@ -22,6 +22,19 @@ pub fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
 }
 
+/// Seconds of CPU this process has used (user + system, all threads): what the work costs
+/// whatever else the machine runs (wall-clock seconds grow with the load average on a shared
+/// machine; CPU seconds do not, and for one thread they are the wall time on an idle core).
+pub fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage only writes the struct it is given.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+        return f64::NAN;
+    }
+    let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    seconds(usage.ru_utime) + seconds(usage.ru_stime)
+}
+
 /// The body of a scene file (import and tetrahedralize).
 pub fn scene_body(path: &str) -> Body {
     let scene = SceneFile::load(Path::new(env!("CARGO_MANIFEST_DIR")).join(path).as_path()).expect("scene loads");

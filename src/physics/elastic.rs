@@ -19,7 +19,7 @@ use super::csr::Csr;
 use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
-use super::projection::{project_batch, project_with_jacobian_batch_into, volume_preserving, ProjectionJacobian};
+use super::projection::{project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, volume_preserving, ProjectionJacobian};
 use super::lanes::BATCH;
 use super::svd3::svd3;
 use crate::error::{Error, Result};
@@ -200,7 +200,10 @@ impl Elastic {
     pub fn local_step_with_jacobians(&self, x: &[Point], targets: &mut [Mat3], jacobians: &mut [ProjectionJacobian]) {
         let share = self.strain_share();
         targets.par_chunks_mut(BATCH).zip(jacobians.par_chunks_mut(BATCH)).enumerate().with_min_len(4).for_each(|(c, (out, jac))| {
-            project_with_jacobian_batch_into(&self.deformation_gradients(c * BATCH, x), share, out, jac);
+            let pj = project_with_jacobian_batch(&self.deformation_gradients(c * BATCH, x), share);
+            for (l, (p, j)) in pj.into_iter().take(out.len()).enumerate() {
+                (out[l], jac[l]) = (p, j);
+            }
         });
     }
 
@@ -219,9 +222,9 @@ impl Elastic {
     /// [`Elastic::local_step_with_jacobians`] on the calling thread, into new vectors.
     pub fn local_step_with_jacobians_sequential(&self, x: &[Point]) -> (Vec<Mat3>, Vec<ProjectionJacobian>) {
         let (share, count) = (self.strain_share(), self.tet_count());
-        let (mut targets, mut jacobians) = (vec![[[0.0; 3]; 3]; count], vec![ProjectionJacobian::default(); count]);
-        for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.chunks_mut(BATCH)).enumerate() {
-            project_with_jacobian_batch_into(&self.deformation_gradients(c * BATCH, x), share, out, jac);
+        let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
+        for first in (0..count).step_by(BATCH) {
+            project_with_jacobian_extend(&self.deformation_gradients(first, x), share, count - first, &mut targets, &mut jacobians);
         }
         (targets, jacobians)
     }
@@ -276,6 +279,50 @@ impl Elastic {
                 let o = &mut out[a as usize];
                 for i in 0..3 {
                     o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+        }
+    }
+
+    /// `J p(x)` with fresh projections, on the calling thread, without storing the targets:
+    /// the bytes of `apply_j_sequential(&local_step_sequential(x))` (the projection and its
+    /// node forces in one vectorized kernel, [`project_forces`]).
+    pub fn projected_forces_sequential(&self, x: &[Point], out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        let (share, count) = (self.strain_share(), self.tet_count());
+        let mut forces = [[[0.0; 3]; 4]; BATCH];
+        for first in (0..count).step_by(BATCH) {
+            let lanes = BATCH.min(count - first);
+            let (mut grads, mut weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
+            grads[..lanes].copy_from_slice(&self.grads[first..first + lanes]);
+            weights[..lanes].copy_from_slice(&self.weights[first..first + lanes]);
+            project_forces(&self.deformation_gradients(first, x), share, &grads, &weights, &mut forces);
+            for (e, corners) in (first..first + lanes).zip(&forces) {
+                for (&a, force) in self.tets[e].iter().zip(corners) {
+                    let o = &mut out[a as usize];
+                    for i in 0..3 {
+                        o[i] += force[i];
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Elastic::apply_j_sequential_with`] with the targets computed [`BATCH`] tets at a time,
+    /// for vectorized kernels: `targets(first, batch)` fills the targets of tets `first..`
+    /// (entries past the last tet are ignored). The same sums in the same order.
+    pub fn apply_j_sequential_batched(&self, mut targets: impl FnMut(usize, &mut [Mat3; BATCH]), out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        let mut batch = [[[0.0; 3]; 3]; BATCH];
+        for first in (0..self.tet_count()).step_by(BATCH) {
+            targets(first, &mut batch);
+            for (e, p) in (first..self.tet_count()).zip(&batch) {
+                let w = self.weights[e];
+                for (&a, g) in self.tets[e].iter().zip(&self.grads[e]) {
+                    let o = &mut out[a as usize];
+                    for i in 0..3 {
+                        o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                    }
                 }
             }
         }
@@ -412,6 +459,10 @@ mod tests {
         let (mut a, mut b) = (vec![[0.0; 3]; n], vec![[1.0; 3]; n]);
         el.apply_j(&targets, &mut a);
         el.apply_j_sequential(&targets, &mut b);
+        assert_eq!(a, b);
+        // Fresh projections straight to forces (cube_mesh(3) has a partial last batch).
+        assert_ne!(el.tet_count() % BATCH, 0);
+        el.projected_forces_sequential(&x, &mut b);
         assert_eq!(a, b);
         el.stiffness.mul_points(&x, &mut a);
         el.stiffness.mul_points_sequential(&x, &mut b);

@@ -11,7 +11,7 @@
 use super::mat3::Mat3;
 #[cfg(doc)]
 use super::mat3::scaled_product;
-use super::lanes::{lane, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
+use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
 use super::svd3::svd_lanes;
 
 /// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`](super::svd3::svd3):
@@ -158,6 +158,28 @@ pub fn project_batch(f: &[Mat3; BATCH], strain_share: f64) -> [Mat3; BATCH] {
 
 with_widest_simd!(dispatch_project, fn(f: &M3<BATCH>, strain_share: f64) -> M3<BATCH> { project_lanes(f, strain_share) });
 
+/// [`project_batch`]'s targets as node forces: for tet lane `l` and corner `k`,
+/// `weights[l] P_l grads[l][k]` with the sums of
+/// [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so that adding
+/// them per node in tet order gives its bytes (for a caller that needs `J p`, not `p`).
+pub fn project_forces(f: &[Mat3; BATCH], strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) {
+    dispatch_project_forces(&to_lanes(f), strain_share, grads, weights, out);
+}
+
+with_widest_simd!(dispatch_project_forces, fn(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) -> () {
+    let p = project_lanes(f, strain_share);
+    let w = Lanes(*weights);
+    for k in 0..4 {
+        let gk: [Lanes<BATCH>; 3] = std::array::from_fn(|j| Lanes(std::array::from_fn(|l| grads[l][k][j])));
+        for i in 0..3 {
+            let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
+            for (l, o) in out.iter_mut().enumerate() {
+                o[k][i] = force.0[l];
+            }
+        }
+    }
+});
+
 #[inline(always)]
 fn project_lanes<const N: usize>(f: &M3<N>, strain_share: f64) -> M3<N> {
     let (u, sigma, v) = svd_lanes(f);
@@ -173,7 +195,7 @@ fn project_lanes<const N: usize>(f: &M3<N>, strain_share: f64) -> M3<N> {
 
 /// [`volume_preserving`] of every lane (the rare collapsed lanes one by one).
 #[inline(always)]
-fn volume_with_fallback<const N: usize>(sigma: [Lanes<N>; 3]) -> [Lanes<N>; 3] {
+pub(crate) fn volume_with_fallback<const N: usize>(sigma: [Lanes<N>; 3]) -> [Lanes<N>; 3] {
     let (mut s, collapse) = volume_lanes(sigma);
     if collapse.any() {
         for l in 0..N {
@@ -246,6 +268,48 @@ impl ProjectionJacobian {
     }
 }
 
+/// [`ProjectionJacobian::apply`] of up to [`BATCH`] Jacobians, each to its own `df` (lanes past
+/// `jacobians.len()` are computed on zeros and dropped): the same operations on lanes, so
+/// every product gets the bytes of the scalar one (tested). Why: the exact gradient and the
+/// time gradient apply a Jacobian per tet at every sample.
+pub fn apply_jacobians_batch(jacobians: &[ProjectionJacobian], df: &[Mat3; BATCH]) -> [Mat3; BATCH] {
+    let z = Lanes::splat(0.0);
+    let mut j = JacobianLanes { u: [[z; 3]; 3], v: [[z; 3]; 3], diag: [[z; 3]; 3], sym: [z; 3], anti: [z; 3] };
+    for (l, jac) in jacobians.iter().enumerate().take(BATCH) {
+        for a in 0..3 {
+            for b in 0..3 {
+                j.u[a][b].0[l] = jac.u[a][b];
+                j.v[a][b].0[l] = jac.v[a][b];
+                j.diag[a][b].0[l] = jac.diag[a][b];
+            }
+            j.sym[a].0[l] = jac.sym[a];
+            j.anti[a].0[l] = jac.anti[a];
+        }
+    }
+    let dp = dispatch_apply_jacobian(&j, &to_lanes(df));
+    std::array::from_fn(|l| lane(&dp, l))
+}
+
+with_widest_simd!(dispatch_apply_jacobian, fn(j: &JacobianLanes<BATCH>, df: &M3<BATCH>) -> M3<BATCH> { apply_jacobian_lanes(j, df) });
+
+/// [`ProjectionJacobian::apply`] on lanes.
+#[inline(always)]
+fn apply_jacobian_lanes<const N: usize>(j: &JacobianLanes<N>, df: &M3<N>) -> M3<N> {
+    let (zero, half) = (Lanes::splat(0.0), Lanes::splat(0.5));
+    let transpose = |a: &M3<N>| [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]];
+    let t = mul_lanes(&mul_lanes(&transpose(&j.u), df), &j.v);
+    let mut dp = [[zero; 3]; 3];
+    for i in 0..3 {
+        dp[i][i] = j.diag[i][0] * t[0][0] + j.diag[i][1] * t[1][1] + j.diag[i][2] * t[2][2];
+    }
+    for (k, &(i, l)) in PAIRS.iter().enumerate() {
+        let (sym, anti) = (half * (t[i][l] + t[l][i]), half * (t[i][l] - t[l][i]));
+        dp[i][l] = j.sym[k] * sym + j.anti[k] * anti;
+        dp[l][i] = j.sym[k] * sym - j.anti[k] * anti;
+    }
+    mul_lanes(&mul_lanes(&j.u, &dp), &transpose(&j.v))
+}
+
 /// [`project`] and its derivative at `f`. (The definition [`project_with_jacobian_batch`] is
 /// tested against.)
 #[cfg_attr(not(test), allow(dead_code))]
@@ -255,22 +319,18 @@ pub fn project_with_jacobian(f: &Mat3, strain_share: f64) -> (Mat3, ProjectionJa
 }
 
 /// [`project_with_jacobian`] of [`BATCH`] elements at once (bit-identical, element by element).
-#[cfg_attr(not(test), allow(dead_code))]
 pub fn project_with_jacobian_batch(f: &[Mat3; BATCH], strain_share: f64) -> [(Mat3, ProjectionJacobian); BATCH] {
-    let (mut p, mut j) = ([[[0.0; 3]; 3]; BATCH], [ProjectionJacobian::default(); BATCH]);
-    project_with_jacobian_batch_into(f, strain_share, &mut p, &mut j);
-    std::array::from_fn(|l| (p[l], j[l]))
+    let (p, j) = dispatch_project_with_jacobian(&to_lanes(f), strain_share);
+    std::array::from_fn(|l| (lane(&p, l), jacobian_lane(&j, l)))
 }
 
-/// [`project_with_jacobian_batch`] written straight into the first `targets.len()` (at most
-/// [`BATCH`]) slots of the caller's arrays: the local step's loops no longer move a 5 kB array
-/// of pairs per batch through temporaries (8% of the demo's solve in memmove).
-pub fn project_with_jacobian_batch_into(f: &[Mat3; BATCH], strain_share: f64, targets: &mut [Mat3], jacobians: &mut [ProjectionJacobian]) {
+/// [`project_with_jacobian_batch`] of the first `count` lanes appended to `targets` and
+/// `jacobians` (each read straight out of the lanes into the vectors: no batch-sized copy).
+pub fn project_with_jacobian_extend(f: &[Mat3; BATCH], strain_share: f64, count: usize, targets: &mut Vec<Mat3>, jacobians: &mut Vec<ProjectionJacobian>) {
     let (p, j) = dispatch_project_with_jacobian(&to_lanes(f), strain_share);
-    for (l, (t, jac)) in targets.iter_mut().zip(jacobians.iter_mut()).enumerate() {
-        *t = lane(&p, l);
-        *jac = jacobian_lane(&j, l);
-    }
+    let count = count.min(BATCH);
+    targets.extend((0..count).map(|l| lane(&p, l)));
+    jacobians.extend((0..count).map(|l| jacobian_lane(&j, l)));
 }
 
 with_widest_simd!(dispatch_project_with_jacobian, fn(f: &M3<BATCH>, strain_share: f64) -> (M3<BATCH>, JacobianLanes<BATCH>) {
@@ -404,6 +464,29 @@ mod tests {
             let p = volume_preserving(s);
             let b = brute_force(s);
             assert!(dist2(p, s) <= dist2(b, s) + 1e-10, "{s:?}: ours {p:?} {} vs brute {b:?} {}", dist2(p, s), dist2(b, s));
+        }
+    }
+
+    #[test]
+    fn batched_jacobian_products_give_the_bytes_of_single_ones() {
+        // Mild, strong and inverted elements, every strain share, a full and a partial batch.
+        let mut rng = Rng(23);
+        for share in [0.0, 0.4, 1.0] {
+            for len in [BATCH, 5] {
+                let jacobians: Vec<ProjectionJacobian> = (0..len)
+                    .map(|k| {
+                        let m = rng.mat();
+                        let scale = [0.1, 0.6, 1.5][k % 3];
+                        let f: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 } + scale * m[i][j]));
+                        project_with_jacobian(&f, share).1
+                    })
+                    .collect();
+                let df: [Mat3; BATCH] = std::array::from_fn(|_| rng.mat());
+                let batch = apply_jacobians_batch(&jacobians, &df);
+                for (l, j) in jacobians.iter().enumerate() {
+                    assert_eq!(batch[l], j.apply(&df[l]), "lane {l}, share {share}");
+                }
+            }
         }
     }
 

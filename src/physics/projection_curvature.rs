@@ -27,8 +27,10 @@
 //! singular only where `σ_i + σ_j = 0` (an inverted element with `|σ3| = σ2`), where the
 //! rotation itself is not differentiable; the same bounded factor is used there.
 
+use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, M3, V3, BATCH};
 use super::mat3::{mul, transpose, Mat3};
-use super::projection::volume_preserving;
+use super::projection::{volume_preserving, volume_with_fallback};
+use super::svd3::svd_lanes;
 #[cfg(test)]
 use super::svd3::svd3;
 use super::svd3::Svd3;
@@ -42,6 +44,7 @@ pub struct ProjectionPath {
 }
 
 /// `1 / (σ_i + σ_j)`, bounded where the rotation is not differentiable (as in the Jacobian).
+#[cfg_attr(not(test), allow(dead_code))]
 #[inline]
 fn inverse_pair_sum(si: f64, sj: f64) -> f64 {
     let den = si + sj;
@@ -49,6 +52,7 @@ fn inverse_pair_sum(si: f64, sj: f64) -> f64 {
 }
 
 /// The skew matrix `Ω` with `(σ_i + σ_j) Ω_ij = B_ij - B_ji`.
+#[cfg_attr(not(test), allow(dead_code))]
 #[inline]
 fn skew_solve(sigma: &[f64; 3], b: &Mat3) -> Mat3 {
     let mut w = [[0.0; 3]; 3];
@@ -62,6 +66,7 @@ fn skew_solve(sigma: &[f64; 3], b: &Mat3) -> Mat3 {
 
 /// `d/dτ` and `d²/dτ²` of the volume-projected stretch `S_d` in the singular frame, from
 /// those of `S` (`ds`, `dds`, symmetric) at `S = diag(sigma)`, `S_d = diag(sp)`.
+#[cfg_attr(not(test), allow(dead_code))]
 fn volume_stretch_derivatives(sigma: &[f64; 3], sp: &[f64; 3], ds: &Mat3, dds: &Mat3) -> (Mat3, Mat3) {
     let a = [0, 1, 2].map(|i| 2.0 * sp[i] - sigma[i]);
     let inv_sum: f64 = (0..3).map(|i| 1.0 / (a[i] * sp[i])).sum();
@@ -101,15 +106,15 @@ fn volume_stretch_derivatives(sigma: &[f64; 3], sp: &[f64; 3], ds: &Mat3, dds: &
 
 /// [`ProjectionPath`] of the blended projection (strain share `strain_share`, as in
 /// [`project`](super::projection::project)) at `f` in direction `g`. The timing derivatives
-/// call [`project_along_svd`] with batched decompositions; this entry point is for tests.
+/// call [`project_along_batch`]; this entry point is for tests.
 #[cfg(test)]
 pub fn project_along(f: &Mat3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     project_along_svd(&svd3(f), strain_share, g)
 }
 
-/// `P(F + τG)` and its τ-derivatives at 0 from the signed SVD of `F` (e.g. from
-/// [`svd3_batch`](super::svd3::svd3_batch), which gives the bytes of
-/// [`svd3`](super::svd3::svd3)).
+/// `P(F + τG)` and its τ-derivatives at 0 from the signed SVD of `F`: the definition, one
+/// element at a time, that [`project_along_batch`] is tested against bit for bit.
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn project_along_svd(svd: &Svd3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     let (u, s, v) = (&svd.u, svd.sigma, &svd.v);
     let gt = mul(&mul(&transpose(u), g), v);
@@ -160,6 +165,159 @@ pub fn project_along_svd(svd: &Svd3, strain_share: f64, g: &Mat3) -> ProjectionP
     }
     let back = |m: &Mat3| mul(&mul(u, m), &transpose(v));
     ProjectionPath { value: back(&p0), first: back(&p1), second: back(&p2) }
+}
+
+/// [`project_along_svd`] of [`BATCH`] deformation gradients `f` along directions `g`, the
+/// decompositions included: the same operations on lanes ([`super::lanes`]), compiled for the
+/// widest vector instructions, so every element gets the bytes of
+/// `project_along_svd(&svd3(f), strain_share, g)` (tested). Why: the scalar form is a chain of
+/// dependent divisions and square roots per element, and the timing derivatives run it for every
+/// tet at every sample.
+#[cfg_attr(not(test), allow(dead_code))]
+pub fn project_along_batch(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BATCH]) -> [ProjectionPath; BATCH] {
+    let (value, first, second) = dispatch_project_along(&to_lanes(f), strain_share, &to_lanes(g));
+    std::array::from_fn(|l| ProjectionPath { value: lane(&value, l), first: lane(&first, l), second: lane(&second, l) })
+}
+
+with_widest_simd!(dispatch_project_along, fn(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>) -> (M3<BATCH>, M3<BATCH>, M3<BATCH>) {
+    project_along_lanes(f, strain_share, g)
+});
+
+/// The node forces of [`project_along_batch`]'s three matrices: for tet lane `l`, matrix `m`
+/// (value, first, second derivative) and corner `k`, `weights[l] P_m grads[l][k]` with the
+/// sums of [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so
+/// that adding them per node in tet order gives its bytes. Written into `out` (no copy of the
+/// matrices leaves the vectorized kernel).
+pub fn project_along_forces(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BATCH], grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
+    dispatch_project_along_forces(&to_lanes(f), strain_share, &to_lanes(g), grads, weights, out);
+}
+
+with_widest_simd!(dispatch_project_along_forces, fn(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) -> () {
+    let paths = project_along_lanes(f, strain_share, g);
+    let w = Lanes(*weights);
+    for (m, p) in [&paths.0, &paths.1, &paths.2].into_iter().enumerate() {
+        for k in 0..4 {
+            let gk: [Lanes<BATCH>; 3] = std::array::from_fn(|j| Lanes(std::array::from_fn(|l| grads[l][k][j])));
+            for i in 0..3 {
+                let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
+                for (l, o) in out.iter_mut().enumerate() {
+                    o[m][k][i] = force.0[l];
+                }
+            }
+        }
+    }
+});
+
+#[inline(always)]
+fn transpose_lanes<const N: usize>(a: &M3<N>) -> M3<N> {
+    [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]]
+}
+
+/// [`skew_solve`] on lanes (with [`inverse_pair_sum`]'s bound).
+#[inline(always)]
+fn skew_solve_lanes<const N: usize>(sigma: &V3<N>, b: &M3<N>) -> M3<N> {
+    let (zero, one, small) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(1e-12));
+    let mut w = [[zero; 3]; 3];
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let den = sigma[i] + sigma[j];
+        let den = Lanes::select(den.abs().lt(small), den.tiny_with_sign(), den);
+        let v = (b[i][j] - b[j][i]) * (one / den);
+        w[i][j] = v;
+        w[j][i] = -v;
+    }
+    w
+}
+
+/// [`volume_stretch_derivatives`] on lanes.
+#[inline(always)]
+fn volume_stretch_derivatives_lanes<const N: usize>(sigma: &V3<N>, sp: &V3<N>, ds: &M3<N>, dds: &M3<N>) -> (M3<N>, M3<N>) {
+    let (zero, one, two, half) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(2.0), Lanes::splat(0.5));
+    let a = [0, 1, 2].map(|i| two * sp[i] - sigma[i]);
+    let inv_sum = one / (a[0] * sp[0]) + one / (a[1] * sp[1]) + one / (a[2] * sp[2]);
+    let mut d1 = [[zero; 3]; 3];
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let v = half * (sp[i] * ds[i][j] / (sp[i] + sp[j] - sigma[j]) + sp[j] * ds[j][i] / (sp[i] + sp[j] - sigma[i]));
+        d1[i][j] = v;
+        d1[j][i] = v;
+    }
+    let dl = -(ds[0][0] / a[0] + ds[1][1] / a[1] + ds[2][2] / a[2]) / inv_sum;
+    for i in 0..3 {
+        d1[i][i] = (sp[i] * ds[i][i] + dl) / a[i];
+    }
+    let (d1ds, d1d1) = (mul_lanes(&d1, ds), mul_lanes(&d1, &d1));
+    let rhs2 = |i: usize, j: usize| sp[i] * dds[i][j] + two * d1ds[i][j] - two * d1d1[i][j];
+    let mut d2 = [[zero; 3]; 3];
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let v = half * (rhs2(i, j) / (sp[i] + sp[j] - sigma[j]) + rhs2(j, i) / (sp[i] + sp[j] - sigma[i]));
+        d2[i][j] = v;
+        d2[j][i] = v;
+    }
+    let mut target = zero;
+    for i in 0..3 {
+        for j in 0..3 {
+            target = target + d1[i][j] * d1[i][j] / (sp[i] * sp[j]);
+        }
+    }
+    let b = [0, 1, 2].map(|i| rhs2(i, i));
+    let ddl = (target - (b[0] / (a[0] * sp[0]) + b[1] / (a[1] * sp[1]) + b[2] / (a[2] * sp[2]))) / inv_sum;
+    for i in 0..3 {
+        d2[i][i] = (b[i] + ddl) / a[i];
+    }
+    (d1, d2)
+}
+
+/// [`project_along_svd`] on lanes, the signed SVD of `f` included: value, first and second
+/// derivative.
+#[inline(always)]
+fn project_along_lanes<const N: usize>(f: &M3<N>, strain_share: f64, g: &M3<N>) -> (M3<N>, M3<N>, M3<N>) {
+    let (zero, one, two, half) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(2.0), Lanes::splat(0.5));
+    let (u, s, v) = svd_lanes(f);
+    let gt = mul_lanes(&mul_lanes(&transpose_lanes(&u), g), &v);
+    let w = skew_solve_lanes(&s, &gt);
+    let ww = mul_lanes(&w, &w);
+    let wg = mul_lanes(&w, &gt);
+    let mut a = [[zero; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            a[i][j] = ww[i][j] * s[j] - two * wg[i][j];
+        }
+    }
+    let dw = skew_solve_lanes(&s, &a);
+    let (mut ds, mut dds) = ([[zero; 3]; 3], [[zero; 3]; 3]);
+    for i in 0..3 {
+        for j in 0..3 {
+            ds[i][j] = gt[i][j] - w[i][j] * s[j];
+            dds[i][j] = (ww[i][j] - dw[i][j]) * s[j] - two * wg[i][j];
+        }
+    }
+    for m in [&mut ds, &mut dds] {
+        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+            let v = half * (m[i][j] + m[j][i]);
+            m[i][j] = v;
+            m[j][i] = v;
+        }
+    }
+    let r = strain_share;
+    let (q, dq, ddq) = if r >= 1.0 {
+        ([one; 3], [[zero; 3]; 3], [[zero; 3]; 3])
+    } else {
+        let sp = volume_with_fallback(s);
+        let (d1, d2) = volume_stretch_derivatives_lanes(&s, &sp, &ds, &dds);
+        let (r, rest) = (Lanes::splat(r), Lanes::splat(1.0 - r));
+        (sp.map(|x| r + rest * x), d1.map(|row| row.map(|x| rest * x)), d2.map(|row| row.map(|x| rest * x)))
+    };
+    let (wdq, wwdw) = (mul_lanes(&w, &dq), [0, 1, 2].map(|i| [0, 1, 2].map(|j| ww[i][j] + dw[i][j])));
+    let (mut p0, mut p1, mut p2) = ([[zero; 3]; 3], [[zero; 3]; 3], [[zero; 3]; 3]);
+    for i in 0..3 {
+        p0[i][i] = q[i];
+        for j in 0..3 {
+            p1[i][j] = w[i][j] * q[j] + dq[i][j];
+            p2[i][j] = wwdw[i][j] * q[j] + two * wdq[i][j] + ddq[i][j];
+        }
+    }
+    let vt = transpose_lanes(&v);
+    let back = |m: &M3<N>| mul_lanes(&mul_lanes(&u, m), &vt);
+    (back(&p0), back(&p1), back(&p2))
 }
 
 #[cfg(test)]
@@ -247,6 +405,40 @@ mod tests {
         }
         assert!(worst_first < 1e-8, "against differences of the first derivative: {worst_first:e}");
         assert!(worst_value < 1e-4, "against second differences of P: {worst_value:e}");
+    }
+
+    #[test]
+    fn batches_give_the_bytes_of_single_paths() {
+        // Every case (mild, strong, collapsing, inverted, coincident singular values), in
+        // batches with padding, against the scalar path of the same decomposition.
+        let mut rng = Rng(17);
+        let mut fs = cases();
+        fs.resize(fs.len().div_ceil(BATCH) * BATCH + 5, IDENTITY);
+        let gs: Vec<Mat3> = fs.iter().map(|_| rng.mat()).collect();
+        for share in [0.0, 0.3, 1.0] {
+            for (fc, gc) in fs.chunks(BATCH).zip(gs.chunks(BATCH)) {
+                let (mut f, mut g) = ([IDENTITY; BATCH], [[[0.0; 3]; 3]; BATCH]);
+                f[..fc.len()].copy_from_slice(fc);
+                g[..gc.len()].copy_from_slice(gc);
+                for ((f, g), path) in f.iter().zip(&g).zip(project_along_batch(&f, share, &g)).take(fc.len()) {
+                    assert_eq!(path, project_along_svd(&svd3(f), share, g), "{f:?} along {g:?}, share {share}");
+                }
+                // The node forces: `w P g_k` with the scalar sums, to the bit.
+                let grads: [[[f64; 3]; 4]; BATCH] = std::array::from_fn(|_| std::array::from_fn(|_| [rng.next(), rng.next(), rng.next()]));
+                let weights: [f64; BATCH] = std::array::from_fn(|_| rng.next().abs());
+                let mut forces = [[[[0.0; 3]; 4]; 3]; BATCH];
+                project_along_forces(&f, share, &g, &grads, &weights, &mut forces);
+                for l in 0..fc.len() {
+                    let path = project_along_svd(&svd3(&f[l]), share, &g[l]);
+                    for (m, p) in [path.value, path.first, path.second].iter().enumerate() {
+                        for (k, gk) in grads[l].iter().enumerate() {
+                            let expected: [f64; 3] = std::array::from_fn(|i| weights[l] * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]));
+                            assert_eq!(forces[l][m][k], expected, "lane {l}, matrix {m}, corner {k}");
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -146,9 +146,10 @@ pub fn svd3(f: &Mat3) -> Svd3 {
     Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
 }
 
-/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by
-/// lane). The local step runs [`svd_lanes`] inside its own batched kernels; this entry point is
-/// for the timing derivatives, which need the decompositions themselves.
+/// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by lane). The batched
+/// kernels (the local step, the timing derivatives) run [`svd_lanes`] inside themselves; this
+/// entry point is for callers that need the decompositions themselves.
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
     let (u, sigma, v) = dispatch_svd(&to_lanes(f));
     std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })

@@ -35,7 +35,8 @@ use super::trajectory::{length_derivative, Trajectory};
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
 use crate::physics::mat3::Mat3;
-use crate::physics::projection::ProjectionJacobian;
+use crate::physics::lanes::BATCH;
+use crate::physics::projection::{apply_jacobians_batch, ProjectionJacobian};
 
 /// The local step: element projections of every sample (`[sample][tet]`), and optionally
 /// their Jacobians (for the exact gradient).
@@ -186,45 +187,73 @@ impl<'a> Objective<'a> {
         Evaluation { value, elastic, gradient, exact_gradient, time_gradient }
     }
 
+    /// W alone with fresh projections: the value of [`Objective::evaluate`] after
+    /// [`Objective::local_step`] to the bit, without the gradients and without storing the
+    /// projections (what a line search on the key times needs).
+    pub fn fresh_value(&self, tr: &Trajectory) -> f64 {
+        let per_sample: Vec<f64> = self.samples.par_iter().map(|s| 0.5 * s.weight * self.residual(tr, s, None).1).collect();
+        per_sample.into_iter().sum()
+    }
+
+    /// One sample's residual force `f` (zero at supports), `|f|²_{M⁻¹}` and `|L x - J p|²_{M⁻¹}`
+    /// (without the weight), with the projections held at `targets`, or fresh ones.
+    fn residual(&self, tr: &Trajectory, s: &Sample, targets: Option<&[Mat3]>) -> (Vec<Point>, f64, f64) {
+        let el = self.elastic;
+        let n = el.node_count();
+        let g = self.gravity;
+        let u = Self::unknowns(tr, s);
+        let (c, l) = self.coefficients(s);
+        let (mut x, mut acc) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        Self::combine(&u, &l, &mut x);
+        Self::combine(&u, &c, &mut acc);
+        let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        // Samples run in parallel: the products run on this thread (same bytes).
+        el.stiffness.mul_points_sequential(&x, &mut lx);
+        match targets {
+            Some(targets) => el.apply_j_sequential(targets, &mut jp),
+            None => el.projected_forces_sequential(&x, &mut jp),
+        }
+        let (mut w, mut w_el) = (0.0, 0.0);
+        let mut f = vec![[0.0; 3]; n];
+        for a in 0..n {
+            if self.supports[a] {
+                continue;
+            }
+            let m = el.mass[a];
+            for d in 0..3 {
+                let e = lx[a][d] - jp[a][d];
+                f[a][d] = m * (acc[a][d] - g[d]) + e;
+                w += f[a][d] * f[a][d] / m;
+                w_el += e * e / m;
+            }
+        }
+        (f, w, w_el)
+    }
+
+    /// `DP_e[dF_e(u)]` of the [`BATCH`] tets from `first` (vectorized; the bytes of
+    /// [`ProjectionJacobian::apply`] per tet).
+    fn jacobian_products(el: &Elastic, jacobians: &[ProjectionJacobian], first: usize, u: &[Point]) -> [Mat3; BATCH] {
+        let count = BATCH.min(el.tet_count() - first);
+        let df: [Mat3; BATCH] = std::array::from_fn(|l| if l < count { el.deformation_gradient(first + l, u) } else { [[0.0; 3]; 3] });
+        apply_jacobians_batch(&jacobians[first..first + count], &df)
+    }
+
     /// The residual of every sample, with the projections held at `p`.
     fn residuals(&self, tr: &Trajectory, p: &Projections) -> Vec<Residual> {
         let el = self.elastic;
         let n = el.node_count();
-        let g = self.gravity;
         // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
         self.samples
             .par_iter()
             .enumerate()
             .map(|(k, s)| {
-                let ps = &p.targets[k];
                 let u = Self::unknowns(tr, s);
-                let (c, l) = self.coefficients(s);
-                let (mut x, mut acc) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                Self::combine(&u, &l, &mut x);
-                Self::combine(&u, &c, &mut acc);
-                let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                // Samples run in parallel: the products run on this thread (same bytes).
-                el.stiffness.mul_points_sequential(&x, &mut lx);
-                el.apply_j_sequential(ps, &mut jp);
-                let (mut w, mut w_el) = (0.0, 0.0);
-                let mut f = vec![[0.0; 3]; n];
-                for a in 0..n {
-                    if self.supports[a] {
-                        continue;
-                    }
-                    let m = el.mass[a];
-                    for d in 0..3 {
-                        let e = lx[a][d] - jp[a][d];
-                        f[a][d] = m * (acc[a][d] - g[d]) + e;
-                        w += f[a][d] * f[a][d] / m;
-                        w_el += e * e / m;
-                    }
-                }
+                let (f, w, w_el) = self.residual(tr, s, Some(&p.targets[k]));
                 // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
                 let correction = p.jacobians.as_ref().map(|jac| {
                     let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
                     let mut z = vec![[0.0; 3]; n];
-                    el.apply_j_sequential_with(|e| jac[k][e].apply(&el.deformation_gradient(e, &u)), &mut z);
+                    el.apply_j_sequential_batched(|first, out| *out = Self::jacobian_products(el, &jac[k], first, &u), &mut z);
                     z
                 });
                 // ∂W_s/∂T = (dτ/T) ½|f|² + dτ f_T·f with f_T = M (ẍ_T + α ẋ_T) + L x_T - J DP[dF(x_T)].
@@ -237,7 +266,7 @@ impl<'a> Objective<'a> {
                     Self::combine(&u, &c_t, &mut acc_t);
                     let (mut lx_t, mut jp_t) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
                     el.stiffness.mul_points_sequential(&x_t, &mut lx_t);
-                    el.apply_j_sequential_with(|e| jac[k][e].apply(&el.deformation_gradient(e, &x_t)), &mut jp_t);
+                    el.apply_j_sequential_batched(|first, out| *out = Self::jacobian_products(el, &jac[k], first, &x_t), &mut jp_t);
                     let mut ftf = 0.0;
                     for a in (0..n).filter(|&a| !self.supports[a]) {
                         for d in 0..3 {

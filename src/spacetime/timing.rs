@@ -29,7 +29,7 @@
 //!   reference code does);
 //! - **fresh**: `p_s = P(x(t_s))` re-projected, so `p_T = DP[dF(x_T)]` and, as `F` is affine in
 //!   `T` too, `p_TT = D²P[dF(x_T), dF(x_T)]`
-//!   ([`project_along_svd`]). This is the total derivative
+//!   ([`project_along_forces`]). This is the total derivative
 //!   of W itself, the quantity the solver measures and the line search compares.
 //!
 //! There is no envelope argument that makes the two first derivatives agree: the projections
@@ -66,6 +66,18 @@
 //! secant update of the curvature across rounds (the gradients are exact derivatives of `W*`)
 //! would recover the reduced curvature.
 
+//!
+//! # Cost
+//!
+//! One *timing round* is one Newton iteration of [`Timing::optimize_times_from`]: the
+//! derivatives on every interval, then one W evaluation (samples, fresh projections,
+//! residuals; no gradient, [`Objective::fresh_value`]) per line-search trial, starting from the
+//! W the caller has.
+//! The derivatives move every tet at every sample along its line in `T`: the projection, its
+//! two derivatives and their node forces run 16 tets at a time in SIMD lanes, the SVD included
+//! ([`project_along_forces`]), with the bytes of the scalar definition
+//! ([`project_along_svd`](crate::physics::projection_curvature::project_along_svd)).
+
 use rayon::prelude::*;
 
 use super::objective::{Objective, Projections};
@@ -77,9 +89,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
 use crate::physics::lanes::BATCH;
-use crate::physics::mat3::Mat3;
-use crate::physics::projection_curvature::project_along_svd;
-use crate::physics::svd3::svd3_batch;
+use crate::physics::projection_curvature::project_along_forces;
 
 /// The spacetime objective as a function of the key times.
 #[derive(Clone)]
@@ -194,8 +204,7 @@ impl<'a> Timing<'a> {
 
     /// W at `tr` (at its own times) with fresh projections.
     pub fn energy(&self, tr: &Trajectory) -> f64 {
-        let objective = self.objective(&tr.times);
-        objective.evaluate(tr, &objective.local_step(tr, false)).value
+        self.objective(&tr.times).fresh_value(tr)
     }
 
     /// W and its exact derivatives in every `T_i` at `tr` (see the module documentation).
@@ -242,29 +251,31 @@ impl<'a> Timing<'a> {
         match mode {
             ProjectionMode::Frozen(p) => el.apply_j_sequential(&p.targets[k], &mut jp),
             ProjectionMode::Fresh => {
-                // p, p_T, p_TT of every tet (SVDs in batches), scattered in tet order like
-                // `apply_j_sequential`.
+                // p, p_T, p_TT of every tet, BATCH tets per vectorized call, their node forces
+                // added in tet order like `apply_j_sequential`.
                 let share = el.strain_share();
                 let count = el.tet_count();
+                let mut forces = [[[[0.0; 3]; 4]; 3]; BATCH];
                 for first in (0..count).step_by(BATCH) {
-                    let f: [Mat3; BATCH] = std::array::from_fn(|l| {
-                        if first + l < count {
-                            el.deformation_gradient(first + l, &x)
-                        } else {
-                            crate::physics::mat3::IDENTITY
-                        }
-                    });
-                    let svds = svd3_batch(&f);
-                    for (l, svd) in svds.iter().enumerate().take(count - first) {
-                        let e = first + l;
-                        let path = project_along_svd(svd, share, &el.deformation_gradient(e, &x_t));
-                        let w = el.weights[e];
-                        for (&a, g) in el.tets[e].iter().zip(&el.grads[e]) {
+                    let lanes = BATCH.min(count - first);
+                    let mut f = [crate::physics::mat3::IDENTITY; BATCH];
+                    let mut f_t = [[[0.0; 3]; 3]; BATCH];
+                    let mut grads = [[[0.0; 3]; 4]; BATCH];
+                    let mut weights = [0.0; BATCH];
+                    for l in 0..lanes {
+                        f[l] = el.deformation_gradient(first + l, &x);
+                        f_t[l] = el.deformation_gradient(first + l, &x_t);
+                        grads[l] = el.grads[first + l];
+                        weights[l] = el.weights[first + l];
+                    }
+                    project_along_forces(&f, share, &f_t, &grads, &weights, &mut forces);
+                    for (e, [value, first_t, second_t]) in (first..first + lanes).zip(&forces) {
+                        for (k, &a) in el.tets[e].iter().enumerate() {
                             let a = a as usize;
                             for i in 0..3 {
-                                jp[a][i] += w * (path.value[i][0] * g[0] + path.value[i][1] * g[1] + path.value[i][2] * g[2]);
-                                jp_t[a][i] += w * (path.first[i][0] * g[0] + path.first[i][1] * g[1] + path.first[i][2] * g[2]);
-                                jp_tt[a][i] += w * (path.second[i][0] * g[0] + path.second[i][1] * g[1] + path.second[i][2] * g[2]);
+                                jp[a][i] += value[k][i];
+                                jp_t[a][i] += first_t[k][i];
+                                jp_tt[a][i] += second_t[k][i];
                             }
                         }
                     }
@@ -293,10 +304,18 @@ impl<'a> Timing<'a> {
     /// W, under `settings`' constraints. W never increases; on any failure to decrease it the
     /// times stay where they are.
     pub fn optimize_times(&self, tr: &Trajectory, settings: &TimingSettings) -> Result<TimingStep> {
+        Blocks::new(&tr.times, settings)?;
+        self.optimize_times_from(tr, self.finite_energy(tr, 0)?, settings)
+    }
+
+    /// [`Timing::optimize_times`] from a trajectory whose W the caller already has, `w0` (as
+    /// [`Timing::energy`] gives it; an alternating solver has it from its last iteration).
+    /// Every Newton iteration of it is one *timing round*: the exact derivatives in every
+    /// interval length, the constrained Newton step, and its line search on W.
+    pub fn optimize_times_from(&self, tr: &Trajectory, w0: f64, settings: &TimingSettings) -> Result<TimingStep> {
         let keys = tr.times.len();
         let blocks = Blocks::new(&tr.times, settings)?;
         let mut tr = tr.clone();
-        let w0 = self.finite_energy(&tr, 0)?;
         let mut energy = vec![w0];
         let (mut iterations, mut gradient_steps, mut halvings) = (0, 0, 0);
         let lengths = |times: &[f64]| -> Vec<f64> { (0..keys - 1).map(|i| times[i + 1] - times[i]).collect() };

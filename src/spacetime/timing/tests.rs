@@ -113,6 +113,12 @@ fn the_objective_gives_the_same_time_gradient() {
             for (i, (a, b)) in g.iter().zip(&d.gradient).enumerate() {
                 assert!(relative(*a, *b) < 1e-9 || (a - b).abs() < 1e-12 * d.value, "interval {i}: {a} vs {b}");
             }
+            // The line search's W is the evaluation's to the bit, and the derivatives are the
+            // same bytes on one thread (the vectorized kernels and the per-sample sums).
+            assert_eq!(timing.energy(&tr), objective.evaluate(&tr, &objective.local_step(&tr, false)).value);
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            assert_eq!(one.install(|| timing.derivatives(&tr, ProjectionMode::Fresh)), d);
+            assert_eq!(one.install(|| objective.evaluate(&tr, &objective.local_step(&tr, true))).time_gradient, Some(g.clone()));
             // And the supports' rows are out of both: W changes when they are counted.
             let counted = Timing { supports: vec![false; el.node_count()], ..timing.clone() };
             assert!(relative(counted.energy(&tr), d.value) > 1e-6);
