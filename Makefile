@@ -23,7 +23,7 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -31,6 +31,7 @@ help:
 	@echo "make tables   print the reliability tables: the bad-input corpus (input, exit 1, message) and the kill tests (signal x phase -> folder)"
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
+	@echo "make bench-demo   print where the demo bake's time goes: the process, each phase, one solver iteration, Python's start-up"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
@@ -125,6 +126,11 @@ bench: build deps-tetgen
 	$(CARGO) bench --locked --bench solver
 	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
 	$(CARGO) bench --locked --bench cache
+
+# The demo bake taken apart (issue 11: under 0.25 s), medians of REPEATS (5).
+bench-demo: build deps-tetgen deps-usd
+	@echo "==> demo benchmark: where the bake's time goes (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench demo
 
 # Production-size bakes through the CLI (100k-vertex cage, 20 keys, CHEB-style volume);
 # peak memory by GNU time (Debian package `time`).

@@ -46,7 +46,7 @@ fn run(body: &Body, change: impl Fn(&mut Settings)) -> Run {
     settings.max_iterations = 20000;
     change(&mut settings);
     let (t, cpu) = (Instant::now(), cpu_seconds());
-    let solved = solve(&elastic, &keys, &settings, &|_, _| {}).unwrap();
+    let solved = solve(&elastic, &keys, &settings, &|_, _, _| {}).unwrap();
     let (seconds, cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);
     let l = solved.log;
     if std::env::var("TRACE").is_ok() {

@@ -132,7 +132,7 @@ fn measure(body: &Body, repeats: usize, iterations: usize) -> Measured {
     let (timing, s) = measure_timing(&elastic, &keys, &settings, &tr, global, repeats);
     let samples = objective.samples.len();
     let short = Settings { max_iterations: SOLVER_ITERATIONS, ..settings.clone() };
-    let solved = solve(&elastic, &keys, &short, &|_, _| {}).expect("solve");
+    let solved = solve(&elastic, &keys, &short, &|_, _, _| {}).expect("solve");
     let solver = (solved.log.iteration_seconds, solved.log.iterations, solved.log.active_contacts);
     Measured {
         samples,

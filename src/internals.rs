@@ -33,6 +33,13 @@ pub mod massspring {
     pub use crate::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
 }
 
+/// The automatic cage and the barycentric binding, for the demo benchmark's cost models
+/// (`benches/demo.rs`).
+pub use crate::cage::{fit::CageFit, voxel_cage};
+pub use crate::embed::Binding;
+pub use crate::cage::predicted_seconds as cage_seconds;
+pub use crate::tetgen::predicted_seconds as tetgen_seconds;
+
 /// glTF clips written for tests (the skinned ribbon the clip reader's unit tests and the
 /// integration tests both bake).
 pub mod gltf_fixtures {

@@ -5,12 +5,19 @@
 //! a render farm's job output): then a bar's first frame and at most one frame a second after it are plain lines
 //! (`solve: spacetime [=====>   ] 40/200 3s eta 12s`), never cursor movements. `--quiet` wins
 //! over it; `BLENDSIM_PROGRESS=0` hides progress even on a terminal.
+//!
+//! Every bar estimates the time left: a loop over counted steps from their rate
+//! ([`Progress::bar`]); a solve whose iteration count is predicted as it goes from that
+//! prediction and the rate ([`Progress::iterations`]); a phase whose work cannot be counted
+//! (an external process, one library call) from a cost model's predicted duration
+//! ([`Progress::predicted`]).
 
+use std::fmt::Write as _;
 use std::io::{IsTerminal, Write};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle, TermLike};
+use indicatif::{HumanDuration, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle, TermLike, WeakProgressBar};
 
 /// How progress is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -23,12 +30,21 @@ enum Mode {
 }
 
 /// Where progress goes: stderr when visible, nowhere otherwise.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct Progress {
     mode: Mode,
     /// Warnings go to stderr (the CLI, quiet or not); the library's hidden progress keeps them
     /// in the stage data only.
     warnings: bool,
+    /// The bars made here (and their clones'), so that a warning can take the one being drawn
+    /// off the terminal while it prints.
+    bars: Arc<Mutex<Vec<WeakProgressBar>>>,
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress").field("mode", &self.mode).field("warnings", &self.warnings).finish_non_exhaustive()
+    }
 }
 
 impl Progress {
@@ -43,12 +59,12 @@ impl Progress {
             _ if std::io::stderr().is_terminal() => Mode::Terminal,
             _ => Mode::Hidden,
         };
-        Progress { mode, warnings: true }
+        Progress { mode, warnings: true, bars: Arc::default() }
     }
 
     /// Never drawn (library use, tests).
     pub fn hidden() -> Progress {
-        Progress { mode: Mode::Hidden, warnings: false }
+        Progress { mode: Mode::Hidden, warnings: false, bars: Arc::default() }
     }
 
     /// Whether anything is drawn.
@@ -65,34 +81,110 @@ impl Progress {
     }
 
     /// One warning line on stderr, `blendsim: warning: LINE` (control characters folded), shown
-    /// even with `--quiet`; the stage data keep it for the report.
+    /// even with `--quiet`; the stage data keep it for the report. A bar being drawn is taken
+    /// off the terminal while the line prints and drawn again below it.
     pub fn warn(&self, line: &str) {
         if self.warnings {
             let line: String = line.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
-            eprintln!("blendsim: warning: {line}");
+            let print = || eprintln!("blendsim: warning: {line}");
+            match self.drawn() {
+                Some(bar) => bar.suspend(print),
+                None => print(),
+            }
         }
     }
 
-    /// A spinner naming a stage; call `finish` on it (or drop it) when the stage is done.
-    pub fn stage(&self, message: impl Into<String>) -> ProgressBar {
-        let bar = ProgressBar::with_draw_target(None, self.target());
-        bar.set_style(ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template"));
-        bar.set_message(message.into());
-        bar.enable_steady_tick(Duration::from_millis(120));
+    /// The bar being drawn, if any (the last one made that is not finished).
+    fn drawn(&self) -> Option<ProgressBar> {
+        let bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
+        bars.iter().rev().filter_map(WeakProgressBar::upgrade).find(|b| !b.is_finished() && !b.is_hidden())
+    }
+
+    /// `bar` with `style` and `message`, redrawn every `tick`, and remembered for [`Progress::warn`].
+    fn start(&self, bar: ProgressBar, style: ProgressStyle, message: String, tick: Duration) -> ProgressBar {
+        bar.set_style(style);
+        bar.set_message(message);
+        bar.enable_steady_tick(tick);
+        let mut bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
+        bars.retain(|b| b.upgrade().is_some_and(|b| !b.is_finished()));
+        bars.push(bar.downgrade());
         bar
+    }
+
+    /// A spinner naming a stage too short to need an estimate; call `finish` on it (or drop it)
+    /// when the stage is done.
+    pub fn stage(&self, message: impl Into<String>) -> ProgressBar {
+        let style = ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template");
+        self.start(ProgressBar::with_draw_target(None, self.target()), style, message.into(), Duration::from_millis(120))
     }
 
     /// A bar over `len` steps, with the time left estimated from the steps' rate.
     pub fn bar(&self, len: u64, message: impl Into<String>) -> ProgressBar {
-        let bar = ProgressBar::with_draw_target(Some(len), self.target());
-        bar.set_style(
-            ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed} eta {eta}").expect("valid template").progress_chars("=> "),
-        );
-        bar.set_message(message.into());
+        let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed} eta {eta}").expect("valid template").progress_chars("=> ");
         // Redrawn at least once a second even while a step runs long (elapsed keeps moving).
-        bar.enable_steady_tick(Duration::from_millis(500));
-        bar
+        self.start(ProgressBar::with_draw_target(Some(len), self.target()), style, message.into(), Duration::from_millis(500))
     }
+
+    /// A bar over iterations whose total is not known up front but predicted as they go: set it
+    /// with `set_length` (and `unset_length` while there is no prediction). Shows `K/~N` and the
+    /// time left at the iterations' measured rate, or `?` for both without a prediction.
+    pub fn iterations(&self, message: impl Into<String>) -> ProgressBar {
+        let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{total} {elapsed} eta {left}")
+            .expect("valid template")
+            .progress_chars("=> ")
+            .with_key("total", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = match s.len() {
+                    Some(n) => write!(w, "~{n}"),
+                    None => write!(w, "?"),
+                };
+            })
+            .with_key("left", |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = match s.len() {
+                    Some(_) => write!(w, "{:#}", HumanDuration(s.eta())),
+                    None => write!(w, "?"),
+                };
+            });
+        self.start(ProgressBar::with_draw_target(None, self.target()), style, message.into(), Duration::from_millis(500))
+    }
+
+    /// A bar over a phase whose work cannot be counted as it runs (an external process, one
+    /// library call), filled by the elapsed time against `seconds`, the duration its cost
+    /// model predicts on this machine's threads: shows `elapsed of ~predicted` and the time
+    /// left of the prediction, or `?` once the phase runs over it (a loaded machine).
+    pub fn predicted(&self, message: impl Into<String>, seconds: f64) -> ProgressBar {
+        let predicted = Duration::try_from_secs_f64(seconds).unwrap_or(Duration::ZERO);
+        let style = ProgressStyle::with_template("{msg} [{fill}] {elapsed} of ~{predicted} eta {left}")
+            .expect("valid template")
+            .with_key("fill", move |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let fraction = if predicted.is_zero() { 1.0 } else { (s.elapsed().as_secs_f64() / predicted.as_secs_f64()).min(1.0) };
+                let full = (fraction * 30.0) as usize;
+                let _ = write!(w, "{}{}", "=".repeat(full), " ".repeat(30 - full));
+            })
+            .with_key("predicted", move |_: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{}", short(predicted));
+            })
+            .with_key("left", move |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = match predicted.checked_sub(s.elapsed()) {
+                    Some(left) => write!(w, "{}", short(left)),
+                    None => write!(w, "? (over the estimate)"),
+                };
+            });
+        self.start(ProgressBar::with_draw_target(None, self.target()), style, message.into(), Duration::from_millis(120))
+    }
+}
+
+/// A duration as `0.4s`, `12s` or `3m05s`.
+fn short(d: Duration) -> String {
+    let s = d.as_secs_f64();
+    let mut out = String::new();
+    let _ = if s < 10.0 {
+        write!(out, "{s:.1}s")
+    } else if s < 120.0 {
+        write!(out, "{s:.0}s")
+    } else {
+        write!(out, "{}m{:02}s", (s / 60.0) as u64, (s as u64) % 60)
+    };
+    out
 }
 
 /// A "terminal" that writes drawn frames as plain lines on stderr: the first frame, then at most
@@ -149,5 +241,35 @@ impl TermLike for Lines {
     fn flush(&self) -> std::io::Result<()> {
         let line = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
         self.emit(&line)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `warn` takes the bar being drawn off the terminal: the last unfinished visible one.
+    #[test]
+    fn warnings_suspend_the_bar_being_drawn() {
+        let progress = Progress { mode: Mode::Lines, warnings: false, bars: Arc::default() };
+        assert!(progress.drawn().is_none());
+        let outer = progress.stage("outer");
+        let inner = progress.predicted("inner", 1.0);
+        assert_eq!(progress.drawn().map(|b| b.message()).as_deref(), Some("inner"));
+        inner.finish_and_clear();
+        assert_eq!(progress.drawn().map(|b| b.message()).as_deref(), Some("outer"), "a finished bar is not drawn");
+        drop(inner);
+        outer.finish_and_clear();
+        assert!(progress.drawn().is_none());
+        let hidden = Progress::hidden();
+        let _bar = hidden.bar(3, "hidden");
+        assert!(hidden.drawn().is_none(), "hidden bars are never drawn");
+    }
+
+    #[test]
+    fn short_durations() {
+        assert_eq!(short(Duration::from_millis(430)), "0.4s");
+        assert_eq!(short(Duration::from_secs(42)), "42s");
+        assert_eq!(short(Duration::from_secs(185)), "3m05s");
     }
 }

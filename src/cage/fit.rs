@@ -40,6 +40,12 @@ pub const ELASTIC: f64 = 1e-2;
 /// `1e-9` of the cage's size.
 const ITERATIONS: usize = 200;
 
+/// The cost model of [`CageFit::predicted_seconds`] (CPU seconds per cage tet and fine point,
+/// per key; measured on cages of 735 nodes, 3k tets, around 200 to 120k fine points: 0.02 s to
+/// 0.1 s per key).
+const FIT_SECONDS_PER_TET: f64 = 7e-6;
+const FIT_SECONDS_PER_POINT: f64 = 7e-7;
+
 /// The fit of cage poses to fine poses through a fixed binding.
 pub struct CageFit<'a> {
     cage: &'a TetMesh,
@@ -92,6 +98,13 @@ impl<'a> CageFit<'a> {
         // fine vertices) removes.
         let cholesky = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq).expect("WᵀW + μL is positive definite");
         CageFit { cage, binding, elastic, mu, cholesky }
+    }
+
+    /// Seconds the fit of `keys` keys is predicted to take for a cage of `cage_tets` tets and
+    /// `points` fine points (for the progress bar's estimate; measured by `cargo bench --bench
+    /// demo -- models`): the factorization, then per key the local/global iterations.
+    pub fn predicted_seconds(cage_tets: usize, points: usize, keys: usize) -> f64 {
+        FIT_SECONDS_PER_TET * cage_tets as f64 * keys as f64 + FIT_SECONDS_PER_POINT * points as f64 * keys as f64
     }
 
     /// The cage pose whose embedding best matches `fine` (the fine points' pose) under the

@@ -51,8 +51,10 @@ use rayon::prelude::*;
 use crate::mesh::{cross, dot, norm, sub, Bounds, Point, TetMesh};
 use bvh::Bvh;
 
+/// Every point's tet and barycentric weights in a tet mesh (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Binding {
+    /// The tet each point is bound to.
     pub tets: Vec<u32>,
     /// Barycentric weights on the vertices of `tets[i]`, in the mesh's vertex order. They sum
     /// to 1 (up to rounding). Outside points have all weights >= 0; inside points may have
@@ -61,6 +63,11 @@ pub struct Binding {
     /// Distance from each point to its tet (0 inside), for diagnostics.
     pub distances: Vec<f64>,
 }
+
+/// The cost model of [`Binding::predicted_seconds`] (CPU seconds; measured on TetGen bodies of
+/// 3k to 70k tets and cages around prisms with 200 to 120k surface vertices).
+const BIND_SECONDS_PER_TET: f64 = 5e-7;
+const BIND_SECONDS_PER_POINT: f64 = 3e-7;
 
 /// Containment tolerance on barycentric coordinates (see the module docs).
 const EPS: f64 = 1e-12;
@@ -71,6 +78,13 @@ const EPS: f64 = 1e-12;
 const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
 impl Binding {
+    /// Seconds [`Binding::compute`] is predicted to take for `points` points in a mesh of
+    /// `tets` tets (CPU seconds; for the progress bar's estimate; measured by `cargo bench
+    /// --bench demo -- models`): the tree over the tets, and one search per point.
+    pub fn predicted_seconds(tets: usize, points: usize) -> f64 {
+        BIND_SECONDS_PER_TET * tets as f64 + BIND_SECONDS_PER_POINT * points as f64
+    }
+
     /// Bind every point to a tet of `mesh` (which must satisfy the [`TetMesh`] invariant:
     /// positive volumes, indices in range).
     ///

@@ -332,8 +332,8 @@ struct Iterate {
     times: Vec<Vec<f64>>,
 }
 
-/// Optimize keyframe positions and velocities (and key times). `on_iteration(k, W)` reports
-/// progress.
+/// Optimize keyframe positions and velocities (and key times). `on_iteration(k, W, floor)`
+/// reports progress: W at iteration k and the stopping rule's floor `negligible × S` there.
 ///
 /// Two phases share one factorized matrix:
 ///
@@ -350,7 +350,7 @@ struct Iterate {
 /// is the next iteration's, so an accepted step costs nothing extra). W never increases, and
 /// the regularization never moves a fixed point. The solve stops when phase 2 settles
 /// (module documentation) or stalls, or after `max_iterations` in all.
-pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_iteration: &dyn Fn(usize, f64)) -> Result<Solved> {
+pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_iteration: &dyn Fn(usize, f64, f64)) -> Result<Solved> {
     let start = Instant::now();
     let blocks = settings.timing.as_ref().map(|t| Blocks::new(&keys.times, t)).transpose()?;
     let objective = objective(elastic, keys, settings);
@@ -405,7 +405,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
         solver.make_feasible(contacts, &mut tr, &mut active)?;
     }
     let eval = solver.evaluate(&tr, 0, false)?;
-    on_iteration(0, eval.value);
+    on_iteration(0, eval.value, settings.negligible * eval.force_scale);
     let at_minimum = vec![false; solver.intervals.len()];
     let times = if solver.blocks.is_some() { vec![tr.times.clone()] } else { Vec::new() };
     let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0, active, at_minimum, timing_iterations: 0, refactorizations: 0, times };
@@ -458,6 +458,37 @@ fn prediction(energy: &[f64], floor: f64) -> (f64, Option<f64>) {
     (last / w, remaining)
 }
 
+/// The iterations left before the stopping rule stops a solve whose W went through `energy`
+/// (one entry per iteration, the first guess first), for a progress estimate: the same
+/// geometric extrapolation of the last two windows' decreases as [`Log::predicted_remaining`],
+/// run forward until the window's decrease falls to `tolerance` of the W it levels off at plus
+/// `floor` (the stopping rule's `negligible × S`). `None` before two windows, or when the
+/// decreases do not shrink (or W heads to zero with no floor, where a relative rule has no
+/// predictable end); `Some(0)` once the last window is within tolerance.
+pub fn predicted_iterations(energy: &[f64], tolerance: f64, floor: f64) -> Option<usize> {
+    let k = energy.len().checked_sub(1)?;
+    if k < 2 * WINDOW {
+        return None;
+    }
+    let last = energy[k - WINDOW] - energy[k];
+    let before = energy[k - 2 * WINDOW] - energy[k - WINDOW];
+    if last <= tolerance * (energy[k] + floor) {
+        return Some(0);
+    }
+    let ratio = last / before;
+    if !(before > 0.0 && ratio > 0.0 && ratio < 1.0) {
+        return None;
+    }
+    // Decreases over a sliding window shrink by `ratio` every WINDOW iterations; W levels off at
+    // `settled` (clamped: W is never negative).
+    let settled = (energy[k] - last * ratio / (1.0 - ratio)).max(0.0) + floor;
+    if settled.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let windows = (tolerance * settled / last).ln() / ratio.ln();
+    Some((WINDOW as f64 * windows).ceil().max(0.0) as usize)
+}
+
 /// The objective, the factorized global step and the constraints of one solve.
 struct Solver<'a> {
     timing: Timing<'a>,
@@ -465,7 +496,7 @@ struct Solver<'a> {
     /// The tangent model Hessian, when the quasi-Newton phase uses it.
     tangent: Option<TangentStep>,
     settings: &'a Settings,
-    on_iteration: &'a dyn Fn(usize, f64),
+    on_iteration: &'a dyn Fn(usize, f64, f64),
     /// The fixed-sum blocks of intervals, when the times are optimized.
     blocks: Option<Blocks>,
     /// `vars[i]`: the variable of interval `i`, if its length is optimized.
@@ -971,7 +1002,7 @@ impl<'a> Solver<'a> {
                 it.halvings += halving;
                 it.tr = trial;
                 it.eval = trial_eval;
-                (self.on_iteration)(it.energy.len(), it.eval.value);
+                (self.on_iteration)(it.energy.len(), it.eval.value, self.settings.negligible * it.eval.force_scale);
                 it.energy.push(it.eval.value);
                 if self.blocks.is_some() {
                     it.times.push(it.tr.times.clone());

@@ -68,7 +68,7 @@ fn free_fall_is_an_exact_parabola() {
     let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![all(n), Nodes::default()], false);
     // The proximal weight (1/h⁴) balances inertia (~36/T⁴) at h ~ T/2.5.
     let s = Settings { gravity: g, regularization: 0.5, ..settings() };
-    let solved = solve(&el, &k, &s, &|_, _| {}).unwrap();
+    let solved = solve(&el, &k, &s, &|_, _, _| {}).unwrap();
     let energy = &solved.log.energy;
     let (w0, w) = (energy[0], *energy.last().unwrap());
     assert!(w < 1e-12 * w0, "W: {w0:e} -> {w:e} after {} iterations", solved.log.iterations);
@@ -286,7 +286,7 @@ fn bending_scene_with(cyclic: bool, amplitude: f64, material: &Material) -> (Ela
 #[test]
 fn masks_are_respected_and_loops_close() {
     let (el, k) = bending_scene(true);
-    let solved = solve(&el, &k, &Settings { tolerance: 1e-3, ..settings() }, &|_, _| {}).unwrap();
+    let solved = solve(&el, &k, &Settings { tolerance: 1e-3, ..settings() }, &|_, _, _| {}).unwrap();
     let tr = &solved.trajectory;
     for key in 0..3 {
         for &a in &k.fixed[key] {
@@ -308,7 +308,7 @@ fn regularization_does_not_move_the_fixed_point() {
     let n = el.node_count();
     k.fixed = vec![all(n), k.fixed[1].clone(), all(n)];
     let s = Settings { gravity: [0.0, -9.81, 0.0], tolerance: 1e-15, max_iterations: 3000, ..settings() };
-    let solve_with = |h: f64| solve(&el, &k, &Settings { regularization: h, ..s.clone() }, &|_, _| {}).unwrap();
+    let solve_with = |h: f64| solve(&el, &k, &Settings { regularization: h, ..s.clone() }, &|_, _, _| {}).unwrap();
     let (a, b, c) = (solve_with(0.0), solve_with(0.15), solve_with(0.5));
     // Without regularization one step solves the quadratic; later ones only confirm it.
     let w = &a.log.energy;
@@ -333,7 +333,7 @@ fn w_never_increases_and_goes_past_the_local_global_stall() {
     // On this scene the paper's step stops decreasing W near 3e-5 W₀ (measured); the exact
     // gradient phase continues below it.
     let (el, k) = bending_scene(false);
-    let solved = solve(&el, &k, &Settings { tolerance: 1e-14, max_iterations: 200, ..settings() }, &|_, _| {}).unwrap();
+    let solved = solve(&el, &k, &Settings { tolerance: 1e-14, max_iterations: 200, ..settings() }, &|_, _, _| {}).unwrap();
     let w = &solved.log.energy;
     assert!(w.windows(2).all(|p| p[1] <= p[0]), "{w:?}");
     assert!(w.last().unwrap() < &(1e-6 * w[0]), "{} -> {}", w[0], w.last().unwrap());
@@ -344,7 +344,7 @@ fn singular_system_is_a_clear_error() {
     let mesh = cube_mesh(1);
     let el = Elastic::new(&mesh, &material()).unwrap();
     let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(); 2], vec![Nodes::default(); 2], false);
-    let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _| {}).unwrap_err().to_string();
+    let e = solve(&el, &k, &Settings { regularization: 0.0, ..settings() }, &|_, _, _| {}).unwrap_err().to_string();
     assert!(e.contains("singular") && e.contains("regularization"), "{e}");
 }
 
@@ -396,14 +396,47 @@ fn a_free_fall_converges_by_default_where_the_relative_rule_never_settles() {
     let n = mesh.positions.len();
     let k = keys(vec![0.0, 1.0], vec![mesh.positions.clone(), mesh.positions.clone()], vec![all(n), Nodes::default()], false);
     let default = Settings { gravity: [0.0, -9.81, 0.0], regularization: 0.5, ..Settings::new(6, 0.0, [0.0; 3]) };
-    let solved = solve(&el, &k, &default, &|_, _| {}).unwrap();
+    let solved = solve(&el, &k, &default, &|_, _, _| {}).unwrap();
     let log = &solved.log;
     let w = *log.energy.last().unwrap();
     println!("default: {} iterations, W {:e} = {:e} S: {}", log.iterations, w, w / log.force_scale, log.stop_reason);
     assert!(log.converged && log.stop_reason.contains("below the tolerance"), "{}", log.stop_reason);
     assert!(w <= default.tolerance * default.negligible * log.force_scale, "W = {:e} S", w / log.force_scale);
     let relative = Settings { negligible: 0.0, max_iterations: 2 * log.iterations, ..default };
-    let solved = solve(&el, &k, &relative, &|_, _| {}).unwrap();
+    let solved = solve(&el, &k, &relative, &|_, _, _| {}).unwrap();
     println!("relative only: {} iterations, W {:e}: {}", solved.log.iterations, solved.log.energy.last().unwrap(), solved.log.stop_reason);
     assert!(!solved.log.stop_reason.contains("below the tolerance"), "{}", solved.log.stop_reason);
+}
+
+/// The progress estimate of the iterations left: on W = c + a r^k (the linear convergence the
+/// extrapolation assumes) it predicts where the stopping rule, run on the same sequence, stops.
+#[test]
+fn predicted_iterations_match_the_stopping_rule_on_linear_convergence() {
+    use super::solver::{predicted_iterations, WINDOW};
+    let stops = |e: &[f64], tol: f64, floor: f64| (WINDOW..e.len()).find(|&k| e[k - WINDOW] - e[k] <= tol * (e[k] + floor)).expect("stops");
+    for (a, r, c, tol) in [(1e4, 0.97, 2e2, 1e-3), (5.0, 0.9, 1.0, 1e-3), (1e3, 0.99, 10.0, 1e-4), (1.0, 0.95, 3.0, 1e-2)] {
+        let energy: Vec<f64> = (0..3000).map(|k| c + a * f64::powi(r, k)).collect();
+        for floor in [0.0, 1e-3 * c] {
+            let end = stops(&energy, tol, floor);
+            for k in (2 * WINDOW..=end).step_by(7) {
+                let left = predicted_iterations(&energy[..=k], tol, floor).expect("a prediction after two windows");
+                assert!((k + left).abs_diff(end) <= 1, "a {a} r {r} c {c} floor {floor}: at {k} predicted {} stop, the rule stops at {end}", k + left);
+            }
+            assert_eq!(predicted_iterations(&energy[..=end], tol, floor), Some(0));
+            assert_eq!(predicted_iterations(&energy[..2 * WINDOW], tol, floor), None, "no prediction before two windows");
+        }
+    }
+    // W heading to zero: without a floor the relative decrease never falls, nothing to predict;
+    // with the force scale's floor the rule stops, and the prediction says where.
+    let to_zero: Vec<f64> = (0..400).map(|k| 0.9f64.powi(k)).collect();
+    assert_eq!(predicted_iterations(&to_zero[..100], 1e-3, 0.0), None);
+    let floor = 1e-6;
+    let end = stops(&to_zero, 1e-3, floor);
+    for k in (2 * WINDOW..=end).step_by(7) {
+        let left = predicted_iterations(&to_zero[..=k], 1e-3, floor).expect("a prediction with a floor");
+        assert!((k + left).abs_diff(end) <= 1, "to zero: at {k} predicted {} stop, the rule stops at {end}", k + left);
+    }
+    // Decreases that grow: no geometric end.
+    let speeding: Vec<f64> = (0..60).map(|k| 100.0 - 0.01 * (k * k) as f64).collect();
+    assert_eq!(predicted_iterations(&speeding, 1e-3, 0.0), None);
 }

@@ -58,7 +58,9 @@ impl<'a> Bake<'a> {
         // The interruption tests stop here, between TetGen and the solver.
         crate::interrupt::pause_point("solve", "");
         let solution = solve_within(&body, self.method, self.max_memory, self.progress)?;
-        let bar = self.progress.stage("embed");
+        // The binding's searches run in parallel.
+        let (tets, points) = (solution.body.mesh.as_ref().map_or(0, |m| m.tets.len()), solution.body.surface.positions.len());
+        let bar = self.progress.predicted("embed", crate::embed::Binding::predicted_seconds(tets, points) / rayon::current_num_threads().max(1) as f64);
         let animation = embed(&solution)?;
         bar.finish_and_clear();
         Ok(animation)

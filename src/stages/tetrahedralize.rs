@@ -61,7 +61,7 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
                 return caged(keys, rest, reason, progress);
             }
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
-            let bar = progress.stage("tetrahedralize: TetGen");
+            let bar = progress.predicted("tetrahedralize: TetGen", tetgen::predicted_seconds(rest, &options));
             let mesh: TetMesh = tetgen::run(rest, &options, std::path::Path::new(&keys.rest_source))?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
@@ -169,13 +169,20 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         enclose.extend(&display.positions);
     }
     let target = scene.tet.cage_nodes;
-    let bar = progress.stage(format!("tetrahedralize: cage of about {target} nodes around {} vertices", fine.positions.len()));
+    let bar = progress.predicted(
+        format!("tetrahedralize: cage of about {target} nodes around {} vertices", fine.positions.len()),
+        crate::cage::predicted_seconds(fine.triangles.len(), target),
+    );
     let cage = voxel_cage(&fine, &enclose, target).map_err(|CageError::Empty| {
         Error::in_file(source, "the surface has no extent: no triangle, or every vertex at one point", "give a surface with faces")
     })?;
     bar.finish_and_clear();
     let mesh = cage.mesh;
-    let bar = progress.stage(format!("tetrahedralize: fit {} cage keys to {} vertices", keys.poses.len(), fine.positions.len()));
+    // The binding and the fit's keys run in parallel.
+    let threads = rayon::current_num_threads().max(1) as f64;
+    let (cage_tets, n_fine, n_keys) = (mesh.tets.len(), fine.positions.len(), keys.poses.len());
+    let fit_seconds = Binding::predicted_seconds(cage_tets, n_fine) / threads + CageFit::predicted_seconds(cage_tets, n_fine, n_keys) / threads.min(n_keys.max(1) as f64);
+    let bar = progress.predicted(format!("tetrahedralize: fit {n_keys} cage keys to {n_fine} vertices"), fit_seconds);
     let binding = Binding::compute(&mesh, &fine.positions);
     let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
     let fit = CageFit::new(&mesh, &binding, &elastic);

@@ -222,3 +222,59 @@ fn progress_lines_when_forced_and_nothing_with_quiet() {
         assert_eq!(a, std::fs::read(dir.join("out/c").join(file)).unwrap(), "{file}");
     }
 }
+
+/// Every phase's progress carries an estimate (issue 11): the solve's total is the stopping
+/// rule's prediction, close to the iterations it takes (never `max_iterations`), and TetGen,
+/// the cage, its fit and the embedding show a cost model's predicted duration. The demo scene
+/// with 50 samples per interval on one thread, so that the solve lasts several of the lines'
+/// seconds (about 6 s on an idle machine) and its last quarter more than one.
+#[test]
+fn progress_estimates_every_phase() {
+    let dir = TempDir::new("progress-estimates");
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    for entry in std::fs::read_dir(&demo).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, input.join(path.file_name().unwrap())).unwrap();
+    }
+    let text = std::fs::read_to_string(demo.join("twist.toml")).unwrap();
+    let slow = text.replace("samples = 10", "samples = 50").replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
+    assert_ne!(slow, text);
+    std::fs::write(input.join("slow.toml"), &slow).unwrap();
+    std::fs::write(input.join("cage.toml"), slow.replace("samples = 50", "samples = 4").replace("[tet]\n", "[tet]\nmax_nodes = 60\ncage_nodes = 60\n")).unwrap();
+    let env = [("BLENDSIM_PROGRESS", OsStr::new("lines")), ("RAYON_NUM_THREADS", OsStr::new("1"))];
+
+    let shown = run_env(&dir.path, &["bake", "in/slow.toml", "--out", "out/slow"], &env).success();
+    let iterations = read_json(&dir.join("out/slow/report.json"))["solver"]["iterations"].as_u64().expect("iterations");
+    let line = |prefix: &str| shown.stderr.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no {prefix} line:\n{shown}")).to_string();
+    for prefix in ["tetrahedralize: TetGen", "embed"] {
+        let l = line(prefix);
+        assert!(l.contains(" of ~") && l.contains(" eta "), "{prefix} has no predicted duration: {l}");
+    }
+    // `K/~N`: N the predicted total, never past max_iterations; over the last quarter of the
+    // solve it is within a quarter of the iterations taken.
+    let totals: Vec<(u64, u64)> = shown
+        .stderr
+        .lines()
+        .filter(|l| l.starts_with("solve: spacetime"))
+        .filter_map(|l| l.split_whitespace().find_map(|w| w.split_once("/~")).map(|(k, n)| (k.parse().unwrap(), n.parse().unwrap())))
+        .collect();
+    assert!(!totals.is_empty(), "no solve line with a predicted total:\n{shown}");
+    for &(k, n) in &totals {
+        assert!(k <= n && n <= 1000, "predicted total {n} at iteration {k} (max_iterations is 1000):\n{shown}");
+    }
+    let late: Vec<&(u64, u64)> = totals.iter().filter(|(k, _)| 4 * k >= 3 * iterations).collect();
+    assert!(!late.is_empty(), "no predicted total over the last quarter of the {iterations} iterations:\n{shown}");
+    for &&(k, n) in &late {
+        let error = n.abs_diff(iterations) as f64 / iterations as f64;
+        assert!(error <= 0.25, "at iteration {k} the predicted total was {n}, the solve took {iterations}:\n{shown}");
+    }
+    eprintln!("predicted totals (iteration, total) {totals:?}; the solve took {iterations}");
+
+    let caged = run_env(&dir.path, &["bake", "in/cage.toml", "--out", "out/cage"], &env).success();
+    for prefix in ["tetrahedralize: cage", "tetrahedralize: fit"] {
+        let l = caged.stderr.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no {prefix} line:\n{caged}"));
+        assert!(l.contains(" of ~") && l.contains(" eta "), "{prefix} has no predicted duration: {l}");
+    }
+}

@@ -348,7 +348,7 @@ fn alternate(
     let mut keys = keys.clone();
     let (mut times, mut energy) = (vec![keys.times.clone()], Vec::new());
     for _ in 0..rounds {
-        let solved = crate::spacetime::solver::solve(el, &keys, settings, &|_, _| {}).unwrap();
+        let solved = crate::spacetime::solver::solve(el, &keys, settings, &|_, _, _| {}).unwrap();
         let t = Timing::new(el, &keys, settings);
         let step = t.optimize_times(&solved.trajectory, timing).unwrap();
         energy.push((step.energy[0], *step.energy.last().unwrap()));
@@ -418,7 +418,7 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
     let solve_at = |t1: f64| {
         let mut k = keys.clone();
         k.times[1] = t1;
-        crate::spacetime::solver::solve(&el, &k, &settings, &|_, _| {}).unwrap()
+        crate::spacetime::solver::solve(&el, &k, &settings, &|_, _, _| {}).unwrap()
     };
     let timing = Timing { gravity: g, ..plain_timing(&el, &keys.times, false, 6) };
     let d = timing.derivatives(&solve_at(0.62).trajectory, ProjectionMode::Fresh);
@@ -434,7 +434,7 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
 /// `solve` with the key times optimized under `timing`.
 fn solve_timed(el: &Elastic, keys: &KeyConstraints, settings: &crate::spacetime::solver::Settings, timing: TimingSettings) -> crate::spacetime::solver::Solved {
     let settings = crate::spacetime::solver::Settings { timing: Some(timing), ..settings.clone() };
-    crate::spacetime::solver::solve(el, keys, &settings, &|_, _| {}).unwrap()
+    crate::spacetime::solver::solve(el, keys, &settings, &|_, _, _| {}).unwrap()
 }
 
 #[test]
