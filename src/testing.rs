@@ -8,29 +8,35 @@ use crate::physics::mat3::Mat3;
 
 /// A cube [0,1]³ split into `n³` cells of 6 tets each (Kuhn triangulation, positive).
 pub fn cube_mesh(n: usize) -> TetMesh {
-    let idx = |i: usize, j: usize, k: usize| (i * (n + 1) * (n + 1) + j * (n + 1) + k) as u32;
-    let mut positions = Vec::new();
-    for i in 0..=n {
-        for j in 0..=n {
-            for k in 0..=n {
-                positions.push([i as f64 / n as f64, j as f64 / n as f64, k as f64 / n as f64]);
+    box_mesh([1.0; 3], [n; 3])
+}
+
+/// A box [0, size] split into `divisions` cells of 6 tets each: the Kuhn triangulation (the six
+/// monotone paths from corner 000 to 111 of every cell, so shared faces match), positive.
+pub fn box_mesh(size: [f64; 3], divisions: [usize; 3]) -> TetMesh {
+    let [nx, ny, nz] = divisions;
+    let node = |i: usize, j: usize, k: usize| ((i * (ny + 1) + j) * (nz + 1) + k) as u32;
+    let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
+    for i in 0..=nx {
+        for j in 0..=ny {
+            for k in 0..=nz {
+                let c = [i, j, k];
+                positions.push(std::array::from_fn(|d| size[d] * (c[d] as f64 / divisions[d] as f64)));
             }
         }
     }
-    let mut tets = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            for k in 0..n {
-                let c = |d: [usize; 3]| idx(i + d[0], j + d[1], k + d[2]);
-                // The 6 monotone paths from corner 000 to 111.
-                for perm in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
-                    let mut p = [0usize; 3];
-                    let mut verts = vec![c(p)];
-                    for &axis in &perm {
-                        p[axis] = 1;
-                        verts.push(c(p));
+    let mut tets = Vec::with_capacity(6 * nx * ny * nz);
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+                    let mut c = [i, j, k];
+                    let mut tet = [node(i, j, k); 4];
+                    for (step, &axis) in order.iter().enumerate() {
+                        c[axis] += 1;
+                        tet[step + 1] = node(c[0], c[1], c[2]);
                     }
-                    tets.push([verts[0], verts[1], verts[2], verts[3]]);
+                    tets.push(tet);
                 }
             }
         }

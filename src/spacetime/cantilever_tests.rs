@@ -25,36 +25,7 @@ const SAMPLES: usize = 10;
 
 /// A Kuhn grid of `SIZE` in `DIVISIONS` cells (six tets per cell, positive).
 fn bar_mesh() -> TetMesh {
-    let [nx, ny, nz] = DIVISIONS;
-    let node = |i: usize, j: usize, k: usize| (i * (ny + 1) + j) * (nz + 1) + k;
-    let mut positions = Vec::new();
-    for i in 0..=nx {
-        for j in 0..=ny {
-            for k in 0..=nz {
-                let c = [i, j, k];
-                positions.push(std::array::from_fn(|d| SIZE[d] * (c[d] as f64 / DIVISIONS[d] as f64)));
-            }
-        }
-    }
-    let mut tets = Vec::new();
-    for i in 0..nx {
-        for j in 0..ny {
-            for k in 0..nz {
-                for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
-                    let mut c = [i, j, k];
-                    let mut tet = [node(i, j, k) as u32; 4];
-                    for (step, &axis) in order.iter().enumerate() {
-                        c[axis] += 1;
-                        tet[step + 1] = node(c[0], c[1], c[2]) as u32;
-                    }
-                    tets.push(tet);
-                }
-            }
-        }
-    }
-    let mut mesh = TetMesh { positions, tets };
-    mesh.orient_positive();
-    mesh
+    crate::testing::box_mesh(SIZE, DIVISIONS)
 }
 
 /// The clamped bar, its first bending mode in y (unit tip displacement) and its period.
