@@ -479,8 +479,8 @@ pub fn predicted_iterations(energy: &[f64], tolerance: f64, floor: f64) -> Optio
     if !(before > 0.0 && ratio > 0.0 && ratio < 1.0) {
         return None;
     }
-    // Decreases over a sliding window shrink by `ratio` every WINDOW iterations; W levels off at
-    // `settled` (clamped: W is never negative).
+    // Decreases over a sliding window shrink by `ratio` every WINDOW iterations; the rule's
+    // reference `W + floor` levels off at `settled` (W's limit clamped at 0: W is never negative).
     let settled = (energy[k] - last * ratio / (1.0 - ratio)).max(0.0) + floor;
     if settled.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
