@@ -75,32 +75,6 @@ fn dot(a: &[Point], b: &[Point]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2]).sum()
 }
 
-/// The free entries of a per-slot array, in unknown order.
-fn gather(u: &Unknowns, per_slot: &[Vec<Point>]) -> Vec<Point> {
-    let mut out = vec![[0.0; 3]; u.count()];
-    for (s, values) in per_slot.iter().enumerate() {
-        for (a, v) in values.iter().enumerate() {
-            if let Some(i) = u.get(a, s) {
-                out[i] = *v;
-            }
-        }
-    }
-    out
-}
-
-/// A per-slot array from free entries (zero at fixed ones).
-fn scatter(u: &Unknowns, free: &[Point]) -> Vec<Vec<Point>> {
-    let mut out = vec![vec![[0.0; 3]; u.nodes]; u.slots.count()];
-    for (s, values) in out.iter_mut().enumerate() {
-        for (a, v) in values.iter_mut().enumerate() {
-            if let Some(i) = u.get(a, s) {
-                *v = free[i];
-            }
-        }
-    }
-    out
-}
-
 fn exact(obj: &Objective, tr: &Trajectory) -> Evaluation {
     obj.evaluate(tr, &obj.local_step(tr, true))
 }
@@ -135,10 +109,10 @@ fn exact_gradients_match_finite_differences_on_the_stiff_cantilever() {
             if perturbed {
                 // Key 0 moved against the bend, some velocity: a loop far from both guesses.
                 let v: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()].map(|c| 0.1 * tip * c)).collect();
-                apply_step(&mut tr, &obj.slots, &scatter(&unknowns, &v), 1.0);
+                apply_step(&mut tr, &obj.slots, &unknowns.scatter(&v), 1.0);
             }
             let e = exact(&obj, &tr);
-            let g = gather(&unknowns, e.exact_gradient.as_ref().unwrap());
+            let g = unknowns.gather(e.exact_gradient.as_ref().unwrap());
             // Random directions, except at the first guess of the small loop: there W is the
             // tiny bending residual, and along a random direction (whose element strains
             // dwarf the bend's) its differences are all truncation and round-off (the
@@ -151,7 +125,7 @@ fn exact_gradients_match_finite_differences_on_the_stiff_cantilever() {
                 for (k, &s) in slots.iter().enumerate() {
                     along_mode[s] = bar.mode.iter().map(|u| u.map(|c| c * [1.0, 3.0, -2.0][k])).collect();
                 }
-                vec![gather(&unknowns, &along_mode)]
+                vec![unknowns.gather(&along_mode)]
             } else {
                 (0..3).map(|_| (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect()
             };
@@ -159,7 +133,7 @@ fn exact_gradients_match_finite_differences_on_the_stiff_cantilever() {
             // round-off, about 1e-12 of W there, then stays below 1e-7 of the difference).
             let h = if smooth { 1e-1 * tip } else { 1e-3 * tip };
             for v in directions {
-                let dir = scatter(&unknowns, &v);
+                let dir = unknowns.scatter(&v);
                 let along = |h: f64| {
                     let mut t = tr.clone();
                     apply_step(&mut t, &obj.slots, &dir, h);
@@ -295,10 +269,10 @@ fn the_best_loop_of_each_duration_is_the_one_mode_loop() {
         // Full steps until W stops falling by more than 1e-6 of itself (it levels off at its
         // round-off there: the next step may raise it by 1e-8).
         for step in 0.. {
-            let mut d = gather(&unknowns, e.exact_gradient.as_ref().unwrap());
+            let mut d = unknowns.gather(e.exact_gradient.as_ref().unwrap());
             tangent.apply_inverse(&mut d);
             let mut trial = tr.clone();
-            apply_step(&mut trial, &obj.slots, &scatter(&unknowns, &d), -1.0);
+            apply_step(&mut trial, &obj.slots, &unknowns.scatter(&d), -1.0);
             let next = exact(&obj, &trial);
             assert!(next.value <= e.value * (1.0 + 1e-6), "a Gauss-Newton step raised W: {} -> {}", e.value, next.value);
             let settled = next.value > e.value * (1.0 - 1e-6);

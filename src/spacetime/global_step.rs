@@ -752,32 +752,14 @@ impl GlobalStep {
         &self.unknowns
     }
 
-    /// The free entries of a per-slot array, in unknown order.
+    /// The free entries of a per-slot array, in unknown order ([`Unknowns::gather`]).
     pub fn gather(&self, per_slot: &[Vec<Point>]) -> Vec<Point> {
-        let u = &self.unknowns;
-        let mut out = vec![[0.0; 3]; u.count()];
-        for (s, values) in per_slot.iter().enumerate() {
-            for (a, v) in values.iter().enumerate() {
-                if let Some(i) = u.get(a, s) {
-                    out[i] = *v;
-                }
-            }
-        }
-        out
+        self.unknowns.gather(per_slot)
     }
 
-    /// A per-slot array from free entries (zero at fixed entries).
+    /// A per-slot array from free entries ([`Unknowns::scatter`]).
     pub fn scatter(&self, free: &[Point]) -> Vec<Vec<Point>> {
-        let u = &self.unknowns;
-        let mut out = vec![vec![[0.0; 3]; u.nodes]; u.slots.count()];
-        for (s, values) in out.iter_mut().enumerate() {
-            for (a, v) in values.iter_mut().enumerate() {
-                if let Some(i) = u.get(a, s) {
-                    *v = free[i];
-                }
-            }
-        }
-        out
+        self.unknowns.scatter(free)
     }
 
     /// `x <- (H + P)⁻¹ x` on free entries, the three coordinates as three right-hand sides.

@@ -69,6 +69,32 @@ pub struct Unknowns {
 const FIXED: u32 = u32::MAX;
 
 impl Unknowns {
+    /// The free entries of a per-slot array, in unknown order.
+    pub fn gather(&self, per_slot: &[Vec<Point>]) -> Vec<Point> {
+        let mut out = vec![[0.0; 3]; self.count()];
+        for (s, values) in per_slot.iter().enumerate() {
+            for (a, v) in values.iter().enumerate() {
+                if let Some(i) = self.get(a, s) {
+                    out[i] = *v;
+                }
+            }
+        }
+        out
+    }
+
+    /// A per-slot array from free entries (zero at fixed entries).
+    pub fn scatter(&self, free: &[Point]) -> Vec<Vec<Point>> {
+        let mut out = vec![vec![[0.0; 3]; self.nodes]; self.slots.count()];
+        for (s, values) in out.iter_mut().enumerate() {
+            for (a, v) in values.iter_mut().enumerate() {
+                if let Some(i) = self.get(a, s) {
+                    *v = free[i];
+                }
+            }
+        }
+        out
+    }
+
     /// Free unknowns of `keys`: a slot is fixed for a node if any key sharing that slot fixes
     /// it (a loop's last key adds its masks to the first key's).
     pub fn new(keys: &KeyConstraints, nodes: usize) -> Unknowns {

@@ -8,11 +8,11 @@
 //! points at every frame (`check_outputs`), with TEXCOORD_0 and NORMAL on two primitives.
 
 use std::fmt::Write as _;
-use std::process::Command;
 
 use blendsim::stage::OutputKind;
 use serde_json::Value;
 
+use crate::common::checkers::usd_probe;
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
@@ -149,12 +149,7 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
 
     let want = obj_corner_uvs(&rest);
     for file in outputs.iter().filter(|f| f.path.contains("usd")) {
-        let probe = Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or_else(|_| "python3".into()))
-            .args(["-c", USD_PROBE, out.join(&file.path).to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(probe.status.success(), "{}", String::from_utf8_lossy(&probe.stderr));
-        let v: Value = serde_json::from_slice(&probe.stdout).unwrap();
+        let v = usd_probe(USD_PROBE, &out.join(&file.path));
         assert_eq!((v["st"].as_str(), v["indexed"].as_bool()), (Some("faceVarying"), Some(true)), "{}: a seam needs faceVarying", file.path);
         let corners = v["corners"].as_array().unwrap();
         let corner = |c: &Value| (c[0].as_u64().unwrap(), c[1].as_f64().unwrap(), c[2].as_f64().unwrap());

@@ -16,12 +16,10 @@
 //!   `st` primvar, as usd-core resolves it.
 
 use std::path::Path;
-use std::process::Command;
 
-use serde_json::Value;
 
 use crate::attributes::{prism_obj, Glb, SCENE};
-use crate::common::checkers::check_texture;
+use crate::common::checkers::{check_texture, usd_probe};
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
@@ -161,12 +159,7 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
 
     // USD: UsdPreviewSurface <- UsdUVTexture(file = the copy) <- UsdPrimvarReader_float2("st").
     for file in outputs.iter().filter(|f| f.path.contains(".usd")) {
-        let probe = Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or_else(|_| "python3".into()))
-            .args(["-c", USD_PROBE, out.join(&file.path).to_str().unwrap()])
-            .output()
-            .unwrap();
-        assert!(probe.status.success(), "{}", String::from_utf8_lossy(&probe.stderr));
-        let v: Value = serde_json::from_slice(&probe.stdout).unwrap();
+        let v = usd_probe(USD_PROBE, &out.join(&file.path));
         for group in ["side", "cap"] {
             let g = &v[group];
             assert_eq!((g["surface"].as_str(), g["texture"].as_str(), g["output"].as_str()), (Some("UsdPreviewSurface"), Some("UsdUVTexture"), Some("rgb")), "{}: {v}", file.path);

@@ -113,6 +113,14 @@ fn summary(what: &str, output: Output) -> Result<Value, String> {
     serde_json::from_str(last).map_err(|e| format!("{what}: summary is not JSON ({e}):\n{stdout}\n{stderr}"))
 }
 
+/// The JSON a test's own usd-core script (`python -c script file`) prints about `file`.
+pub fn usd_probe(script: &str, file: &Path) -> Value {
+    require_pxr();
+    let probe = Command::new(python()).args(["-c", script, file.to_str().unwrap()]).output().unwrap();
+    assert!(probe.status.success(), "{}: {}", file.display(), String::from_utf8_lossy(&probe.stderr));
+    serde_json::from_slice(&probe.stdout).unwrap()
+}
+
 /// `usd_check.py`: usd-core validation with every registered validator, then UsdSkel (or
 /// `points`) evaluation at `expected.timecodes`. With `usdc`, also converts to usdc and
 /// checks that the reopened file evaluates the same.
