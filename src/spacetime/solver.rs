@@ -489,6 +489,40 @@ pub fn predicted_iterations(energy: &[f64], tolerance: f64, floor: f64) -> Optio
     Some((WINDOW as f64 * windows).ceil().max(0.0) as usize)
 }
 
+/// The predicted total iteration count of a running solve, for its progress bar: the median
+/// of the last WINDOW [`predicted_iterations`], shown only while most of them exist. After a
+/// stall W can speed up again (a buckling, a contact settling); the few windows whose decrease
+/// shrinks again right after it extrapolate from one uncertain ratio and can be off by 4x, so
+/// a total waits for a majority of the window to agree rather than show one of them.
+#[derive(Debug, Default)]
+pub struct IterationEstimate {
+    energy: Vec<f64>,
+    totals: std::collections::VecDeque<Option<usize>>,
+    shown: Option<usize>,
+}
+
+impl IterationEstimate {
+    /// Record iteration `k`'s `w` and the stopping rule's `floor` (the arguments of
+    /// `solve`'s `on_iteration`), and return the predicted total (at least `k`, at most
+    /// `max_iterations`), or `None` while nothing reliable is predicted.
+    pub fn update(&mut self, k: usize, w: f64, floor: f64, tolerance: f64, max_iterations: usize) -> Option<usize> {
+        self.energy.push(w);
+        self.totals.push_back(predicted_iterations(&self.energy, tolerance, floor).map(|left| (k + left).min(max_iterations)));
+        if self.totals.len() > WINDOW {
+            self.totals.pop_front();
+        }
+        let mut known: Vec<usize> = self.totals.iter().flatten().copied().collect();
+        known.sort_unstable();
+        if self.totals.len() == WINDOW && 2 * known.len() > WINDOW {
+            self.shown = Some(known[known.len() / 2].max(k));
+        } else if self.shown.is_some_and(|n| n < k) {
+            // The last total stands until it is passed.
+            self.shown = None;
+        }
+        self.shown
+    }
+}
+
 /// The objective, the factorized global step and the constraints of one solve.
 struct Solver<'a> {
     timing: Timing<'a>,

@@ -89,25 +89,14 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
         }
         Method::Spacetime => {
             // The total is the stopping rule's own prediction from the W so far
-            // (`solver::predicted_iterations`; not max_iterations, which a converging solve
-            // never reaches), capped by max_iterations: the median of the last WINDOW
-            // predictions, as one window whose decrease barely shrank predicts a far end.
+            // (`solver::IterationEstimate`; not max_iterations, which a converging solve never
+            // reaches).
             let bar = progress.iterations("solve: spacetime");
-            let history = std::sync::Mutex::new((Vec::new(), std::collections::VecDeque::new()));
+            let estimate = std::sync::Mutex::new(solver::IterationEstimate::default());
             let solved = solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
-                let mut history = history.lock().unwrap_or_else(|e| e.into_inner());
-                let (energy, totals) = &mut *history;
-                energy.push(w);
-                totals.push_back(solver::predicted_iterations(energy, settings.tolerance, floor).map(|left| (k + left).min(settings.max_iterations)));
-                if totals.len() > solver::WINDOW {
-                    totals.pop_front();
-                }
-                let mut known: Vec<usize> = totals.iter().flatten().copied().collect();
-                known.sort_unstable();
-                match known.get(known.len() / 2) {
-                    Some(&total) => bar.set_length(total.max(k) as u64),
-                    // Nothing predicted lately: the last prediction stands until it is passed.
-                    None if bar.length().is_some_and(|n| n >= k as u64) => {}
+                let total = estimate.lock().unwrap_or_else(|e| e.into_inner()).update(k, w, floor, settings.tolerance, settings.max_iterations);
+                match total {
+                    Some(total) => bar.set_length(total as u64),
                     None => bar.unset_length(),
                 }
                 bar.set_position(k as u64);
