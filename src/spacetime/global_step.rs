@@ -518,15 +518,12 @@ pub struct FillReducingOrder {
 /// coupling of neighbouring keys causes once there are more than about ten keys
 /// ([`KEY_SEPARATOR_MIN_KEYS`]). The winner is put in postorder of its elimination tree (same
 /// fill), which lets the solve give whole subtrees to two threads.
-pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> FillReducingOrder {
-    fill_reducing_order_if(lower, unknowns, rest, |_| true)
-}
-
-/// [`fill_reducing_order`], weighing the key-separator candidate only when `weigh_keys` says so
-/// for the node order's cost (its graph of (node, key) blocks and two symbolic counts cost
-/// about as much as the rest of the set-up of a modal step at 20 keys: skipped when only a
-/// direct step could use it).
-pub fn fill_reducing_order_if(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+///
+/// The key-separator candidate is weighed only when `weigh_keys` says so for the node order's
+/// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
+/// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
+/// direct step could use it.
+pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
     let mut block_of = vec![0u32; unknowns.count()];
@@ -683,7 +680,7 @@ impl GlobalStep {
                 m == Method::Direct || seconds <= MODAL_MIN_DIRECT_SECONDS
             }
         };
-        let order = fill_reducing_order_if(&a, &unknowns, &objective.elastic.rest, could_be_direct);
+        let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest, could_be_direct);
         // faer's parallel supernodal factorization pays off only for large fronts.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
@@ -1082,7 +1079,7 @@ mod tests {
                 let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
                 let nd = nested_dissection(&graph, &el.rest);
                 let by_keys = key_separator_order(&a, &unknowns, &nd).unwrap();
-                let chosen = fill_reducing_order(&a, &unknowns, &el.rest);
+                let chosen = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
                 println!(
                     "{} nodes, {keys_count} keys: node order {:.3e} flops, keys as separators {:.3e} ({:.2}x); chosen: {}",
                     unknowns.nodes,
@@ -1233,12 +1230,12 @@ mod modal_phases {
         println!("{} nodes, {kc} keys, {} unknowns, load {}", el.node_count(), unknowns.count(), std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
         let c = timed("time coefficients", || TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization)));
         let a = timed("assemble", || assemble(&obj, &unknowns, &c));
-        let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest));
+        let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest, |_| true));
         println!("  {} {:.3e} flops", order.name, order.cost.flops);
         let _ = timed("key_block_order", || key_block_order(&a, &unknowns, &el.rest));
         let size = modal_size(&obj, &unknowns);
         println!("  modal size {size:?}, predicted {:?}", size.predicted());
-        let _ = timed("fill_reducing_order without keys", || fill_reducing_order_if(&a, &unknowns, &el.rest, |_| false));
+        let _ = timed("fill_reducing_order without keys", || fill_reducing_order(&a, &unknowns, &el.rest, |_| false));
         if std::env::var("DIRECT").is_ok() {
             for par in [Par::Seq, Par::rayon(0)] {
                 let chol = timed(&format!("Cholesky::factor {par:?}"), || Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), par).unwrap());
