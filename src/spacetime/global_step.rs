@@ -113,8 +113,10 @@ pub struct GlobalStats {
 }
 
 /// Seconds per stored factor entry of one solve with three right-hand sides (both sweeps read
-/// every entry once; measured on 2 cores: 75M entries in 0.12 s).
-const SWEEP_SECONDS_PER_ENTRY: f64 = 1.6e-9;
+/// every entry once), on one thread and on two (the solve splits the elimination tree's two
+/// subtrees over the cores): 87M entries in 0.126 CPU s on one thread; ARMADILLO-size's 50M
+/// entries in 0.046 s a global step on two, idle.
+const SWEEP_SECONDS_PER_ENTRY: [f64; 2] = [1.45e-9, 0.92e-9];
 
 /// Global-step solves a bake is assumed to make (one per iteration, local/global and
 /// quasi-Newton alike; the converged-by-default stopping rule: TWIST 120 iterations, DINO 150,
@@ -193,8 +195,8 @@ const MODAL_COPIES: f64 = 3.0;
 /// modal ones 0 when not weighed).
 pub fn choose(direct: &Cost, blocks: &Cost, modal: Option<&ModalSize>, parallel: bool, budget: u64) -> (Method, [(f64, f64); 3]) {
     let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
-    let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY;
-    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY;
+    let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY[parallel as usize];
+    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY[0];
     let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
     // The modes only where the direct step is slow: below that, the direct step costs little
     // anyway.
@@ -939,6 +941,14 @@ mod tests {
         let blocks = Cost { flops: 9469100459.999752, entries: 14530940.0 };
         let modal = ModalSize { nodes: 2744, slots: 10, held: 980, held_nodes: 196 };
         assert_eq!(choose(&direct, &blocks, Some(&modal), true, u64::MAX).0, Method::Modal);
+        // ARMADILLO-size (2630 nodes, 5 keys, nothing held: 8.3e10 flops, 50M entries), idle:
+        // the direct step factorizes in 2.0 s and solves in 0.046 s; the modes took 11.4 s to
+        // set up and 0.20 s a solve at load 10. Direct (Table 1's precompute and iteration).
+        let direct = Cost { flops: 8.3e10, entries: 50.15e6 };
+        let blocks = Cost { flops: 4.0e9, entries: 10.0e6 };
+        let modal = ModalSize { nodes: 2630, slots: 10, held: 0, held_nodes: 0 };
+        let (method, [(ds, _), (ms, _), _]) = choose(&direct, &blocks, Some(&modal), true, u64::MAX);
+        assert_eq!(method, Method::Direct, "direct {ds} s, modal {ms} s");
         // A small body (1k nodes, 2 keys: a few M flops): direct, the modes are not weighed.
         let small = Cost { flops: 3e8, entries: 1.5e6 };
         let (method, [_, (ms, _), _]) = choose(&small, &Cost { flops: 1e8, entries: 5e5 }, Some(&ModalSize { nodes: 1000, slots: 4, held: 0, held_nodes: 0 }), false, u64::MAX);
