@@ -85,6 +85,23 @@ impl Csr {
         }
     }
 
+    /// [`Csr::mul_points_sequential`] of two vectors in one pass over the matrix (the same sums).
+    pub fn mul_points_pair_sequential(&self, x: [&[Point]; 2], out: [&mut [Point]; 2]) {
+        let [ox, oy] = out;
+        for (i, (o, p)) in ox.iter_mut().zip(oy.iter_mut()).enumerate() {
+            let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+            for (j, v) in self.row(i) {
+                a[0] += v * x[0][j][0];
+                a[1] += v * x[0][j][1];
+                a[2] += v * x[0][j][2];
+                b[0] += v * x[1][j][0];
+                b[1] += v * x[1][j][1];
+                b[2] += v * x[1][j][2];
+            }
+            (*o, *p) = (a, b);
+        }
+    }
+
     /// `self * diag(d) * self` for a symmetric `self` (its pattern is the 2-ring of the graph).
     pub fn sandwich_diagonal(&self, d: &[f64]) -> Csr {
         let n = self.n;

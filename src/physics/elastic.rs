@@ -20,7 +20,7 @@ use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
 use super::projection::{project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, volume_preserving, ProjectionJacobian};
-use super::lanes::BATCH;
+use super::lanes::{Lanes, M3, BATCH};
 use super::svd3::svd3;
 use crate::error::{Error, Result};
 use crate::mesh::{Point, TetMesh};
@@ -175,6 +175,60 @@ impl Elastic {
         f
     }
 
+    /// [`Elastic::deformation_gradient`] of the [`BATCH`] tets from `first` at `x`, and at `y`
+    /// when given, written straight into lanes (the same sums; lanes past the last tet hold the
+    /// identity at `x` and zero at `y`). One read of each tet's nodes and gradients for both: a
+    /// tet along a line of positions (the timing derivatives' `x` and `x_T`); no transposition
+    /// into lanes after the fact.
+    #[inline]
+    pub(crate) fn deformation_gradient_lanes(&self, first: usize, x: &[Point], y: Option<(&[Point], &mut M3<BATCH>)>, f: &mut M3<BATCH>) {
+        let lanes = BATCH.min(self.tets.len() - first);
+        let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
+        *f = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
+        // Each tet's sums in registers, then one store per entry.
+        match y {
+            Some((y, h)) => {
+                *h = [[zero; 3]; 3];
+                for l in 0..lanes {
+                    let (fl, hl) = self.deformation_gradients_at(first + l, x, y);
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            f[i][j].0[l] = fl[i][j];
+                            h[i][j].0[l] = hl[i][j];
+                        }
+                    }
+                }
+            }
+            None => {
+                for l in 0..lanes {
+                    let fl = self.deformation_gradient(first + l, x);
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            f[i][j].0[l] = fl[i][j];
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Elastic::deformation_gradient`] of tet `e` at `x` and at `y`, reading the tet once.
+    #[inline(always)]
+    fn deformation_gradients_at(&self, e: usize, x: &[Point], y: &[Point]) -> (Mat3, Mat3) {
+        let (tet, g) = (&self.tets[e], &self.grads[e]);
+        let (mut f, mut h) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+        for a in 0..4 {
+            let (p, q) = (x[tet[a] as usize], y[tet[a] as usize]);
+            for i in 0..3 {
+                for j in 0..3 {
+                    f[i][j] += p[i] * g[a][j];
+                    h[i][j] += q[i] * g[a][j];
+                }
+            }
+        }
+        (f, h)
+    }
+
     /// Deformation gradients of the [`BATCH`] tets from `first` (the identity past the last
     /// tet: those lanes are computed and dropped).
     #[inline]
@@ -291,12 +345,21 @@ impl Elastic {
         out.fill([0.0; 3]);
         let (share, count) = (self.strain_share(), self.tet_count());
         let mut forces = [[[0.0; 3]; 4]; BATCH];
+        let mut f = [[Lanes::splat(0.0); 3]; 3];
+        let (mut last_grads, mut last_weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
         for first in (0..count).step_by(BATCH) {
             let lanes = BATCH.min(count - first);
-            let (mut grads, mut weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
-            grads[..lanes].copy_from_slice(&self.grads[first..first + lanes]);
-            weights[..lanes].copy_from_slice(&self.weights[first..first + lanes]);
-            project_forces(&self.deformation_gradients(first, x), share, &grads, &weights, &mut forces);
+            self.deformation_gradient_lanes(first, x, None, &mut f);
+            // A whole batch reads the arrays in place; the last one pads them with zeros.
+            let (grads, weights) = match (self.grads[first..].first_chunk::<BATCH>(), self.weights[first..].first_chunk::<BATCH>()) {
+                (Some(g), Some(w)) => (g, w),
+                _ => {
+                    last_grads[..lanes].copy_from_slice(&self.grads[first..]);
+                    last_weights[..lanes].copy_from_slice(&self.weights[first..]);
+                    (&last_grads, &last_weights)
+                }
+            };
+            project_forces(&f, share, grads, weights, &mut forces);
             for (e, corners) in (first..first + lanes).zip(&forces) {
                 for (&a, force) in self.tets[e].iter().zip(corners) {
                     let o = &mut out[a as usize];

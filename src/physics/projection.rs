@@ -158,19 +158,25 @@ pub fn project_batch(f: &[Mat3; BATCH], strain_share: f64) -> [Mat3; BATCH] {
 
 with_widest_simd!(dispatch_project, fn(f: &M3<BATCH>, strain_share: f64) -> M3<BATCH> { project_lanes(f, strain_share) });
 
-/// [`project_batch`]'s targets as node forces: for tet lane `l` and corner `k`,
-/// `weights[l] P_l grads[l][k]` with the sums of
+/// [`project_batch`]'s targets as node forces, from deformation gradients on lanes: for tet
+/// lane `l` and corner `k`, `weights[l] P_l grads[l][k]` with the sums of
 /// [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so that adding
 /// them per node in tet order gives its bytes (for a caller that needs `J p`, not `p`).
-pub fn project_forces(f: &[Mat3; BATCH], strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) {
-    dispatch_project_forces(&to_lanes(f), strain_share, grads, weights, out);
+pub(crate) fn project_forces(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) {
+    dispatch_project_forces(f, strain_share, grads, weights, out);
 }
 
 with_widest_simd!(dispatch_project_forces, fn(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) -> () {
     let p = project_lanes(f, strain_share);
     let w = Lanes(*weights);
     for k in 0..4 {
-        let gk: [Lanes<BATCH>; 3] = std::array::from_fn(|j| Lanes(std::array::from_fn(|l| grads[l][k][j])));
+        // A loop, not `array::from_fn`: its closures are not inlined into this SIMD body.
+        let mut gk = [Lanes::splat(0.0); 3];
+        for (j, gkj) in gk.iter_mut().enumerate() {
+            for (l, grad) in grads.iter().enumerate() {
+                gkj.0[l] = grad[k][j];
+            }
+        }
         for i in 0..3 {
             let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
             for (l, o) in out.iter_mut().enumerate() {

@@ -188,16 +188,31 @@ with_widest_simd!(dispatch_project_along, fn(f: &M3<BATCH>, strain_share: f64, g
 /// sums of [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so
 /// that adding them per node in tet order gives its bytes. Written into `out` (no copy of the
 /// matrices leaves the vectorized kernel).
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn project_along_forces(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BATCH], grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
     dispatch_project_along_forces(&to_lanes(f), strain_share, &to_lanes(g), grads, weights, out);
+}
+
+/// [`project_along_forces`] of matrices already on lanes.
+pub(crate) fn project_along_forces_lanes(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
+    dispatch_project_along_forces(f, strain_share, g, grads, weights, out);
 }
 
 with_widest_simd!(dispatch_project_along_forces, fn(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) -> () {
     let paths = project_along_lanes(f, strain_share, g);
     let w = Lanes(*weights);
+    // The corners' gradients on lanes, once for the three matrices (loops, not closures: the
+    // closures of `array::from_fn` are not inlined into this SIMD-compiled body).
+    let mut gks = [[Lanes::splat(0.0); 3]; 4];
+    for (k, gk) in gks.iter_mut().enumerate() {
+        for (j, gkj) in gk.iter_mut().enumerate() {
+            for (l, grad) in grads.iter().enumerate() {
+                gkj.0[l] = grad[k][j];
+            }
+        }
+    }
     for (m, p) in [&paths.0, &paths.1, &paths.2].into_iter().enumerate() {
-        for k in 0..4 {
-            let gk: [Lanes<BATCH>; 3] = std::array::from_fn(|j| Lanes(std::array::from_fn(|l| grads[l][k][j])));
+        for (k, gk) in gks.iter().enumerate() {
             for i in 0..3 {
                 let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
                 for (l, o) in out.iter_mut().enumerate() {
@@ -232,7 +247,7 @@ fn skew_solve_lanes<const N: usize>(sigma: &V3<N>, b: &M3<N>) -> M3<N> {
 #[inline(always)]
 fn volume_stretch_derivatives_lanes<const N: usize>(sigma: &V3<N>, sp: &V3<N>, ds: &M3<N>, dds: &M3<N>) -> (M3<N>, M3<N>) {
     let (zero, one, two, half) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(2.0), Lanes::splat(0.5));
-    let a = [0, 1, 2].map(|i| two * sp[i] - sigma[i]);
+    let a = [two * sp[0] - sigma[0], two * sp[1] - sigma[1], two * sp[2] - sigma[2]];
     let inv_sum = one / (a[0] * sp[0]) + one / (a[1] * sp[1]) + one / (a[2] * sp[2]);
     let mut d1 = [[zero; 3]; 3];
     for (i, j) in [(0, 1), (0, 2), (1, 2)] {
@@ -245,10 +260,15 @@ fn volume_stretch_derivatives_lanes<const N: usize>(sigma: &V3<N>, sp: &V3<N>, d
         d1[i][i] = (sp[i] * ds[i][i] + dl) / a[i];
     }
     let (d1ds, d1d1) = (mul_lanes(&d1, ds), mul_lanes(&d1, &d1));
-    let rhs2 = |i: usize, j: usize| sp[i] * dds[i][j] + two * d1ds[i][j] - two * d1d1[i][j];
+    let mut rhs2 = [[zero; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            rhs2[i][j] = sp[i] * dds[i][j] + two * d1ds[i][j] - two * d1d1[i][j];
+        }
+    }
     let mut d2 = [[zero; 3]; 3];
     for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-        let v = half * (rhs2(i, j) / (sp[i] + sp[j] - sigma[j]) + rhs2(j, i) / (sp[i] + sp[j] - sigma[i]));
+        let v = half * (rhs2[i][j] / (sp[i] + sp[j] - sigma[j]) + rhs2[j][i] / (sp[i] + sp[j] - sigma[i]));
         d2[i][j] = v;
         d2[j][i] = v;
     }
@@ -258,7 +278,7 @@ fn volume_stretch_derivatives_lanes<const N: usize>(sigma: &V3<N>, sp: &V3<N>, d
             target = target + d1[i][j] * d1[i][j] / (sp[i] * sp[j]);
         }
     }
-    let b = [0, 1, 2].map(|i| rhs2(i, i));
+    let b = [rhs2[0][0], rhs2[1][1], rhs2[2][2]];
     let ddl = (target - (b[0] / (a[0] * sp[0]) + b[1] / (a[1] * sp[1]) + b[2] / (a[2] * sp[2]))) / inv_sum;
     for i in 0..3 {
         d2[i][i] = (b[i] + ddl) / a[i];
@@ -304,9 +324,22 @@ fn project_along_lanes<const N: usize>(f: &M3<N>, strain_share: f64, g: &M3<N>) 
         let sp = volume_with_fallback(s);
         let (d1, d2) = volume_stretch_derivatives_lanes(&s, &sp, &ds, &dds);
         let (r, rest) = (Lanes::splat(r), Lanes::splat(1.0 - r));
-        (sp.map(|x| r + rest * x), d1.map(|row| row.map(|x| rest * x)), d2.map(|row| row.map(|x| rest * x)))
+        let (mut dq, mut ddq) = ([[zero; 3]; 3], [[zero; 3]; 3]);
+        for i in 0..3 {
+            for j in 0..3 {
+                dq[i][j] = rest * d1[i][j];
+                ddq[i][j] = rest * d2[i][j];
+            }
+        }
+        ([r + rest * sp[0], r + rest * sp[1], r + rest * sp[2]], dq, ddq)
     };
-    let (wdq, wwdw) = (mul_lanes(&w, &dq), [0, 1, 2].map(|i| [0, 1, 2].map(|j| ww[i][j] + dw[i][j])));
+    let mut wwdw = [[zero; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            wwdw[i][j] = ww[i][j] + dw[i][j];
+        }
+    }
+    let wdq = mul_lanes(&w, &dq);
     let (mut p0, mut p1, mut p2) = ([[zero; 3]; 3], [[zero; 3]; 3], [[zero; 3]; 3]);
     for i in 0..3 {
         p0[i][i] = q[i];
@@ -316,8 +349,7 @@ fn project_along_lanes<const N: usize>(f: &M3<N>, strain_share: f64, g: &M3<N>) 
         }
     }
     let vt = transpose_lanes(&v);
-    let back = |m: &M3<N>| mul_lanes(&mul_lanes(&u, m), &vt);
-    (back(&p0), back(&p1), back(&p2))
+    (mul_lanes(&mul_lanes(&u, &p0), &vt), mul_lanes(&mul_lanes(&u, &p1), &vt), mul_lanes(&mul_lanes(&u, &p2), &vt))
 }
 
 #[cfg(test)]

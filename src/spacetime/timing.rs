@@ -29,7 +29,7 @@
 //!   reference code does);
 //! - **fresh**: `p_s = P(x(t_s))` re-projected, so `p_T = DP[dF(x_T)]` and, as `F` is affine in
 //!   `T` too, `p_TT = D²P[dF(x_T), dF(x_T)]`
-//!   ([`project_along_forces`]). This is the total derivative
+//!   ([`project_along_forces`](crate::physics::projection_curvature::project_along_forces)). This is the total derivative
 //!   of W itself, the quantity the solver measures and the line search compares.
 //!
 //! There is no envelope argument that makes the two first derivatives agree: the projections
@@ -45,7 +45,9 @@
 //! the fresh W (the function the line search measures), each entry replaced by a safe
 //! gradient-step curvature where it is not positive; the step is the minimizer of that
 //! separable quadratic model under the constraints; Armijo backtracking on W with fresh local
-//! steps, so W never increases.
+//! steps, so W never increases. The first trial is the full step, or less where an interval
+//! would more than double or lose more than half its length (W grows like `T⁻³` as an
+//! interval shrinks with its keys held, far faster than the model says).
 //!
 //! Constraints. A key's time is a prefix sum, `t_k = t_0 + Σ_{i<k} T_i`, and `t_0` never moves
 //! (only lengths matter). So fixing key `k`'s time fixes `Σ_{i<k} T_i`; fixing keys `a < b`
@@ -75,8 +77,11 @@
 //! W the caller has.
 //! The derivatives move every tet at every sample along its line in `T`: the projection, its
 //! two derivatives and their node forces run 16 tets at a time in SIMD lanes, the SVD included
-//! ([`project_along_forces`]), with the bytes of the scalar definition
-//! ([`project_along_svd`](crate::physics::projection_curvature::project_along_svd)).
+//! ([`project_along_forces`](crate::physics::projection_curvature::project_along_forces)), with the bytes of the scalar definition
+//! ([`project_along_svd`](crate::physics::projection_curvature::project_along_svd); tested on
+//! the whole derivatives). Around the kernel, per sample: the five combinations of the unknowns
+//! in one pass, `L x` and `L x_T` in one pass over `L`, and each tet's `F` and `F_T` from one
+//! read of its nodes, written straight into lanes.
 
 use rayon::prelude::*;
 
@@ -88,8 +93,8 @@ use super::unknowns::KeyConstraints;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
-use crate::physics::lanes::BATCH;
-use crate::physics::projection_curvature::project_along_forces;
+use crate::physics::lanes::{Lanes, BATCH};
+use crate::physics::projection_curvature::project_along_forces_lanes;
 
 /// The spacetime objective as a function of the key times.
 #[derive(Clone)]
@@ -168,6 +173,12 @@ pub struct TimingStep {
 
 /// Largest growth of an interval in one Newton iteration (a factor of 1 + this).
 const MAX_GROWTH: f64 = 1.0;
+/// Largest shrink of an interval in the first trial of a Newton iteration (a fraction of its
+/// length). Why: W grows like `T⁻³` as an interval with held keys shortens (its accelerations
+/// go as `T⁻²`), far faster than the quadratic model says, and a step that the model sends to
+/// the minimum length is a clamp, not the model's minimum; on DINO the full step that shrank
+/// two intervals from 0.35 to 0.001 s failed and its half was taken, one W evaluation more.
+const MAX_SHRINK: f64 = 0.5;
 /// Relative change of an interval taken by the gradient step that replaces a non-positive
 /// curvature.
 const GRADIENT_STEP: f64 = 0.25;
@@ -240,13 +251,18 @@ impl<'a> Timing<'a> {
         let c_t: [f64; 4] = std::array::from_fn(|j| d1.acc[j] + alpha * d1.vel[j]);
         let c_tt: [f64; 4] = std::array::from_fn(|j| d2.acc[j] + alpha * d2.vel[j]);
         let u = [&tr.positions[i], &tr.velocities[i], &tr.positions[i + 1], &tr.velocities[i + 1]];
-        let combine = |w: &[f64; 4]| -> Vec<Point> {
-            (0..n).map(|a| [0, 1, 2].map(|d| w[0] * u[0][a][d] + w[1] * u[1][a][d] + w[2] * u[2][a][d] + w[3] * u[3][a][d])).collect()
-        };
-        let (x, x_t, acc, acc_t, acc_tt) = (combine(&pos), combine(&pos_t), combine(&c), combine(&c_t), combine(&c_tt));
+        // The five combinations of the interval's unknowns in one pass over them.
+        let mut combos: [Vec<Point>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
+        for a in 0..n {
+            let (u0, u1, u2, u3) = (u[0][a], u[1][a], u[2][a], u[3][a]);
+            for (w, out) in [&pos, &pos_t, &c, &c_t, &c_tt].into_iter().zip(combos.iter_mut()) {
+                let at = |d: usize| w[0] * u0[d] + w[1] * u1[d] + w[2] * u2[d] + w[3] * u3[d];
+                out.push([at(0), at(1), at(2)]);
+            }
+        }
+        let [x, x_t, acc, acc_t, acc_tt] = combos;
         let (mut lx, mut lx_t) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-        el.stiffness.mul_points_sequential(&x, &mut lx);
-        el.stiffness.mul_points_sequential(&x_t, &mut lx_t);
+        el.stiffness.mul_points_pair_sequential([&x, &x_t], [&mut lx, &mut lx_t]);
         let (mut jp, mut jp_t, mut jp_tt) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
         match mode {
             ProjectionMode::Frozen(p) => el.apply_j_sequential(&p.targets[k], &mut jp),
@@ -256,19 +272,22 @@ impl<'a> Timing<'a> {
                 let share = el.strain_share();
                 let count = el.tet_count();
                 let mut forces = [[[[0.0; 3]; 4]; 3]; BATCH];
+                let (mut f, mut f_t) = ([[Lanes::splat(0.0); 3]; 3], [[Lanes::splat(0.0); 3]; 3]);
+                let (mut last_grads, mut last_weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
                 for first in (0..count).step_by(BATCH) {
                     let lanes = BATCH.min(count - first);
-                    let mut f = [crate::physics::mat3::IDENTITY; BATCH];
-                    let mut f_t = [[[0.0; 3]; 3]; BATCH];
-                    let mut grads = [[[0.0; 3]; 4]; BATCH];
-                    let mut weights = [0.0; BATCH];
-                    for l in 0..lanes {
-                        f[l] = el.deformation_gradient(first + l, &x);
-                        f_t[l] = el.deformation_gradient(first + l, &x_t);
-                        grads[l] = el.grads[first + l];
-                        weights[l] = el.weights[first + l];
-                    }
-                    project_along_forces(&f, share, &f_t, &grads, &weights, &mut forces);
+                    // F and F_T straight into lanes (past the last tet: the identity and zero).
+                    el.deformation_gradient_lanes(first, &x, Some((&x_t, &mut f_t)), &mut f);
+                    // A whole batch reads the body's arrays in place; the last one pads them.
+                    let (grads, weights) = match (el.grads[first..].first_chunk::<BATCH>(), el.weights[first..].first_chunk::<BATCH>()) {
+                        (Some(g), Some(w)) => (g, w),
+                        _ => {
+                            last_grads[..lanes].copy_from_slice(&el.grads[first..]);
+                            last_weights[..lanes].copy_from_slice(&el.weights[first..]);
+                            (&last_grads, &last_weights)
+                        }
+                    };
+                    project_along_forces_lanes(&f, share, &f_t, grads, weights, &mut forces);
                     for (e, [value, first_t, second_t]) in (first..first + lanes).zip(&forces) {
                         for (k, &a) in el.tets[e].iter().enumerate() {
                             let a = a as usize;
@@ -338,8 +357,17 @@ impl<'a> Timing<'a> {
             if decrease.is_nan() || decrease <= settings.tolerance * w {
                 break format!("stationary: the predicted decrease {:.3e} is below {:.0e} of W", decrease.max(0.0), settings.tolerance);
             }
-            // Start at the full step, or less where an interval would more than double.
-            let mut scale = step.iter().zip(&t).filter(|(s, _)| **s > 0.0).fold(1.0f64, |a, (s, t)| a.min(MAX_GROWTH * t / s));
+            // Start at the full step, or less where an interval would more than double or lose
+            // more than half its length.
+            let mut scale = step.iter().zip(&t).fold(1.0f64, |a, (&s, &t)| {
+                if s > 0.0 {
+                    a.min(MAX_GROWTH * t / s)
+                } else if s < 0.0 {
+                    a.min(MAX_SHRINK * t / -s)
+                } else {
+                    a
+                }
+            });
             let mut accepted = None;
             for halving in 0..=MAX_HALVINGS {
                 let trial = Trajectory { times: blocks.times(&tr.times, &step, scale), ..tr.clone() };

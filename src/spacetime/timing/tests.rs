@@ -4,6 +4,7 @@ use super::*;
 use crate::physics::elastic::Elastic;
 use crate::spacetime::tests::{all, from_mask, keys, material, settings, wobbly};
 use crate::spacetime::unknowns::KeyConstraints;
+use crate::physics::svd3::svd3;
 use crate::testing::{cube_mesh, Rng};
 
 /// `tr` with interval `i` set to length `len`, later keys shifted with it.
@@ -122,6 +123,79 @@ fn the_objective_gives_the_same_time_gradient() {
             // And the supports' rows are out of both: W changes when they are counted.
             let counted = Timing { supports: vec![false; el.node_count()], ..timing.clone() };
             assert!(relative(counted.energy(&tr), d.value) > 1e-6);
+        }
+    }
+}
+
+/// The fresh derivatives written with the per-tet scalar definitions: every combination of the
+/// unknowns by itself, each tet's deformation gradients, signed SVD and projection path one at a
+/// time ([`project_along_svd`](crate::physics::projection_curvature::project_along_svd)), their
+/// node forces summed in tet order ([`Elastic::apply_j_sequential_with`]), samples summed in order.
+fn per_tet_derivatives(timing: &Timing, tr: &Trajectory) -> TimeDerivatives {
+    use crate::physics::projection_curvature::{project_along_svd, ProjectionPath};
+    let (el, alpha, g) = (timing.elastic, timing.damping, timing.gravity);
+    let n = el.node_count();
+    let intervals = tr.times.len() - 1;
+    let (mut value, mut gradient, mut curvature) = (0.0, vec![0.0; intervals], vec![0.0; intervals]);
+    for s in &timing.objective(&tr.times).samples {
+        let (i, b) = (s.interval, &s.basis);
+        let t = tr.times[i + 1] - tr.times[i];
+        let (d1, d2) = (length_derivative(b, t, 1), length_derivative(b, t, 2));
+        let c: [f64; 4] = std::array::from_fn(|j| b.acc[j] + alpha * b.vel[j]);
+        let c_t: [f64; 4] = std::array::from_fn(|j| d1.acc[j] + alpha * d1.vel[j]);
+        let c_tt: [f64; 4] = std::array::from_fn(|j| d2.acc[j] + alpha * d2.vel[j]);
+        let u = [&tr.positions[i], &tr.velocities[i], &tr.positions[i + 1], &tr.velocities[i + 1]];
+        let combine = |w: &[f64; 4]| -> Vec<Point> {
+            (0..n).map(|a| [0, 1, 2].map(|d| w[0] * u[0][a][d] + w[1] * u[1][a][d] + w[2] * u[2][a][d] + w[3] * u[3][a][d])).collect()
+        };
+        let (x, x_t, acc, acc_t, acc_tt) = (combine(&b.pos), combine(&d1.pos), combine(&c), combine(&c_t), combine(&c_tt));
+        let paths: Vec<ProjectionPath> = (0..el.tet_count())
+            .map(|e| project_along_svd(&svd3(&el.deformation_gradient(e, &x)), el.strain_share(), &el.deformation_gradient(e, &x_t)))
+            .collect();
+        let (mut jp, mut jp_t, mut jp_tt) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        el.apply_j_sequential_with(|e| paths[e].value, &mut jp);
+        el.apply_j_sequential_with(|e| paths[e].first, &mut jp_t);
+        el.apply_j_sequential_with(|e| paths[e].second, &mut jp_tt);
+        let (mut lx, mut lx_t) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        el.stiffness.mul_points_sequential(&x, &mut lx);
+        el.stiffness.mul_points_sequential(&x_t, &mut lx_t);
+        let (mut ff, mut ftf, mut ftft, mut fttf) = (0.0, 0.0, 0.0, 0.0);
+        for a in (0..n).filter(|&a| !timing.supports[a]) {
+            let m = el.mass[a];
+            for d in 0..3 {
+                let f = m * (acc[a][d] - g[d]) + lx[a][d] - jp[a][d];
+                let f_t = m * acc_t[a][d] + lx_t[a][d] - jp_t[a][d];
+                let f_tt = m * acc_tt[a][d] - jp_tt[a][d];
+                ff += f * f / m;
+                ftf += f_t * f / m;
+                ftft += f_t * f_t / m;
+                fttf += f_tt * f / m;
+            }
+        }
+        let (w, dw) = (s.weight, s.weight / t);
+        value += 0.5 * w * ff;
+        gradient[i] += 0.5 * dw * ff + w * ftf;
+        curvature[i] += 2.0 * dw * ftf + w * (ftft + fttf);
+    }
+    TimeDerivatives { value, gradient, curvature }
+}
+
+#[test]
+fn fresh_derivatives_are_the_bytes_of_the_per_tet_definition() {
+    // The derivatives run 16 tets per vectorized call, F and F_T written straight into lanes,
+    // the body's arrays read in place, the five combinations in one pass: none of that may
+    // change a bit. A 3x3x3 cube has 162 tets, so the last batch is partial (padded lanes).
+    let mesh = cube_mesh(3);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    assert_ne!(el.tet_count() % BATCH, 0);
+    let supports: Vec<bool> = mesh.positions.iter().map(|p| p[1] == 0.0).collect();
+    for (tr, cyclic) in [(wobbly(&mesh.positions, false), false), (wobbly(&mesh.positions, true), true), (contact_trajectory(&mesh.positions), false)] {
+        for (damping, gravity, supports) in [(0.0, [0.0; 3], vec![false; el.node_count()]), (2.5, [0.3, -9.81, 0.0], supports.clone())] {
+            let timing = Timing { damping, gravity, supports, ..plain_timing(&el, &tr.times, cyclic, 4) };
+            let reference = per_tet_derivatives(&timing, &tr);
+            assert_eq!(timing.derivatives(&tr, ProjectionMode::Fresh), reference);
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+            assert_eq!(one.install(|| timing.derivatives(&tr, ProjectionMode::Fresh)), reference);
         }
     }
 }
