@@ -93,7 +93,7 @@ deps-blender:
 
 test-deps: deps-tetgen deps-usd deps-npm deps-chromium deps-blender
 
-demo: build deps-tetgen deps-usd
+demo: build deps-tetgen
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"
 	$(BIN) bake fixtures/demo/twist.toml --out build/demo
 	@echo
