@@ -104,9 +104,7 @@ fn push_attribute(out: &mut String, a: &Attribute, indent: usize) {
 
 fn push_value(out: &mut String, value: &Value) {
     match value {
-        Value::Token(s) | Value::String(s) => {
-            let _ = write!(out, "\"{s}\"");
-        }
+        Value::Token(s) | Value::String(s) => push_quoted(out, s),
         Value::Asset(s) => {
             let _ = write!(out, "@{s}@");
         }
@@ -115,9 +113,7 @@ fn push_value(out: &mut String, value: &Value) {
         }
         Value::Float(x) => push_f32(out, *x),
         Value::Vec3f(v) => push_vec3(out, v),
-        Value::Tokens(items) => push_list(out, items.iter(), |o, s| {
-            let _ = write!(o, "\"{s}\"");
-        }),
+        Value::Tokens(items) => push_list(out, items.iter(), |o, s| push_quoted(o, s)),
         Value::Ints(items) => push_list(out, items.iter(), |o, i| {
             let _ = write!(o, "{i}");
         }),
@@ -131,6 +127,20 @@ fn push_value(out: &mut String, value: &Value) {
         }),
         Value::Vec3fs(items) => push_vec3s(out, items.iter()),
     }
+}
+
+/// A quoted string, with the escapes USD's text format reads (`\\`, `\"`, `\n`).
+fn push_quoted(out: &mut String, s: &str) {
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '"' => out.push_str("\\\""),
+            '\n' => out.push_str("\\n"),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
 }
 
 pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {

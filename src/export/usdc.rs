@@ -181,6 +181,8 @@ struct Writer {
     field_set_index: HashMap<Vec<u32>, u32>,
     /// (path, field set, spec type)
     specs: Vec<(u32, u32, u32)>,
+    /// Offsets of the arrays written, by (representation, hash of their bytes).
+    stored: HashMap<(u64, u64), Vec<u64>>,
 }
 
 impl Writer {
@@ -409,10 +411,9 @@ impl Writer {
     fn time_samples(&mut self, samples: &[(f64, Value)]) -> u64 {
         let at = self.here();
         self.put_u64(0);
-        let times_at = self.here();
-        self.put_u64(samples.len() as u64);
-        samples.iter().for_each(|(t, _)| self.out.extend_from_slice(&t.to_le_bytes()));
-        let times = rep(ty::DOUBLE_VECTOR, times_at);
+        let mut times: Vec<u8> = (samples.len() as u64).to_le_bytes().to_vec();
+        samples.iter().for_each(|(t, _)| times.extend_from_slice(&t.to_le_bytes()));
+        let times = self.stored(rep(ty::DOUBLE_VECTOR, 0), times, false);
         self.patch_jump(at);
         self.put_u64(times);
         let values_jump = self.here();
@@ -452,12 +453,11 @@ impl Writer {
                 self.array(ty::TOKEN, indices.len(), |out| indices.iter().for_each(|i| out.extend_from_slice(&i.to_le_bytes())))
             }
             Value::Ints(items) if items.len() >= MIN_COMPRESSED_ARRAY => {
-                let at = self.here();
-                self.put_u64(items.len() as u64);
+                let mut body = (items.len() as u64).to_le_bytes().to_vec();
                 let compressed = compressed_ints(items);
-                self.put_u64(compressed.len() as u64);
-                self.out.extend_from_slice(&compressed);
-                rep(ty::INT, at) | ARRAY_BIT | COMPRESSED_BIT
+                body.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+                body.extend_from_slice(&compressed);
+                self.stored(rep(ty::INT, 0) | ARRAY_BIT | COMPRESSED_BIT, body, false)
             }
             Value::Ints(items) => self.array(ty::INT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
             Value::Floats(items) => self.array(ty::FLOAT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
@@ -472,11 +472,28 @@ impl Writer {
         if len == 0 {
             return rep(ty, 0) | ARRAY_BIT;
         }
-        self.align8();
+        let mut body = (len as u64).to_le_bytes().to_vec();
+        elements(&mut body);
+        self.stored(rep(ty, 0) | ARRAY_BIT, body, true)
+    }
+
+    /// `rep` pointing at `body`, written once per file like usd-core does (the same weights or
+    /// offsets in two places, the same sample times of two attributes): an equal body of the
+    /// same representation is found by its hash and compared with the bytes already written.
+    fn stored(&mut self, rep: u64, body: Vec<u8>, aligned: bool) -> u64 {
+        let mut hasher = std::hash::DefaultHasher::new();
+        std::hash::Hash::hash(&body, &mut hasher);
+        let key = (rep, std::hash::Hasher::finish(&hasher));
+        if let Some(&at) = self.stored.get(&key).and_then(|at| at.iter().find(|&&at| self.out[at as usize..].starts_with(&body))) {
+            return rep | at;
+        }
+        if aligned {
+            self.align8();
+        }
         let at = self.here();
-        self.put_u64(len as u64);
-        elements(&mut self.out);
-        rep(ty, at) | ARRAY_BIT
+        self.out.extend_from_slice(&body);
+        self.stored.entry(key).or_default().push(at);
+        rep | at
     }
 
     /// The structural sections, the table of contents and the bootstrap.
@@ -587,4 +604,107 @@ impl Writer {
 enum ListOp {
     Explicit,
     Prepend,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::export::layer::Attribute;
+
+    /// Every kind of value, property and prim our layouts use, with edge cases: empty and
+    /// short arrays, int arrays long enough to be compressed with every code width, negative
+    /// and extreme values, a string, an asset, connections and relationships, time samples.
+    fn every_kind() -> Layer {
+        let mut shader = Prim::new("Shader", "S");
+        shader.attribute(Attribute::uniform("info:id", "token", Value::Token("UsdUVTexture".into())));
+        shader.attribute(Attribute::new("inputs:file", "asset", Value::Asset("./a b.png".into())));
+        shader.attribute(Attribute::new("inputs:varname", "string", Value::String("st".into())));
+        shader.attribute(Attribute::new("inputs:roughness", "float", Value::Float(-0.1)));
+        shader.attribute(Attribute::new("inputs:diffuseColor", "color3f", Value::Vec3f([0.8, -1e-30, 3.4e38])));
+        shader.attribute(Attribute::declared("outputs:rgb", "float3"));
+        let mut material = Prim::new("Material", "M");
+        material.attribute(Attribute::connected("outputs:surface", "token", "/root/M/S.outputs:rgb".into()));
+        material.children.push(shader);
+        let mut mesh = Prim::new("Mesh", "Mesh").with_api("SkelBindingAPI").with_api("MaterialBindingAPI");
+        let long: Vec<i32> = (0..300).map(|i: i32| [i, -i, i * 1000, i.wrapping_mul(1 << 20), i32::MIN, i32::MAX, 7][i as usize % 7]).collect();
+        mesh.attribute(Attribute::new("faceVertexIndices", "int[]", Value::Ints(long)));
+        mesh.attribute(Attribute::new("faceVertexCounts", "int[]", Value::Ints(vec![3, 3, -4])));
+        mesh.attribute(Attribute::new("primvars:st", "texCoord2f[]", Value::Vec2fs(vec![[0.0, 1.0], [0.5, 0.25]])).with_interpolation("faceVarying"));
+        mesh.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
+        mesh.attribute(Attribute::uniform("names", "token[]", Value::Tokens(vec!["a".into(), "b".into(), "a".into()])));
+        mesh.attribute(Attribute::sampled("weights", "float[]", vec![(-2.0, Value::Floats(vec![0.25, -1.0])), (0.5, Value::Floats(vec![]))]));
+        mesh.attribute(Attribute::sampled("points", "point3f[]", vec![(1.0, Value::Vec3fs(vec![[1.0, 2.0, 3.0]])), (2.0, Value::Vec3fs(vec![[4.0, 5.0, 6.0]; 20]))]));
+        mesh.relationship("material:binding", vec!["/root/M".into()]);
+        mesh.relationship("skel:blendShapeTargets", vec!["/root/M".into(), "/root/M/S".into()]);
+        let mut root = Prim::new("Xform", "root");
+        root.children.push(mesh);
+        root.children.push(material);
+        let metadata = vec![("defaultPrim", Value::Token("root".into())), ("doc", Value::String("a \"doc\"".into())), ("metersPerUnit", Value::Double(0.01)), ("endTimeCode", Value::Double(1e300))];
+        Layer { metadata, prims: vec![root, Prim::new("Scope", "second")] }
+    }
+
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("blendsim-usdc-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// usd-core reads our bytes as the layer our usda text holds (the test suite's checker).
+    #[test]
+    fn usd_core_reads_every_kind_of_value_as_the_usda_layer() {
+        let d = scratch("kinds");
+        let layer = every_kind();
+        let (a, c) = (d.join("x.usda"), d.join("x.usdc"));
+        std::fs::write(&a, crate::export::usda::text(&layer)).unwrap();
+        let bytes = super::bytes(&layer, &c).unwrap();
+        assert_eq!(bytes, super::bytes(&layer, &c).unwrap(), "same bytes every time");
+        std::fs::write(&c, bytes).unwrap();
+        let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/usd_same_layer.py");
+        let out = std::process::Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or("python3".into())).arg(checker).arg(&a).arg(&c).output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && stdout.contains("\"ok\": true"), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    fn error(layer: &Layer) -> String {
+        let e = super::bytes(layer, Path::new("out/x.usdc")).unwrap_err().to_string();
+        assert!(!e.contains('\n') && e.contains("out/x.usdc: cannot write the usdc file: ") && e.contains("(fix: "), "{e}");
+        e
+    }
+
+    #[test]
+    fn values_the_format_cannot_hold_are_one_line_errors() {
+        let mut nan = every_kind();
+        let Property::Attribute(a) = &mut nan.prims[0].children[0].properties[6] else { panic!() };
+        a.samples[1].1 = Value::Vec3fs(vec![[0.0, f32::NAN, 0.0]]);
+        assert!(error(&nan).contains("/root/Mesh.points holds a non-finite number"));
+        let mut nul = every_kind();
+        nul.prims[1].name = "a\0b".into();
+        assert!(error(&nul).contains("the prim name `a\\0b` contains a NUL byte"));
+        let mut dangling = every_kind();
+        dangling.prims[0].children[0].relationship("skel:skeleton", vec!["/root/Skel".into()]);
+        assert!(error(&dangling).contains("/root/Mesh.skel:skeleton targets /root/Skel, which is not in the layer"));
+    }
+
+    /// The bootstrap points at a table of contents that lists the six sections in order, each
+    /// inside the file.
+    #[test]
+    fn bootstrap_and_table_of_contents() {
+        let bytes = super::bytes(&every_kind(), Path::new("x.usdc")).unwrap();
+        assert_eq!(&bytes[..8], b"PXR-USDC");
+        assert_eq!(&bytes[8..16], &[0, 8, 0, 0, 0, 0, 0, 0]);
+        let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+        let toc = u64_at(16);
+        assert_eq!(u64_at(toc), 6);
+        let mut end = 88;
+        for (k, name) in ["TOKENS", "STRINGS", "FIELDS", "FIELDSETS", "PATHS", "SPECS"].iter().enumerate() {
+            let at = toc + 8 + 32 * k;
+            assert_eq!(&bytes[at..at + name.len()], name.as_bytes());
+            assert!(bytes[at + name.len()..at + 16].iter().all(|&b| b == 0));
+            let (start, size) = (u64_at(at + 16), u64_at(at + 24));
+            assert!(start >= end && size > 0 && start + size <= toc, "{name}: {start} + {size}");
+            end = start + size;
+        }
+        assert_eq!(bytes.len(), toc + 8 + 32 * 6);
+    }
 }

@@ -1,34 +1,78 @@
 //! The two codings a crate file's structural sections (and its large int arrays) are stored
 //! in, as usd-core reads them (`TfFastCompression`, `Sdf_IntegerCompression`):
 //!
-//! - [`fast_compression`]: a zero byte ("one chunk") and one LZ4 block. We write the block as a
-//!   single literal run: a valid LZ4 block that any LZ4 decoder reads, without a match search.
-//!   The sections it holds are small (indices, not geometry), so the bytes saved by real
-//!   matching would be a few kilobytes at most.
+//! - [`fast_compression`]: a zero byte ("one chunk") and one LZ4 block, from a greedy match
+//!   search over a table of the last position of each hashed 4 bytes (LZ4's own fast mode,
+//!   without its acceleration heuristics). The sections it holds are small (indices, not
+//!   geometry), so a better search would save a few hundred bytes at most.
 //! - [`compressed_ints`]: 32-bit integers as differences to their predecessor, each tagged by a
 //!   2-bit code (the most common difference, or an 8-, 16- or 32-bit value), then
 //!   [`fast_compression`].
 
 use std::collections::HashMap;
 
-/// `TfFastCompression` of `bytes`: `0` (one chunk) and an LZ4 block of one literal run.
+/// `TfFastCompression` of `bytes`: `0` (one chunk) and an LZ4 block.
 pub fn fast_compression(bytes: &[u8]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(bytes.len() + bytes.len() / 255 + 3);
+    let mut out = Vec::with_capacity(bytes.len() + bytes.len() / 255 + 16);
     out.push(0);
-    // The block's only sequence: a token whose high nibble is the literal length (15 means
-    // "more length bytes follow": 255s and a final byte below 255), then the literals.
-    let n = bytes.len();
-    out.push((n.min(15) as u8) << 4);
-    if n >= 15 {
-        let mut rest = n - 15;
+    lz4_block(bytes, &mut out);
+    out
+}
+
+/// The LZ4 block format's limits: a match is at least 4 bytes, its offset at most 65535, the
+/// last match starts at least 12 bytes before the end and the last 5 bytes are literals.
+const MIN_MATCH: usize = 4;
+const MAX_OFFSET: usize = 65535;
+const MATCH_START_LIMIT: usize = 12;
+const LAST_LITERALS: usize = 5;
+const HASH_BITS: u32 = 12;
+
+/// One LZ4 block: sequences of (literals, match), the last one literals only.
+pub fn lz4_block(input: &[u8], out: &mut Vec<u8>) {
+    let n = input.len();
+    let mut last_seen = vec![usize::MAX; 1 << HASH_BITS];
+    let (mut anchor, mut i) = (0, 0);
+    let four = |at: usize| u32::from_le_bytes(input[at..at + 4].try_into().expect("4 bytes"));
+    while i + MATCH_START_LIMIT <= n {
+        let hash = (four(i).wrapping_mul(2_654_435_761) >> (32 - HASH_BITS)) as usize;
+        let candidate = std::mem::replace(&mut last_seen[hash], i);
+        if candidate != usize::MAX && i - candidate <= MAX_OFFSET && four(candidate) == four(i) {
+            let mut len = MIN_MATCH;
+            while i + len < n - LAST_LITERALS && input[candidate + len] == input[i + len] {
+                len += 1;
+            }
+            push_sequence(out, &input[anchor..i], Some((i - candidate, len)));
+            i += len;
+            anchor = i;
+        } else {
+            i += 1;
+        }
+    }
+    push_sequence(out, &input[anchor..], None);
+}
+
+/// A token (literal length, match length - 4, 15 meaning "more bytes follow": 255s and a final
+/// byte below 255), the literals, and the match's offset and length.
+fn push_sequence(out: &mut Vec<u8>, literals: &[u8], matched: Option<(usize, usize)>) {
+    let extra = matched.map_or(0, |(_, len)| len - MIN_MATCH);
+    out.push(((literals.len().min(15) as u8) << 4) | extra.min(15) as u8);
+    push_length(out, literals.len());
+    out.extend_from_slice(literals);
+    if let Some((offset, _)) = matched {
+        out.extend_from_slice(&(offset as u16).to_le_bytes());
+        push_length(out, extra);
+    }
+}
+
+fn push_length(out: &mut Vec<u8>, len: usize) {
+    if len >= 15 {
+        let mut rest = len - 15;
         while rest >= 255 {
             out.push(255);
             rest -= 255;
         }
         out.push(rest as u8);
     }
-    out.extend_from_slice(bytes);
-    out
 }
 
 /// `Sdf_IntegerCompression` of `ints` (the caller stores the count separately).
@@ -91,13 +135,57 @@ mod tests {
         assert_eq!(encoded, expected);
     }
 
+    /// A plain LZ4 block decoder (the format's definition), to check our blocks against.
+    fn lz4_decode(block: &[u8]) -> Vec<u8> {
+        let (mut out, mut i) = (Vec::new(), 0);
+        let length = |i: &mut usize, nibble: usize| {
+            let mut len = nibble;
+            if nibble == 15 {
+                loop {
+                    let b = block[*i];
+                    *i += 1;
+                    len += b as usize;
+                    if b != 255 {
+                        break;
+                    }
+                }
+            }
+            len
+        };
+        loop {
+            let token = block[i] as usize;
+            i += 1;
+            let literals = length(&mut i, token >> 4);
+            out.extend_from_slice(&block[i..i + literals]);
+            i += literals;
+            if i == block.len() {
+                return out;
+            }
+            let offset = u16::from_le_bytes([block[i], block[i + 1]]) as usize;
+            i += 2;
+            let len = length(&mut i, token & 15) + MIN_MATCH;
+            assert!(offset > 0 && offset <= out.len(), "offset {offset} at {}", out.len());
+            for _ in 0..len {
+                out.push(out[out.len() - offset]);
+            }
+        }
+    }
+
     #[test]
-    fn literal_runs_spell_their_length() {
+    fn lz4_blocks_decode_to_their_input_and_keep_the_format_limits() {
+        let mut inputs: Vec<Vec<u8>> = vec![vec![], b"abc".to_vec(), vec![7; 12], vec![7; 13], vec![0; 100_000]];
+        inputs.push((0..5000u32).flat_map(|i| (i % 37 * 1000 + i / 100).to_le_bytes()).collect());
+        inputs.push((0..70_000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect());
+        inputs.push(b"the tokens of a layer: points\0extent\0points\0offsets\0pointIndices\0points\0".repeat(30));
+        for input in inputs {
+            let c = fast_compression(&input);
+            assert_eq!(c[0], 0);
+            assert_eq!(lz4_decode(&c[1..]), input, "{} bytes", input.len());
+            if input.len() > 64 && input.iter().all(|&b| b == input[0]) {
+                assert!(c.len() < input.len() / 100, "a run compresses: {} -> {}", input.len(), c.len());
+            }
+        }
         assert_eq!(fast_compression(b"abc"), [0, 0x30, b'a', b'b', b'c']);
-        let long = vec![7u8; 15 + 255 + 3];
-        let c = fast_compression(&long);
-        assert_eq!(&c[..4], &[0, 0xf0, 255, 3]);
-        assert_eq!(&c[4..], &long[..]);
         assert_eq!(fast_compression(&[]), [0, 0]);
     }
 }
