@@ -112,14 +112,14 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
     let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
     let metadata = metadata(settings, first, last);
     let mut mesh = Prim::new("Mesh", "Mesh");
-    let sampled = |f: &dyn Fn(&Vec<[f32; 3]>) -> Vec<[f32; 3]>| frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, Value::Vec3fs(f(p)))).collect();
-    mesh.attribute(Attribute::sampled("extent", "float3[]", sampled(&|p| extent(p).to_vec())));
+    let sampled = |f: fn(&[[f32; 3]]) -> Vec<[f32; 3]>| frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, Value::Vec3fs(f(p)))).collect();
+    mesh.attribute(Attribute::sampled("extent", "float3[]", sampled(|p| extent(p).to_vec())));
     push_topology(&mut mesh, triangles);
     let vertices = frames.points.first().map_or(0, Vec::len);
     if let Some(a) = attributes {
         attrs::push_properties(&mut mesh, triangles, vertices, a);
     }
-    mesh.attribute(Attribute::sampled("points", "point3f[]", sampled(&|p| p.clone())));
+    mesh.attribute(Attribute::sampled("points", "point3f[]", sampled(|p| p.to_vec())));
     mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
     Layer { metadata, prims: vec![plain_root(mesh, attributes, &settings.name)] }
 }

@@ -14,7 +14,7 @@
 //!   stored plain (usd-core stores vectors plain too, and scalar float arrays plain unless
 //!   they are integral or take few distinct values);
 //! - TOKENS (every name, null-terminated), STRINGS (tokens used as strings), FIELDS (name token
-//!   + value representation), FIELDSETS (each spec's fields, ~0-terminated), PATHS (the path
+//!   and value representation), FIELDSETS (each spec's fields, ~0-terminated), PATHS (the path
 //!   tree, depth first), SPECS (path, field set, spec type);
 //! - the table of contents: each section's name, start and size.
 //!
@@ -372,7 +372,7 @@ impl Writer {
     }
 
     fn align8(&mut self) {
-        while self.out.len() % 8 != 0 {
+        while !self.out.len().is_multiple_of(8) {
             self.out.push(0);
         }
     }
