@@ -93,7 +93,7 @@ deps-blender:
 
 test-deps: deps-tetgen deps-usd deps-npm deps-chromium deps-blender
 
-demo: build deps-tetgen deps-usd
+demo: build deps-tetgen
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"
 	$(BIN) bake fixtures/demo/twist.toml --out build/demo
 	@echo
@@ -134,7 +134,7 @@ bench-demo: build deps-tetgen deps-usd
 
 # Production-size bakes through the CLI (100k-vertex cage, 20 keys, CHEB-style volume);
 # peak memory by GNU time (Debian package `time`).
-bench-scale: build deps-tetgen deps-usd
+bench-scale: build deps-tetgen
 	@command -v /usr/bin/time >/dev/null 2>&1 || { echo "==> installing GNU time (apt-get)"; $(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq time; }
 	@echo "==> scale benchmark: whole bakes of production-size surfaces (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench scale

@@ -42,7 +42,7 @@ pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let animation: Animation = stage::read(&args.animation)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None)?;
-    let outputs = stages::export_with(&animation, &clip, &mut staging, None, progress)?;
+    let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
     staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;
     staging.commit()
 }

@@ -3,7 +3,8 @@
 //! - [`clip`]: the blendshape form of a Hermite trajectory (base, targets, weight curves), in
 //!   the signed form or the Bernstein form of `bernstein` (every weight in [0, 1]);
 //! - [`fullframe`]: one pose per frame (what a vertex cache holds);
-//! - [`usda`] (written natively), [`usdc`] (converted by usd-core), [`glb`]: the files;
+//! - [`usd`]: the USD layout as a [`layer::Layer`], which [`usda`] writes as text and [`usdc`]
+//!   as a binary crate file; [`glb`]: the glTF file;
 //! - [`texture`]: the material groups' diffuse textures they carry.
 //!
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
@@ -11,11 +12,13 @@
 
 mod bernstein;
 pub mod principal;
-mod usda_attributes;
+mod usd_attributes;
 pub mod clip;
 pub mod fullframe;
 pub mod glb;
+pub mod layer;
 pub mod texture;
+pub mod usd;
 pub mod usda;
 pub mod usdc;
 

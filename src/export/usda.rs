@@ -1,171 +1,146 @@
-//! USD ASCII writers. Layout in `formats/usd.md`.
+//! USD ASCII: a [`Layer`] as `.usda` text. Layout in `formats/usd.md`.
 //!
 //! Written as text directly (no USD library in Rust): the layout is small and fixed, and
 //! writing it ourselves keeps the bytes deterministic. Floats are f32 in their shortest
-//! round-trip form, so reading the file back gives exactly the values we hold.
+//! round-trip form, so reading the file back gives exactly the values we hold. The streaming
+//! helpers below (`header`, `push_topology`, `push_vec3s`) also serve the vertex-cache writer,
+//! which writes frames as they come instead of building a layer.
 
 use std::fmt::Write;
 
 use super::clip::BlendShapeClip;
 use super::fullframe::FullFrame;
-use super::usda_attributes as attrs;
+use super::layer::{Attribute, Layer, Prim, Property, Value};
+pub(crate) use super::usd::extent;
+pub use super::usd::{prim_name, UsdSettings};
 use crate::mesh::attributes::CornerAttributes;
-use crate::mesh::Bounds;
-use crate::spacetime::trajectory::frames_between;
 
-/// Stage-level settings shared by both USD files.
-#[derive(Debug, Clone, PartialEq)]
-pub struct UsdSettings {
-    /// Prim-safe name of the asset (used for the SkelRoot / mesh names).
-    pub name: String,
-    /// Frames per second (`timeCodesPerSecond`).
-    pub fps: f64,
-    /// "Y" or "Z".
-    pub up_axis: char,
-    /// Scene units in meters (`metersPerUnit`).
-    pub meters_per_unit: f64,
-}
-
-/// A valid USD prim name from an asset name: letters, digits and `_`, not starting with a digit.
-pub fn prim_name(name: &str) -> String {
-    let mut s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
-    if !s.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
-        s.insert(0, '_');
-    }
-    s
-}
-
-/// UsdSkel blendshape animation: weights sampled at every frame of the clip's key range.
-///
-/// A clip without targets (a static animation) is written as a plain mesh under an Xform:
-/// a SkelAnimation with no blend shapes would only add noise for importers.
-///
-/// `attributes` (UVs, normals, material groups of the surface) add `primvars:st`, `normals`,
-/// `GeomSubset`s and their placeholder materials; without them the file is as before.
+/// [`super::usd::blendshapes`] as text.
 pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
-    let (start, end) = (clip.times[0], *clip.times.last().expect("a clip has keys"));
-    let frames = frames_between(start, end, settings.fps);
-    let mut out = header(settings, frames[0].0, frames[frames.len() - 1].0);
-    let root = &settings.name;
-    if clip.targets.is_empty() {
-        let _ = writeln!(out, "def Xform \"{root}\"\n{{\n    def Mesh \"Mesh\"\n    {{");
-        push_attr(&mut out, 8, "float3[] extent", |o| push_vec3s(o, extent(&clip.base).iter()));
-        push_topology(&mut out, triangles);
-        push_mesh_attributes(&mut out, triangles, clip.vertex_count(), attributes);
-        push_attr(&mut out, 8, "point3f[] points", |o| push_vec3s(o, clip.base.iter()));
-        out.push_str("        uniform token subdivisionScheme = \"none\"\n");
-        close_mesh_and_root(&mut out, attributes, root);
-        return out;
-    }
+    text(&super::usd::blendshapes(clip, triangles, attributes, settings))
+}
 
-    // The SkelRoot's extent bounds the whole animation, so culling never clips a deformed pose.
-    let weights: Vec<Vec<f64>> = frames.iter().map(|&(_, t)| clip.weights_at(t)).collect();
-    let mut bounds = Bounds::of_f32(&clip.base);
-    for w in &weights {
-        let posed: Vec<[f32; 3]> = clip.points_with_weights(w).iter().map(|p| p.map(|x| x as f32)).collect();
-        bounds = bounds.union(Bounds::of_f32(&posed));
-    }
-    let lo_hi = bounds.to_f32();
-    let names = || clip.targets.iter().map(|t| t.name.as_str());
+/// [`super::usd::full_frame`] as text.
+pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
+    text(&super::usd::full_frame(frames, triangles, attributes, settings))
+}
 
-    let _ = writeln!(out, "def SkelRoot \"{root}\"\n{{");
-    push_attr(&mut out, 4, "float3[] extent", |o| push_vec3s(o, lo_hi.iter()));
-    out.push('\n');
-    out.push_str("    def Mesh \"Mesh\" (\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n    {\n");
-    push_attr(&mut out, 8, "float3[] extent", |o| push_vec3s(o, extent(&clip.base).iter()));
-    push_topology(&mut out, triangles);
-    push_mesh_attributes(&mut out, triangles, clip.vertex_count(), attributes);
-    push_attr(&mut out, 8, "point3f[] points", |o| push_vec3s(o, clip.base.iter()));
-    push_attr(&mut out, 8, "uniform token[] skel:blendShapes", |o| push_tokens(o, names()));
-    push_attr(&mut out, 8, "rel skel:blendShapeTargets", |o| {
-        push_list(o, names(), |o, n| {
-            let _ = write!(o, "</{root}/Mesh/{n}>");
-        })
-    });
-    let _ = writeln!(out, "        rel skel:skeleton = </{root}/Skel>");
-    out.push_str("        uniform token subdivisionScheme = \"none\"\n");
-    let n = clip.vertex_count();
-    for target in &clip.targets {
-        let _ = writeln!(out, "\n        def BlendShape \"{}\"\n        {{", target.name);
-        if super::sparse_is_smaller(target.indices.len(), n, 4) {
-            push_attr(&mut out, 12, "uniform vector3f[] offsets", |o| push_vec3s(o, target.offsets.iter()));
-            push_attr(&mut out, 12, "uniform int[] pointIndices", |o| push_ints(o, target.indices.iter().copied()));
-        } else {
-            let mut dense = vec![[0.0f32; 3]; n];
-            for (&i, o) in target.indices.iter().zip(&target.offsets) {
-                dense[i as usize] = *o;
-            }
-            push_attr(&mut out, 12, "uniform vector3f[] offsets", |o| push_vec3s(o, dense.iter()));
-        }
-        out.push_str("        }\n");
-    }
-    if let Some(a) = attributes.filter(|a| !a.groups.is_empty()) {
-        attrs::push_subsets(&mut out, a, root);
-    }
-    out.push_str("    }\n\n");
-    if let Some(a) = attributes.filter(|a| !a.groups.is_empty()) {
-        attrs::push_materials(&mut out, a, root);
+/// The layer as `.usda` text: metadata, then each prim with its properties, then its children
+/// (a blank line before a child that follows anything).
+pub fn text(layer: &Layer) -> String {
+    let mut out = String::from("#usda 1.0\n(\n");
+    for (key, value) in &layer.metadata {
+        let _ = write!(out, "    {key} = ");
+        push_value(&mut out, value);
         out.push('\n');
     }
-
-    out.push_str("    def Skeleton \"Skel\" (\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n    {\n");
-    out.push_str("        uniform token[] joints = []\n");
-    let _ = writeln!(out, "        rel skel:animationSource = </{root}/Skel/Anim>\n");
-    out.push_str("        def SkelAnimation \"Anim\"\n        {\n");
-    push_attr(&mut out, 12, "uniform token[] blendShapes", |o| push_tokens(o, names()));
-    out.push_str("            float[] blendShapeWeights.timeSamples = {\n");
-    for ((frame, _), w) in frames.iter().zip(&weights) {
-        let _ = write!(out, "                {frame}: ");
-        push_list(&mut out, w.iter(), |o, &x| push_f32(o, x as f32));
-        out.push_str(",\n");
+    out.push_str(")\n\n");
+    for (i, prim) in layer.prims.iter().enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        push_prim(&mut out, prim, 0);
     }
-    out.push_str("            }\n        }\n    }\n}\n");
     out
 }
 
-/// Full-frame animation: `points.timeSamples` at every frame.
-pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
-    let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
-    let mut out = header(settings, first, last);
-    let _ = writeln!(out, "def Xform \"{}\"\n{{\n    def Mesh \"Mesh\"\n    {{", settings.name);
-    out.push_str("        float3[] extent.timeSamples = {\n");
-    for (frame, points) in frames.frames.iter().zip(&frames.points) {
-        let _ = write!(out, "            {frame}: ");
-        push_vec3s(&mut out, extent(points).iter());
-        out.push_str(",\n");
+fn push_prim(out: &mut String, prim: &Prim, indent: usize) {
+    let _ = write!(out, "{:indent$}def {} \"{}\"", "", prim.type_name, prim.name);
+    if !prim.api_schemas.is_empty() {
+        let _ = write!(out, " (\n{:w$}prepend apiSchemas = ", "", w = indent + 4);
+        push_list(out, prim.api_schemas.iter(), |o, s| {
+            let _ = write!(o, "\"{s}\"");
+        });
+        let _ = write!(out, "\n{:indent$})", "");
     }
-    out.push_str("        }\n");
-    push_topology(&mut out, triangles);
-    let vertices = frames.points.first().map_or(0, Vec::len);
-    push_mesh_attributes(&mut out, triangles, vertices, attributes);
-    out.push_str("        point3f[] points.timeSamples = {\n");
-    for (frame, points) in frames.frames.iter().zip(&frames.points) {
-        let _ = write!(out, "            {frame}: ");
-        push_vec3s(&mut out, points.iter());
-        out.push_str(",\n");
+    let _ = writeln!(out, "\n{:indent$}{{", "");
+    let inner = indent + 4;
+    for property in &prim.properties {
+        let _ = write!(out, "{:inner$}", "");
+        match property {
+            Property::Attribute(a) => push_attribute(out, a, inner),
+            Property::Relationship { name, targets } => {
+                let _ = write!(out, "rel {name} = ");
+                if let [one] = &targets[..] {
+                    let _ = write!(out, "<{one}>");
+                } else {
+                    push_list(out, targets.iter(), |o, t| {
+                        let _ = write!(o, "<{t}>");
+                    });
+                }
+            }
+        }
+        out.push('\n');
     }
-    out.push_str("        }\n        uniform token subdivisionScheme = \"none\"\n");
-    close_mesh_and_root(&mut out, attributes, &settings.name);
-    out
+    for (i, child) in prim.children.iter().enumerate() {
+        if i > 0 || !prim.properties.is_empty() {
+            out.push('\n');
+        }
+        push_prim(out, child, inner);
+    }
+    let _ = writeln!(out, "{:indent$}}}", "");
 }
 
-fn push_mesh_attributes(out: &mut String, triangles: &[[u32; 3]], vertices: usize, attributes: Option<&CornerAttributes>) {
-    if let Some(a) = attributes {
-        attrs::push_properties(out, triangles, vertices, a);
+fn push_attribute(out: &mut String, a: &Attribute, indent: usize) {
+    let _ = write!(out, "{}{} {}", if a.uniform { "uniform " } else { "" }, a.type_name, a.name);
+    if let Some(path) = &a.connection {
+        let _ = write!(out, ".connect = <{path}>");
+    } else if !a.samples.is_empty() {
+        out.push_str(".timeSamples = {\n");
+        for (time, value) in &a.samples {
+            let _ = write!(out, "{:w$}{time}: ", "", w = indent + 4);
+            push_value(out, value);
+            out.push_str(",\n");
+        }
+        let _ = write!(out, "{:indent$}}}", "");
+    } else if let Some(value) = &a.default {
+        out.push_str(" = ");
+        push_value(out, value);
+    }
+    if let Some(interpolation) = a.interpolation {
+        let _ = write!(out, " (\n{:w$}interpolation = \"{interpolation}\"\n{:indent$})", "", "", w = indent + 4);
     }
 }
 
-/// `}` of a plain mesh (after its subsets) and of its root (after the materials).
-fn close_mesh_and_root(out: &mut String, attributes: Option<&CornerAttributes>, root: &str) {
-    let groups = attributes.filter(|a| !a.groups.is_empty());
-    if let Some(a) = groups {
-        attrs::push_subsets(out, a, root);
+fn push_value(out: &mut String, value: &Value) {
+    match value {
+        Value::Token(s) | Value::String(s) => push_quoted(out, s),
+        Value::Asset(s) => {
+            let _ = write!(out, "@{s}@");
+        }
+        Value::Double(x) => {
+            let _ = write!(out, "{x}");
+        }
+        Value::Float(x) => push_f32(out, *x),
+        Value::Vec3f(v) => push_vec3(out, v),
+        Value::Tokens(items) => push_list(out, items.iter(), |o, s| push_quoted(o, s)),
+        Value::Ints(items) => push_list(out, items.iter(), |o, i| {
+            let _ = write!(o, "{i}");
+        }),
+        Value::Floats(items) => push_list(out, items.iter(), |o, &x| push_f32(o, x)),
+        Value::Vec2fs(items) => push_list(out, items.iter(), |o, [u, v]| {
+            o.push('(');
+            push_f32(o, *u);
+            o.push_str(", ");
+            push_f32(o, *v);
+            o.push(')');
+        }),
+        Value::Vec3fs(items) => push_vec3s(out, items.iter()),
     }
-    out.push_str("    }\n");
-    if let Some(a) = groups {
-        attrs::push_materials(out, a, root);
+}
+
+/// A quoted string, with the escapes USD's text format reads (`\\`, `\"`, `\n`).
+fn push_quoted(out: &mut String, s: &str) {
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '"' => out.push_str("\\\""),
+            '\n' => out.push_str("\\n"),
+            c => out.push(c),
+        }
     }
-    out.push_str("}\n");
+    out.push('"');
 }
 
 pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
@@ -187,11 +162,6 @@ pub(crate) fn push_topology(out: &mut String, triangles: &[[u32; 3]]) {
     push_attr(out, 8, "int[] faceVertexCounts", |o| push_list(o, triangles.iter(), |o, _| o.push('3')));
     push_attr(out, 8, "int[] faceVertexIndices", |o| push_ints(o, triangles.iter().flatten().copied()));
     out.push_str("        uniform token orientation = \"rightHanded\"\n");
-}
-
-/// `[(lo), (hi)]` of a point set (zeros when empty).
-pub(crate) fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
-    Bounds::of_f32(points).to_f32()
 }
 
 /// `INDENT DECLARATION = VALUE\n`.
@@ -218,22 +188,18 @@ pub(super) fn push_ints(out: &mut String, items: impl Iterator<Item = u32>) {
     });
 }
 
-fn push_tokens<'a>(out: &mut String, items: impl Iterator<Item = &'a str>) {
-    push_list(out, items, |o, s| {
-        let _ = write!(o, "\"{s}\"");
-    });
+pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
+    push_list(out, items, push_vec3);
 }
 
-pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [f32; 3]>) {
-    push_list(out, items, |o, p| {
-        o.push('(');
-        push_f32(o, p[0]);
-        o.push_str(", ");
-        push_f32(o, p[1]);
-        o.push_str(", ");
-        push_f32(o, p[2]);
-        o.push(')');
-    });
+fn push_vec3(out: &mut String, p: &[f32; 3]) {
+    out.push('(');
+    push_f32(out, p[0]);
+    out.push_str(", ");
+    push_f32(out, p[1]);
+    out.push_str(", ");
+    push_f32(out, p[2]);
+    out.push(')');
 }
 
 /// The shorter of `{}` and `{:e}`: both are the shortest round-trip digits of the f32, and the

@@ -1,175 +1,647 @@
-//! `.usdc` by converting our `.usda` with usd-core's `pxr` in a Python process.
+//! USD binary ("crate", `.usdc`) files written natively from a [`Layer`], the same layer the
+//! `.usda` text holds, so usd-core reads both as one layer.
 //!
-//! The crate format is only written faithfully by USD itself (no Rust writer that usd-core
-//! 26.11 accepts builds with our toolchain), so we ask the reference implementation.
-//! The Python executable is `$BLENDSIM_PYTHON`, or `python3`.
+//! Version 0.8.0 of the format, the one usd-core writes by default: usd-core 26.11 refuses
+//! files older than 0.4.0, and every version from 0.4.0 on stores the structural sections
+//! (tokens, fields, field sets, paths, specs) compressed, so 0.8.0 costs the writer nothing
+//! more than the oldest readable one while being read by every USD that reads usd-core's own
+//! files. Layout (all little-endian):
 //!
-//! Starting Python and importing `pxr` costs about 0.3 s of CPU, more than converting a small
-//! layer, so one [`Converter`] process converts every file of a bake: it imports `pxr` once,
-//! then reads one JSON line `["in.usda", "out.usdc"]` per file from its stdin and answers
-//! `[true, ""]` or `[false, "message"]` on its stdout. A bake can start it before the solve so
-//! the import overlaps the solve (see `stages::Bake::files`). The bytes are the same as one
-//! process per file: each layer is opened, exported and released on its own.
+//! - bootstrap: `PXR-USDC`, the version bytes, the table of contents' offset;
+//! - the values that do not fit in a field's 48-bit payload (arrays, time samples, list ops,
+//!   doubles...), each at an offset its field points to; arrays 8-byte aligned, `u64` count
+//!   then the elements; int arrays of 16 or more compressed like usd-core does, float arrays
+//!   stored plain (usd-core stores vectors plain too, and scalar float arrays plain unless
+//!   they are integral or take few distinct values);
+//! - TOKENS (every name, null-terminated), STRINGS (tokens used as strings), FIELDS (name token
+//!   and value representation), FIELDSETS (each spec's fields, ~0-terminated), PATHS (the path
+//!   tree, depth first), SPECS (path, field set, spec type);
+//! - the table of contents: each section's name, start and size.
+//!
+//! Format reference: usd-core's `crateFile.cpp`; checked by reading our files back with
+//! usd-core in the test suite.
 
-use std::ffi::{OsStr, OsString};
-use std::io::{BufRead, BufReader, Read, Write};
+mod compression;
+
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
-use std::process::{ChildStdin, ChildStdout, Command, Stdio};
-use std::thread::JoinHandle;
 
+use self::compression::{compressed_ints, fast_compression};
+use super::layer::{Attribute, Layer, Prim, Property, Value};
 use crate::error::{Error, Result};
-use crate::interrupt::ChildGuard;
 
-/// Exit code of the script when `pxr` cannot be imported.
-const NO_PXR: i32 = 3;
+const VERSION: [u8; 3] = [0, 8, 0];
 
-const SCRIPT: &str = "\
-import sys, json
-try:
-    from pxr import Sdf
-except ImportError as e:
-    print(e, file=sys.stderr)
-    sys.exit(3)
-for line in sys.stdin:
-    usda, usdc = json.loads(line)
-    try:
-        layer = Sdf.Layer.FindOrOpen(usda)
-        ok = layer is not None and layer.Export(usdc)
-        message = '' if ok else 'Sdf.Layer.Export returned false'
-    except Exception as e:
-        lines = [l.strip() for l in str(e).splitlines() if l.strip()]
-        ok, message = False, lines[-1] if lines else type(e).__name__
-    layer = None
-    print(json.dumps([bool(ok), message]), flush=True)
-";
-
-const FIX: &str = "pip install usd-core (or set BLENDSIM_PYTHON to a Python that has it)";
-
-/// A running Python with `pxr` imported (or importing), converting one file per request.
-/// Dropped: its stdin closes and the process, whose loop then ends, is waited for; one that
-/// never converted anything (the bake failed first) is killed instead of waiting for its import.
-pub struct Converter {
-    python: OsString,
-    /// `None` when Python could not be started: the error is given at the first conversion,
-    /// naming the file the caller wanted.
-    running: Option<Running>,
+/// usd-core's type numbers of the values we write (crateDataTypes.h).
+mod ty {
+    pub const BOOL: u64 = 1;
+    pub const INT: u64 = 3;
+    pub const FLOAT: u64 = 8;
+    pub const DOUBLE: u64 = 9;
+    pub const STRING: u64 = 10;
+    pub const TOKEN: u64 = 11;
+    pub const ASSET_PATH: u64 = 12;
+    pub const VEC2F: u64 = 20;
+    pub const VEC3F: u64 = 24;
+    pub const TOKEN_LIST_OP: u64 = 32;
+    pub const PATH_LIST_OP: u64 = 34;
+    pub const PATH_VECTOR: u64 = 40;
+    pub const TOKEN_VECTOR: u64 = 41;
+    pub const SPECIFIER: u64 = 42;
+    pub const VARIABILITY: u64 = 44;
+    pub const TIME_SAMPLES: u64 = 46;
+    pub const DOUBLE_VECTOR: u64 = 48;
 }
 
-struct Running {
-    child: ChildGuard,
-    stdin: Option<ChildStdin>,
-    stdout: BufReader<ChildStdout>,
-    /// Drains stderr (USD's warnings) so a chatty layer cannot block the pipe.
-    stderr: Option<JoinHandle<Vec<u8>>>,
-    /// Whether a conversion was asked for.
-    used: bool,
+/// `SdfSpecType` numbers.
+mod spec {
+    pub const ATTRIBUTE: u32 = 1;
+    pub const CONNECTION: u32 = 2;
+    pub const PRIM: u32 = 6;
+    pub const PSEUDO_ROOT: u32 = 7;
+    pub const RELATIONSHIP: u32 = 8;
+    pub const RELATIONSHIP_TARGET: u32 = 9;
 }
 
-impl Converter {
-    /// Start `$BLENDSIM_PYTHON` (or `python3`); never fails here, see [`Converter::convert`].
-    pub fn start() -> Converter {
-        Converter::start_with(&std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3")))
-    }
+const ARRAY_BIT: u64 = 1 << 63;
+const INLINED_BIT: u64 = 1 << 62;
+const COMPRESSED_BIT: u64 = 1 << 61;
+const PAYLOAD_MASK: u64 = (1 << 48) - 1;
+/// usd-core compresses int arrays from this length on.
+const MIN_COMPRESSED_ARRAY: usize = 16;
 
-    /// [`Converter::start`] with an explicit Python executable.
-    pub(crate) fn start_with(python: &OsStr) -> Converter {
-        // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
-        let running = crate::interrupt::spawn(
-            Command::new(python).arg("-c").arg(SCRIPT).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()),
-        )
-        .ok()
-        .map(|mut child| {
-            let stdin = child.child().stdin.take();
-            let stdout = BufReader::new(child.child().stdout.take().expect("piped stdout"));
-            let mut pipe = child.child().stderr.take().expect("piped stderr");
-            let stderr = std::thread::spawn(move || {
-                let mut bytes = Vec::new();
-                let _ = pipe.read_to_end(&mut bytes);
-                bytes
-            });
-            Running { child, stdin, stdout, stderr: Some(stderr), used: false }
-        });
-        Converter { python: python.to_owned(), running }
-    }
+/// A value representation: type, flags and a 48-bit payload (an inlined value or an offset).
+fn rep(ty: u64, payload: u64) -> u64 {
+    (ty << 48) | (payload & PAYLOAD_MASK)
+}
 
-    /// Convert `usda` to `usdc`; a clear error names the fix when Python or `pxr` is missing.
-    pub fn convert(&mut self, usda: &Path, usdc: &Path) -> Result<()> {
-        let py = self.python.to_string_lossy().into_owned();
-        let Some(running) = self.running.as_mut() else {
-            // Start again only to get the operating system's reason.
-            let e = Command::new(&self.python).arg("-c").arg("").stdin(Stdio::null()).output().err();
-            let reason = e.map_or("it did not start".to_string(), |e| e.to_string());
-            return Err(Error::in_file(usdc, format!("cannot run {py} to write the usdc file: {reason}"), FIX));
-        };
-        let (Some(a), Some(c)) = (usda.to_str(), usdc.to_str()) else {
-            return Err(Error::in_file(usdc, "the path is not valid UTF-8, which usd-core's Python API needs", "write into a folder whose path is UTF-8"));
-        };
-        if !running.used {
-            // The interruption tests stop here: in the export, with Python running.
-            crate::interrupt::pause_point("usdc", &format!("(pid {})", running.child.id()));
-            running.used = true;
+fn inlined(ty: u64, payload: u32) -> u64 {
+    rep(ty, payload as u64) | INLINED_BIT
+}
+
+/// The `.usdc` bytes of `layer`. `path` (the file it will be written to) only names the file
+/// in errors: a value the format cannot hold (a NUL byte in a name or string) or a non-finite
+/// number (a corrupted animation) is refused with a one-line error instead of a file.
+pub fn bytes(layer: &Layer, path: &Path) -> Result<Vec<u8>> {
+    check(layer).map_err(|problem| Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it"))?;
+    let mut w = Writer::default();
+    w.out.extend_from_slice(&[0; 88]);
+    w.layer(layer);
+    Ok(w.finish())
+}
+
+/// A value the format cannot store, or a non-finite number, as a problem statement.
+fn check(layer: &Layer) -> std::result::Result<(), String> {
+    fn text(what: &str, s: &str) -> std::result::Result<(), String> {
+        if s.contains('\0') {
+            return Err(format!("{what} `{}` contains a NUL byte", s.replace('\0', "\\0")));
         }
-        let mut request = serde_json::to_string(&[a, c]).expect("strings serialize");
-        request.push('\n');
-        let sent = running.stdin.as_mut().map(|s| s.write_all(request.as_bytes()).and_then(|()| s.flush()));
-        let mut answer = String::new();
-        let answered = matches!(sent, Some(Ok(()))) && running.stdout.read_line(&mut answer).is_ok_and(|n| n > 0);
-        if answered {
-            return match serde_json::from_str::<(bool, String)>(&answer) {
-                Ok((true, _)) if usdc.is_file() => Ok(()),
-                Ok((_, message)) => Err(failed(usda, usdc, if message.is_empty() { "no file written" } else { &message })),
-                Err(_) => Err(failed(usda, usdc, answer.trim())),
+        Ok(())
+    }
+    fn value(at: &str, v: &Value) -> std::result::Result<(), String> {
+        let finite = match v {
+            Value::Token(s) | Value::String(s) | Value::Asset(s) => return text(&format!("the value of {at}"), s),
+            Value::Tokens(items) => return items.iter().try_for_each(|s| text(&format!("a value of {at}"), s)),
+            Value::Double(x) => x.is_finite(),
+            Value::Float(x) => x.is_finite(),
+            Value::Vec3f(v) => v.iter().all(|x| x.is_finite()),
+            Value::Ints(_) => true,
+            Value::Floats(items) => items.iter().all(|x| x.is_finite()),
+            Value::Vec2fs(items) => items.iter().flatten().all(|x| x.is_finite()),
+            Value::Vec3fs(items) => items.iter().flatten().all(|x| x.is_finite()),
+        };
+        if finite {
+            Ok(())
+        } else {
+            Err(format!("{at} holds a non-finite number (NaN or infinity)"))
+        }
+    }
+    fn prim(parent: &str, p: &Prim) -> std::result::Result<(), String> {
+        let path = format!("{parent}/{}", p.name);
+        text("the prim name", &p.name)?;
+        for property in &p.properties {
+            let at = format!("{path}.{}", property.name());
+            text("the property name", property.name())?;
+            if let Property::Attribute(a) = property {
+                a.default.iter().chain(a.samples.iter().map(|(_, v)| v)).try_for_each(|v| value(&at, v))?;
+                if a.samples.iter().any(|(t, _)| !t.is_finite()) {
+                    return Err(format!("{at} has a non-finite sample time"));
+                }
+            }
+        }
+        p.children.iter().try_for_each(|c| prim(&path, c))
+    }
+    fn spec_paths(parent: &str, p: &Prim, paths: &mut HashSet<String>) {
+        let path = format!("{parent}/{}", p.name);
+        paths.extend(p.properties.iter().map(|q| format!("{path}.{}", q.name())));
+        p.children.iter().for_each(|c| spec_paths(&path, c, paths));
+        paths.insert(path);
+    }
+    fn targets_exist(parent: &str, p: &Prim, paths: &HashSet<String>) -> std::result::Result<(), String> {
+        let path = format!("{parent}/{}", p.name);
+        for property in &p.properties {
+            let targets: &[String] = match property {
+                Property::Relationship { targets, .. } => targets,
+                Property::Attribute(Attribute { connection: Some(c), .. }) => std::slice::from_ref(c),
+                Property::Attribute(_) => &[],
             };
+            if let Some(t) = targets.iter().find(|t| !paths.contains(*t)) {
+                return Err(format!("{path}.{} targets {t}, which is not in the layer", property.name()));
+            }
         }
-        // The process ended: it could not import pxr, or crashed. It is of no further use.
-        let mut running = self.running.take().expect("checked above");
-        drop(running.stdin.take());
-        let status = running.child.child().wait();
-        let stderr = running.stderr.take().and_then(|h| h.join().ok()).unwrap_or_default();
-        let stderr = String::from_utf8_lossy(&stderr);
-        let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no message").trim().to_string();
-        Err(match status {
-            Ok(s) if s.code() == Some(NO_PXR) => Error::in_file(usdc, format!("{py} cannot import usd-core's pxr module ({last})"), FIX),
-            Ok(s) => failed(usda, usdc, &format!("{s}: {last}")),
-            Err(e) => failed(usda, usdc, &e.to_string()),
-        })
+        p.children.iter().try_for_each(|c| targets_exist(&path, c, paths))
+    }
+    layer.metadata.iter().try_for_each(|(key, v)| value(&format!("the layer's {key}"), v))?;
+    layer.prims.iter().try_for_each(|p| prim("", p))?;
+    let mut paths = HashSet::new();
+    layer.prims.iter().for_each(|p| spec_paths("", p, &mut paths));
+    layer.prims.iter().try_for_each(|p| targets_exist("", p, &paths))
+}
+
+/// A path of the layer: its children, its last element's token, and whether that element is a
+/// property name (`.name`) rather than a prim name or a target (`[/path]`).
+struct PathEntry {
+    element: u32,
+    property: bool,
+    children: Vec<u32>,
+}
+
+#[derive(Default)]
+struct Writer {
+    out: Vec<u8>,
+    tokens: Vec<String>,
+    token_index: HashMap<String, u32>,
+    strings: Vec<u32>,
+    string_index: HashMap<String, u32>,
+    paths: Vec<PathEntry>,
+    path_index: HashMap<String, u32>,
+    fields: Vec<(u32, u64)>,
+    field_index: HashMap<(u32, u64), u32>,
+    field_sets: Vec<u32>,
+    field_set_index: HashMap<Vec<u32>, u32>,
+    /// (path, field set, spec type)
+    specs: Vec<(u32, u32, u32)>,
+    /// Offsets of the arrays written, by (representation, hash of their bytes).
+    stored: HashMap<(u64, u64), Vec<u64>>,
+}
+
+impl Writer {
+    fn token(&mut self, s: &str) -> u32 {
+        if let Some(&i) = self.token_index.get(s) {
+            return i;
+        }
+        let i = self.tokens.len() as u32;
+        self.tokens.push(s.to_string());
+        self.token_index.insert(s.to_string(), i);
+        i
+    }
+
+    fn string(&mut self, s: &str) -> u32 {
+        if let Some(&i) = self.string_index.get(s) {
+            return i;
+        }
+        let token = self.token(s);
+        let i = self.strings.len() as u32;
+        self.strings.push(token);
+        self.string_index.insert(s.to_string(), i);
+        i
+    }
+
+    /// The index of `path` (the root is `/`), adding it after its parent; `element` is its last
+    /// element as a path tree stores it (a prim or property name, or `[/target]`).
+    fn path(&mut self, path: &str, parent: Option<&str>, element: &str, property: bool) -> u32 {
+        if let Some(&i) = self.path_index.get(path) {
+            return i;
+        }
+        let parent = parent.map(|p| self.path_index[p]);
+        let element = self.token(element);
+        let i = self.paths.len() as u32;
+        self.paths.push(PathEntry { element, property, children: Vec::new() });
+        if let Some(p) = parent {
+            self.paths[p as usize].children.push(i);
+        }
+        self.path_index.insert(path.to_string(), i);
+        i
+    }
+
+    /// The index of a path added by `prim_paths` (targets are among them: see `check`).
+    fn existing_path(&self, path: &str) -> u32 {
+        self.path_index[path]
+    }
+
+    fn spec(&mut self, path: u32, spec_type: u32, fields: &[(&str, u64)]) {
+        let indices: Vec<u32> = fields
+            .iter()
+            .map(|&(name, value)| {
+                let key = (self.token(name), value);
+                let next = self.fields.len() as u32;
+                *self.field_index.entry(key).or_insert_with(|| {
+                    self.fields.push(key);
+                    next
+                })
+            })
+            .collect();
+        let next = self.field_sets.len() as u32;
+        let set = match self.field_set_index.get(&indices) {
+            Some(&s) => s,
+            None => {
+                self.field_sets.extend(&indices);
+                self.field_sets.push(u32::MAX);
+                self.field_set_index.insert(indices, next);
+                next
+            }
+        };
+        self.specs.push((path, set, spec_type));
+    }
+
+    fn layer(&mut self, layer: &Layer) {
+        // Token 0 is the root's (empty) element, so no property name gets index 0: the path
+        // tree marks property names by negating their token index.
+        let root = self.path("/", None, "", false);
+        // Every path first (the tree), so targets and connections can name any of them.
+        for p in &layer.prims {
+            self.prim_paths("", p);
+        }
+        let mut fields = Vec::new();
+        for (key, value) in &layer.metadata {
+            let name = if *key == "doc" { "documentation" } else { key };
+            fields.push((name, self.value(value)));
+        }
+        let children: Vec<&str> = layer.prims.iter().map(|p| p.name.as_str()).collect();
+        if !children.is_empty() {
+            fields.push(("primChildren", self.token_vector(&children)));
+        }
+        self.spec(root, spec::PSEUDO_ROOT, &fields);
+        for p in &layer.prims {
+            self.prim("", p);
+        }
+    }
+
+    fn prim_paths(&mut self, parent: &str, p: &Prim) {
+        let path = format!("{parent}/{}", p.name);
+        self.path(&path, Some(if parent.is_empty() { "/" } else { parent }), &p.name, false);
+        for property in &p.properties {
+            let at = format!("{path}.{}", property.name());
+            self.path(&at, Some(&path), property.name(), true);
+            let targets: &[String] = match property {
+                Property::Relationship { targets, .. } => targets,
+                Property::Attribute(Attribute { connection: Some(c), .. }) => std::slice::from_ref(c),
+                Property::Attribute(_) => &[],
+            };
+            for t in targets {
+                let element = format!("[{t}]");
+                self.path(&format!("{at}{element}"), Some(&at), &element, false);
+            }
+        }
+        for c in &p.children {
+            self.prim_paths(&path, c);
+        }
+    }
+
+    fn prim(&mut self, parent: &str, p: &Prim) {
+        let path = format!("{parent}/{}", p.name);
+        let mut fields = vec![("specifier", inlined(ty::SPECIFIER, 0)), ("typeName", inlined(ty::TOKEN, self.token(p.type_name)))];
+        if !p.api_schemas.is_empty() {
+            let items: Vec<u32> = p.api_schemas.iter().map(|s| self.token(s)).collect();
+            fields.push(("apiSchemas", self.list_op(ty::TOKEN_LIST_OP, ListOp::Prepend, &items)));
+        }
+        if !p.children.is_empty() {
+            let names: Vec<&str> = p.children.iter().map(|c| c.name.as_str()).collect();
+            fields.push(("primChildren", self.token_vector(&names)));
+        }
+        if !p.properties.is_empty() {
+            let names: Vec<&str> = p.properties.iter().map(Property::name).collect();
+            fields.push(("properties", self.token_vector(&names)));
+        }
+        let index = self.existing_path(&path);
+        self.spec(index, spec::PRIM, &fields);
+        for property in &p.properties {
+            let at = format!("{path}.{}", property.name());
+            let index = self.existing_path(&at);
+            let custom = ("custom", inlined(ty::BOOL, 0));
+            match property {
+                Property::Attribute(a) => {
+                    let mut fields = vec![("typeName", inlined(ty::TOKEN, self.token(a.type_name))), custom, ("variability", inlined(ty::VARIABILITY, a.uniform as u32))];
+                    if let Some(v) = &a.default {
+                        fields.push(("default", self.value(v)));
+                    }
+                    if !a.samples.is_empty() {
+                        fields.push(("timeSamples", self.time_samples(&a.samples)));
+                    }
+                    if let Some(c) = &a.connection {
+                        let target = self.existing_path(c);
+                        fields.push(("connectionPaths", self.list_op(ty::PATH_LIST_OP, ListOp::Explicit, &[target])));
+                        fields.push(("connectionChildren", self.index_vector(ty::PATH_VECTOR, &[target])));
+                    }
+                    if let Some(i) = a.interpolation {
+                        fields.push(("interpolation", inlined(ty::TOKEN, self.token(i))));
+                    }
+                    self.spec(index, spec::ATTRIBUTE, &fields);
+                    if let Some(c) = &a.connection {
+                        let target = self.existing_path(&format!("{at}[{c}]"));
+                        self.spec(target, spec::CONNECTION, &[]);
+                    }
+                }
+                Property::Relationship { targets, .. } => {
+                    let items: Vec<u32> = targets.iter().map(|t| self.existing_path(t)).collect();
+                    let fields = [
+                        custom,
+                        ("variability", inlined(ty::VARIABILITY, 1)),
+                        ("targetPaths", self.list_op(ty::PATH_LIST_OP, ListOp::Explicit, &items)),
+                        ("targetChildren", self.index_vector(ty::PATH_VECTOR, &items)),
+                    ];
+                    self.spec(index, spec::RELATIONSHIP, &fields);
+                    for t in targets {
+                        let target = self.existing_path(&format!("{at}[{t}]"));
+                        self.spec(target, spec::RELATIONSHIP_TARGET, &[]);
+                    }
+                }
+            }
+        }
+        for c in &p.children {
+            self.prim(&path, c);
+        }
+    }
+
+    fn put_u32(&mut self, x: u32) {
+        self.out.extend_from_slice(&x.to_le_bytes());
+    }
+
+    fn put_u64(&mut self, x: u64) {
+        self.out.extend_from_slice(&x.to_le_bytes());
+    }
+
+    fn align8(&mut self) {
+        while !self.out.len().is_multiple_of(8) {
+            self.out.push(0);
+        }
+    }
+
+    fn here(&self) -> u64 {
+        self.out.len() as u64
+    }
+
+    fn token_vector(&mut self, names: &[&str]) -> u64 {
+        let items: Vec<u32> = names.iter().map(|n| self.token(n)).collect();
+        self.index_vector(ty::TOKEN_VECTOR, &items)
+    }
+
+    /// A `std::vector` of token or path indices: `u64` count, then the `u32` indices.
+    fn index_vector(&mut self, ty: u64, items: &[u32]) -> u64 {
+        let at = self.here();
+        self.put_u64(items.len() as u64);
+        items.iter().for_each(|&i| self.put_u32(i));
+        rep(ty, at)
+    }
+
+    /// An `SdfListOp` of token or path indices: a header byte, then the one list it holds.
+    fn list_op(&mut self, ty: u64, op: ListOp, items: &[u32]) -> u64 {
+        let at = self.here();
+        // Header bits: IsExplicit 1, HasExplicitItems 2, HasPrependedItems 32.
+        self.out.push(match op {
+            ListOp::Explicit => 1 | 2,
+            ListOp::Prepend => 32,
+        });
+        self.index_vector(0, items);
+        rep(ty, at)
+    }
+
+    /// Time samples: a jump over the times (a `double` vector), their representation, a jump
+    /// over the values, then the count and each value's representation.
+    fn time_samples(&mut self, samples: &[(f64, Value)]) -> u64 {
+        let at = self.here();
+        self.put_u64(0);
+        let mut times: Vec<u8> = (samples.len() as u64).to_le_bytes().to_vec();
+        samples.iter().for_each(|(t, _)| times.extend_from_slice(&t.to_le_bytes()));
+        let times = self.stored(rep(ty::DOUBLE_VECTOR, 0), times, false);
+        self.patch_jump(at);
+        self.put_u64(times);
+        let values_jump = self.here();
+        self.put_u64(0);
+        let reps: Vec<u64> = samples.iter().map(|(_, v)| self.value(v)).collect();
+        self.patch_jump(values_jump);
+        self.put_u64(reps.len() as u64);
+        reps.iter().for_each(|&r| self.put_u64(r));
+        rep(ty::TIME_SAMPLES, at)
+    }
+
+    /// Write at `at` the distance from `at` to the end of the output.
+    fn patch_jump(&mut self, at: u64) {
+        let jump = (self.here() - at).to_le_bytes();
+        self.out[at as usize..at as usize + 8].copy_from_slice(&jump);
+    }
+
+    /// A value's representation, writing what does not fit in the payload.
+    fn value(&mut self, v: &Value) -> u64 {
+        match v {
+            Value::Token(s) => inlined(ty::TOKEN, self.token(s)),
+            Value::String(s) => inlined(ty::STRING, self.string(s)),
+            Value::Asset(s) => inlined(ty::ASSET_PATH, self.token(s)),
+            Value::Float(x) => inlined(ty::FLOAT, x.to_bits()),
+            Value::Double(x) => {
+                let at = self.here();
+                self.out.extend_from_slice(&x.to_le_bytes());
+                rep(ty::DOUBLE, at)
+            }
+            Value::Vec3f(v) => {
+                let at = self.here();
+                v.iter().for_each(|x| self.out.extend_from_slice(&x.to_le_bytes()));
+                rep(ty::VEC3F, at)
+            }
+            Value::Tokens(items) => {
+                let indices: Vec<u32> = items.iter().map(|s| self.token(s)).collect();
+                self.array(ty::TOKEN, indices.len(), |out| indices.iter().for_each(|i| out.extend_from_slice(&i.to_le_bytes())))
+            }
+            Value::Ints(items) if items.len() >= MIN_COMPRESSED_ARRAY => {
+                let mut body = (items.len() as u64).to_le_bytes().to_vec();
+                let compressed = compressed_ints(items);
+                body.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+                body.extend_from_slice(&compressed);
+                self.stored(rep(ty::INT, 0) | ARRAY_BIT | COMPRESSED_BIT, body, false)
+            }
+            Value::Ints(items) => self.array(ty::INT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
+            Value::Floats(items) => self.array(ty::FLOAT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
+            Value::Vec2fs(items) => self.array(ty::VEC2F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
+            Value::Vec3fs(items) => self.array(ty::VEC3F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
+        }
+    }
+
+    /// An uncompressed array: empty ones are a zero payload; others 8-byte aligned (so a reader
+    /// can map them in place), `u64` count, elements.
+    fn array(&mut self, ty: u64, len: usize, elements: impl FnOnce(&mut Vec<u8>)) -> u64 {
+        if len == 0 {
+            return rep(ty, 0) | ARRAY_BIT;
+        }
+        let mut body = (len as u64).to_le_bytes().to_vec();
+        elements(&mut body);
+        self.stored(rep(ty, 0) | ARRAY_BIT, body, true)
+    }
+
+    /// `rep` pointing at `body`, written once per file like usd-core does (the same weights or
+    /// offsets in two places, the same sample times of two attributes): an equal body of the
+    /// same representation is found by its hash and compared with the bytes already written.
+    fn stored(&mut self, rep: u64, body: Vec<u8>, aligned: bool) -> u64 {
+        let mut hasher = std::hash::DefaultHasher::new();
+        std::hash::Hash::hash(&body, &mut hasher);
+        let key = (rep, std::hash::Hasher::finish(&hasher));
+        if let Some(&at) = self.stored.get(&key).and_then(|at| at.iter().find(|&&at| self.out[at as usize..].starts_with(&body))) {
+            return rep | at;
+        }
+        if aligned {
+            self.align8();
+        }
+        let at = self.here();
+        self.out.extend_from_slice(&body);
+        self.stored.entry(key).or_default().push(at);
+        rep | at
+    }
+
+    /// The structural sections, the table of contents and the bootstrap.
+    fn finish(mut self) -> Vec<u8> {
+        let mut sections: Vec<(&str, u64, u64)> = Vec::new();
+        let mut section = |w: &mut Writer, name: &'static str, write: &dyn Fn(&mut Writer)| {
+            w.align8();
+            let start = w.here();
+            write(w);
+            sections.push((name, start, w.here() - start));
+        };
+        section(&mut self, "TOKENS", &|w| {
+            let mut chars = Vec::new();
+            for t in &w.tokens {
+                chars.extend_from_slice(t.as_bytes());
+                chars.push(0);
+            }
+            let compressed = fast_compression(&chars);
+            w.put_u64(w.tokens.len() as u64);
+            w.put_u64(chars.len() as u64);
+            w.put_u64(compressed.len() as u64);
+            w.out.extend_from_slice(&compressed);
+        });
+        section(&mut self, "STRINGS", &|w| {
+            let strings = w.strings.clone();
+            w.index_vector(0, &strings);
+        });
+        section(&mut self, "FIELDS", &|w| {
+            let names: Vec<i32> = w.fields.iter().map(|f| f.0 as i32).collect();
+            let reps: Vec<u8> = w.fields.iter().flat_map(|f| f.1.to_le_bytes()).collect();
+            w.put_u64(names.len() as u64);
+            w.put_ints(&names);
+            let reps = fast_compression(&reps);
+            w.put_u64(reps.len() as u64);
+            w.out.extend_from_slice(&reps);
+        });
+        section(&mut self, "FIELDSETS", &|w| {
+            let sets: Vec<i32> = w.field_sets.iter().map(|&f| f as i32).collect();
+            w.put_u64(sets.len() as u64);
+            w.put_ints(&sets);
+        });
+        section(&mut self, "PATHS", &|w| {
+            let (mut indices, mut elements, mut jumps) = (Vec::new(), Vec::new(), Vec::new());
+            w.path_tree(0, false, &mut indices, &mut elements, &mut jumps);
+            w.put_u64(w.paths.len() as u64);
+            w.put_u64(indices.len() as u64);
+            w.put_ints(&indices);
+            w.put_ints(&elements);
+            w.put_ints(&jumps);
+        });
+        section(&mut self, "SPECS", &|w| {
+            let column = |f: fn(&(u32, u32, u32)) -> u32| w.specs.iter().map(|s| f(s) as i32).collect::<Vec<i32>>();
+            let (paths, sets, types) = (column(|s| s.0), column(|s| s.1), column(|s| s.2));
+            w.put_u64(w.specs.len() as u64);
+            w.put_ints(&paths);
+            w.put_ints(&sets);
+            w.put_ints(&types);
+        });
+        self.align8();
+        let toc = self.here();
+        self.put_u64(sections.len() as u64);
+        for (name, start, size) in sections {
+            let mut padded = [0u8; 16];
+            padded[..name.len()].copy_from_slice(name.as_bytes());
+            self.out.extend_from_slice(&padded);
+            self.put_u64(start);
+            self.put_u64(size);
+        }
+        let mut boot = [0u8; 88];
+        boot[..8].copy_from_slice(b"PXR-USDC");
+        boot[8..11].copy_from_slice(&VERSION);
+        boot[16..24].copy_from_slice(&toc.to_le_bytes());
+        self.out[..88].copy_from_slice(&boot);
+        self.out
+    }
+
+    /// Compressed ints: `u64` compressed size, then the bytes.
+    fn put_ints(&mut self, ints: &[i32]) {
+        let compressed = compressed_ints(ints);
+        self.put_u64(compressed.len() as u64);
+        self.out.extend_from_slice(&compressed);
+    }
+
+    /// The path tree depth first from `node`: its index, its element token (negated for a
+    /// property name), and a jump: -2 a leaf with no sibling after it, -1 a child follows and no
+    /// sibling, 0 no child and the sibling follows, n > 0 a child follows and the sibling is n
+    /// entries ahead.
+    fn path_tree(&self, node: u32, has_sibling: bool, indices: &mut Vec<i32>, elements: &mut Vec<i32>, jumps: &mut Vec<i32>) {
+        let entry = &self.paths[node as usize];
+        let me = indices.len();
+        indices.push(node as i32);
+        elements.push(if entry.property { -(entry.element as i32) } else { entry.element as i32 });
+        jumps.push(0);
+        let has_child = !entry.children.is_empty();
+        for (k, &c) in entry.children.iter().enumerate() {
+            self.path_tree(c, k + 1 < entry.children.len(), indices, elements, jumps);
+        }
+        jumps[me] = match (has_child, has_sibling) {
+            (false, false) => -2,
+            (true, false) => -1,
+            (false, true) => 0,
+            (true, true) => (indices.len() - me) as i32,
+        };
     }
 }
 
-fn failed(usda: &Path, usdc: &Path, why: &str) -> Error {
-    Error::in_file(
-        usdc,
-        format!("usd-core failed to convert {} ({why})", usda.display()),
-        "check that usd-core opens the .usda file (python3 -c \"from pxr import Usd; Usd.Stage.Open('FILE')\")",
-    )
-}
-
-impl Drop for Converter {
-    fn drop(&mut self) {
-        if let Some(mut running) = self.running.take() {
-            // End of input: the script's loop ends and Python exits on its own.
-            drop(running.stdin.take());
-            if running.used {
-                let _ = running.child.child().wait();
-            }
-            // Otherwise the guard kills it (and its process group) and reaps it.
-            drop(running.child);
-            if let Some(h) = running.stderr.take() {
-                let _ = h.join();
-            }
-        }
-    }
-}
-
-/// Convert one `usda` to `usdc` in a Python process of its own.
-#[cfg(test)]
-pub(crate) fn convert_with(python: &OsStr, usda: &Path, usdc: &Path) -> Result<()> {
-    Converter::start_with(python).convert(usda, usdc)
+#[derive(Clone, Copy)]
+enum ListOp {
+    Explicit,
+    Prepend,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::export::layer::Attribute;
+
+    /// Every kind of value, property and prim our layouts use, with edge cases: empty and
+    /// short arrays, int arrays long enough to be compressed with every code width, negative
+    /// and extreme values, a string, an asset, connections and relationships, time samples.
+    fn every_kind() -> Layer {
+        let mut shader = Prim::new("Shader", "S");
+        shader.attribute(Attribute::uniform("info:id", "token", Value::Token("UsdUVTexture".into())));
+        shader.attribute(Attribute::new("inputs:file", "asset", Value::Asset("./a b.png".into())));
+        shader.attribute(Attribute::new("inputs:varname", "string", Value::String("st".into())));
+        shader.attribute(Attribute::new("inputs:roughness", "float", Value::Float(-0.1)));
+        shader.attribute(Attribute::new("inputs:diffuseColor", "color3f", Value::Vec3f([0.8, -1e-30, 3.4e38])));
+        shader.attribute(Attribute::declared("outputs:rgb", "float3"));
+        let mut material = Prim::new("Material", "M");
+        material.attribute(Attribute::connected("outputs:surface", "token", "/root/M/S.outputs:rgb".into()));
+        material.children.push(shader);
+        let mut mesh = Prim::new("Mesh", "Mesh").with_api("SkelBindingAPI").with_api("MaterialBindingAPI");
+        let long: Vec<i32> = (0..300).map(|i: i32| [i, -i, i * 1000, i.wrapping_mul(1 << 20), i32::MIN, i32::MAX, 7][i as usize % 7]).collect();
+        mesh.attribute(Attribute::new("faceVertexIndices", "int[]", Value::Ints(long)));
+        mesh.attribute(Attribute::new("faceVertexCounts", "int[]", Value::Ints(vec![3, 3, -4])));
+        mesh.attribute(Attribute::new("primvars:st", "texCoord2f[]", Value::Vec2fs(vec![[0.0, 1.0], [0.5, 0.25]])).with_interpolation("faceVarying"));
+        mesh.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
+        mesh.attribute(Attribute::uniform("names", "token[]", Value::Tokens(vec!["a".into(), "b".into(), "a".into()])));
+        mesh.attribute(Attribute::sampled("weights", "float[]", vec![(-2.0, Value::Floats(vec![0.25, -1.0])), (0.5, Value::Floats(vec![]))]));
+        mesh.attribute(Attribute::sampled("points", "point3f[]", vec![(1.0, Value::Vec3fs(vec![[1.0, 2.0, 3.0]])), (2.0, Value::Vec3fs(vec![[4.0, 5.0, 6.0]; 20]))]));
+        mesh.relationship("material:binding", vec!["/root/M".into()]);
+        mesh.relationship("skel:blendShapeTargets", vec!["/root/M".into(), "/root/M/S".into()]);
+        let mut root = Prim::new("Xform", "root");
+        root.children.push(mesh);
+        root.children.push(material);
+        let metadata = vec![("defaultPrim", Value::Token("root".into())), ("doc", Value::String("a \"doc\"".into())), ("metersPerUnit", Value::Double(0.01)), ("endTimeCode", Value::Double(1e300))];
+        Layer { metadata, prims: vec![root, Prim::new("Scope", "second")] }
+    }
 
     fn scratch(name: &str) -> std::path::PathBuf {
         let d = std::env::temp_dir().join(format!("blendsim-usdc-{name}-{}", std::process::id()));
@@ -177,64 +649,62 @@ mod tests {
         d
     }
 
+    /// usd-core reads our bytes as the layer our usda text holds (the test suite's checker).
     #[test]
-    fn missing_python_names_the_fix() {
-        let d = scratch("missing");
-        let e = convert_with(OsStr::new("/nonexistent/python3"), &d.join("a.usda"), &d.join("a.usdc")).unwrap_err();
-        let s = e.to_string();
-        assert!(s.contains("a.usdc: cannot run /nonexistent/python3"), "{s}");
-        assert!(s.contains("(fix: pip install usd-core"), "{s}");
-        assert!(!s.contains('\n'));
-        std::fs::remove_dir_all(&d).unwrap();
-    }
-
-    #[test]
-    fn python_without_pxr_names_the_fix() {
-        // `python3 -I -S` is a Python without site-packages, hence without usd-core.
-        let d = scratch("nopxr");
-        let wrapper = d.join("python-without-site");
-        std::fs::write(&wrapper, "#!/bin/sh\nexec python3 -I -S \"$@\"\n").unwrap();
-        std::process::Command::new("chmod").arg("+x").arg(&wrapper).status().unwrap();
-        let e = convert_with(wrapper.as_os_str(), &d.join("a.usda"), &d.join("a.usdc")).unwrap_err();
-        let s = e.to_string();
-        assert!(s.contains("cannot import usd-core's pxr module (No module named 'pxr')"), "{s}");
-        assert!(s.contains("(fix: pip install usd-core"), "{s}");
-        std::fs::remove_dir_all(&d).unwrap();
-    }
-
-    #[test]
-    fn converts_a_layer_that_usd_reads_back() {
-        let d = scratch("convert");
+    fn usd_core_reads_every_kind_of_value_as_the_usda_layer() {
+        let d = scratch("kinds");
+        let layer = every_kind();
         let (a, c) = (d.join("x.usda"), d.join("x.usdc"));
-        std::fs::write(&a, "#usda 1.0\n(\n    defaultPrim = \"x\"\n)\n\ndef Xform \"x\"\n{\n}\n").unwrap();
-        convert_with(OsStr::new("python3"), &a, &c).unwrap();
-        assert_eq!(&std::fs::read(&c).unwrap()[..8], b"PXR-USDC");
-        std::fs::write(&a, "#usda 1.0\ndef Xform \"x\" {\n").unwrap();
-        let e = convert_with(OsStr::new("python3"), &a, &d.join("bad.usdc")).unwrap_err().to_string();
-        assert!(e.contains("usd-core failed to convert"), "{e}");
+        std::fs::write(&a, crate::export::usda::text(&layer)).unwrap();
+        let bytes = super::bytes(&layer, &c).unwrap();
+        assert_eq!(bytes, super::bytes(&layer, &c).unwrap(), "same bytes every time");
+        std::fs::write(&c, bytes).unwrap();
+        let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/usd_same_layer.py");
+        let out = std::process::Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or("python3".into())).arg(checker).arg(&a).arg(&c).output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && stdout.contains("\"ok\": true"), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
         std::fs::remove_dir_all(&d).unwrap();
     }
 
-    /// One process converts a series of layers, a bad one in the middle included, into the
-    /// bytes one process per file writes.
+    fn error(layer: &Layer) -> String {
+        let e = super::bytes(layer, Path::new("out/x.usdc")).unwrap_err().to_string();
+        assert!(!e.contains('\n') && e.contains("out/x.usdc: cannot write the usdc file: ") && e.contains("(fix: "), "{e}");
+        e
+    }
+
     #[test]
-    fn one_process_converts_many_files_as_one_process_each() {
-        let d = scratch("many");
-        let mut converter = Converter::start_with(OsStr::new("python3"));
-        for i in 0..3 {
-            let (a, c) = (d.join(format!("x{i}.usda")), d.join(format!("x{i}.usdc")));
-            std::fs::write(&a, format!("#usda 1.0\n(\n    defaultPrim = \"x\"\n)\n\ndef Xform \"x\"\n{{\n    double3 xformOp:translate = ({i}, 0, 0)\n}}\n")).unwrap();
-            converter.convert(&a, &c).unwrap();
-            let alone = d.join(format!("alone{i}.usdc"));
-            convert_with(OsStr::new("python3"), &a, &alone).unwrap();
-            assert_eq!(std::fs::read(&c).unwrap(), std::fs::read(&alone).unwrap(), "file {i}");
-            if i == 1 {
-                std::fs::write(d.join("bad.usda"), "#usda 1.0\ndef Xform \"x\" {\n").unwrap();
-                let e = converter.convert(&d.join("bad.usda"), &d.join("bad.usdc")).unwrap_err().to_string();
-                assert!(e.contains("bad.usdc: usd-core failed to convert") && !e.contains('\n'), "{e}");
-            }
+    fn values_the_format_cannot_hold_are_one_line_errors() {
+        let mut nan = every_kind();
+        let Property::Attribute(a) = &mut nan.prims[0].children[0].properties[6] else { panic!() };
+        a.samples[1].1 = Value::Vec3fs(vec![[0.0, f32::NAN, 0.0]]);
+        assert!(error(&nan).contains("/root/Mesh.points holds a non-finite number"));
+        let mut nul = every_kind();
+        nul.prims[1].name = "a\0b".into();
+        assert!(error(&nul).contains("the prim name `a\\0b` contains a NUL byte"));
+        let mut dangling = every_kind();
+        dangling.prims[0].children[0].relationship("skel:skeleton", vec!["/root/Skel".into()]);
+        assert!(error(&dangling).contains("/root/Mesh.skel:skeleton targets /root/Skel, which is not in the layer"));
+    }
+
+    /// The bootstrap points at a table of contents that lists the six sections in order, each
+    /// inside the file.
+    #[test]
+    fn bootstrap_and_table_of_contents() {
+        let bytes = super::bytes(&every_kind(), Path::new("x.usdc")).unwrap();
+        assert_eq!(&bytes[..8], b"PXR-USDC");
+        assert_eq!(&bytes[8..16], &[0, 8, 0, 0, 0, 0, 0, 0]);
+        let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+        let toc = u64_at(16);
+        assert_eq!(u64_at(toc), 6);
+        let mut end = 88;
+        for (k, name) in ["TOKENS", "STRINGS", "FIELDS", "FIELDSETS", "PATHS", "SPECS"].iter().enumerate() {
+            let at = toc + 8 + 32 * k;
+            assert_eq!(&bytes[at..at + name.len()], name.as_bytes());
+            assert!(bytes[at + name.len()..at + 16].iter().all(|&b| b == 0));
+            let (start, size) = (u64_at(at + 16), u64_at(at + 24));
+            assert!(start >= end && size > 0 && start + size <= toc, "{name}: {start} + {size}");
+            end = start + size;
         }
-        drop(converter);
-        std::fs::remove_dir_all(&d).unwrap();
+        assert_eq!(bytes.len(), toc + 8 + 32 * 6);
     }
 }

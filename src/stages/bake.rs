@@ -5,8 +5,7 @@ use crate::error::Result;
 use crate::output::Staging;
 use crate::progress::Progress;
 use crate::report::Report;
-use crate::export::usdc;
-use crate::scene::{Format, Method, SceneFile};
+use crate::scene::{Method, SceneFile};
 use crate::stage::{Animation, Body};
 
 use super::export::blendshape_clip;
@@ -69,16 +68,13 @@ impl<'a> Bake<'a> {
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the
     /// report.
     pub fn files(&self, staging: &mut Staging) -> Result<Report> {
-        // Python's start-up and usd-core's import (about 0.3 s of CPU) overlap the solve.
-        let converter = self.scene.scene.export.formats.contains(&Format::Usdc).then(usdc::Converter::start);
         let animation = self.animation()?;
         // The report's measures need no file: they run on a second thread while the files are
-        // written (mostly waiting for usd-core's Python), each computed as alone, so the same
-        // numbers. Export's error comes first, as when they ran one after the other.
+        // written, each computed as alone, so the same numbers. Export's error comes first, as when they ran one after the other.
         let clip = blendshape_clip(&animation, None)?;
         let (outputs, measured) = std::thread::scope(|scope| {
             let measuring = scope.spawn(|| measure(&animation, &clip));
-            let outputs = export_with(&animation, &clip, staging, converter, self.progress);
+            let outputs = export_with(&animation, &clip, staging, self.progress);
             let bar = self.progress.stage("report");
             let measured = measuring.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             bar.finish_and_clear();

@@ -3,7 +3,7 @@
 //! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights`
 //! names) and the `FullFrame` (one pose per frame) from the animation, and stage, for each
 //! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
-//! `NAME.full.EXT` (full-frame). `usdc` is converted from the staged `.usda` by usd-core.
+//! `NAME.full.EXT` (full-frame). `usda` and `usdc` hold the same USD layer (`export::usd`).
 //! Returns the list of staged files with their sizes. The files (and whatever the caller
 //! stages after them, e.g. `NAME.outputs.json`) are in the staging group `export:NAME`: a
 //! commit removes the files an earlier export of the same scene wrote that this one did not,
@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
 use crate::export::fullframe::FullFrame;
 use crate::export::principal::{smallest_rank, Components};
-use crate::export::{glb, texture, usda, usdc};
+use crate::export::{glb, texture, usd, usda, usdc};
 use crate::mesh::{bbox_diagonal, Axis};
 use crate::output::Staging;
 use crate::progress::Progress;
@@ -28,23 +28,13 @@ use crate::stage::{Animation, OutputFile, OutputKind, Outputs};
 /// in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
     let clip = blendshape_clip(animation, None)?;
-    export_with(animation, &clip, staging, None, &Progress::hidden())
+    export_with(animation, &clip, staging, &Progress::hidden())
 }
 
 /// [`export`] of `clip` (the animation's [`blendshape_clip`], chosen once by the caller, who
-/// may also measure it), converting the `.usdc` files with `converter` (one started earlier,
-/// so that its start-up overlapped other work) instead of a Python process started when the
-/// first is due, and showing a bar over the files on `progress`.
-pub fn export_with(
-    animation: &Animation,
-    clip: &(BlendShapeClip, Option<usize>),
-    staging: &mut Staging,
-    converter: Option<usdc::Converter>,
-    progress: &Progress,
-) -> Result<Outputs> {
+/// may also measure it), showing a bar over the files on `progress`.
+pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), staging: &mut Staging, progress: &Progress) -> Result<Outputs> {
     check(animation)?;
-    // One Python process for every usdc file of the export.
-    let mut converter = converter;
     let scene = &animation.scene;
     staging.set_group(&format!("export:{}", scene.name));
     let trajectory = &animation.trajectory;
@@ -53,8 +43,8 @@ pub fn export_with(
     let mut formats = scene.export.formats.clone();
     formats.sort();
     formats.dedup();
-    let usd = usda::UsdSettings {
-        name: usda::prim_name(&scene.name),
+    let settings = usd::UsdSettings {
+        name: usd::prim_name(&scene.name),
         fps: scene.fps,
         up_axis: if scene.export.up_axis == Axis::Z { 'Z' } else { 'Y' },
         meters_per_unit: scene.export.meters_per_unit,
@@ -85,34 +75,20 @@ pub fn export_with(
     let mut files = Vec::new();
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
-        let usda_text = || match (&kind, &full) {
-            (OutputKind::FullFrame, Some(full)) => usda::full_frame(full, triangles, attributes, &usd),
-            _ => usda::blendshapes(clip, triangles, attributes, &usd),
-        };
+        let layer = formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)).then(|| match (&kind, &full) {
+            (OutputKind::FullFrame, Some(full)) => usd::full_frame(full, triangles, attributes, &settings),
+            _ => usd::blendshapes(clip, triangles, attributes, &settings),
+        });
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
             bar.set_message(format!("export: {name}"));
             match format {
-                Format::Usda => staging.write(&name, usda_text().as_bytes())?,
+                Format::Usda => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
                 Format::Usdc => {
-                    // Formats are sorted, so a requested .usda is already staged; otherwise a
-                    // hidden one is written for the conversion and not recorded as an output.
-                    let source = if formats.contains(&Format::Usda) {
-                        format!("{stem}.usda")
-                    } else {
-                        let temporary = format!(".{stem}.for-usdc.usda");
-                        let path = staging.path(&temporary);
-                        std::fs::write(&path, usda_text()).map_err(|e| Error::io(&path, &e, "write a temporary .usda"))?;
-                        temporary
-                    };
-                    // Errors name the file the user asked for, not its staging path.
-                    let converted = converter.get_or_insert_with(usdc::Converter::start).convert(&staging.path(&source), &staging.path(&name))
-                        .map_err(|e| Error { path: Some(staging.final_path(&name)), ..e });
-                    if source.starts_with('.') {
-                        let _ = std::fs::remove_file(staging.path(&source));
-                    }
-                    converted?;
-                    staging.record(&name);
+                    // The interruption tests stop here: in the export, before the usdc is staged.
+                    crate::interrupt::pause_point("usdc", "");
+                    let bytes = usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?;
+                    staging.write(&name, &bytes)?;
                 }
                 Format::Glb => {
                     let bytes = match (&kind, &full) {

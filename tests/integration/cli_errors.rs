@@ -332,43 +332,6 @@ fn cyclic_with_a_last_key_unlike_the_first() {
     assert_says(&r, "(fix: repeat the first keyframe's mesh");
 }
 
-/// A usdc bake with a Python that cannot give usd-core's `pxr`: fails after the solve, and
-/// must still leave nothing (the staged .usda and the staging folder go too).
-fn usdc_without_pxr(name: &'static str, python: String) -> Run {
-    let (r, _dir) = bad_bake(Case {
-        name,
-        files: vec![
-            ("k0.obj", obj::write(&cube())),
-            ("k1.obj", obj::write(&translated(cube(), [0.0, 0.5, 0.0]))),
-            ("scene.toml", scene(&["k0.obj", "k1.obj"], "", "[export]\nformats = [\"usda\", \"usdc\", \"glb\"]")),
-        ],
-        args: vec![],
-        env: vec![("BLENDSIM_PYTHON", python)],
-    });
-    assert_says(&r, "out/baked/t.usdc: ");
-    assert_says(&r, "(fix: pip install usd-core");
-    r
-}
-
-#[test]
-fn usdc_with_no_python() {
-    let r = usdc_without_pxr("usdc-no-python", "/nonexistent/python3".into());
-    assert_says(&r, "cannot run /nonexistent/python3");
-}
-
-#[test]
-fn usdc_with_a_python_lacking_pxr() {
-    // The real interpreter with its site-packages (where usd-core lives) turned off.
-    let out = std::process::Command::new("python3").args(["-c", "import sys; print(sys.executable)"]).output().expect("python3 runs");
-    let python = String::from_utf8(out.stdout).unwrap().trim().to_string();
-    let wrapper = TempDir::new("errors-python-wrapper");
-    let script = wrapper.join("python3-without-site");
-    std::fs::write(&script, format!("#!/bin/sh\nexec {python} -S \"$@\"\n")).unwrap();
-    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    let r = usdc_without_pxr("usdc-no-pxr", script.to_string_lossy().into_owned());
-    assert_says(&r, "cannot import usd-core's pxr module");
-}
-
 /// A good tiny scene and its stage files, made by the chain of subcommands.
 fn stage_files(dir: &Path) {
     std::fs::create_dir_all(dir.join("in")).unwrap();

@@ -113,7 +113,7 @@ struct Phase {
     /// The bake had passed its point of no return.
     committed: bool,
     fallback: bool,
-    /// The hook line names a child process (TetGen, Python).
+    /// The hook line names a child process (TetGen).
     child: bool,
 }
 
@@ -121,7 +121,7 @@ const PHASES: [Phase; 7] = [
     Phase { hook: "tetgen", scene: "slow", committed: false, fallback: false, child: true },
     Phase { hook: "solve", scene: "new", committed: false, fallback: false, child: false },
     Phase { hook: "staged", scene: "new", committed: false, fallback: false, child: false },
-    Phase { hook: "usdc", scene: "new", committed: false, fallback: false, child: true },
+    Phase { hook: "usdc", scene: "new", committed: false, fallback: false, child: false },
     Phase { hook: "commit-staged", scene: "new", committed: false, fallback: false, child: false },
     Phase { hook: "commit-swapped", scene: "new", committed: true, fallback: false, child: false },
     Phase { hook: "commit-moved-aside", scene: "new", committed: true, fallback: true, child: false },

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use blendsim::mesh::{obj, TriMesh};
 use blendsim::procedural::prism;
+use crate::common::checkers::check_same_layer;
 use crate::common::cli::{names, read_json, run, run_env, Spawned, TempDir};
 
 fn cube() -> TriMesh {
@@ -218,11 +219,32 @@ fn progress_lines_when_forced_and_nothing_with_quiet() {
     assert_eq!(quiet.stderr, "", "--quiet must silence progress:\n{quiet}");
     let piped = run(&dir.path, &["bake", "in/box.toml", "--out", "out/c"]).success();
     assert_eq!(piped.stderr.lines().count(), 1, "no progress on a pipe unless asked:\n{piped}");
-    // The same files with or without progress, and usdc through the one Python process.
+    // The same files with or without progress.
     for file in ["box.usda", "box.usdc", "box.glb"] {
         let a = std::fs::read(dir.join("out/a").join(file)).unwrap();
         assert_eq!(a, std::fs::read(dir.join("out/b").join(file)).unwrap(), "{file}");
         assert_eq!(a, std::fs::read(dir.join("out/c").join(file)).unwrap(), "{file}");
+    }
+}
+
+/// The usdc files are written natively (issue 11): a bake with no Python at all (a
+/// `BLENDSIM_PYTHON` that does not exist) writes them, the same bytes twice, and usd-core reads
+/// each as the same layer as the usda beside it.
+#[test]
+fn usdc_needs_no_python_and_has_the_same_bytes_every_run() {
+    let dir = TempDir::new("usdc-native");
+    scene(&dir.path, "box.toml", "[\"usda\", \"usdc\"]\nfull_frame = true");
+    let no_python = [("BLENDSIM_PYTHON", OsStr::new("/nonexistent/python3"))];
+    for out in ["out/a", "out/b"] {
+        run_env(&dir.path, &["bake", "in/box.toml", "--out", out, "-q"], &no_python).success();
+    }
+    for file in ["box.usdc", "box.full.usdc"] {
+        let a = std::fs::read(dir.join("out/a").join(file)).unwrap();
+        assert_eq!(&a[..8], b"PXR-USDC", "{file}");
+        assert_eq!(a, std::fs::read(dir.join("out/b").join(file)).unwrap(), "{file}: different bytes in two runs");
+        let usda = dir.join("out/a").join(file.replace(".usdc", ".usda"));
+        let summary = check_same_layer(&usda, &dir.join("out/a").join(file));
+        assert_eq!(summary["ok"], true, "{file}: {summary}");
     }
 }
 

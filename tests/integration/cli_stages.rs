@@ -181,8 +181,8 @@ fn stage_files_round_trip_exactly() {
 }
 
 /// Every file of the demo bake opens in the reference tools and animates like our
-/// evaluation of the scene: usda (UsdValidation, UsdSkel), usdc (written through usd-core,
-/// checked the same), glb (Khronos validator, three.js), and the full-frame versions.
+/// evaluation of the scene: usda (UsdValidation, UsdSkel), usdc (checked the same, and read by
+/// usd-core as the same layer as the usda), glb (Khronos validator, three.js), and the full-frame versions.
 #[test]
 fn demo_bake_outputs_pass_the_independent_checkers() {
     let dir = TempDir::new("stages-demo-checkers");

@@ -125,7 +125,7 @@ fn signed_weights_and_linear_gltf_in_every_format() {
 #[test]
 fn cyclic_z_up_centimeters_without_usda() {
     let (_, outputs) = export_and_check(&cyclic_box("[\"usdc\", \"glb\"]"));
-    // The .usda the usdc was converted from is not an output and is not left behind.
+    // No .usda is written or left behind when only usdc is asked for.
     assert_eq!(names(&outputs), ["cyclic.usdc", "cyclic.glb", "cyclic.full.usdc", "cyclic.full.glb"]);
 }
 

@@ -142,6 +142,14 @@ pub fn try_check_usd(file: &Path, expected: &Expected, usdc: bool) -> Result<Val
     summary(&format!("usd_check.py {}", file.display()), output)
 }
 
+/// `usd_same_layer.py`: usd-core opens both files without an error and finds the same layer
+/// in them (as usd-core's own usda text, and spec by spec, field by field, sample by sample).
+pub fn check_same_layer(usda: &Path, usdc: &Path) -> Value {
+    require_pxr();
+    let output = Command::new(python()).arg(checkers_dir().join("usd_same_layer.py")).arg(usda).arg(usdc).output().expect("run usd_same_layer.py");
+    summary(&format!("usd_same_layer.py {} {}", usda.display(), usdc.display()), output).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// `gltf_check.mjs`: the Khronos validator (no errors, no warnings), then three.js's
 /// GLTFLoader and AnimationMixer evaluated at `expected.times`.
 pub fn check_glb(file: &Path, expected: &Expected) -> Value {

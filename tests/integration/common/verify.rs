@@ -12,7 +12,7 @@ use blendsim::stage::{Animation, OutputFile, OutputKind};
 use blendsim::stages::Bake;
 use serde_json::Value;
 
-use super::checkers::{check_glb, check_usd, Expected};
+use super::checkers::{check_glb, check_same_layer, check_usd, Expected};
 
 /// The animation of a scene computed in this process by the library, as `bake` does (our
 /// reference evaluation; no file in between).
@@ -85,6 +85,29 @@ pub fn check_outputs(dir: &Path, anim: &Animation, outputs: &[OutputFile]) -> Ve
     check_outputs_ranked(dir, anim, outputs, None)
 }
 
+/// Our usdc holds the layer of our usda of the same animation: the one written beside it, or
+/// one exported now (into a scratch folder) when the scene asked for usdc alone.
+pub fn same_layer_as_usda(usdc: &Path, anim: &Animation) -> Value {
+    let beside = usdc.with_extension("usda");
+    let summary = if beside.is_file() {
+        check_same_layer(&beside, usdc)
+    } else {
+        let scratch = std::env::temp_dir().join(format!("blendsim-same-layer-{}-{}", std::process::id(), usdc.file_name().unwrap().to_string_lossy()));
+        let _ = std::fs::remove_dir_all(&scratch);
+        let mut usda_only = anim.clone();
+        usda_only.scene.export.formats = vec![Format::Usda];
+        let mut staging = blendsim::output::Staging::new(&scratch).unwrap();
+        blendsim::stages::export::export(&usda_only, &mut staging).unwrap();
+        staging.commit().unwrap();
+        let summary = check_same_layer(&scratch.join(beside.file_name().unwrap()), usdc);
+        std::fs::remove_dir_all(&scratch).unwrap();
+        summary
+    };
+    eprintln!("{}: same layer as its usda: {summary}", usdc.display());
+    assert_eq!(summary["ok"], true, "{}: {summary}", usdc.display());
+    summary
+}
+
 /// [`check_outputs`] for files of `[export] basis = "principal"` at `rank` (the report's):
 /// the blendshape files must play that clip, the full-frame files the unreduced trajectory.
 pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile], rank: Option<usize>) -> Vec<(String, Value)> {
@@ -141,6 +164,9 @@ pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile]
         };
         eprintln!("{}: {} bytes: {summary}", f.path, f.bytes);
         assert_eq!(summary["ok"], true, "{}: {summary}", f.path);
+        if f.format == Format::Usdc {
+            same_layer_as_usda(&path, anim);
+        }
         summaries.push((f.path.clone(), summary));
     }
     summaries

@@ -1,0 +1,165 @@
+//! The USD layout of our animations as a [`Layer`] (written by `usda` as text and by `usdc`
+//! as a binary crate). Layout in `formats/usd.md`.
+
+use super::clip::BlendShapeClip;
+use super::fullframe::FullFrame;
+use super::layer::{Attribute, Layer, Prim, Value};
+use super::usd_attributes as attrs;
+use crate::mesh::attributes::CornerAttributes;
+use crate::mesh::Bounds;
+use crate::spacetime::trajectory::frames_between;
+
+/// Stage-level settings shared by both USD files.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UsdSettings {
+    /// Prim-safe name of the asset (used for the SkelRoot / mesh names).
+    pub name: String,
+    /// Frames per second (`timeCodesPerSecond`).
+    pub fps: f64,
+    /// "Y" or "Z".
+    pub up_axis: char,
+    /// Scene units in meters (`metersPerUnit`).
+    pub meters_per_unit: f64,
+}
+
+/// A valid USD prim name from an asset name: letters, digits and `_`, not starting with a digit.
+pub fn prim_name(name: &str) -> String {
+    let mut s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+    if !s.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
+        s.insert(0, '_');
+    }
+    s
+}
+
+/// UsdSkel blendshape animation: weights sampled at every frame of the clip's key range.
+///
+/// A clip without targets (a static animation) is written as a plain mesh under an Xform:
+/// a SkelAnimation with no blend shapes would only add noise for importers.
+///
+/// `attributes` (UVs, normals, material groups of the surface) add `primvars:st`, `normals`,
+/// `GeomSubset`s and their placeholder materials; without them the layer is as before.
+pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> Layer {
+    let (start, end) = (clip.times[0], *clip.times.last().expect("a clip has keys"));
+    let frames = frames_between(start, end, settings.fps);
+    let metadata = metadata(settings, frames[0].0, frames[frames.len() - 1].0);
+    let root = &settings.name;
+    let mut mesh = Prim::new("Mesh", "Mesh");
+    mesh.attribute(Attribute::new("extent", "float3[]", Value::Vec3fs(extent(&clip.base).to_vec())));
+    push_topology(&mut mesh, triangles);
+    if let Some(a) = attributes {
+        attrs::push_properties(&mut mesh, triangles, clip.vertex_count(), a);
+    }
+    mesh.attribute(Attribute::new("points", "point3f[]", Value::Vec3fs(clip.base.clone())));
+    if clip.targets.is_empty() {
+        mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
+        return Layer { metadata, prims: vec![plain_root(mesh, attributes, root)] };
+    }
+
+    // The SkelRoot's extent bounds the whole animation, so culling never clips a deformed pose.
+    let weights: Vec<Vec<f64>> = frames.iter().map(|&(_, t)| clip.weights_at(t)).collect();
+    let mut bounds = Bounds::of_f32(&clip.base);
+    for w in &weights {
+        let posed: Vec<[f32; 3]> = clip.points_with_weights(w).iter().map(|p| p.map(|x| x as f32)).collect();
+        bounds = bounds.union(Bounds::of_f32(&posed));
+    }
+    let names: Vec<String> = clip.targets.iter().map(|t| t.name.clone()).collect();
+
+    let mut skel_root = Prim::new("SkelRoot", root.clone());
+    skel_root.attribute(Attribute::new("extent", "float3[]", Value::Vec3fs(bounds.to_f32().to_vec())));
+    let mut mesh = mesh.with_api("SkelBindingAPI");
+    mesh.attribute(Attribute::uniform("skel:blendShapes", "token[]", Value::Tokens(names.clone())));
+    mesh.relationship("skel:blendShapeTargets", names.iter().map(|n| format!("/{root}/Mesh/{n}")).collect());
+    mesh.relationship("skel:skeleton", vec![format!("/{root}/Skel")]);
+    mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
+    let n = clip.vertex_count();
+    for target in &clip.targets {
+        let mut shape = Prim::new("BlendShape", target.name.clone());
+        if super::sparse_is_smaller(target.indices.len(), n, 4) {
+            shape.attribute(Attribute::uniform("offsets", "vector3f[]", Value::Vec3fs(target.offsets.clone())));
+            shape.attribute(Attribute::uniform("pointIndices", "int[]", Value::Ints(target.indices.iter().map(|&i| i as i32).collect())));
+        } else {
+            let mut dense = vec![[0.0f32; 3]; n];
+            for (&i, o) in target.indices.iter().zip(&target.offsets) {
+                dense[i as usize] = *o;
+            }
+            shape.attribute(Attribute::uniform("offsets", "vector3f[]", Value::Vec3fs(dense)));
+        }
+        mesh.children.push(shape);
+    }
+    let groups = attributes.filter(|a| !a.groups.is_empty());
+    if let Some(a) = groups {
+        mesh.children.extend(attrs::subsets(a, root));
+    }
+    skel_root.children.push(mesh);
+    if let Some(a) = groups {
+        skel_root.children.push(attrs::materials(a, root));
+    }
+
+    let mut skel = Prim::new("Skeleton", "Skel").with_api("SkelBindingAPI");
+    skel.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
+    skel.relationship("skel:animationSource", vec![format!("/{root}/Skel/Anim")]);
+    let mut anim = Prim::new("SkelAnimation", "Anim");
+    anim.attribute(Attribute::uniform("blendShapes", "token[]", Value::Tokens(names)));
+    let samples = frames.iter().zip(&weights).map(|(&(frame, _), w)| (frame as f64, Value::Floats(w.iter().map(|&x| x as f32).collect()))).collect();
+    anim.attribute(Attribute::sampled("blendShapeWeights", "float[]", samples));
+    skel.children.push(anim);
+    skel_root.children.push(skel);
+    Layer { metadata, prims: vec![skel_root] }
+}
+
+/// Full-frame animation: `points.timeSamples` at every frame.
+pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> Layer {
+    let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
+    let metadata = metadata(settings, first, last);
+    let mut mesh = Prim::new("Mesh", "Mesh");
+    let sampled = |f: fn(&[[f32; 3]]) -> Vec<[f32; 3]>| frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, Value::Vec3fs(f(p)))).collect();
+    mesh.attribute(Attribute::sampled("extent", "float3[]", sampled(|p| extent(p).to_vec())));
+    push_topology(&mut mesh, triangles);
+    let vertices = frames.points.first().map_or(0, Vec::len);
+    if let Some(a) = attributes {
+        attrs::push_properties(&mut mesh, triangles, vertices, a);
+    }
+    mesh.attribute(Attribute::sampled("points", "point3f[]", sampled(|p| p.to_vec())));
+    mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
+    Layer { metadata, prims: vec![plain_root(mesh, attributes, &settings.name)] }
+}
+
+/// `Xform ROOT` holding a plain mesh (with its subsets) and the materials they bind.
+fn plain_root(mut mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) -> Prim {
+    let mut xform = Prim::new("Xform", root);
+    let groups = attributes.filter(|a| !a.groups.is_empty());
+    if let Some(a) = groups {
+        mesh.children.extend(attrs::subsets(a, root));
+    }
+    xform.children.push(mesh);
+    if let Some(a) = groups {
+        xform.children.push(attrs::materials(a, root));
+    }
+    xform
+}
+
+fn metadata(s: &UsdSettings, start: i64, end: i64) -> Vec<(&'static str, Value)> {
+    vec![
+        ("defaultPrim", Value::Token(s.name.clone())),
+        ("doc", Value::String(format!("blendsim {}", env!("CARGO_PKG_VERSION")))),
+        ("endTimeCode", Value::Double(end as f64)),
+        ("framesPerSecond", Value::Double(s.fps)),
+        ("metersPerUnit", Value::Double(s.meters_per_unit)),
+        ("startTimeCode", Value::Double(start as f64)),
+        ("timeCodesPerSecond", Value::Double(s.fps)),
+        ("upAxis", Value::Token(s.up_axis.to_string())),
+    ]
+}
+
+/// Triangles as USD faces; our triangles are counter-clockwise seen from outside, which is
+/// USD's `rightHanded` orientation.
+fn push_topology(mesh: &mut Prim, triangles: &[[u32; 3]]) {
+    mesh.attribute(Attribute::new("faceVertexCounts", "int[]", Value::Ints(vec![3; triangles.len()])));
+    mesh.attribute(Attribute::new("faceVertexIndices", "int[]", Value::Ints(triangles.iter().flatten().map(|&i| i as i32).collect())));
+    mesh.attribute(Attribute::uniform("orientation", "token", Value::Token("rightHanded".into())));
+}
+
+/// `[(lo), (hi)]` of a point set (zeros when empty).
+pub(crate) fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
+    Bounds::of_f32(points).to_f32()
+}
