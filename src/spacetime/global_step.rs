@@ -116,10 +116,11 @@ pub struct GlobalStats {
 /// every entry once; measured on 2 cores: 75M entries in 0.12 s).
 const SWEEP_SECONDS_PER_ENTRY: f64 = 1.6e-9;
 
-/// Global-step solves a bake is assumed to make (the benchmark's TWIST: 64 iterations, one
-/// solve each), and CG iterations per iterative solve (measured at 20 keys on 2.7k nodes:
-/// 37-46 with the warm start).
-const ASSUMED_SOLVES: f64 = 60.0;
+/// Global-step solves a bake is assumed to make (one per iteration, local/global and
+/// quasi-Newton alike; the converged-by-default stopping rule: TWIST 120 iterations, DINO 150,
+/// the demo 140, the 20-key body over 180), and CG iterations per iterative solve (measured at
+/// 20 keys on 2.7k nodes: 37-46 with the warm start).
+const ASSUMED_SOLVES: f64 = 150.0;
 /// See [`ASSUMED_SOLVES`].
 const ASSUMED_CG_ITERATIONS: f64 = 40.0;
 
@@ -149,24 +150,37 @@ pub struct ModalSize {
 }
 
 impl ModalSize {
-    /// Predicted (seconds, peak bytes) of building the modal step and [`ASSUMED_SOLVES`] solves.
+    /// Predicted (seconds, peak bytes) of building the modal step and [`ASSUMED_SOLVES`] solves:
+    /// the eigendecomposition (`EIGEN_SECONDS_PER_NODE3 n³`), the capacitance matrix (`c² n`
+    /// flops) and its factor (`c³ / 3`), and per solve the two products with `Φ`
+    /// (`2 × 2 n² × 3 slots` flops), the two with the held rows of `Φ`, the capacitance solve and
+    /// the per-mode systems, times [`MODAL_SOLVE_OVERHEAD`].
     pub fn predicted(&self) -> (f64, f64) {
         let (n, s, c, h) = (self.nodes as f64, self.slots as f64, self.held as f64, self.held_nodes as f64);
-        let setup = EIGEN_FLOPS_PER_NODE3 * n * n * n + c * c * n + c * c * c / 3.0;
-        let solve = 2.0 * 2.0 * n * n * 3.0 * s + 2.0 * 2.0 * h * n * 3.0 * s + 2.0 * 3.0 * c * c + 2.0 * 2.0 * 3.0 * n * s * s;
-        let seconds = setup / DENSE_FLOPS_PER_SECOND + ASSUMED_SOLVES * solve / DENSE_FLOPS_PER_SECOND;
-        let bytes = 8.0 * (MODAL_COPIES * n * n + n * s * s + c * c + h * n + 2.0 * 3.0 * s * n);
+        let setup = EIGEN_SECONDS_PER_NODE3 * n * n * n + (c * c * n + c * c * c / 3.0) / DENSE_FLOPS_PER_SECOND;
+        let solve = MODAL_SOLVE_OVERHEAD * (2.0 * 2.0 * n * n * 3.0 * s + 2.0 * 2.0 * h * n * 3.0 * s + 2.0 * 3.0 * c * c + 2.0 * 2.0 * 3.0 * n * s * s) / DENSE_FLOPS_PER_SECOND;
+        let seconds = setup + ASSUMED_SOLVES * solve;
+        let bytes = 8.0 * (MODAL_COPIES * n * n + n * s * s + 2.0 * c * c + h * n + 2.0 * 3.0 * s * n);
         (seconds, bytes)
     }
 }
 
-/// The dense eigendecomposition's flops per cubed node count (tridiagonalization, the
-/// divide-and-conquer eigenvectors and their back-transformation).
-const EIGEN_FLOPS_PER_NODE3: f64 = 9.0;
+/// Seconds of the dense symmetric eigendecomposition (tridiagonalization, divide-and-conquer
+/// eigenvectors, back-transformation) per cubed node count on 2 cores. Measured at 2744 nodes:
+/// 5.7-6.8 CPU s (2.8e-10 to 3.3e-10 per n³, on one thread or two), 16 s wall on two threads
+/// against 23 s on one under the same load: 1.4x from the second core.
+const EIGEN_SECONDS_PER_NODE3: f64 = 2.2e-10;
 /// Predicted seconds of the direct step below which the modal step is not weighed.
 pub const MODAL_MIN_DIRECT_SECONDS: f64 = 2.0;
-/// Dense flops per second on 2 cores (faer's blocked kernels).
-const DENSE_FLOPS_PER_SECOND: f64 = 2.0e10;
+/// Flops per second of faer's dense products as the modal step uses them (measured at 2744
+/// nodes, 20 keys: the capacitance matrix of 3920 held entries, 6.2e10 flops, in 2.0-2.2 CPU s;
+/// one solve's 4.0e9 flops in 0.13 CPU s on one thread; a lone 120 x 2744 x 2744 product runs
+/// at 4.5e10 per CPU second).
+const DENSE_FLOPS_PER_SECOND: f64 = 3.0e10;
+/// A modal solve's time over its products' flops at [`DENSE_FLOPS_PER_SECOND`] (gathering and
+/// scattering the unknowns, the per-mode systems' memory traffic): measured 1.0-1.4 at 20 keys
+/// (0.13-0.19 CPU s), 1.7-2.8 at 5 keys (0.055-0.094 CPU s for 1e9 flops).
+const MODAL_SOLVE_OVERHEAD: f64 = 1.5;
 /// `n × n` matrices alive at the modal step's peak (the eigenproblem, its eigenvectors and
 /// the decomposition's workspace).
 const MODAL_COPIES: f64 = 3.0;
@@ -504,7 +518,12 @@ pub struct FillReducingOrder {
 /// coupling of neighbouring keys causes once there are more than about ten keys
 /// ([`KEY_SEPARATOR_MIN_KEYS`]). The winner is put in postorder of its elimination tree (same
 /// fill), which lets the solve give whole subtrees to two threads.
-pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> FillReducingOrder {
+///
+/// The key-separator candidate is weighed only when `weigh_keys` says so for the node order's
+/// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
+/// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
+/// direct step could use it.
+pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
     let mut block_of = vec![0u32; unknowns.count()];
@@ -530,7 +549,7 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
         (degree, "minimum degree (nodes)", cost_md)
     };
     let keys = slots / 2;
-    if keys >= KEY_SEPARATOR_MIN_KEYS {
+    if keys >= KEY_SEPARATOR_MIN_KEYS && weigh_keys(&cost) {
         if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
             if by_keys.cost.flops < by_keys.node_cost.flops {
                 return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
@@ -543,6 +562,11 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
 /// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
 /// predicted flops at 20 keys on a 1k-node body, 1.3x on 2.6k, worse at 10 keys or fewer).
 pub const KEY_SEPARATOR_MIN_KEYS: usize = 8;
+
+/// The most the key-separator order is assumed to cut the node order's predicted flops and
+/// factor entries (measured at most 2.5x: 20 keys on a 1k-node body), for skipping it when even
+/// that cut could not make the direct step the choice ([`GlobalStep::build`]).
+pub const KEY_SEPARATOR_MAX_GAIN: f64 = 4.0;
 
 /// The key-separator candidate, with the node order's cost on the same (node, key) graph so
 /// that the two compare exactly.
@@ -642,12 +666,24 @@ impl GlobalStep {
         let a = assemble(objective, &unknowns, &coefficients);
         let assemble_seconds = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
-        let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest);
+        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
+        let size = modal_size(objective, &unknowns);
+        // The key-separator order only where the direct step could use it: even cut by
+        // KEY_SEPARATOR_MAX_GAIN and factorized at the parallel rate, would the node order's
+        // cost make the direct step the choice (or leave the modes unweighed)? When not, the
+        // choice below is the same with or without it.
+        let could_be_direct = |node: &Cost| match forced {
+            Some(m) => m == Method::Direct,
+            None => {
+                let optimistic = Cost { flops: node.flops / KEY_SEPARATOR_MAX_GAIN, entries: node.entries / KEY_SEPARATOR_MAX_GAIN };
+                let (m, [(seconds, _), _, _]) = choose(&optimistic, &block_cost, Some(&size), true, budget);
+                m == Method::Direct || seconds <= MODAL_MIN_DIRECT_SECONDS
+            }
+        };
+        let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest, could_be_direct);
         // faer's parallel supernodal factorization pays off only for large fronts.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
-        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
-        let size = modal_size(objective, &unknowns);
         let (mut method, [(predicted_seconds, predicted_bytes), (predicted_modal_seconds, predicted_modal_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, Some(&size), parallel, budget);
         if let Some(forced) = forced {
             method = forced;
@@ -664,6 +700,9 @@ impl GlobalStep {
             Method::Iterative => ("the solve's global steps (conjugate gradients)", predicted_iterative_seconds),
         };
         crate::resources::check_predicted_time(predicted, solver_name)?;
+        let matrix_nnz = a.compute_nnz();
+        // The modes never read the assembled matrix: free it before their dense matrices.
+        let a = (method != Method::Modal).then_some(a);
         let mut modal = None;
         if method == Method::Modal {
             // A failed eigendecomposition (or a mode that costs nothing) falls back to the
@@ -678,12 +717,14 @@ impl GlobalStep {
         }
         let (inverse, factor_nnz, ordering, linear_solver) = match method {
             Method::Direct => {
+                let a = a.unwrap_or_else(|| assemble(objective, &unknowns, &coefficients));
                 let cholesky = Cholesky::factor(&a, &FillOrdering::Custom(order.perm), par).map_err(|_| singular())?;
                 let nnz = cholesky.factor_nnz();
                 (Inverse::Direct(Box::new(cholesky)), nnz, order.name, "direct")
             }
             Method::Modal => (Inverse::Modal(Box::new(modal.expect("built above"))), 0, "vibration modes", "modal"),
             Method::Iterative => {
+                let a = a.unwrap_or_else(|| assemble(objective, &unknowns, &coefficients));
                 let iterative = Iterative::new(&a, KroneckerSum::new(objective, &unknowns, &coefficients), &block_order).map_err(|_| singular())?;
                 let nnz = iterative.preconditioner.factor_nnz();
                 (Inverse::Iterative(Box::new(iterative)), nnz, "per-key blocks (preconditioner)", "iterative")
@@ -691,7 +732,7 @@ impl GlobalStep {
         };
         let stats = GlobalStats {
             unknowns: dim,
-            matrix_nnz: a.compute_nnz(),
+            matrix_nnz,
             factor_nnz,
             ordering,
             assemble_seconds,
@@ -870,6 +911,40 @@ mod tests {
         assert_eq!(choose(&huge, &key_blocks, Some(&modal), true, (modal_bytes * 0.9) as u64).0, Method::Iterative);
     }
 
+    /// The choice on problem sizes recorded from the project's bodies (the costs `build` weighs,
+    /// with the measured outcome): the 2744-node cube with 20 keys and with 5 keys, the bottom
+    /// held at every key (`modal_setup_phases`), and a small body.
+    #[test]
+    fn the_cost_model_on_recorded_problem_sizes() {
+        // 20 keys: the node order (the key separators are not weighed: even 4x fewer flops
+        // would not make the direct step the choice), 1.4e13 flops and 1.1e9 entries (the
+        // factorization measured 60 s and 6.9 GB with the key-separator order); the per-key
+        // blocks; the modes measured 8 CPU s to set up and 0.13-0.19 CPU s per solve, CG 4.9-5.5 s
+        // per solve.
+        let direct = Cost { flops: 13999542089240.0, entries: 1098108520.0 };
+        let blocks = Cost { flops: 37876401839.99901, entries: 58123760.0 };
+        let modal = ModalSize { nodes: 2744, slots: 40, held: 3920, held_nodes: 196 };
+        let (method, [(ds, db), (ms, mb), (is, _)]) = choose(&direct, &blocks, Some(&modal), true, 3 << 30);
+        assert_eq!(method, Method::Modal, "{ds} {ms} {is}");
+        assert!(db > 1e10 && mb < 5e8 && ms < is / 5.0 && ms < ds / 5.0, "{db} {mb} {ms} {is} {ds}");
+        // Under a budget below the modes' dense matrices, CG.
+        assert_eq!(choose(&direct, &blocks, Some(&modal), true, (mb * 0.9) as u64).0, Method::Iterative);
+        // The cut the key separators may bring does not change that.
+        let optimistic = Cost { flops: direct.flops / KEY_SEPARATOR_MAX_GAIN, entries: direct.entries / KEY_SEPARATOR_MAX_GAIN };
+        assert_eq!(choose(&optimistic, &blocks, Some(&modal), true, u64::MAX).0, Method::Modal);
+        // 5 keys: measured 6.9 CPU s to factorize (2.2e11 flops, 87M entries) and 0.126 CPU s
+        // per solve, against the modes' 6.2-6.8 CPU s and 0.055-0.094 CPU s per solve: over a
+        // bake's solves the modes are faster.
+        let direct = Cost { flops: 218794320635.0, entries: 68641705.0 };
+        let blocks = Cost { flops: 9469100459.999752, entries: 14530940.0 };
+        let modal = ModalSize { nodes: 2744, slots: 10, held: 980, held_nodes: 196 };
+        assert_eq!(choose(&direct, &blocks, Some(&modal), true, u64::MAX).0, Method::Modal);
+        // A small body (1k nodes, 2 keys: a few M flops): direct, the modes are not weighed.
+        let small = Cost { flops: 3e8, entries: 1.5e6 };
+        let (method, [_, (ms, _), _]) = choose(&small, &Cost { flops: 1e8, entries: 5e5 }, Some(&ModalSize { nodes: 1000, slots: 4, held: 0, held_nodes: 0 }), false, u64::MAX);
+        assert_eq!((method, ms), (Method::Direct, 0.0));
+    }
+
     #[test]
     fn the_kronecker_sum_is_the_assembled_matrix() {
         // Supports (the bottom held at every key) and a key with extra held nodes: the
@@ -1004,7 +1079,7 @@ mod tests {
                 let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
                 let nd = nested_dissection(&graph, &el.rest);
                 let by_keys = key_separator_order(&a, &unknowns, &nd).unwrap();
-                let chosen = fill_reducing_order(&a, &unknowns, &el.rest);
+                let chosen = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
                 println!(
                     "{} nodes, {keys_count} keys: node order {:.3e} flops, keys as separators {:.3e} ({:.2}x); chosen: {}",
                     unknowns.nodes,
@@ -1107,6 +1182,92 @@ mod experiment {
             let gg: Vec<Vec<Point>> = g.iter().map(|v| v.iter().map(|p| [p[0] + 0.01 * round as f64 * p[1], p[1], p[2]]).collect()).collect();
             let _ = it.step(&gg);
             println!("solve {round}: {:.2} s, {:?}", t.elapsed().as_secs_f64(), it.cg_log());
+        }
+    }
+}
+
+#[cfg(test)]
+mod modal_phases {
+    use super::*;
+    use crate::physics::elastic::Elastic;
+    use crate::spacetime::solver::objective;
+    use crate::spacetime::tests::{keys, material, settings};
+    use crate::testing::{cube_mesh, Rng};
+
+    /// CPU seconds of the process (all threads), from getrusage.
+    fn cpu() -> f64 {
+        let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+        unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+        let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+        t(u.ru_utime) + t(u.ru_stime)
+    }
+
+    fn timed<T>(name: &str, f: impl FnOnce() -> T) -> T {
+        let (w, c) = (std::time::Instant::now(), cpu());
+        let out = f();
+        println!("{name:<44} wall {:8.3} s  cpu {:8.3} s", w.elapsed().as_secs_f64(), cpu() - c);
+        out
+    }
+
+    /// `cargo test --release --lib modal_setup_phases -- --ignored --nocapture` (CUBE, KEYS).
+    #[test]
+    #[ignore]
+    fn modal_setup_phases() {
+        let n: usize = std::env::var("CUBE").ok().and_then(|v| v.parse().ok()).unwrap_or(13);
+        let kc: usize = std::env::var("KEYS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
+        let mut mesh = cube_mesh(n);
+        for p in &mut mesh.positions {
+            *p = [p[0] * 1.2, p[1] * 3.6, p[2] * 1.2];
+        }
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let times: Vec<f64> = (0..kc).map(|k| 0.5 * k as f64).collect();
+        let poses = (0..kc).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * (k as f64).sin() * p[1] * p[1], p[1], p[2]]).collect()).collect();
+        let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
+        let k = keys(times, poses, vec![bottom; kc], false);
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        println!("{} nodes, {kc} keys, {} unknowns, load {}", el.node_count(), unknowns.count(), std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
+        let c = timed("time coefficients", || TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization)));
+        let a = timed("assemble", || assemble(&obj, &unknowns, &c));
+        let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest, |_| true));
+        println!("  {} {:.3e} flops", order.name, order.cost.flops);
+        let _ = timed("key_block_order", || key_block_order(&a, &unknowns, &el.rest));
+        let size = modal_size(&obj, &unknowns);
+        println!("  modal size {size:?}, predicted {:?}", size.predicted());
+        let _ = timed("fill_reducing_order without keys", || fill_reducing_order(&a, &unknowns, &el.rest, |_| false));
+        if std::env::var("DIRECT").is_ok() {
+            for par in [Par::Seq, Par::rayon(0)] {
+                let chol = timed(&format!("Cholesky::factor {par:?}"), || Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), par).unwrap());
+                println!("  factor entries {}", chol.factor_nnz());
+                let mut x: Vec<Point> = (0..unknowns.count()).map(|i| [i as f64, 1.0, 2.0]).collect();
+                timed("  solve_rows3", || chol.solve_rows3(&mut x));
+            }
+        }
+        let modes = timed("Modes::new (rayon)", || Modes::new(&el, &obj.supports, Par::rayon(0)).unwrap());
+        if std::env::var("SEQ").is_ok() {
+            let _ = timed("Modes::new (seq)", || Modes::new(&el, &obj.supports, Par::Seq).unwrap());
+        }
+        let step = timed("ModalStep::new (rayon)", || ModalStep::new(modes, &c, &unknowns, Par::rayon(0)).unwrap());
+        let whole = timed("GlobalStep::build (modal, whole set-up)", || GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap());
+        println!("  {:?}", whole.stats);
+        drop(whole);
+        let chosen = timed("GlobalStep::build (the cost model's choice)", || GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, None).unwrap());
+        println!("  {:?}", chosen.stats);
+        drop(chosen);
+        let mut rng = Rng(7);
+        let x0: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect();
+        for r in 0..3 {
+            let mut x = x0.clone();
+            timed(&format!("solve {r}"), || step.solve(&unknowns, &mut x));
+        }
+        let nn = size.nodes;
+        let phi = faer::Mat::<f64>::from_fn(nn, nn, |i, j| ((i * 3 + j * 5) % 11) as f64);
+        let r = faer::Mat::<f64>::from_fn(3 * c.slots, nn, |i, j| ((i * 7 + j) % 13) as f64);
+        let mut y = faer::Mat::<f64>::zeros(3 * c.slots, nn);
+        for par in [Par::rayon(0), Par::Seq] {
+            timed(&format!("GEMM {}x{nn}x{nn} {par:?}", 3 * c.slots), || faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.as_ref(), 1.0, par));
+            timed(&format!("GEMM^T {}x{nn}x{nn} {par:?}", 3 * c.slots), || faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.transpose(), 1.0, par));
         }
     }
 }

@@ -221,36 +221,41 @@ impl ModalStep {
         if count == 0 {
             return Ok(());
         }
-        // G[p, q] = Σ_i Φ[j_p, i] Φ[j_q, i] B_i⁻¹[s_p, s_q], one slot pair at a time.
+        // G[p, q] = Σ_i Φ[j_p, i] Φ[j_q, i] B_i⁻¹[s_p, s_q], one slot pair at a time: the rows
+        // of Φ at the held entries of slot s, column i scaled by B_i⁻¹[s, t], times those of
+        // slot t. The pairs go to the threads whole, each product sequential: every block of G
+        // is one sequential product, the same bytes on any thread count.
         let mut by_slot: Vec<Vec<(usize, usize)>> = vec![Vec::new(); slots];
         for (p, &(s, r)) in self.held.iter().enumerate() {
             by_slot[s].push((p, r));
         }
-        let mut g = Mat::<f64>::zeros(count, count);
         let phi_rows = |list: &[(usize, usize)]| Mat::from_fn(list.len(), n, |k, i| self.phi_held[(list[k].1, i)]);
         let per_slot: Vec<Mat<f64>> = by_slot.iter().map(|l| phi_rows(l)).collect();
-        let mut block = Mat::<f64>::zeros(0, 0);
-        for s in 0..slots {
-            if by_slot[s].is_empty() {
-                continue;
-            }
-            for t in 0..=s {
-                if by_slot[t].is_empty() {
-                    continue;
-                }
+        let pairs: Vec<(usize, usize)> = (0..slots).flat_map(|s| (0..=s).map(move |t| (s, t))).filter(|&(s, t)| !by_slot[s].is_empty() && !by_slot[t].is_empty()).collect();
+        let ss = slots * slots;
+        let blocks: Vec<Mat<f64>> = pairs
+            .par_iter()
+            .map(|&(s, t)| {
                 let at = s * slots + t;
-                let scaled = Mat::from_fn(by_slot[s].len(), n, |k, i| per_slot[s][(k, i)] * self.inverse[i * slots * slots + at]);
-                block.resize_with(by_slot[s].len(), by_slot[t].len(), |_, _| 0.0);
-                matmul(block.as_mut(), Accum::Replace, scaled.as_ref(), per_slot[t].transpose(), 1.0, self.par);
-                for (k, &(p, _)) in by_slot[s].iter().enumerate() {
-                    for (m, &(q, _)) in by_slot[t].iter().enumerate() {
-                        if q <= p {
-                            g[(p, q)] = block[(k, m)];
-                        }
+                let weight: Vec<f64> = (0..n).map(|i| self.inverse[i * ss + at]).collect();
+                let rows = &per_slot[s];
+                let scaled = Mat::from_fn(rows.nrows(), n, |k, i| rows[(k, i)] * weight[i]);
+                let mut block = Mat::<f64>::zeros(by_slot[s].len(), by_slot[t].len());
+                matmul(block.as_mut(), Accum::Replace, scaled.as_ref(), per_slot[t].transpose(), 1.0, Par::Seq);
+                block
+            })
+            .collect();
+        let mut g = Mat::<f64>::zeros(count, count);
+        for (&(s, t), block) in pairs.iter().zip(&blocks) {
+            for (k, &(p, _)) in by_slot[s].iter().enumerate() {
+                for (m, &(q, _)) in by_slot[t].iter().enumerate() {
+                    if q <= p {
+                        g[(p, q)] = block[(k, m)];
                     }
                 }
             }
         }
+        drop(blocks);
         let mut buffer = MemBuffer::new(faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(count, self.par, Default::default()));
         faer::linalg::cholesky::llt::factor::cholesky_in_place(g.as_mut(), LltRegularization::default(), self.par, MemStack::new(&mut buffer), Default::default())
             .map_err(|_| ModalFailure::NotPositiveDefinite)?;
