@@ -1,6 +1,6 @@
 //! Not API: the solver's parts, for the benchmark (`benches/solver.rs`), which times them one
 //! by one, the writers, whose byte counts `benches/cache.rs` compares, and the natural
-//! vibration periods for tests that compare against them. Nothing here is stable; library users
+//! vibration periods and static poses for tests that compare against them. Nothing here is stable; library users
 //! call [`crate::stages`].
 
 pub use crate::export::fullframe::FullFrame;
@@ -9,6 +9,7 @@ pub use crate::export::usda::{self, UsdSettings};
 pub use crate::export::usdc;
 pub use crate::physics::elastic::{Elastic, Material as ElasticMaterial};
 pub use crate::physics::vibration::{natural_vibration, RestStiffness, Vibration};
+pub use crate::physics::equilibrium::{loaded_equilibrium, EquilibriumInfo};
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};
 pub use crate::spacetime::objective::{Evaluation, Objective, Projections};
 pub use crate::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Log, Settings, Solved, DEFAULT_TOLERANCE, WINDOW};

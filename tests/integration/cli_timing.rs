@@ -2,12 +2,12 @@
 //! cyclic swing finds its natural period, and a ballistic jump with `keep_duration` finds the
 //! parabola's key times. The exported files carry the optimized times.
 
-use blendsim::internals::{natural_vibration, Elastic, ElasticMaterial, RestStiffness};
+use blendsim::internals::{loaded_equilibrium, natural_vibration, Elastic, ElasticMaterial, RestStiffness};
 use blendsim::mesh::{Point, TetMesh};
 use blendsim::stage::Solution;
 use serde_json::Value;
 
-use crate::common::bar::{bar, BarSettings};
+use crate::common::bar::{bar_body, bar_released, BarSettings};
 use crate::cli_contacts::{bake_and_check, FALLING, FLOOR};
 use crate::cli_physics::solve_scene;
 use crate::common::cli::{energies, key_times, TempDir};
@@ -49,8 +49,10 @@ fn swing_period(tip: &[Point], fps: f64) -> f64 {
     (ups[ups.len() - 1] - ups[0]) / (ups.len() - 1) as f64 / fps
 }
 
-/// The bar of the period tests: its tet mesh and material, its first bending period
-/// in y by the tangent eigenvalue and by rapier's simulation, and the bar bent along that mode.
+/// The bar of the period tests: its tet mesh and material, its first bending period in y by
+/// the tangent eigenvalue, the bar bent in y to a tip displacement of `amplitude` times its
+/// length as a static pose it can hold, and the period of rapier's simulation of it released
+/// from that pose.
 struct PeriodBar {
     mesh: TetMesh,
     material: ElasticMaterial,
@@ -59,78 +61,96 @@ struct PeriodBar {
     bent: Vec<Point>,
 }
 
-fn period_bar() -> PeriodBar {
-    // The rapier bar (same tet mesh, same material), swinging freely from a small sag. Its
-    // section is twice as deep as high, so the first mode is a clean bending in y (on a square
-    // section the tets' diagonals split the y/z pair into two diagonal bendings 7% apart, and
-    // gravity excites both).
-    let settings = BarSettings { size: [1.2, 0.16, 0.32], divisions: [30, 4, 8], gravity: 0.5, ..BarSettings::default() };
-    let simulated = bar(&settings);
-    let rapier = swing_period(&simulated.tip, settings.fps);
+fn period_bar(amplitude: f64) -> PeriodBar {
+    // Its section is twice as deep as high, so the first mode is a clean bending in y (on a
+    // square section the tets' diagonals split the y/z pair into two diagonal bendings 7%
+    // apart). No gravity: the bar swings about its straight rest shape.
+    let settings = BarSettings { size: [1.2, 0.16, 0.32], divisions: [30, 4, 8], gravity: 0.0, ..BarSettings::default() };
+    let mesh = bar_body(&settings);
     // Our elastic model of it: the clamped end held; the first bending periods by the tangent
-    // stiffness at rest (a square bar bends alike in y and z: a pair).
-    let mesh = simulated.body.clone();
+    // stiffness at rest (one in y, one in z).
     let material = lame_to_pd(&settings);
     let elastic = Elastic::new(&mesh, &material).unwrap();
     let clamped: Vec<bool> = mesh.positions.iter().map(|p| p[0] == 0.0).collect();
     let modes = natural_vibration(&elastic, &clamped, RestStiffness::Tangent, 2).unwrap();
-    // The bending in y is the one gravity excites in rapier's swing.
     let tip: Vec<usize> = (0..mesh.positions.len()).filter(|&a| mesh.positions[a][0] == settings.size[0]).collect();
     let tip_mean = |shape: &[Point], d: usize| tip.iter().map(|&a| shape[a][d]).sum::<f64>() / tip.len() as f64;
     let y_share = |m: usize| tip_mean(&modes.shapes[m], 1).abs() / (tip_mean(&modes.shapes[m], 1).abs() + tip_mean(&modes.shapes[m], 2).abs());
     let mode = if y_share(0) > y_share(1) { 0 } else { 1 };
     assert!(y_share(mode) > 0.95, "mode {mode} is not a bending in y: {}", y_share(mode));
     let eigen = modes.periods()[mode];
+    // The bent key: the static pose under the mode's inertial load λ M φ (whose linear response
+    // is φ itself), scaled so that the tip moves up by the amplitude. Unlike φ scaled up (which
+    // moves points across the bar only, stretching it), the pose's stretch along the bar is the
+    // bar's own. The load is rescaled once by the measured tip (the response is linear to
+    // O(amplitude)).
+    let (lambda, shape) = (modes.eigenvalues[mode], &modes.shapes[mode]);
+    let target = amplitude * settings.size[0];
+    let mut bent = mesh.positions.clone();
+    let mut scale = target / tip_mean(shape, 1);
+    for _ in 0..2 {
+        let load: Vec<Point> = shape.iter().zip(&elastic.mass).map(|(u, m)| u.map(|c| scale * lambda * m * c)).collect();
+        let info = loaded_equilibrium(&elastic, &clamped, &load, &mut bent, 1e-9 * target, 200).unwrap();
+        let residual = elastic.energy_gradient(&bent).iter().zip(&load).zip(&clamped).filter(|(_, &c)| !c).map(|((g, f), _)| (0..3).map(|d| (g[d] - f[d]).powi(2)).sum::<f64>()).sum::<f64>().sqrt();
+        let force = load.iter().map(|f| f.iter().map(|c| c * c).sum::<f64>()).sum::<f64>().sqrt();
+        println!("bent key: {} Newton steps, last move {:.1e} m, |∇E - f| / |f| = {:.1e}, tip {:.6e} m", info.iterations, info.last_move, residual / force, tip_mean(&bent, 1) - settings.size[1] / 2.0);
+        scale *= target / (tip_mean(&bent, 1) - tip_mean(&mesh.positions, 1));
+    }
+    let rest_tip = tip_mean(&mesh.positions, 1);
+    // rapier released from the same pose: the same mesh, material and amplitude.
+    let simulated = bar_released(&settings, &bent);
+    let rapier = swing_period(&simulated.tip, settings.fps);
+    let swing = simulated.tip.iter().map(|p| p[1] - rest_tip).fold(0.0f64, |m, y| m.max(y.abs()));
     println!(
-        "first bending period in y: tangent eigenvalue {eigen:.4} s (in z {:.4} s), rapier {rapier:.4} s, Euler-Bernoulli {:.4} s",
+        "first bending period in y: tangent eigenvalue {eigen:.4} s (in z {:.4} s), rapier released from the bent key (tip {:.3e} of the length, largest tip swing {:.3e}) {rapier:.4} s, Euler-Bernoulli {:.4} s",
         modes.periods()[1 - mode],
+        (tip_mean(&bent, 1) - rest_tip) / settings.size[0],
+        swing / settings.size[0],
         1.0 / settings.euler_bernoulli_frequency()
     );
-    assert!((rapier / eigen - 1.0).abs() < 0.05, "rapier {rapier} vs eigen {eigen}");
-    // The y bending scaled to a tip amplitude of 1e-5 of the length: small enough to be
-    // linear (see the_cyclic_bar_finds_its_first_bending_period).
-    let shape = &modes.shapes[mode];
-    let tip_y = |shape: &[Point]| tip_mean(shape, 1);
-    let amplitude = 1e-5 * settings.size[0] / tip_y(shape);
-    let bent: Vec<Point> = mesh.positions.iter().zip(shape).map(|(p, u)| std::array::from_fn(|d| p[d] + amplitude * u[d])).collect();
     PeriodBar { mesh, material, eigen, rapier, bent }
 }
 
+/// The cyclic bar's amplitude: its tip moves by this fraction of its length (0.12 mm).
+const AMPLITUDE: f64 = 1e-4;
+
 #[test]
 fn the_bar_period_by_the_tangent_eigenvalue_matches_rapier() {
-    let bar = period_bar();
+    let bar = period_bar(AMPLITUDE);
     assert!((bar.rapier / bar.eigen - 1.0).abs() < 0.05, "rapier {} vs eigen {}", bar.rapier, bar.eigen);
 }
 
-/// The loop's middle key is the bar bent along its first bending mode at a tip amplitude of
-/// 1e-5 of its length, held; the straight key is free. At that amplitude the body is linear
-/// and the best loop at each duration is the one-mode loop (measured: the smallest W at 0.7,
-/// 0.9, 1.0, 1.1, 1.4 periods is 0.911, 0.126, 0.021, 0.072, 0.379 of the first guess's, the
-/// 1-DOF two-interval cyclic Hermite loop's 0.911, 0.125, 0.020, 0.071, 0.379), whose minimum
-/// is at the period. At 1e-3 of the length it is not: a linear mode shape moves every point
-/// across the bar only, so the bent bar is also stretched along it by about half the squared
-/// rotation (a real swing shortens it instead), and the held key's axial forces are 3.8 times
-/// its bending forces (measured, growing in proportion to the amplitude). Those forces cannot
-/// be relaxed at a held key, their W grows with the time spent near it, and the best W was 67%
-/// of the first guess's at the period and shortest at the shortest loops (the stall reported
-/// before was that minimum; the exact gradient agrees with finite differences on this bar).
-/// The tangent model Hessian (a Newton model about the rest shape) is the preconditioner.
-#[test]
-fn the_cyclic_bar_finds_its_first_bending_period() {
-    let PeriodBar { mesh, material, eigen, rapier, bent } = period_bar();
-    let meshes = [("rest.mesh", medit(&mesh, &mesh.positions)), ("bent.mesh", medit(&mesh, &bent))];
+/// One solve of the cyclic bar's loop started at `duration`: the loop's duration and the solution.
+fn cyclic_bar(bar: &PeriodBar, dir: &TempDir, duration: f64, model_hessian: &str, quarters: bool) -> (f64, Solution) {
+    let meshes = [("rest.mesh", medit(&bar.mesh, &bar.mesh.positions)), ("bent.mesh", medit(&bar.mesh, &bar.bent))];
     // A loop: the straight bar (free but for the clamp), the bent bar half a loop later (held),
     // the loop's end. The clamp is a support: position and velocity held at every key.
-    let solve = |dir: &TempDir, duration: f64| -> (f64, Solution) {
-        let scene = format!(
-            r#"
+    let clamp = r#"{ axis = "x", max = 1e-9 }"#;
+    let keys = if quarters {
+        format!(
+            r#"meshes = ["rest.mesh", "rest.mesh", "bent.mesh", "rest.mesh", "rest.mesh"]
+times = [0.0, {}, {}, {}, {duration}]
+fixed = [{clamp}, {clamp}, "all", {clamp}, {clamp}]
+fixed_velocity = [{clamp}, {clamp}, {clamp}, {clamp}, {clamp}]"#,
+            0.25 * duration,
+            0.5 * duration,
+            0.75 * duration
+        )
+    } else {
+        format!(
+            r#"meshes = ["rest.mesh", "bent.mesh", "rest.mesh"]
+times = [0.0, {}, {duration}]
+fixed = [{clamp}, "all", {clamp}]
+fixed_velocity = [{clamp}, {clamp}, {clamp}]"#,
+            0.5 * duration
+        )
+    };
+    let scene = format!(
+        r#"
 name = "bar"
 [keyframes]
-meshes = ["rest.mesh", "bent.mesh", "rest.mesh"]
-times = [0.0, {half}, {duration}]
+{keys}
 cyclic = true
-fixed = [{{ axis = "x", max = 1e-9 }}, "all", {{ axis = "x", max = 1e-9 }}]
-fixed_velocity = [{{ axis = "x", max = 1e-9 }}, {{ axis = "x", max = 1e-9 }}, {{ axis = "x", max = 1e-9 }}]
 [material]
 stiffness = {ks}
 volume = {kv}
@@ -138,41 +158,78 @@ density = {rho}
 damping = 0.0
 [solver]
 optimize_timing = true
-model_hessian = "tangent"
+model_hessian = "{model_hessian}"
 "#,
-            half = 0.5 * duration,
-            ks = material.stiffness,
-            kv = material.volume,
-            rho = material.density
-        );
-        let solution = solve_scene(dir, &meshes, &scene);
-        (*solution.trajectory.times.last().unwrap(), solution)
-    };
+        ks = bar.material.stiffness,
+        kv = bar.material.volume,
+        rho = bar.material.density
+    );
+    let solution = solve_scene(dir, &meshes, &scene);
+    (*solution.trajectory.times.last().unwrap(), solution)
+}
+
+/// Both starts (0.7 and 1.4 eigen periods) of the cyclic bar's loop end at the same duration,
+/// within 5% of the eigen period and of rapier's; prints the comparison table.
+fn both_starts_find_the_period(bar: &PeriodBar, quarters: bool) {
+    println!("| start (s) | period (s) | vs eigen {:.4} s | vs rapier {:.4} s | iterations | moving the times | solver (s) |", bar.eigen, bar.rapier);
     let mut found = Vec::new();
-    for start in [0.7 * eigen, 1.4 * eigen] {
-        let dir = TempDir::new(&format!("timing-bar-{}", (start * 1000.0).round()));
-        let (duration, solution) = solve(&dir, start);
+    for start in [0.7 * bar.eigen, 1.4 * bar.eigen] {
+        let dir = TempDir::new(&format!("timing-bar-{}-{}", if quarters { 5 } else { 3 }, (start * 1000.0).round()));
+        let (duration, solution) = cyclic_bar(bar, &dir, start, "tangent", quarters);
         let log = &solution.log;
         println!(
-            "started at {start:.4} s: the loop takes {duration:.4} s (times {:?}), W {:.4e} -> {:.4e}, {} iterations ({} moving the times, {} refactorizations) in {:.2} s: {}",
-            solution.trajectory.times,
-            log.energy[0],
-            log.energy.last().unwrap(),
+            "| {start:.4} | {duration:.4} | {:+.2}% | {:+.2}% | {} | {} | {:.2} |",
+            100.0 * (duration / bar.eigen - 1.0),
+            100.0 * (duration / bar.rapier - 1.0),
             log.iterations,
             log.timing_iterations,
-            log.refactorizations,
-            log.seconds,
-            log.stop_reason
+            log.seconds
         );
+        println!("times {:?}, W {:.4e} -> {:.4e}, {} refactorizations: {}", solution.trajectory.times, log.energy[0], log.energy.last().unwrap(), log.refactorizations, log.stop_reason);
         assert!(log.converged, "{}", log.stop_reason);
         assert!(log.energy.windows(2).all(|w| w[1] <= w[0]), "W never increases");
-        assert_eq!(log.input_times, vec![0.0, 0.5 * start, start]);
+        let keys = if quarters { 4 } else { 2 };
+        assert_eq!(log.input_times, (0..=keys).map(|k| start * k as f64 / keys as f64).collect::<Vec<f64>>());
         assert_eq!(log.times, solution.trajectory.times);
-        assert!((duration / eigen - 1.0).abs() < 0.05, "from {start}: {duration} vs the eigen period {eigen}");
-        assert!((duration / rapier - 1.0).abs() < 0.05, "from {start}: {duration} vs rapier's {rapier}");
+        assert!((duration / bar.eigen - 1.0).abs() < 0.05, "from {start}: {duration} vs the eigen period {}", bar.eigen);
+        assert!((duration / bar.rapier - 1.0).abs() < 0.05, "from {start}: {duration} vs rapier's {}", bar.rapier);
         found.push(duration);
     }
     assert!((found[0] / found[1] - 1.0).abs() < 0.01, "the two starts end at {found:?}");
+}
+
+/// The loop: the straight bar (free but for the clamp), the bar bent to a tip displacement of
+/// 1e-4 of its length as the static pose under its first mode's inertial load (held) half a
+/// loop later, the loop's end. rapier released from that pose swings with the period (0.4982 s)
+/// and so does the loop: 0.4951 s from both starts (measured, 18-22 iterations). The key is a
+/// pose the bar can hold: its stretch along the bar is its own (the linear mode scaled up
+/// stretched the bar by half its squared rotation, and at 1e-3 of the length those held axial
+/// forces made the loops shorter than 0.7 periods best). At 1e-3 of the length the equilibrium
+/// key alone is not enough (measured: 0.3722 s from both starts, 25% short; 0.392 s with the
+/// projective model Hessian): the swing shortens the bar at twice its frequency, a motion two
+/// cubic intervals per loop cannot follow, and the bar's stiff axial response to that misfit
+/// costs W in proportion to the loop's duration; free keys at the quarters fix it (see
+/// [`the_cyclic_bar_at_a_visible_amplitude_finds_its_period`]). The tangent model Hessian (a
+/// Newton model about the rest shape) is the preconditioner, and it is needed: with the
+/// default projective one (`L`, which resists the rotations bending is made of) W falls so
+/// slowly that the stopping rule ends both solves at 0.4215 s and 0.4217 s, 15% short, with W
+/// still 0.85 and 0.58 of the first guess's (measured; the tangent one ends at 0.12 and 0.08).
+#[test]
+fn the_cyclic_bar_finds_its_first_bending_period() {
+    both_starts_find_the_period(&period_bar(AMPLITUDE), false);
+}
+
+/// The loop at a visible amplitude: the tip moves by 1e-3 of the length (1.2 mm), the bent key
+/// as above, and free keys (the straight bar to start from) at a quarter and three quarters of
+/// the loop, so that the bar's shortening at twice the swing's frequency has two cubic
+/// intervals per cycle. Measured (load 11): 0.4981 s and 0.4988 s from the two starts (+0.05%
+/// and +0.20% of the eigen period, -0.06% and +0.10% of rapier's at the same amplitude),
+/// 41 and 66 iterations, but 150-185 s of solver each, 117 CPU seconds in all: too slow for
+/// the suite on this mesh (5760 tets). Run by hand with `--ignored`.
+#[test]
+#[ignore = "about 2 CPU minutes: run with --ignored"]
+fn the_cyclic_bar_at_a_visible_amplitude_finds_its_period() {
+    both_starts_find_the_period(&period_bar(1e-3), true);
 }
 
 #[test]

@@ -7,8 +7,8 @@
 //! share their vertex order. Frames are generated once per parameter set and kept under
 //! Cargo's target scratch folder, so the suite does not re-simulate in every test.
 //!
-//! Used by the cache tests and the cache benchmark; the timing work uses the tip trajectory
-//! and [`BarSettings::euler_bernoulli_frequency`] for a period test.
+//! Used by the cache tests and the cache benchmark; the timing work releases the bar from a
+//! bent pose ([`bar_released`]) and measures its period from the tip trajectory.
 #![allow(dead_code)]
 
 use std::io::{Read, Write};
@@ -104,7 +104,26 @@ pub struct BarCache {
 
 /// The bar with `settings`, simulated once per parameter set and then read from disk.
 pub fn bar(settings: &BarSettings) -> BarCache {
-    let key = format!("v{SIMULATOR_VERSION} {settings:?}");
+    simulated(settings, None)
+}
+
+/// The bar's tet mesh at rest (the nodes [`bar_released`] takes a start pose of).
+pub fn bar_body(settings: &BarSettings) -> TetMesh {
+    geometry(settings).0
+}
+
+/// The bar with `settings` released at rest from the node positions `start` (a bent pose of
+/// [`bar_body`]'s nodes; the clamped ones where they are at rest) instead of straight.
+pub fn bar_released(settings: &BarSettings, start: &[Point]) -> BarCache {
+    simulated(settings, Some(start))
+}
+
+fn simulated(settings: &BarSettings, start: Option<&[Point]>) -> BarCache {
+    let mut key = format!("v{SIMULATOR_VERSION} {settings:?}");
+    if let Some(start) = start {
+        let bytes: Vec<u8> = start.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+        key += &format!(" released from {:016x}", fnv1a(&bytes));
+    }
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("simulated-caches");
     let name = format!("bar-{:016x}.bin", fnv1a(key.as_bytes()));
     let path = dir.join(&name);
@@ -112,7 +131,7 @@ pub fn bar(settings: &BarSettings) -> BarCache {
     if let Some((frames, tip)) = std::fs::read(&path).ok().and_then(|bytes| decode(&bytes, &key, surface.positions.len())) {
         return BarCache { settings: settings.clone(), body, surface, frames, tip };
     }
-    let (frames, tip) = simulate(settings, &body, &node_of_vertex);
+    let (frames, tip) = simulate(settings, &body, &node_of_vertex, start);
     std::fs::create_dir_all(&dir).unwrap();
     // Write then rename: concurrent test binaries never read a half-written file. Each call
     // writes its own temporary file: two tests of one binary may simulate the same bar at
@@ -143,7 +162,7 @@ fn geometry(s: &BarSettings) -> (TetMesh, TriMesh, Vec<usize>) {
     (body, surface, node_of_vertex)
 }
 
-fn simulate(s: &BarSettings, body: &TetMesh, node_of_vertex: &[usize]) -> (MemoryFrames, Vec<Point>) {
+fn simulate(s: &BarSettings, body: &TetMesh, node_of_vertex: &[usize], start: Option<&[Point]>) -> (MemoryFrames, Vec<Point>) {
     use rapier3d::prelude::*;
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(0.0, -s.gravity as Real, 0.0);
@@ -176,6 +195,12 @@ fn simulate(s: &BarSettings, body: &TetMesh, node_of_vertex: &[usize]) -> (Memor
         .no_surface_collider()
         .can_sleep(false);
     let handle = world.insert_soft_body(builder);
+    if let Some(start) = start {
+        let sb = &mut world.soft_bodies[handle];
+        for (n, p) in start.iter().enumerate() {
+            sb.set_particle_position(n, Vector::new(p[0] as Real, p[1] as Real, p[2] as Real));
+        }
+    }
     let tip_nodes: Vec<usize> = (0..body.positions.len()).filter(|&n| body.positions[n][0] == s.size[0]).collect();
     let (mut times, mut frames, mut tip) = (Vec::new(), Vec::new(), Vec::new());
     for f in 0..s.frame_count() {
