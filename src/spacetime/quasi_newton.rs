@@ -53,6 +53,7 @@ impl Lbfgs {
     }
 
     /// The factor `H₀` is multiplied by in [`Lbfgs::direction`].
+    #[cfg(test)]
     pub fn h0_scale(&self) -> f64 {
         self.h0_scale
     }
