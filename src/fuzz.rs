@@ -10,7 +10,7 @@
 //! Allocation is measured by the test binary's global allocator (`crate::testing::alloc`):
 //! the peak of live bytes on the parsing thread during one parse.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
@@ -22,7 +22,10 @@ use crate::testing::alloc;
 
 /// Cases per property unless `PROPTEST_CASES` says otherwise.
 const DEFAULT_CASES: u32 = 10_000;
-/// The slowest a single parse of a fuzz input (at most a few kilobytes) may be.
+/// The most CPU time a single parse of a fuzz input (at most a few kilobytes) may take: the
+/// parsing thread's own time ([`thread_cpu_seconds`]), not the wall clock, so the bound
+/// catches a slow parse (quadratic work) without failing on a loaded machine that merely
+/// leaves the thread waiting for a core.
 const MAX_SECONDS: f64 = 1.0;
 /// Peak allocation allowed for a parse: this many bytes per input byte, plus [`ALLOC_SLACK`].
 const ALLOC_PER_BYTE: usize = 64;
@@ -54,6 +57,15 @@ where
     );
 }
 
+/// CPU seconds the calling thread has used (`CLOCK_THREAD_CPUTIME_ID`).
+fn thread_cpu_seconds() -> f64 {
+    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec it is given and nothing else.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0;
+    assert!(ok, "clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
 thread_local! {
     /// Parses accepted and parses run by the current property (so a run shows it reached both
     /// the error paths and the invariants of accepted inputs).
@@ -64,10 +76,10 @@ thread_local! {
 
 /// Parse `text` with `parse`, checking time, allocation and the shape of an error.
 fn bounded<T>(text: &str, parse: impl FnOnce(&str) -> Result<T>) -> Result<Result<T>, TestCaseError> {
-    let started = Instant::now();
+    let started = thread_cpu_seconds();
     let (result, peak) = alloc::peak(|| parse(text));
-    let elapsed = started.elapsed();
-    prop_assert!(elapsed < Duration::from_secs_f64(MAX_SECONDS), "a parse of {} bytes took {elapsed:?}", text.len());
+    let cpu = thread_cpu_seconds() - started;
+    prop_assert!(cpu < MAX_SECONDS, "a parse of {} bytes took {cpu:.3} s of CPU", text.len());
     let bound = ALLOC_PER_BYTE * text.len() + ALLOC_SLACK;
     prop_assert!(peak <= bound, "a parse of {} bytes allocated {peak} bytes at once (bound {bound})", text.len());
     if text.len() >= 1024 {

@@ -156,6 +156,9 @@ impl FolderLock {
         let path = parent.join(format!(".{name}.blendsim-lock"));
         let mut announced = false;
         for _ in 0..1000 {
+            // A signal between creating the lock file and registering it would leave the file
+            // behind: the cleanup waits for this section (but not for a wait on another run).
+            let mut critical = Some(interrupt::critical());
             let file = match OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&path) {
                 Ok(f) => f,
                 // A run that failed removed the parent it had created: make it again.
@@ -168,6 +171,8 @@ impl FolderLock {
             match file.try_lock() {
                 Ok(()) => {}
                 Err(std::fs::TryLockError::WouldBlock) => {
+                    // The file is the holder's (it removes it): waiting stays interruptible.
+                    critical = None;
                     let holder = std::fs::read_to_string(&path).ok().and_then(|s| s.trim().parse::<u32>().ok());
                     let who = holder.map_or("another blendsim".to_string(), |p| format!("another blendsim (pid {p})"));
                     if wait == LockWait::Fail {
@@ -190,6 +195,7 @@ impl FolderLock {
                 continue;
             }
             let token = interrupt::register_file(path.clone());
+            drop(critical);
             let mut f = &file;
             let _ = f.set_len(0).and_then(|_| writeln!(f, "{}", std::process::id()));
             return Ok(FolderLock { path, file, _token: token });
@@ -288,6 +294,8 @@ impl Staging {
         let mut builder = std::fs::DirBuilder::new();
         loop {
             let dir = staging.parent.join(format!(".{}.blendsim-staging-{}", staging.name, unique_suffix()));
+            // Created and registered with the signal cleanup waiting, so it never misses it.
+            let _critical = interrupt::critical();
             match builder.create(&dir) {
                 Ok(()) => {
                     staging.dir_token = Some(interrupt::register_tree(dir.clone()));
@@ -307,6 +315,7 @@ impl Staging {
     fn create_parents(&mut self) -> Result<()> {
         let missing: Vec<PathBuf> = self.parent.ancestors().take_while(|p| !p.is_dir()).map(Path::to_path_buf).collect();
         for dir in missing.into_iter().rev() {
+            let _critical = interrupt::critical();
             match std::fs::create_dir(&dir) {
                 Ok(()) => {
                     let token = interrupt::register_empty_dir(dir.clone());

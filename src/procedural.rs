@@ -1,11 +1,11 @@
-//! Procedural shapes and deformations: the demo's prism, spheres for benchmarks, and the
-//! scene file's `twist` deformation.
+//! Procedural shapes and deformations: the demo's prism, Kuhn tet grids, spheres for
+//! benchmarks, and the scene file's `twist` deformation.
 
 use std::collections::HashMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::mesh::{norm, scale, Axis, Bounds, Point, TriMesh};
+use crate::mesh::{norm, scale, Axis, Bounds, Point, TetMesh, TriMesh};
 
 /// A procedural twist of a keyframe mesh about an axis through its bounding-box centre: the
 /// rotation angle grows linearly from 0 at the low end of the box to `degrees` at the high end,
@@ -25,6 +25,43 @@ pub struct Twist {
 
 fn one() -> f64 {
     1.0
+}
+
+/// A box [0, size] split into `divisions` cells of 6 tets each: the Kuhn triangulation (the six
+/// monotone paths from corner 000 to 111 of every cell, so shared faces match), positive. Node
+/// `(i, j, k)` of the grid is `(i * (ny + 1) + j) * (nz + 1) + k`. A conforming tet body with
+/// no TetGen run, the same on every machine (the cantilever tests, the simulated test caches).
+pub fn box_tets(size: [f64; 3], divisions: [usize; 3]) -> TetMesh {
+    let [nx, ny, nz] = divisions;
+    let node = |i: usize, j: usize, k: usize| ((i * (ny + 1) + j) * (nz + 1) + k) as u32;
+    let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
+    for i in 0..=nx {
+        for j in 0..=ny {
+            for k in 0..=nz {
+                let c = [i, j, k];
+                positions.push(std::array::from_fn(|d| size[d] * (c[d] as f64 / divisions[d] as f64)));
+            }
+        }
+    }
+    let mut tets = Vec::with_capacity(6 * nx * ny * nz);
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+                    let mut c = [i, j, k];
+                    let mut tet = [node(i, j, k); 4];
+                    for (step, &axis) in order.iter().enumerate() {
+                        c[axis] += 1;
+                        tet[step + 1] = node(c[0], c[1], c[2]);
+                    }
+                    tets.push(tet);
+                }
+            }
+        }
+    }
+    let mut m = TetMesh { positions, tets };
+    m.orient_positive();
+    m
 }
 
 /// A closed box surface `[0,size]` with `divisions` segments per axis, outward wound.

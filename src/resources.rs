@@ -34,8 +34,8 @@ pub fn set_max_memory(bytes: u64) {
 static MAX_TIME: std::sync::OnceLock<(std::time::Instant, f64)> = std::sync::OnceLock::new();
 
 /// Route the CLI's `--max-time` (seconds, counted from this call) here: from then on TetGen
-/// is bounded by what is left of it ([`time_left`]) and the solve, the cache fit and the
-/// mass-spring blend check it ([`check_time`], [`check_predicted_time`]). Set once per process.
+/// is bounded by what is left of it ([`time_left`]) and the solve, the cache fit, its key
+/// selection and error measure, and the mass-spring blend check it ([`check_time`], [`check_predicted_time`]). Set once per process.
 pub fn set_max_time(seconds: f64) {
     let _ = MAX_TIME.set((std::time::Instant::now(), seconds));
 }

@@ -360,6 +360,15 @@ pub trait StageData: Serialize + DeserializeOwned {
     fn has_textures(&self) -> bool {
         false
     }
+    /// The cache record the data carries (`[cache]` scenes), whose paths (the cache, its rest
+    /// mesh) the file holds relative to its own folder like the textures.
+    fn cache(&self) -> Option<&CacheRecord> {
+        None
+    }
+    /// See [`StageData::cache`].
+    fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
+        None
+    }
 }
 
 impl StageData for Keyframes {
@@ -374,6 +383,12 @@ impl StageData for Keyframes {
     }
     fn has_textures(&self) -> bool {
         matches!(&self.rest, Shape::Surface(m) if textured(m)) || self.display.as_ref().is_some_and(textured)
+    }
+    fn cache(&self) -> Option<&CacheRecord> {
+        self.cache.as_ref()
+    }
+    fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
+        self.cache.as_mut()
     }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
@@ -408,6 +423,12 @@ impl StageData for Body {
     fn has_textures(&self) -> bool {
         textured(&self.surface)
     }
+    fn cache(&self) -> Option<&CacheRecord> {
+        self.cache.as_ref()
+    }
+    fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
+        self.cache.as_mut()
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
         rerun.scene(&self.scene)?;
@@ -430,6 +451,12 @@ impl StageData for Solution {
     fn has_textures(&self) -> bool {
         textured(&self.body.surface)
     }
+    fn cache(&self) -> Option<&CacheRecord> {
+        self.body.cache.as_ref()
+    }
+    fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
+        self.body.cache.as_mut()
+    }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.body.scene));
         rerun.scene(&self.body.scene)?;
@@ -451,6 +478,12 @@ impl StageData for Animation {
     }
     fn has_textures(&self) -> bool {
         textured(&self.mesh)
+    }
+    fn cache(&self) -> Option<&CacheRecord> {
+        self.cache.as_ref()
+    }
+    fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
+        self.cache.as_mut()
     }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
@@ -668,7 +701,8 @@ pub fn to_json<T: StageData>(value: &T) -> Vec<u8> {
     bytes
 }
 
-/// Write a stage file atomically. Texture paths are written relative to the file's folder.
+/// Write a stage file atomically. Texture and cache paths are written relative to the file's
+/// folder.
 pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
     let mut value = std::borrow::Cow::Borrowed(value);
     if value.has_textures() {
@@ -679,15 +713,26 @@ pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
             }
         }
     }
+    if value.cache().is_some() {
+        let folder = stage_folder(path)?;
+        for file in value.to_mut().cache_mut().into_iter().flat_map(cache_paths_mut) {
+            *file = relative_to(&folder, &resolved(Path::new(file.as_str()))).to_string_lossy().into_owned();
+        }
+    }
     crate::output::write_atomic(path, &to_json(value.as_ref()))
 }
 
 /// Read a stage file, checking that it holds the expected stage and that its data keeps the
 /// stage's invariants ([`StageData::validate`]). Relative texture paths are resolved against
-/// the file's folder.
+/// the file's folder; relative cache paths are joined to the folder as `path` names it (so a
+/// stage file in the working folder gives the path `import` had).
 pub fn read<T: StageData>(path: &Path) -> Result<T> {
     let bytes = crate::input::read_bytes(path, &format!("the {} file", T::STAGE))?;
     let mut value: T = from_json(&bytes, path)?;
+    let parent = path.parent().unwrap_or(Path::new(""));
+    for file in value.cache_mut().into_iter().flat_map(cache_paths_mut).filter(|f| Path::new(f.as_str()).is_relative()) {
+        *file = parent.join(file.as_str()).to_string_lossy().into_owned();
+    }
     let mut surfaces = value.surfaces_mut();
     if surfaces.iter_mut().any(|m| textures_mut(m).any(|t| Path::new(t.as_str()).is_relative())) {
         let folder = stage_folder(path)?;
@@ -699,6 +744,22 @@ pub fn read<T: StageData>(path: &Path) -> Result<T> {
         }
     }
     Ok(value)
+}
+
+/// The paths of a cache record: the cache (an OBJ sequence's pattern) and its topology mesh.
+fn cache_paths_mut(record: &mut CacheRecord) -> impl Iterator<Item = &mut String> {
+    std::iter::once(&mut record.path).chain(record.options.rest.as_mut())
+}
+
+/// `path` absolute (against the working folder), its folder with symbolic links resolved as a
+/// stage folder's are ([`stage_folder`]); the file name is kept as it is (a sequence's pattern
+/// names no file), and so is a path whose folder does not exist.
+fn resolved(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    match (absolute.parent(), absolute.file_name()) {
+        (Some(folder), Some(name)) => folder.canonicalize().map_or(absolute.clone(), |f| f.join(name)),
+        _ => absolute,
+    }
 }
 
 /// Whether a surface's material groups name a texture.

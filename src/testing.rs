@@ -11,41 +11,10 @@ pub fn cube_mesh(n: usize) -> TetMesh {
     box_mesh([1.0; 3], [n; 3])
 }
 
-/// A box [0, size] split into `divisions` cells of 6 tets each: the Kuhn triangulation (the six
-/// monotone paths from corner 000 to 111 of every cell, so shared faces match), positive.
+/// A box [0, size] split into `divisions` cells of 6 tets each ([`crate::procedural::box_tets`]).
 pub fn box_mesh(size: [f64; 3], divisions: [usize; 3]) -> TetMesh {
-    let [nx, ny, nz] = divisions;
-    let node = |i: usize, j: usize, k: usize| ((i * (ny + 1) + j) * (nz + 1) + k) as u32;
-    let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
-    for i in 0..=nx {
-        for j in 0..=ny {
-            for k in 0..=nz {
-                let c = [i, j, k];
-                positions.push(std::array::from_fn(|d| size[d] * (c[d] as f64 / divisions[d] as f64)));
-            }
-        }
-    }
-    let mut tets = Vec::with_capacity(6 * nx * ny * nz);
-    for i in 0..nx {
-        for j in 0..ny {
-            for k in 0..nz {
-                for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
-                    let mut c = [i, j, k];
-                    let mut tet = [node(i, j, k); 4];
-                    for (step, &axis) in order.iter().enumerate() {
-                        c[axis] += 1;
-                        tet[step + 1] = node(c[0], c[1], c[2]);
-                    }
-                    tets.push(tet);
-                }
-            }
-        }
-    }
-    let mut m = TetMesh { positions, tets };
-    m.orient_positive();
-    m
+    crate::procedural::box_tets(size, divisions)
 }
-
 
 /// A small deterministic generator of test data (xorshift).
 pub struct Rng(pub u64);

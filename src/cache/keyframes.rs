@@ -137,7 +137,7 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
             "give one flag per cache vertex, or none",
         ));
     }
-    let mut source = Counting { inner: source, reads: 0 };
+    let mut source = super::Metered::new(source, |_, _| Ok(()));
     let diagonal = cache_diagonal(&mut source)?;
     let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
     let eps = settings.tolerance * scale;
@@ -536,28 +536,6 @@ fn splice(trajectory: &mut Trajectory, lo: usize, local: Trajectory) {
     trajectory.times.splice(range.clone(), local.times);
     trajectory.positions.splice(range.clone(), local.positions);
     trajectory.velocities.splice(range, local.velocities);
-}
-
-/// Counts the frames read through it.
-struct Counting<'a, S: ?Sized> {
-    inner: &'a mut S,
-    reads: usize,
-}
-
-impl<S: FrameSource + ?Sized> FrameSource for Counting<'_, S> {
-    fn vertex_count(&self) -> usize {
-        self.inner.vertex_count()
-    }
-    fn frame_count(&self) -> usize {
-        self.inner.frame_count()
-    }
-    fn time(&self, frame: usize) -> f64 {
-        self.inner.time(frame)
-    }
-    fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
-        self.reads += 1;
-        self.inner.read_frame(frame, out)
-    }
 }
 
 #[cfg(test)]

@@ -54,6 +54,41 @@ pub trait FrameSource {
     fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()>;
 }
 
+/// A frame source read through a hook: `before_read(frame, reads)` runs before every read
+/// (`reads`: the frames read through it so far) and can refuse it, and the reads are counted.
+/// The key selection's read statistics, the stages' `--max-time` check at every frame, and
+/// the tests' damaged caches.
+pub struct Metered<'a, S: ?Sized, F> {
+    inner: &'a mut S,
+    before_read: F,
+    /// Frames read through it.
+    pub reads: usize,
+}
+
+impl<'a, S: FrameSource + ?Sized, F: FnMut(usize, usize) -> Result<()>> Metered<'a, S, F> {
+    /// `inner` read through `before_read`, no frame read yet.
+    pub fn new(inner: &'a mut S, before_read: F) -> Self {
+        Metered { inner, before_read, reads: 0 }
+    }
+}
+
+impl<S: FrameSource + ?Sized, F: FnMut(usize, usize) -> Result<()>> FrameSource for Metered<'_, S, F> {
+    fn vertex_count(&self) -> usize {
+        self.inner.vertex_count()
+    }
+    fn frame_count(&self) -> usize {
+        self.inner.frame_count()
+    }
+    fn time(&self, frame: usize) -> f64 {
+        self.inner.time(frame)
+    }
+    fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
+        (self.before_read)(frame, self.reads)?;
+        self.reads += 1;
+        self.inner.read_frame(frame, out)
+    }
+}
+
 /// Frames held in memory (tests, and caches computed in-process).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MemoryFrames {

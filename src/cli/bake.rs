@@ -32,7 +32,7 @@ pub struct Args {
     /// Time the bake may take, in seconds (e.g. 600, 90s, 10m, 2h): TetGen gets at most what
     /// is left of it (or [tet] timeout, the smaller); the solve checks it before its global
     /// step is built (against the predicted cost) and at every iteration, a cache's key
-    /// selection and fit at every frame they read, the mass-spring blend at every Newton
+    /// selection, fit and error measure at every frame they read, the mass-spring blend at every Newton
     /// iteration; the bake stops with an error (nothing written) once it is spent. Default: no limit.
     #[arg(long, value_parser = super::parse_seconds)]
     max_time: Option<f64>,

@@ -22,7 +22,11 @@ pub struct Args {
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
-    no_wait: bool,
+    no_wait: bool,    /// Time the export may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, the rank
+    /// search's error measure checks it at every cache frame it reads, and the export stops
+    /// with an error (nothing written) once it is spent. Default: no limit.
+    #[arg(long, value_parser = super::parse_seconds)]
+    max_time: Option<f64>,
 }
 
 impl Args {
@@ -32,6 +36,9 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
+    if let Some(seconds) = args.max_time {
+        blendsim::resources::set_max_time(seconds);
+    }
     let animation: Animation = stage::read(&args.animation)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None)?;

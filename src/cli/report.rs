@@ -29,7 +29,11 @@ pub struct Args {
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
-    no_wait: bool,
+    no_wait: bool,    /// Time the report may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, its error
+    /// measure and fit check it at every cache frame they read, and the report stops with an
+    /// error (nothing written) once it is spent. Default: no limit.
+    #[arg(long, value_parser = super::parse_seconds)]
+    max_time: Option<f64>,
 }
 
 impl Args {
@@ -39,6 +43,9 @@ impl Args {
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+    if let Some(seconds) = args.max_time {
+        blendsim::resources::set_max_time(seconds);
+    }
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
         let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use crate::cache::deviation::{cache_diagonal, deviation, CacheDeviation};
 use crate::cache::fit::{fit, FitSettings};
 use crate::cache::keyframes::{select, AutoSettings};
-use crate::cache::{CacheFormat, CacheOptions, FrameRange, FrameSource, VertexCache};
+use crate::cache::{CacheFormat, CacheOptions, FrameRange, FrameSource, Metered, VertexCache};
 use crate::error::{Error, Result};
 use crate::mesh::{self, surface, Point, TriMesh};
 use crate::scene::{CacheKeys, CacheSpec, Method, Rest, SceneFile, Selection};
@@ -68,48 +68,22 @@ pub fn reopen(record: &CacheRecord) -> Result<VertexCache> {
 pub fn fit_cache(record: &CacheRecord) -> Result<Trajectory> {
     let mut cache = reopen(record)?;
     let pins = if record.fixed.is_empty() { Vec::new() } else { vec![record.fixed.to_mask(record.vertices); record.keys.len()] };
-    let mut frames = Timed::new(cache.frames.as_mut(), "cache fit");
-    fit(&mut frames, &record.keys, &pins, &FitSettings::default()).map_err(|e| e.with_path(Path::new(&record.path)))
+    fit(&mut timed(cache.frames.as_mut(), "cache fit"), &record.keys, &pins, &FitSettings::default()).map_err(|e| e.with_path(Path::new(&record.path)))
 }
 
 /// A cache whose every frame read first checks `--max-time` ([`crate::resources::check_time`]):
-/// the key selection and the fit stream the cache, so a frame is their unit of work.
-struct Timed<'a> {
-    inner: &'a mut (dyn FrameSource + Send),
-    phase: &'static str,
-    reads: usize,
-}
-
-impl<'a> Timed<'a> {
-    fn new(inner: &'a mut (dyn FrameSource + Send), phase: &'static str) -> Timed<'a> {
-        Timed { inner, phase, reads: 0 }
-    }
-}
-
-impl FrameSource for Timed<'_> {
-    fn vertex_count(&self) -> usize {
-        self.inner.vertex_count()
-    }
-
-    fn frame_count(&self) -> usize {
-        self.inner.frame_count()
-    }
-
-    fn time(&self, frame: usize) -> f64 {
-        self.inner.time(frame)
-    }
-
-    fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
-        crate::resources::check_time(self.phase, || format!("after reading {} cache frames", self.reads))?;
-        self.reads += 1;
-        self.inner.read_frame(frame, out)
-    }
+/// the key selection, the fit and the error measure stream the cache, so a frame is their unit
+/// of work.
+fn timed<'a, S: FrameSource + ?Sized>(frames: &'a mut S, phase: &'static str) -> Metered<'a, S, impl FnMut(usize, usize) -> Result<()>> {
+    Metered::new(frames, move |_, reads| crate::resources::check_time(phase, || format!("after reading {reads} cache frames")))
 }
 
 /// The distance of `trajectory` (over the cache's vertices) from every frame of the cache.
+/// It streams the whole cache (once per candidate rank in the export's rank search), so it
+/// checks `--max-time` at every frame like the fit.
 pub fn error_against(record: &CacheRecord, trajectory: &Trajectory) -> Result<CacheDeviation> {
     let mut cache = reopen(record)?;
-    deviation(cache.frames.as_mut(), trajectory, record.diagonal)
+    deviation(&mut timed(cache.frames.as_mut(), "cache error measure"), trajectory, record.diagonal).map_err(|e| e.with_path(Path::new(&record.path)))
 }
 
 /// Write the `[cache]` of a scene (its range, as the scene opens it) to `out`, in the format
@@ -209,7 +183,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
                 window_bytes: usize::try_from(spec.window_bytes()).unwrap_or(usize::MAX),
                 ..AutoSettings::default()
             };
-            let auto = select(&mut Timed::new(cache.frames.as_mut(), "cache key selection"), &settings).map_err(|e| e.with_path(&path))?;
+            let auto = select(&mut timed(cache.frames.as_mut(), "cache key selection"), &settings).map_err(|e| e.with_path(&path))?;
             (auto.keys, Some(auto.stats))
         }
         CacheKeys::Frames(list) => {

@@ -12,6 +12,7 @@ import { chromium } from 'playwright-core';
 const THREE_ROOT = join(dirname(fileURLToPath(import.meta.url)), 'node_modules', 'three');
 const CHROMIUM = '/usr/bin/chromium';
 // --user-data-dir is given through launchPersistentContext (playwright refuses it in args).
+const ACTION_TIMEOUT_MS = 600_000;
 const ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 
 /**
@@ -76,12 +77,17 @@ export async function inChromium(server, viewport, issues, work) {
   const profile = mkdtempSync(join(tmpdir(), 'blendsim-chromium-'));
   let context;
   try {
-    context = await chromium.launchPersistentContext(profile, { executablePath: CHROMIUM, headless: true, args: ARGS, viewport });
+    // Playwright's own limits (30 s per action and navigation, 180 s to launch) only turn a
+    // hang into a failure; on a loaded machine (CI's 2 cores at load 20, software WebGL) a
+    // slow but healthy browser must not reach them. The checker's TIMEOUT_MS bounds the whole.
+    context = await chromium.launchPersistentContext(profile, { executablePath: CHROMIUM, headless: true, args: ARGS, viewport, timeout: ACTION_TIMEOUT_MS });
+    context.setDefaultTimeout(ACTION_TIMEOUT_MS);
+    context.setDefaultNavigationTimeout(ACTION_TIMEOUT_MS);
     const page = context.pages()[0] ?? (await context.newPage());
     page.on('pageerror', (e) => issues.push(`page error: ${e.message}`));
     page.on('console', (m) => m.type() === 'error' && issues.push(`console error: ${m.text()}`));
     await page.goto(`http://127.0.0.1:${server.address().port}/`);
-    await page.waitForFunction(() => window.pageReady === true, null, { timeout: 60_000 });
+    await page.waitForFunction(() => window.pageReady === true, null, { timeout: ACTION_TIMEOUT_MS });
     return await work(page);
   } finally {
     await context?.close();

@@ -25,7 +25,8 @@ import { inChromium, pageStart, runChecker, serve } from './browser.mjs';
 const SIZE = { width: 400, height: 400 };
 const DIFF = 48;
 const MAX_MISMATCH = 0.02;
-const TIMEOUT_MS = 180_000;
+// Only turns a hang into a failure (see render_check.mjs).
+const TIMEOUT_MS = 1_200_000;
 
 const PAGE = `${pageStart('blendsim texture check', SIZE, ['OBJLoader'])}
 scene.background = new THREE.Color(0x000000);

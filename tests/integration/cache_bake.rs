@@ -412,3 +412,37 @@ fn batch_of_the_generated_caches() {
     println!("written: {} and summary.csv", root.join("summary.md").display());
     assert_eq!(md.lines().filter(|l| l.starts_with("| bar") || l.starts_with(&format!("| {}", bakes.display()))).count(), 12, "{md}");
 }
+
+/// Stage files name the cache and a PC2's rest mesh relative to their own folder, as they do
+/// textures: a folder staged by `import` and `tetrahedralize` (run from its parent, so the
+/// scene's paths are `staged/...` to the process), renamed, resumes from the new name (`solve`
+/// and `report` stream the cache again) to the bake's bytes.
+#[test]
+fn a_staged_cache_folder_can_be_moved_and_resumed() {
+    let dir = TempDir::new("cache-moved");
+    let staged = dir.join("staged");
+    std::fs::create_dir_all(staged.join("stages")).unwrap();
+    write_cache(&staged, &bar(&BarSettings::default()), "bar.pc2");
+    std::fs::write(staged.join("scene.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = [0, 60, 120, 180]\n")).unwrap();
+    run(&dir.path, &["import", "staged/scene.toml", "-o", "staged/keys.json"]).success();
+    run(&dir.path, &["tetrahedralize", "staged/keys.json", "-o", "staged/stages/body.json"]).success();
+    let canonical = staged.canonicalize().unwrap();
+    for (file, cache, rest) in [("keys.json", "\"path\":\"bar.pc2\"", "\"rest\":\"rest.obj\""), ("stages/body.json", "\"path\":\"../bar.pc2\"", "\"rest\":\"../rest.obj\"")] {
+        let text = std::fs::read_to_string(staged.join(file)).unwrap();
+        assert!(text.contains(cache) && text.contains(rest), "{file}: the cache and its rest mesh relative to it");
+        // (`rest_source`, the name messages give the rest shape, stays the one `import` was given.)
+        assert!(!text.contains(canonical.to_str().unwrap()) && !text.contains("\"path\":\"staged/bar.pc2\""), "{file}: no path from elsewhere");
+    }
+    let moved = dir.join("moved");
+    std::fs::rename(&staged, &moved).unwrap();
+    run(&dir.path, &["solve", "moved/stages/body.json", "-o", "moved/stages/solution.json"]).success();
+    run(&dir.path, &["embed", "moved/stages/solution.json", "-o", "moved/animation.json"]).success();
+    run(&dir.path, &["export", "moved/animation.json", "--out", "moved/out"]).success();
+    run(&dir.path, &["report", "moved/animation.json", "--outputs", "moved/out/bar.outputs.json", "--out", "moved/out"]).success();
+    run(&moved, &["bake", "scene.toml", "--out", "baked", "--quiet"]).success();
+    for file in ["bar.glb", "bar.usda", "bar.full.glb", "bar.full.usda"] {
+        assert!(std::fs::read(moved.join("out").join(file)).unwrap() == std::fs::read(moved.join("baked").join(file)).unwrap(), "{file}");
+    }
+    let (chained, baked) = (report(&moved.join("out")), report(&moved.join("baked")));
+    assert_eq!(chained["cache"]["error"], baked["cache"]["error"], "the report measured the same cache");
+}

@@ -673,7 +673,7 @@ fn corpus_of_bad_inputs() {
             }
             let before = tree(&dir.path);
             let tmp = dir.join("tmp");
-            let r = crate::common::cli::run_timeout(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked"], &[("TMPDIR", tmp.as_os_str())], 120.0);
+            let r = crate::common::cli::run_timeout(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked"], &[("TMPDIR", tmp.as_os_str())], 600.0);
             assert_eq!(r.code, Some(1), "{}: bad input must exit 1:\n{r}", case.name);
             assert_one_line_error(&r);
             assert!(r.stdout.is_empty(), "{}:\n{r}", case.name);
@@ -822,7 +822,7 @@ fn corpus_of_bad_stage_files() {
         (case.edit)(&mut v);
         std::fs::write(dir.join("bad.json"), serde_json::to_vec(&v).unwrap()).unwrap();
         let before = tree(&dir.path);
-        let r = crate::common::cli::run_timeout(&dir.path, case.args, &[], 120.0);
+        let r = crate::common::cli::run_timeout(&dir.path, case.args, &[], 600.0);
         assert_eq!(r.code, Some(1), "{}: a bad stage file must exit 1:\n{r}", case.name);
         assert_one_line_error(&r);
         assert!(!r.stderr.trim_end().chars().any(char::is_control), "{}: a control character in the message:\n{r:?}", case.name);

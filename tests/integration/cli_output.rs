@@ -105,8 +105,10 @@ fn a_second_bake_into_a_busy_folder_waits_or_fails_clearly() {
     let dir = TempDir::new("output-busy");
     scene(&dir.path, "usda.toml", "[\"usda\"]");
     scene(&dir.path, "glb.toml", "[\"glb\"]");
+    // The time limits below only turn a hang into a failure: generous, so that a loaded
+    // machine (CI's 2 cores at load 20) never reaches them.
     let mut first = Spawned::start(&dir.path, &["bake", "in/usda.toml", "--out", "out", "-q"], &[("BLENDSIM_TEST_PAUSE", OsStr::new("solve"))]);
-    first.wait_for_line("paused at solve", 60.0);
+    first.wait_for_line("paused at solve", 600.0);
 
     let r = run(&dir.path, &["bake", "in/glb.toml", "--out", "out", "--no-wait"]);
     assert_eq!(r.code, Some(1), "{r}");
@@ -119,14 +121,14 @@ fn a_second_bake_into_a_busy_folder_waits_or_fails_clearly() {
     );
 
     let mut second = Spawned::start(&dir.path, &["bake", "in/glb.toml", "--out", "out"], &[]);
-    let waiting = second.wait_for_line("waiting", 30.0);
+    let waiting = second.wait_for_line("waiting", 300.0);
     assert_eq!(waiting, format!("blendsim: waiting for another blendsim (pid {}) to finish writing out", first.pid()));
     std::thread::sleep(std::time::Duration::from_millis(500));
     assert!(second.wait_timeout(0.0).is_none(), "the second bake still waits");
     first.signal(libc::SIGTERM);
-    let status = first.wait_timeout(30.0).expect("the first bake stops");
+    let status = first.wait_timeout(300.0).expect("the first bake stops");
     assert_eq!(status.signal(), Some(libc::SIGTERM));
-    let status = second.wait_timeout(120.0).expect("the second bake finishes");
+    let status = second.wait_timeout(600.0).expect("the second bake finishes");
     let r = second.finish(status);
     assert_eq!(r.code, Some(0), "{r}");
     assert_eq!(manifest_files(&dir.join("out")), ["box.full.glb", "box.glb", "report.json", "report.md"]);
@@ -148,7 +150,7 @@ fn concurrent_bakes_into_one_folder_never_mix() {
         let b = Spawned::start(&dir.path, &["bake", "in/glb.toml", "--out", "out"], &[]);
         let mut results = Vec::new();
         for mut p in [a, b] {
-            let status = p.wait_timeout(120.0).expect("bake finishes");
+            let status = p.wait_timeout(600.0).expect("bake finishes");
             results.push(p.finish(status));
         }
         for r in &results {
@@ -162,8 +164,9 @@ fn concurrent_bakes_into_one_folder_never_mix() {
         assert!(now.contains(first), "round {round}: the report belongs to the bake whose files are there");
         assert_eq!(names(&dir.path), set(&["in", "out"]));
     }
+    // Whether they overlapped is up to the scheduler (almost always one waits); the waiting
+    // itself is checked deterministically by a_second_bake_into_a_busy_folder_waits_or_fails_clearly.
     eprintln!("{waited} of 8 bakes waited for the other");
-    assert!(waited > 0, "the bakes overlap (each takes far longer than starting the other)");
 }
 
 #[test]
@@ -227,9 +230,16 @@ fn progress_lines_when_forced_and_nothing_with_quiet() {
 /// rule's prediction, close to the iterations it takes (never `max_iterations`), and TetGen,
 /// the cage, its fit and the embedding show a cost model's predicted duration. The demo scene
 /// with 50 samples per interval on one thread, so that the solve lasts several of the lines'
-/// seconds (about 6 s on an idle machine) and its last quarter more than one.
+/// seconds (about 6 s on an idle machine).
+///
+/// Which iterations get a line depends on the machine's speed and load (a bar's first frame,
+/// then at most one a second), so the lines are only held to what is true at every iteration
+/// (`K <= N <= max_iterations`, and within a quarter of the iterations taken over the last
+/// quarter); that the estimate exists and is that close over the whole last quarter is checked
+/// on the solve's own W history (report.json), whatever lines were printed.
 #[test]
 fn progress_estimates_every_phase() {
+    use blendsim::internals::{IterationEstimate, NEGLIGIBLE};
     let dir = TempDir::new("progress-estimates");
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
     let input = dir.join("in");
@@ -241,36 +251,46 @@ fn progress_estimates_every_phase() {
     let text = std::fs::read_to_string(demo.join("twist.toml")).unwrap();
     let slow = text.replace("samples = 10", "samples = 50").replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
     assert_ne!(slow, text);
+    assert!(slow.contains("tolerance = 0.001"), "the estimate below uses the demo's tolerance");
     std::fs::write(input.join("slow.toml"), &slow).unwrap();
     std::fs::write(input.join("cage.toml"), slow.replace("samples = 50", "samples = 4").replace("[tet]\n", "[tet]\nmax_nodes = 60\ncage_nodes = 60\n")).unwrap();
     let env = [("BLENDSIM_PROGRESS", OsStr::new("lines")), ("RAYON_NUM_THREADS", OsStr::new("1"))];
 
     let shown = run_env(&dir.path, &["bake", "in/slow.toml", "--out", "out/slow"], &env).success();
-    let iterations = read_json(&dir.join("out/slow/report.json"))["solver"]["iterations"].as_u64().expect("iterations");
+    let report = read_json(&dir.join("out/slow/report.json"));
+    let iterations = report["solver"]["iterations"].as_u64().expect("iterations");
+    // A bar's first frame is always a line (drawn when the bar is made), whatever the timing.
     let line = |prefix: &str| shown.stderr.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no {prefix} line:\n{shown}")).to_string();
     for prefix in ["tetrahedralize: TetGen", "embed"] {
         let l = line(prefix);
         assert!(l.contains(" of ~") && l.contains(" eta "), "{prefix} has no predicted duration: {l}");
     }
-    // `K/~N`: N the predicted total, never past max_iterations; over the last quarter of the
-    // solve it is within a quarter of the iterations taken.
+    line("solve: spacetime");
+    // `K/~N` on the lines printed: N the predicted total, never past max_iterations; over the
+    // last quarter of the solve within a quarter of the iterations taken.
+    let close = |k: u64, n: u64| 4 * k < 3 * iterations || 4 * n.abs_diff(iterations) <= iterations;
     let totals: Vec<(u64, u64)> = shown
         .stderr
         .lines()
         .filter(|l| l.starts_with("solve: spacetime"))
         .filter_map(|l| l.split_whitespace().find_map(|w| w.split_once("/~")).map(|(k, n)| (k.parse().unwrap(), n.parse().unwrap())))
         .collect();
-    assert!(!totals.is_empty(), "no solve line with a predicted total:\n{shown}");
     for &(k, n) in &totals {
         assert!(k <= n && n <= 1000, "predicted total {n} at iteration {k} (max_iterations is 1000):\n{shown}");
+        assert!(close(k, n), "at iteration {k} the predicted total was {n}, the solve took {iterations}:\n{shown}");
     }
-    let late: Vec<&(u64, u64)> = totals.iter().filter(|(k, _)| 4 * k >= 3 * iterations).collect();
-    assert!(!late.is_empty(), "no predicted total over the last quarter of the {iterations} iterations:\n{shown}");
-    for &&(k, n) in &late {
-        let error = n.abs_diff(iterations) as f64 / iterations as f64;
-        assert!(error <= 0.25, "at iteration {k} the predicted total was {n}, the solve took {iterations}:\n{shown}");
+    // The same estimate at every iteration of this solve, from its W (the floor from the final
+    // force scale S; the solve's floor follows S, which barely moves at the end).
+    let energy = crate::common::cli::energies(&report);
+    let floor = NEGLIGIBLE * report["solver"]["force_scale"].as_f64().expect("solver.force_scale");
+    let mut estimate = IterationEstimate::default();
+    let every: Vec<Option<usize>> = energy.iter().enumerate().map(|(k, &w)| estimate.update(k, w, floor, 1e-3, 1000)).collect();
+    let late: Vec<(u64, u64)> = every.iter().enumerate().filter_map(|(k, n)| n.map(|n| (k as u64, n as u64))).filter(|&(k, _)| 4 * k >= 3 * iterations).collect();
+    assert!(late.len() >= 10, "a total over the last quarter of the {iterations} iterations: {every:?}");
+    for &(k, n) in &late {
+        assert!(k <= n && n <= 1000 && close(k, n), "at iteration {k} the predicted total is {n}, the solve took {iterations}: {every:?}");
     }
-    eprintln!("predicted totals (iteration, total) {totals:?}; the solve took {iterations}");
+    eprintln!("printed totals (iteration, total) {totals:?}; the solve took {iterations}");
 
     let caged = run_env(&dir.path, &["bake", "in/cage.toml", "--out", "out/cage"], &env).success();
     for prefix in ["tetrahedralize: cage", "tetrahedralize: fit"] {

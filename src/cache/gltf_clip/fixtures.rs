@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use gltf_json as json;
-use json::accessor::{ComponentType, GenericComponentType, Type};
+use json::accessor::{ComponentType, Type};
 use json::animation::{Interpolation as Interp, Property};
 use json::validation::{Checked::Valid, USize64};
 use json::Index;
@@ -49,20 +49,7 @@ impl Builder {
             extensions: None,
             extras: None,
         });
-        json::Accessor {
-            buffer_view: Some(view),
-            byte_offset: None,
-            count: USize64(count as u64),
-            component_type: Valid(GenericComponentType(component)),
-            extensions: None,
-            extras: None,
-            type_: Valid(type_),
-            min: None,
-            max: None,
-            name: None,
-            normalized: false,
-            sparse: None,
-        }
+        crate::export::glb::accessor_in(Some((view.value() as u32, 0)), count, component, type_)
     }
 
     pub(crate) fn floats(&mut self, values: &[f32], type_: Type, bounds: bool) -> Index<json::Accessor> {

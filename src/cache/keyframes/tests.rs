@@ -185,35 +185,15 @@ fn bad_settings_are_one_line_errors() {
     assert!(select(&mut one, &settings(0.01)).unwrap_err().problem.contains("1 frame"));
 }
 
-/// A cache whose file goes bad at one frame.
-struct Failing {
-    inner: MemoryFrames,
-    bad: usize,
-}
-
-impl FrameSource for Failing {
-    fn vertex_count(&self) -> usize {
-        self.inner.vertex_count()
-    }
-    fn frame_count(&self) -> usize {
-        self.inner.frame_count()
-    }
-    fn time(&self, frame: usize) -> f64 {
-        self.inner.time(frame)
-    }
-    fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
-        if frame == self.bad {
-            return Err(Error::in_file("anim.pc2", format!("frame {frame} is truncated at byte 4096"), "re-export the cache"));
-        }
-        self.inner.read_frame(frame, out)
-    }
-}
-
 #[test]
 fn a_read_error_is_passed_on_not_a_panic() {
     let rest = grid();
-    let inner = sampled(40, 30.0, &rest, |p, t| [p[0] + t, p[1], p[2]]);
-    let mut bad = Failing { inner, bad: 23 };
+    let mut inner = sampled(40, 30.0, &rest, |p, t| [p[0] + t, p[1], p[2]]);
+    // The file goes bad at frame 23.
+    let mut bad = crate::cache::Metered::new(&mut inner, |frame, _| match frame {
+        23 => Err(Error::in_file("anim.pc2", format!("frame {frame} is truncated at byte 4096"), "re-export the cache")),
+        _ => Ok(()),
+    });
     let e = select(&mut bad, &settings(0.005)).unwrap_err();
     assert_eq!(e.to_string(), "anim.pc2: frame 23 is truncated at byte 4096 (fix: re-export the cache)");
     let e = fit(&mut bad, &[0, 39], &[], &FitSettings::default()).unwrap_err();

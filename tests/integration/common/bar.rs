@@ -114,8 +114,12 @@ pub fn bar(settings: &BarSettings) -> BarCache {
     }
     let (frames, tip) = simulate(settings, &body, &node_of_vertex);
     std::fs::create_dir_all(&dir).unwrap();
-    // Write then rename: concurrent test binaries never read a half-written file.
-    let tmp = dir.join(format!("{name}.{}.tmp", std::process::id()));
+    // Write then rename: concurrent test binaries never read a half-written file. Each call
+    // writes its own temporary file: two tests of one binary may simulate the same bar at
+    // once (an empty target folder), and a shared one would be renamed away under the other.
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!("{name}.{}-{call}.tmp", std::process::id()));
     std::fs::File::create(&tmp).unwrap().write_all(&encode(&key, &frames, &tip)).unwrap();
     std::fs::rename(&tmp, &path).unwrap();
     BarCache { settings: settings.clone(), body, surface, frames, tip }
@@ -123,37 +127,10 @@ pub fn bar(settings: &BarSettings) -> BarCache {
 
 /// The structured tet grid, the prism surface, and for each surface vertex its grid node.
 fn geometry(s: &BarSettings) -> (TetMesh, TriMesh, Vec<usize>) {
-    let [nx, ny, nz] = s.divisions;
+    let [_, ny, nz] = s.divisions;
     let node = |i: usize, j: usize, k: usize| (i * (ny + 1) + j) * (nz + 1) + k;
-    let coordinate = |c: [usize; 3]| -> Point { std::array::from_fn(|d| s.size[d] * (c[d] as f64 / s.divisions[d] as f64)) };
-    let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
-    for i in 0..=nx {
-        for j in 0..=ny {
-            for k in 0..=nz {
-                positions.push(coordinate([i, j, k]));
-            }
-        }
-    }
-    // Kuhn split: the six tets around the cell diagonal from corner 000 to 111, one per order
-    // of the axes; every cell split the same way, so shared faces match.
-    let mut tets = Vec::with_capacity(6 * nx * ny * nz);
-    for i in 0..nx {
-        for j in 0..ny {
-            for k in 0..nz {
-                for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
-                    let mut c = [i, j, k];
-                    let mut tet = [node(i, j, k) as u32; 4];
-                    for (step, &axis) in order.iter().enumerate() {
-                        c[axis] += 1;
-                        tet[step + 1] = node(c[0], c[1], c[2]) as u32;
-                    }
-                    tets.push(tet);
-                }
-            }
-        }
-    }
-    let mut body = TetMesh { positions, tets };
-    body.orient_positive();
+    // The Kuhn split of the grid (six tets per cell), node (i, j, k) numbered as `node` does.
+    let body = procedural::box_tets(s.size, s.divisions);
     let surface = procedural::prism(s.size, s.divisions);
     let node_of_vertex = surface
         .positions
