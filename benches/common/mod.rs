@@ -109,3 +109,45 @@ pub fn cheb_size() -> Body {
     };
     Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new() }
 }
+
+/// The scale benchmark's 20-key body (`benches/scale.rs`, "2.6k-nodes-20-keys": a 1.2 x 3.6 x
+/// 1.2 prism twisted up to ±90° and bent about z over 20 keys of 0.5 s, the bottom face held at
+/// every key) with `divisions` of the surface and TetGen's `max_volume`: the same scene file
+/// through the same import, on fewer nodes (`[6, 18, 6]` and 0.024 give about 400). With
+/// `held_surface` every surface vertex is held at every key (`fixed = "all"`, the default)
+/// instead of the bottom face only, whose free keys let W fall to 0 with the body at rest.
+pub fn twenty_keys(divisions: [usize; 3], max_volume: f64, held_surface: bool) -> Body {
+    use blendsim::mesh::obj;
+    let keys = 20;
+    let dir = std::env::temp_dir().join(format!("blendsim-twenty-keys-{}-{}-{held_surface}", std::process::id(), divisions[0]));
+    std::fs::create_dir_all(&dir).unwrap();
+    let rest = procedural::prism([1.2, 3.6, 1.2], divisions);
+    let height = rest.positions.iter().map(|p| p[1]).fold(0.0, f64::max);
+    let pose = |degrees: f64, bend: f64| -> Vec<Point> {
+        procedural::twist(&rest.positions, &Twist { axis: Axis::Y, degrees, axial_scale: 1.0 })
+            .into_iter()
+            .map(|[x, y, z]| {
+                let (s, c) = (bend * y / height).sin_cos();
+                [c * x - s * y, s * x + c * y, z]
+            })
+            .collect()
+    };
+    let mut names = Vec::new();
+    for k in 0..keys {
+        let phase = 2.0 * std::f64::consts::PI * k as f64 / (keys - 1) as f64;
+        let mut m = rest.clone();
+        m.positions = pose(90.0 * phase.sin(), 0.4 * (phase + 1.0).sin() - 0.4 * 1f64.sin());
+        std::fs::write(dir.join(format!("k{k}.obj")), obj::write(&m)).unwrap();
+        names.push(format!("\"k{k}.obj\""));
+    }
+    let bottom: String = rest.positions.iter().enumerate().filter(|(_, p)| p[1] == 0.0).map(|(i, _)| format!("{i}\n")).collect();
+    std::fs::write(dir.join("bottom.txt"), bottom).unwrap();
+    let times: Vec<String> = (0..keys).map(|k| format!("{:.1}", 0.5 * k as f64)).collect();
+    let fixed = if held_surface { String::new() } else { format!("fixed = [{}]\n", vec!["\"bottom.txt\""; keys].join(", ")) };
+    let text = format!("name = \"twenty-keys\"\nfps = 30\n[keyframes]\nmeshes = [{}]\ntimes = [{}]\n{fixed}[tet]\nmax_volume = {max_volume}\n", names.join(", "), times.join(", "));
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    let scene = SceneFile::load(&dir.join("scene.toml")).expect("scene loads");
+    let body = Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize");
+    std::fs::remove_dir_all(&dir).ok();
+    body
+}
