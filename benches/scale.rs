@@ -161,8 +161,8 @@ fn main() {
         },
         Case { name: "2.6k-nodes-5-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 5, tet: "max_volume = 0.003", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
-        Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: Some(&[0.0]), args: &[] },
-        Case { name: "6.8k-full", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold: Some(&[0.0]), args: &[] },
+        Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
+        Case { name: "6.8k-full", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
         Case { name: "25k-cage", size: [1.0, 3.0, 1.0], divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold: None, args: &[] },
         Case { name: "100k-cage", size: [1.0, 3.0, 1.0], divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold: None, args: &[] },
     ];
