@@ -388,7 +388,14 @@ impl Staging {
     pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         self.check_name(name)?;
         let p = self.path(name);
-        std::fs::write(&p, bytes).map_err(|e| Error::io(self.final_path(name), &e, "write an output file"))?;
+        // A signal's cleanup removes the staging folder while this thread runs on: a file
+        // created after its listing would make that removal fail and stay behind. The write
+        // is a critical section, so the cleanup waits for it and no write starts after it.
+        let written = {
+            let _critical = interrupt::critical();
+            std::fs::write(&p, bytes)
+        };
+        written.map_err(|e| Error::io(self.final_path(name), &e, "write an output file"))?;
         self.record(name);
         Ok(())
     }
