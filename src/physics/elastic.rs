@@ -175,6 +175,21 @@ impl Elastic {
         f
     }
 
+    /// The corner gradients and weights of the batch of [`BATCH`] tets from `first`: the body's
+    /// arrays in place for a whole batch; the last, partial one copied into `pad`, whose entries
+    /// past the last tet stay as they are (zeros as the callers make it).
+    pub(crate) fn batch_grads_weights<'a>(&'a self, first: usize, pad: &'a mut ([[[f64; 3]; 4]; BATCH], [f64; BATCH])) -> (&'a [[[f64; 3]; 4]; BATCH], &'a [f64; BATCH]) {
+        match (self.grads[first..].first_chunk::<BATCH>(), self.weights[first..].first_chunk::<BATCH>()) {
+            (Some(g), Some(w)) => (g, w),
+            _ => {
+                let lanes = self.grads.len() - first;
+                pad.0[..lanes].copy_from_slice(&self.grads[first..]);
+                pad.1[..lanes].copy_from_slice(&self.weights[first..]);
+                (&pad.0, &pad.1)
+            }
+        }
+    }
+
     /// [`Elastic::deformation_gradient`] of the [`BATCH`] tets from `first` at `x`, and at `y`
     /// when given, written straight into lanes (the same sums; lanes past the last tet hold the
     /// identity at `x` and zero at `y`). One read of each tet's nodes and gradients for both: a
@@ -346,19 +361,11 @@ impl Elastic {
         let (share, count) = (self.strain_share(), self.tet_count());
         let mut forces = [[[0.0; 3]; 4]; BATCH];
         let mut f = [[Lanes::splat(0.0); 3]; 3];
-        let (mut last_grads, mut last_weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
+        let mut last = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
         for first in (0..count).step_by(BATCH) {
             let lanes = BATCH.min(count - first);
             self.deformation_gradient_lanes(first, x, None, &mut f);
-            // A whole batch reads the arrays in place; the last one pads them with zeros.
-            let (grads, weights) = match (self.grads[first..].first_chunk::<BATCH>(), self.weights[first..].first_chunk::<BATCH>()) {
-                (Some(g), Some(w)) => (g, w),
-                _ => {
-                    last_grads[..lanes].copy_from_slice(&self.grads[first..]);
-                    last_weights[..lanes].copy_from_slice(&self.weights[first..]);
-                    (&last_grads, &last_weights)
-                }
-            };
+            let (grads, weights) = self.batch_grads_weights(first, &mut last);
             project_forces(&f, share, grads, weights, &mut forces);
             for (e, corners) in (first..first + lanes).zip(&forces) {
                 for (&a, force) in self.tets[e].iter().zip(corners) {

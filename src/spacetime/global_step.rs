@@ -1139,10 +1139,9 @@ mod experiment {
     use crate::spacetime::tests::{keys, material, settings};
     use crate::testing::{cube_mesh, Rng};
 
-    /// `cargo test --release --lib cg_at_20_keys -- --ignored --nocapture`
-    #[test]
-    #[ignore]
-    fn cg_at_20_keys() {
+    /// The measurements' body: a `CUBE`-per-side (default 13) Kuhn cube stretched to 1.2 x 3.6
+    /// x 1.2, bent over `KEYS` (default 20) keys of 0.5 s, its bottom face held at every key.
+    pub(super) fn many_keys_problem() -> (Elastic, crate::spacetime::unknowns::KeyConstraints, usize) {
         let n: usize = std::env::var("CUBE").ok().and_then(|v| v.parse().ok()).unwrap_or(13);
         let kc: usize = std::env::var("KEYS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
         let mut mesh = cube_mesh(n);
@@ -1154,6 +1153,14 @@ mod experiment {
         let poses = (0..kc).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * (k as f64).sin() * p[1] * p[1], p[1], p[2]]).collect()).collect();
         let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
         let k = keys(times, poses, vec![bottom; kc], false);
+        (el, k, kc)
+    }
+
+    /// `cargo test --release --lib cg_at_20_keys -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn cg_at_20_keys() {
+        let (el, k, kc) = many_keys_problem();
         let mut s = settings();
         s.damping = 0.1;
         let obj = objective(&el, &k, &s);
@@ -1198,11 +1205,11 @@ mod experiment {
 
 #[cfg(test)]
 mod modal_phases {
+    use super::experiment::many_keys_problem;
     use super::*;
-    use crate::physics::elastic::Elastic;
     use crate::spacetime::solver::objective;
-    use crate::spacetime::tests::{keys, material, settings};
-    use crate::testing::{cube_mesh, Rng};
+    use crate::spacetime::tests::settings;
+    use crate::testing::Rng;
 
     /// CPU seconds of the process (all threads), from getrusage.
     fn cpu() -> f64 {
@@ -1223,17 +1230,7 @@ mod modal_phases {
     #[test]
     #[ignore]
     fn modal_setup_phases() {
-        let n: usize = std::env::var("CUBE").ok().and_then(|v| v.parse().ok()).unwrap_or(13);
-        let kc: usize = std::env::var("KEYS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
-        let mut mesh = cube_mesh(n);
-        for p in &mut mesh.positions {
-            *p = [p[0] * 1.2, p[1] * 3.6, p[2] * 1.2];
-        }
-        let el = Elastic::new(&mesh, &material()).unwrap();
-        let times: Vec<f64> = (0..kc).map(|k| 0.5 * k as f64).collect();
-        let poses = (0..kc).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * (k as f64).sin() * p[1] * p[1], p[1], p[2]]).collect()).collect();
-        let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
-        let k = keys(times, poses, vec![bottom; kc], false);
+        let (el, k, kc) = many_keys_problem();
         let s = settings();
         let obj = objective(&el, &k, &s);
         let unknowns = Unknowns::new(&k, el.node_count());

@@ -273,20 +273,12 @@ impl<'a> Timing<'a> {
                 let count = el.tet_count();
                 let mut forces = [[[[0.0; 3]; 4]; 3]; BATCH];
                 let (mut f, mut f_t) = ([[Lanes::splat(0.0); 3]; 3], [[Lanes::splat(0.0); 3]; 3]);
-                let (mut last_grads, mut last_weights) = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
+                let mut last = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
                 for first in (0..count).step_by(BATCH) {
                     let lanes = BATCH.min(count - first);
                     // F and F_T straight into lanes (past the last tet: the identity and zero).
                     el.deformation_gradient_lanes(first, &x, Some((&x_t, &mut f_t)), &mut f);
-                    // A whole batch reads the body's arrays in place; the last one pads them.
-                    let (grads, weights) = match (el.grads[first..].first_chunk::<BATCH>(), el.weights[first..].first_chunk::<BATCH>()) {
-                        (Some(g), Some(w)) => (g, w),
-                        _ => {
-                            last_grads[..lanes].copy_from_slice(&el.grads[first..]);
-                            last_weights[..lanes].copy_from_slice(&el.weights[first..]);
-                            (&last_grads, &last_weights)
-                        }
-                    };
+                    let (grads, weights) = el.batch_grads_weights(first, &mut last);
                     project_along_forces_lanes(&f, share, &f_t, grads, weights, &mut forces);
                     for (e, [value, first_t, second_t]) in (first..first + lanes).zip(&forces) {
                         for (k, &a) in el.tets[e].iter().enumerate() {
