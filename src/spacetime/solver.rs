@@ -578,9 +578,7 @@ impl<'a> Solver<'a> {
     /// is an error naming the iteration.
     fn evaluate(&self, tr: &Trajectory, iteration: usize, exact: bool) -> Result<Evaluation> {
         let objective = self.objective(&tr.times);
-        let projections = &mut self.projections.borrow_mut()[exact as usize];
-        objective.local_step_into(tr, exact, projections);
-        let eval = objective.evaluate(tr, projections);
+        let eval = objective.evaluate_fresh(tr, exact, &mut self.projections.borrow_mut()[exact as usize]);
         if !eval.value.is_finite() {
             return Err(Error::general(
                 format!("the spacetime energy W became {} at iteration {iteration}", eval.value),
