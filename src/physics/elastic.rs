@@ -377,7 +377,7 @@ impl Elastic {
     pub fn projected_forces_sequential(&self, x: &[Point], out: &mut [Point]) {
         out.fill([0.0; 3]);
         let (share, count) = (self.strain_share(), self.tet_count());
-        let mut forces = [[[0.0; 3]; 4]; BATCH];
+        let mut forces = [[Lanes::splat(0.0); 3]; 4];
         let mut f = [[Lanes::splat(0.0); 3]; 3];
         let mut last = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
         for first in (0..count).step_by(BATCH) {
@@ -385,11 +385,11 @@ impl Elastic {
             self.deformation_gradient_lanes(first, x, None, &mut f);
             let (grads, weights) = self.batch_grads_weights(first, &mut last);
             project_forces(&f, share, grads, weights, &mut forces);
-            for (e, corners) in (first..first + lanes).zip(&forces) {
-                for (&a, force) in self.tets[e].iter().zip(corners) {
+            for (l, e) in (first..first + lanes).enumerate() {
+                for (&a, force) in self.tets[e].iter().zip(&forces) {
                     let o = &mut out[a as usize];
                     for i in 0..3 {
-                        o[i] += force[i];
+                        o[i] += force[i].0[l];
                     }
                 }
             }

@@ -80,11 +80,13 @@ fn volume_lanes<const N: usize>(sigma: [Lanes<N>; 3]) -> ([Lanes<N>; 3], Mask<N>
     let linear = (one / p0 - one) / (one / (sigma[0] * sigma[0]) + one / (sigma[1] * sigma[1]) + one / (sigma[2] * sigma[2]));
     let mut l = Lanes::select(positive & linear.gt(lo) & linear.lt(hi), linear, half * (lo + hi));
     let mut active = !done;
+    // `s` is the branch at the current `l`: carried from the end of the previous iteration
+    // (which computed it for the `closed` test) instead of recomputed.
+    let mut s = plus_branch(&sigma, l);
     for _ in 0..100 {
         if !active.any() {
             break;
         }
-        let s = plus_branch(&sigma, l);
         let p = product3(&s);
         let phi = p - one;
         let converged = active & phi.abs().lt(Lanes::splat(1e-15));
@@ -103,16 +105,15 @@ fn volume_lanes<const N: usize>(sigma: [Lanes<N>; 3]) -> ([Lanes<N>; 3], Mask<N>
         let inside = newton.gt(lo) & newton.lt(hi) & dphi.abs().lt(Lanes::splat(f64::INFINITY));
         l = Lanes::select(active, Lanes::select(inside, newton, half * (lo + hi)), l);
         let closed = active & (hi - lo).le(Lanes::splat(1e-16) * (one + hi.abs()));
-        let end = plus_branch(&sigma, l);
+        s = plus_branch(&sigma, l);
         for i in 0..3 {
-            result[i] = Lanes::select(closed, end[i], result[i]);
+            result[i] = Lanes::select(closed, s[i], result[i]);
         }
         active = active & !closed;
     }
     // Out of iterations: the last iterate.
-    let end = plus_branch(&sigma, l);
     for i in 0..3 {
-        result[i] = Lanes::select(active, end[i], result[i]);
+        result[i] = Lanes::select(active, s[i], result[i]);
     }
     (result, collapse)
 }
@@ -158,15 +159,19 @@ pub fn project_batch(f: &[Mat3; BATCH], strain_share: f64) -> [Mat3; BATCH] {
 
 with_widest_simd!(dispatch_project, fn(f: &M3<BATCH>, strain_share: f64) -> M3<BATCH> { project_lanes(f, strain_share) });
 
+/// Node forces of one batch, on lanes: `[corner][coordinate]`, lane `l` the tet `first + l`.
+pub(crate) type CornerForces = [[Lanes<BATCH>; 3]; 4];
+
 /// [`project_batch`]'s targets as node forces, from deformation gradients on lanes: for tet
 /// lane `l` and corner `k`, `weights[l] P_l grads[l][k]` with the sums of
 /// [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so that adding
-/// them per node in tet order gives its bytes (for a caller that needs `J p`, not `p`).
-pub(crate) fn project_forces(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) {
+/// them per node in tet order gives its bytes (for a caller that needs `J p`, not `p`). Written
+/// on lanes (`out[k][i].0[l]`): vector stores, no transposition inside the kernel.
+pub(crate) fn project_forces(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut CornerForces) {
     dispatch_project_forces(f, strain_share, grads, weights, out);
 }
 
-with_widest_simd!(dispatch_project_forces, fn(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[f64; 3]; 4]; BATCH]) -> () {
+with_widest_simd!(dispatch_project_forces, fn(f: &M3<BATCH>, strain_share: f64, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut CornerForces) -> () {
     let p = project_lanes(f, strain_share);
     let w = Lanes(*weights);
     for k in 0..4 {
@@ -178,10 +183,7 @@ with_widest_simd!(dispatch_project_forces, fn(f: &M3<BATCH>, strain_share: f64, 
             }
         }
         for i in 0..3 {
-            let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
-            for (l, o) in out.iter_mut().enumerate() {
-                o[k][i] = force.0[l];
-            }
+            out[k][i] = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
         }
     }
 });

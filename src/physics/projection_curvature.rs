@@ -183,22 +183,37 @@ with_widest_simd!(dispatch_project_along, fn(f: &M3<BATCH>, strain_share: f64, g
     project_along_lanes(f, strain_share, g)
 });
 
+/// Node forces of one batch along a line, on lanes: `[matrix][corner][coordinate]` (matrix:
+/// value, first, second derivative), lane `l` the tet `first + l`.
+pub(crate) type PathForces = [[[Lanes<BATCH>; 3]; 4]; 3];
+
 /// The node forces of [`project_along_batch`]'s three matrices: for tet lane `l`, matrix `m`
 /// (value, first, second derivative) and corner `k`, `weights[l] P_m grads[l][k]` with the
 /// sums of [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so
-/// that adding them per node in tet order gives its bytes. Written into `out` (no copy of the
-/// matrices leaves the vectorized kernel).
+/// that adding them per node in tet order gives its bytes. Written into `out[l][m][k]` (the
+/// kernel itself writes lanes, [`project_along_forces_lanes`]).
 #[cfg_attr(not(test), allow(dead_code))]
 pub fn project_along_forces(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BATCH], grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
-    dispatch_project_along_forces(&to_lanes(f), strain_share, &to_lanes(g), grads, weights, out);
+    let mut lanes = [[[Lanes::splat(0.0); 3]; 4]; 3];
+    dispatch_project_along_forces(&to_lanes(f), strain_share, &to_lanes(g), grads, weights, &mut lanes);
+    for (l, o) in out.iter_mut().enumerate() {
+        for m in 0..3 {
+            for k in 0..4 {
+                for i in 0..3 {
+                    o[m][k][i] = lanes[m][k][i].0[l];
+                }
+            }
+        }
+    }
 }
 
-/// [`project_along_forces`] of matrices already on lanes.
-pub(crate) fn project_along_forces_lanes(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
+/// [`project_along_forces`] of matrices already on lanes, the forces written on lanes
+/// (`out[m][k][i].0[l]`): vector stores, no transposition inside the kernel.
+pub(crate) fn project_along_forces_lanes(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut PathForces) {
     dispatch_project_along_forces(f, strain_share, g, grads, weights, out);
 }
 
-with_widest_simd!(dispatch_project_along_forces, fn(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) -> () {
+with_widest_simd!(dispatch_project_along_forces, fn(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut PathForces) -> () {
     let paths = project_along_lanes(f, strain_share, g);
     let w = Lanes(*weights);
     // The corners' gradients on lanes, once for the three matrices (loops, not closures: the
@@ -214,10 +229,7 @@ with_widest_simd!(dispatch_project_along_forces, fn(f: &M3<BATCH>, strain_share:
     for (m, p) in [&paths.0, &paths.1, &paths.2].into_iter().enumerate() {
         for (k, gk) in gks.iter().enumerate() {
             for i in 0..3 {
-                let force = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
-                for (l, o) in out.iter_mut().enumerate() {
-                    o[m][k][i] = force.0[l];
-                }
+                out[m][k][i] = w * (p[i][0] * gk[0] + p[i][1] * gk[1] + p[i][2] * gk[2]);
             }
         }
     }

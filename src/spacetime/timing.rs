@@ -271,7 +271,7 @@ impl<'a> Timing<'a> {
                 // added in tet order like `apply_j_sequential`.
                 let share = el.strain_share();
                 let count = el.tet_count();
-                let mut forces = [[[[0.0; 3]; 4]; 3]; BATCH];
+                let mut forces = [[[Lanes::splat(0.0); 3]; 4]; 3];
                 let (mut f, mut f_t) = ([[Lanes::splat(0.0); 3]; 3], [[Lanes::splat(0.0); 3]; 3]);
                 let mut last = ([[[0.0; 3]; 4]; BATCH], [0.0; BATCH]);
                 for first in (0..count).step_by(BATCH) {
@@ -280,13 +280,14 @@ impl<'a> Timing<'a> {
                     el.deformation_gradient_lanes(first, &x, Some((&x_t, &mut f_t)), &mut f);
                     let (grads, weights) = el.batch_grads_weights(first, &mut last);
                     project_along_forces_lanes(&f, share, &f_t, grads, weights, &mut forces);
-                    for (e, [value, first_t, second_t]) in (first..first + lanes).zip(&forces) {
+                    let [value, first_t, second_t] = &forces;
+                    for (l, e) in (first..first + lanes).enumerate() {
                         for (k, &a) in el.tets[e].iter().enumerate() {
                             let a = a as usize;
                             for i in 0..3 {
-                                jp[a][i] += value[k][i];
-                                jp_t[a][i] += first_t[k][i];
-                                jp_tt[a][i] += second_t[k][i];
+                                jp[a][i] += value[k][i].0[l];
+                                jp_t[a][i] += first_t[k][i].0[l];
+                                jp_tt[a][i] += second_t[k][i].0[l];
                             }
                         }
                     }
