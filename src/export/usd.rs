@@ -86,14 +86,7 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Op
         }
         mesh.children.push(shape);
     }
-    let groups = attributes.filter(|a| !a.groups.is_empty());
-    if let Some(a) = groups {
-        mesh.children.extend(attrs::subsets(a, root));
-    }
-    skel_root.children.push(mesh);
-    if let Some(a) = groups {
-        skel_root.children.push(attrs::materials(a, root));
-    }
+    push_mesh(&mut skel_root, mesh, attributes, root);
 
     let mut skel = Prim::new("Skeleton", "Skel").with_api("SkelBindingAPI");
     skel.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
@@ -125,17 +118,24 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
 }
 
 /// `Xform ROOT` holding a plain mesh (with its subsets) and the materials they bind.
-fn plain_root(mut mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) -> Prim {
+fn plain_root(mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) -> Prim {
     let mut xform = Prim::new("Xform", root);
+    push_mesh(&mut xform, mesh, attributes, root);
+    xform
+}
+
+/// `mesh` as a child of the root prim `parent` (a SkelRoot or an Xform) with the surface's
+/// material groups: a `GeomSubset` per group under the mesh, then beside it the materials the
+/// subsets bind (`/ROOT/Materials`), so both layouts bind materials the same way.
+fn push_mesh(parent: &mut Prim, mut mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) {
     let groups = attributes.filter(|a| !a.groups.is_empty());
     if let Some(a) = groups {
         mesh.children.extend(attrs::subsets(a, root));
     }
-    xform.children.push(mesh);
+    parent.children.push(mesh);
     if let Some(a) = groups {
-        xform.children.push(attrs::materials(a, root));
+        parent.children.push(attrs::materials(a, root));
     }
-    xform
 }
 
 fn metadata(s: &UsdSettings, start: i64, end: i64) -> Vec<(&'static str, Value)> {
