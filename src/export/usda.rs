@@ -143,13 +143,14 @@ fn push_quoted(out: &mut String, s: &str) {
     out.push('"');
 }
 
-pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
+/// The layer header of a streamed file (a vertex cache's), `doc` its documentation string
+/// (plain text: no quote or backslash).
+pub(crate) fn header(s: &UsdSettings, doc: &str, start: i64, end: i64) -> String {
     format!(
-        "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"blendsim {version}\"\n    endTimeCode = {end}\n    \
+        "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"{doc}\"\n    endTimeCode = {end}\n    \
          framesPerSecond = {fps}\n    metersPerUnit = {mpu}\n    startTimeCode = {start}\n    \
          timeCodesPerSecond = {fps}\n    upAxis = \"{up}\"\n)\n\n",
         name = s.name,
-        version = env!("CARGO_PKG_VERSION"),
         fps = s.fps,
         mpu = s.meters_per_unit,
         up = s.up_axis,
