@@ -211,6 +211,10 @@ pub struct SolverLog {
     /// squared relative size of the residual force.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_scale: Option<f64>,
+    /// The force scale S at each iterate of `energy` (spacetime only; the last is
+    /// `force_scale`): the stopping rule's floor is `solver::NEGLIGIBLE` S at each iteration.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub force_scales: Vec<f64>,
     /// The key times given to the solver.
     #[serde(default)]
     pub input_times: Vec<f64>,
