@@ -85,7 +85,7 @@ pub struct Keyframes {
     /// The scene, carried along so later stages need no scene file.
     pub scene: Scene,
     /// The file the rest shape came from, as a path from where the process runs (for messages);
-    /// the stage file holds it relative to its own folder ([`write`], [`read`]).
+    /// the stage file holds it relative to its own folder ([`write()`], [`read`]).
     pub rest_source: String,
     /// The elastic rest shape. Every pose has its vertex count.
     pub rest: Shape,
@@ -357,11 +357,11 @@ pub trait StageData: Serialize + DeserializeOwned {
     /// hand-edited or damaged file fails here with one line instead of deep inside a stage.
     fn validate(&self) -> Result<()>;
     /// The surfaces the data carries, whose texture paths (absolute in memory) the file holds
-    /// relative to its own folder ([`write`], [`read`]), so a staged folder can be moved.
+    /// relative to its own folder ([`write()`], [`read`]), so a staged folder can be moved.
     fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
         Vec::new()
     }
-    /// Whether any surface has a texture (so [`write`] has paths to rewrite).
+    /// Whether any surface has a texture (so [`write()`] has paths to rewrite).
     fn has_textures(&self) -> bool {
         false
     }

@@ -1,4 +1,4 @@
-//! USD ASCII: a [`Layer`] as `.usda` text. Layout in `formats/usd.md`.
+//! USD ASCII: a `Layer` (`export::layer`) as `.usda` text. Layout in `formats/usd.md`.
 //!
 //! Written as text directly (no USD library in Rust): the layout is small and fixed, and
 //! writing it ourselves keeps the bytes deterministic. Floats are f32 in their shortest
@@ -15,12 +15,12 @@ pub(crate) use super::usd::extent;
 pub use super::usd::{prim_name, UsdSettings};
 use crate::mesh::attributes::CornerAttributes;
 
-/// [`super::usd::blendshapes`] as text.
+/// `usd::blendshapes` as text.
 pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     text(&super::usd::blendshapes(clip, triangles, attributes, settings))
 }
 
-/// [`super::usd::full_frame`] as text.
+/// `usd::full_frame` as text.
 pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     text(&super::usd::full_frame(frames, triangles, attributes, settings))
 }
