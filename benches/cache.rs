@@ -242,15 +242,8 @@ fn compare(name: &str, cache: &BarCache) {
     let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
     let size = |p: &str| std::fs::metadata(dir.join(p)).unwrap().len();
     let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
-    let full_usdc = {
-        let path = dir.join("full.usdc");
-        // The vertex cache is written as streamed text only: usd-core converts it.
-        let script = "import sys\nfrom pxr import Sdf\nassert Sdf.Layer.FindOrOpen(sys.argv[1]).Export(sys.argv[2])";
-        let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| "python3".into());
-        let status = std::process::Command::new(python).arg("-c").arg(script).arg(dir.join("full.usda")).arg(&path).status();
-        assert!(status.is_ok_and(|s| s.success()), "usd-core converts the full-frame usda (make test-deps installs it)");
-        size("full.usdc")
-    };
+    blendsim::cache::write(&dir.join("full.usdc"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    let full_usdc = size("full.usdc");
     let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, usdc: Option<u64>, max: f64, ms: Option<f64>| {
         let smaller = |full: u64, x: Option<u64>| x.map_or("-".into(), |x| format!("{:.1}x", full as f64 / x as f64));
         println!(

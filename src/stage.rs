@@ -84,7 +84,8 @@ pub enum Shape {
 pub struct Keyframes {
     /// The scene, carried along so later stages need no scene file.
     pub scene: Scene,
-    /// The file the rest shape came from, as a path from where `import` ran (for messages).
+    /// The file the rest shape came from, as a path from where the process runs (for messages);
+    /// the stage file holds it relative to its own folder ([`write()`], [`read`]).
     pub rest_source: String,
     /// The elastic rest shape. Every pose has its vertex count.
     pub rest: Shape,
@@ -210,6 +211,10 @@ pub struct SolverLog {
     /// squared relative size of the residual force.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_scale: Option<f64>,
+    /// The force scale S at each iterate of `energy` (spacetime only; the last is
+    /// `force_scale`): the stopping rule's floor is `solver::NEGLIGIBLE` S at each iteration.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub force_scales: Vec<f64>,
     /// The key times given to the solver.
     #[serde(default)]
     pub input_times: Vec<f64>,
@@ -352,11 +357,11 @@ pub trait StageData: Serialize + DeserializeOwned {
     /// hand-edited or damaged file fails here with one line instead of deep inside a stage.
     fn validate(&self) -> Result<()>;
     /// The surfaces the data carries, whose texture paths (absolute in memory) the file holds
-    /// relative to its own folder ([`write`], [`read`]), so a staged folder can be moved.
+    /// relative to its own folder ([`write()`], [`read`]), so a staged folder can be moved.
     fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
         Vec::new()
     }
-    /// Whether any surface has a texture (so [`write`] has paths to rewrite).
+    /// Whether any surface has a texture (so [`write()`] has paths to rewrite).
     fn has_textures(&self) -> bool {
         false
     }
@@ -368,6 +373,15 @@ pub trait StageData: Serialize + DeserializeOwned {
     /// See [`StageData::cache`].
     fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
         None
+    }
+    /// Whether the data names files other than textures ([`StageData::files_mut`]).
+    fn has_files(&self) -> bool {
+        self.cache().is_some()
+    }
+    /// The file paths the data names other than textures: the cache and its rest mesh, and the
+    /// keyframes' rest source. The file holds them relative to its own folder like the textures.
+    fn files_mut(&mut self) -> Vec<&mut String> {
+        self.cache_mut().into_iter().flat_map(cache_paths_mut).collect()
     }
 }
 
@@ -389,6 +403,12 @@ impl StageData for Keyframes {
     }
     fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
         self.cache.as_mut()
+    }
+    fn has_files(&self) -> bool {
+        true
+    }
+    fn files_mut(&mut self) -> Vec<&mut String> {
+        std::iter::once(&mut self.rest_source).chain(self.cache.iter_mut().flat_map(cache_paths_mut)).collect()
     }
     fn validate(&self) -> Result<()> {
         let rerun = Check(Self::WRITER, contact_keys(&self.scene));
@@ -701,8 +721,8 @@ pub fn to_json<T: StageData>(value: &T) -> Vec<u8> {
     bytes
 }
 
-/// Write a stage file atomically. Texture and cache paths are written relative to the file's
-/// folder.
+/// Write a stage file atomically. Texture, cache and rest source paths are written relative to
+/// the file's folder.
 pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
     let mut value = std::borrow::Cow::Borrowed(value);
     if value.has_textures() {
@@ -713,9 +733,9 @@ pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
             }
         }
     }
-    if value.cache().is_some() {
+    if value.has_files() {
         let folder = stage_folder(path)?;
-        for file in value.to_mut().cache_mut().into_iter().flat_map(cache_paths_mut) {
+        for file in value.to_mut().files_mut() {
             *file = relative_to(&folder, &resolved(Path::new(file.as_str()))).to_string_lossy().into_owned();
         }
     }
@@ -724,13 +744,13 @@ pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
 
 /// Read a stage file, checking that it holds the expected stage and that its data keeps the
 /// stage's invariants ([`StageData::validate`]). Relative texture paths are resolved against
-/// the file's folder; relative cache paths are joined to the folder as `path` names it (so a
-/// stage file in the working folder gives the path `import` had).
+/// the file's folder; relative cache and rest source paths are joined to the folder as `path`
+/// names it (so a stage file in the working folder gives the path `import` had).
 pub fn read<T: StageData>(path: &Path) -> Result<T> {
     let bytes = crate::input::read_bytes(path, &format!("the {} file", T::STAGE))?;
     let mut value: T = from_json(&bytes, path)?;
     let parent = path.parent().unwrap_or(Path::new(""));
-    for file in value.cache_mut().into_iter().flat_map(cache_paths_mut).filter(|f| Path::new(f.as_str()).is_relative()) {
+    for file in value.files_mut().into_iter().filter(|f| Path::new(f.as_str()).is_relative()) {
         *file = parent.join(file.as_str()).to_string_lossy().into_owned();
     }
     let mut surfaces = value.surfaces_mut();

@@ -18,7 +18,7 @@
 //! between them to fix their velocities), the fit takes the least-bending curve: a tiny term
 //! `λ Σ_i T_i³ ∫_i |x''|² dt` (dimensionless like the data term) is added to the factored
 //! matrix, and the solution is then refined with the residual of the plain least squares, so
-//! that it decides only what the frames do not (see [`NormalEquations::solve`]). `λ = 0` is
+//! that it decides only what the frames do not (see `NormalEquations::solve`). `λ = 0` is
 //! the plain least squares, and an undetermined velocity is then an error.
 //!
 //! Velocity unknowns are scaled by a per-key time `τ_k` (the mean length of the intervals at
@@ -170,7 +170,7 @@ pub(crate) struct NormalEquations {
 /// Columns solved at once: bounds the solver's scratch memory whatever the vertex count.
 const CHUNK_COLUMNS: usize = 3 * 512;
 
-/// Refinement steps towards the plain least squares (see [`NormalEquations::solve`]).
+/// Refinement steps towards the plain least squares (see `NormalEquations::solve`).
 const REFINEMENT_STEPS: usize = 2;
 
 impl NormalEquations {

@@ -4,7 +4,7 @@
 //! [`FrameSource`] is the contract between the cache readers and what consumes a cache
 //! (keyframe selection, the Hermite fit, the error report). [`VertexCache::open`] picks the
 //! reader by extension and returns the topology, the frames and what the report needs;
-//! [`write`] writes any format from a mesh and its frames. The formats and what each reader
+//! [`write()`] writes any format from a mesh and its frames. The formats and what each reader
 //! accepts are specified in `formats/caches.md`.
 //!
 //! Every reader checks its file's structure against the file's size before allocating

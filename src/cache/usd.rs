@@ -1,19 +1,20 @@
 //! USD point caches (`.usd`, `.usda`, `.usdc`): the `points` time samples of one Mesh prim.
 //!
-//! Read through usd-core's `pxr` (the reference implementation; already required to write
-//! usdc), in a Python process running `usd_cache.py`: it writes the selected samples one at a
-//! time to a temporary PC2 file, which [`pc2`](super::pc2) then serves one frame per read, so
-//! neither process holds the whole cache (usd-core itself keeps a `.usda` layer's text values
-//! in memory; `.usdc` values are read on demand). The temporary folder goes with the reader.
+//! Read through usd-core's `pxr` (the reference implementation), in a Python process running
+//! `usd_cache.py`: it writes the selected samples one at a time to a temporary PC2 file, which
+//! [`pc2`](super::pc2) then serves one frame per read, so neither process holds the whole cache
+//! (usd-core itself keeps a `.usda` layer's text values in memory; `.usdc` values are read on
+//! demand). The temporary folder goes with the reader.
 //!
 //! Frame `i` is at `time_code / timeCodesPerSecond`: the stage's rate is the cache's, whatever
 //! the caller's fps. Faces are fan-triangulated in vertex order; a `leftHanded` mesh has its
 //! triangles reversed so they face the same way as a `rightHanded` one. Points are in the
 //! prim's own space (its transforms are not applied).
 //!
-//! Written as `.usda` by us (text, streamed one frame at a time, the layout of
-//! `formats/usd.md`'s full-frame file) or `.usdc` / `.usd` by usd-core from a temporary PC2.
-//! The Python executable is `$BLENDSIM_PYTHON`, or `python3`.
+//! Written natively, without usd-core: `.usda` as text streamed one frame at a time, `.usdc` /
+//! `.usd` as a binary crate ([`crate::export::usdc`]) of the same layer
+//! ([`crate::export::usd::sampled_points`], the layout of `formats/usd.md`'s full-frame file).
+//! The Python executable that reads is `$BLENDSIM_PYTHON`, or `python3`.
 
 use std::ffi::OsString;
 use std::fs::File;
@@ -27,6 +28,7 @@ use super::pc2::{self, Pc2Frames};
 use super::range::FrameRange;
 use super::{check_writable, FrameSource};
 use crate::error::{Error, Result};
+use crate::export::layer::Value;
 use crate::export::usda::{extent, header, prim_name, push_topology, push_vec3s, UsdSettings};
 use crate::mesh::{Point, TriMesh};
 
@@ -220,7 +222,7 @@ fn time_codes(frames: &dyn FrameSource, fps: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Write `frames` as a USD point cache: `.usda` as text, `.usdc` / `.usd` through usd-core.
+/// Write `frames` as a USD point cache: `.usda` as text, `.usdc` / `.usd` as a binary crate.
 /// The stage is `/NAME/Mesh` (NAME from the file name), timeCodesPerSecond = `fps`.
 pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64) -> Result<()> {
     let (n, _) = check_writable(path, frames, fps)?;
@@ -238,27 +240,27 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let name = prim_name(&path.file_stem().map_or_else(|| "cache".into(), |s| s.to_string_lossy().into_owned()));
     let codes = time_codes(frames, fps);
     let (start, end) = (codes[0].floor() as i64, codes[codes.len() - 1].ceil() as i64);
+    let settings = UsdSettings { name, fps, up_axis: 'Y', meters_per_unit: 1.0 };
+    // Marked as a conversion, as the glb cache's generator is.
+    let doc = format!("blendsim {} (vertex cache)", env!("CARGO_PKG_VERSION"));
     let ascii = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("usda"));
     if ascii {
-        return write_usda(path, mesh, frames, &codes, UsdSettings { name, fps, up_axis: 'Y', meters_per_unit: 1.0 }, start, end);
+        return write_usda(path, mesh, frames, &codes, (&settings, &doc), start, end);
     }
-    let temp = TempDir::new("usd-write")?;
-    let pc2_path = temp.0.join("frames.pc2");
-    pc2::write(&pc2_path, frames, fps)?;
-    let info = serde_json::json!({
-        "name": name,
-        "fps": fps,
-        "time_codes": codes,
-        "start": start,
-        "end": end,
-        "doc": format!("blendsim {} (vertex cache)", env!("CARGO_PKG_VERSION")),
-        "face_vertex_indices": mesh.triangles.iter().flatten().collect::<Vec<_>>(),
-    });
-    let info_path = temp.0.join("info.json");
-    std::fs::write(&info_path, info.to_string()).map_err(|e| Error::io(&info_path, &e, "write a temporary file"))?;
-    crate::output::write_atomic_with(path, |tmp| {
-        run_script(path, &[std::ffi::OsStr::new("write"), pc2_path.as_os_str(), info_path.as_os_str(), tmp.as_os_str()])
-    })
+    // The binary crate is written natively from the layer the `.usda` text holds; the crate's
+    // values precede its tables, so the layer is built whole: the frames are held once as the
+    // layer's samples and once as the file's bytes (usd-core's writer held its layer too).
+    let mut samples = Vec::with_capacity(codes.len());
+    let mut points = vec![[0.0; 3]; n];
+    for (i, &code) in codes.iter().enumerate() {
+        frames.read_frame(i, &mut points)?;
+        samples.push((code, points.iter().map(|p| p.map(|x| x as f32)).collect::<Vec<[f32; 3]>>()));
+    }
+    let mut layer = crate::export::usd::sampled_points(samples, &mesh.triangles, None, &settings, (start, end));
+    layer.metadata.iter_mut().filter(|(key, _)| *key == "doc").for_each(|(_, value)| *value = Value::String(doc.clone()));
+    let bytes = crate::export::usdc::bytes(&layer, path)?;
+    drop(layer);
+    crate::output::write_atomic(path, &bytes)
 }
 
 fn write_usda(
@@ -266,7 +268,7 @@ fn write_usda(
     mesh: &TriMesh,
     frames: &mut dyn FrameSource,
     codes: &[f64],
-    settings: UsdSettings,
+    (settings, doc): (&UsdSettings, &str),
     start: i64,
     end: i64,
 ) -> Result<()> {
@@ -274,7 +276,7 @@ fn write_usda(
         let file = File::create(tmp).map_err(|e| Error::io(tmp, &e, "create the usda file"))?;
         let mut w = BufWriter::new(file);
         let io = |e: std::io::Error| Error::io(path, &e, "write the usda file");
-        let mut text = header(&settings, start, end);
+        let mut text = header(settings, doc, start, end);
         text.push_str(&format!("def Xform \"{}\"\n{{\n    def Mesh \"Mesh\"\n    {{\n", settings.name));
         w.write_all(text.as_bytes()).map_err(io)?;
         let mut points = vec![[0.0; 3]; frames.vertex_count()];
@@ -322,6 +324,27 @@ mod tests {
         }
         assert_eq!(&std::fs::read(dir.join("wave.usdc")).unwrap()[..8], b"PXR-USDC");
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2, "no temporaries left");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The `.usdc` cache is the `.usda` cache's layer, written natively: usd-core's checker
+    /// reads the two as one layer (every spec, field and time sample), also with time codes
+    /// that are not whole (frames at 24 fps on a 30 fps stage), and a `.usd` is the same crate.
+    #[test]
+    fn usdc_holds_the_usda_layer() {
+        let dir = scratch("usd-same-layer");
+        let (mesh, frames) = (wave_mesh(4), wave(16, 7, 24.0));
+        for name in ["wave.usda", "wave.usdc", "wave.usd"] {
+            write(&dir.join(name), &mesh, &mut frames.clone(), 30.0).unwrap();
+        }
+        assert_eq!(std::fs::read(dir.join("wave.usdc")).unwrap(), std::fs::read(dir.join("wave.usd")).unwrap());
+        let checker = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/usd_same_layer.py");
+        let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
+        let out = Command::new(python).arg(checker).arg(dir.join("wave.usda")).arg(dir.join("wave.usdc")).output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && stdout.contains("\"ok\": true"), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        let text = std::fs::read_to_string(dir.join("wave.usda")).unwrap();
+        assert!(text.contains("            1.25: [(") && text.contains(" (vertex cache)\"\n"), "fractional time codes, the doc of a cache");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

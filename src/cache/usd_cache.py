@@ -5,9 +5,6 @@ read FILE PRIM START END OUT_DIR
     inclusive, negative from the end; PRIM "-" picks the only Mesh, or the only animated one).
     Writes OUT_DIR/frames.pc2 (one sample at a time: memory is one frame) and
     OUT_DIR/info.json (prim, timeCodesPerSecond, time codes, topology).
-write PC2 INFO_JSON OUT
-    A stage with /NAME/Mesh whose points and extent are time-sampled from the PC2 frames at
-    INFO_JSON's time codes. usd-core picks the format from OUT's extension.
 
 Errors: one line `blendsim-usd: PROBLEM | FIX` on stderr and exit code 4; exit code 3 when
 pxr cannot be imported.
@@ -110,45 +107,9 @@ def read(path, prim_path, start, end, out_dir):
         json.dump(info, f)
 
 
-def write(pc2, info_path, out):
-    with open(info_path) as f:
-        info = json.load(f)
-    fps, codes = info["fps"], info["time_codes"]
-    stage = Usd.Stage.CreateNew(out)
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    stage.SetTimeCodesPerSecond(fps)
-    stage.SetFramesPerSecond(fps)
-    stage.SetStartTimeCode(info["start"])
-    stage.SetEndTimeCode(info["end"])
-    stage.GetRootLayer().documentation = info["doc"]
-    root = UsdGeom.Xform.Define(stage, "/" + info["name"])
-    stage.SetDefaultPrim(root.GetPrim())
-    mesh = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild("Mesh"))
-    indices = info["face_vertex_indices"]
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * (len(indices) // 3)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(indices))
-    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-    points, extent = mesh.CreatePointsAttr(), mesh.CreateExtentAttr()
-    with open(pc2, "rb") as f:
-        count = struct.unpack("<i", f.read(32)[16:20])[0]
-        for code in codes:
-            values = array.array("f")
-            values.frombytes(f.read(12 * count))
-            if sys.byteorder != "little":
-                values.byteswap()
-            frame = Vt.Vec3fArray.FromBuffer(memoryview(values).cast("B").cast("f", (count, 3)))
-            points.Set(frame, code)
-            extent.Set(UsdGeom.PointBased.ComputeExtent(frame), code)
-    stage.GetRootLayer().Save()
-
-
 def main(argv):
     if len(argv) == 6 and argv[0] == "read":
         read(argv[1], argv[2], int(argv[3]), int(argv[4]), argv[5])
-    elif len(argv) == 4 and argv[0] == "write":
-        write(argv[1], argv[2], argv[3])
     else:
         print(__doc__, file=sys.stderr)
         sys.exit(2)

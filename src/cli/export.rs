@@ -9,8 +9,8 @@ use blendsim::{stages, Result};
 ///
 /// Formats are the scene's [export] formats; NAME.outputs.json lists what was written.
 /// Blendshape: NAME.usda / NAME.usdc (UsdSkel BlendShapes and weights), NAME.glb (morph
-/// targets with CUBICSPLINE weights). Full-frame: NAME.full.EXT. `usdc` needs usd-core
-/// (`pip install usd-core`). Nothing is written unless every file succeeds; the folder is then
+/// targets with CUBICSPLINE weights). Full-frame: NAME.full.EXT. Every format is written
+/// natively (no usd-core). Nothing is written unless every file succeeds; the folder is then
 /// replaced in one step, keeping files that are not blendsim's and removing the files an
 /// earlier export of the same scene wrote that this one does not.
 #[derive(clap::Args)]

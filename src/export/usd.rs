@@ -86,14 +86,7 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Op
         }
         mesh.children.push(shape);
     }
-    let groups = attributes.filter(|a| !a.groups.is_empty());
-    if let Some(a) = groups {
-        mesh.children.extend(attrs::subsets(a, root));
-    }
-    skel_root.children.push(mesh);
-    if let Some(a) = groups {
-        skel_root.children.push(attrs::materials(a, root));
-    }
+    push_mesh(&mut skel_root, mesh, attributes, root);
 
     let mut skel = Prim::new("Skeleton", "Skel").with_api("SkelBindingAPI");
     skel.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
@@ -110,32 +103,48 @@ pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Op
 /// Full-frame animation: `points.timeSamples` at every frame.
 pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> Layer {
     let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
-    let metadata = metadata(settings, first, last);
+    let samples = frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, p.clone())).collect();
+    sampled_points(samples, triangles, attributes, settings, (first, last))
+}
+
+/// A mesh whose `points` (and `extent`) are sampled at `samples`' time codes (increasing,
+/// every sample with the same vertex count), under `Xform ROOT`: the full-frame file's layout,
+/// and a `.usdc` vertex cache's (`cache::usd`, whose `.usda` text is this layer too).
+/// `time_codes` is the stage's `(startTimeCode, endTimeCode)`.
+pub fn sampled_points(samples: Vec<(f64, Vec<[f32; 3]>)>, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, time_codes: (i64, i64)) -> Layer {
+    let metadata = metadata(settings, time_codes.0, time_codes.1);
     let mut mesh = Prim::new("Mesh", "Mesh");
-    let sampled = |f: fn(&[[f32; 3]]) -> Vec<[f32; 3]>| frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, Value::Vec3fs(f(p)))).collect();
-    mesh.attribute(Attribute::sampled("extent", "float3[]", sampled(|p| extent(p).to_vec())));
+    mesh.attribute(Attribute::sampled("extent", "float3[]", samples.iter().map(|(code, p)| (*code, Value::Vec3fs(extent(p).to_vec()))).collect()));
     push_topology(&mut mesh, triangles);
-    let vertices = frames.points.first().map_or(0, Vec::len);
+    let vertices = samples.first().map_or(0, |s| s.1.len());
     if let Some(a) = attributes {
         attrs::push_properties(&mut mesh, triangles, vertices, a);
     }
-    mesh.attribute(Attribute::sampled("points", "point3f[]", sampled(|p| p.to_vec())));
+    // The points move into the layer: a cache is held once, not copied.
+    mesh.attribute(Attribute::sampled("points", "point3f[]", samples.into_iter().map(|(code, p)| (code, Value::Vec3fs(p))).collect()));
     mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
     Layer { metadata, prims: vec![plain_root(mesh, attributes, &settings.name)] }
 }
 
 /// `Xform ROOT` holding a plain mesh (with its subsets) and the materials they bind.
-fn plain_root(mut mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) -> Prim {
+fn plain_root(mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) -> Prim {
     let mut xform = Prim::new("Xform", root);
+    push_mesh(&mut xform, mesh, attributes, root);
+    xform
+}
+
+/// `mesh` as a child of the root prim `parent` (a SkelRoot or an Xform) with the surface's
+/// material groups: a `GeomSubset` per group under the mesh, then beside it the materials the
+/// subsets bind (`/ROOT/Materials`), so both layouts bind materials the same way.
+fn push_mesh(parent: &mut Prim, mut mesh: Prim, attributes: Option<&CornerAttributes>, root: &str) {
     let groups = attributes.filter(|a| !a.groups.is_empty());
     if let Some(a) = groups {
         mesh.children.extend(attrs::subsets(a, root));
     }
-    xform.children.push(mesh);
+    parent.children.push(mesh);
     if let Some(a) = groups {
-        xform.children.push(attrs::materials(a, root));
+        parent.children.push(attrs::materials(a, root));
     }
-    xform
 }
 
 fn metadata(s: &UsdSettings, start: i64, end: i64) -> Vec<(&'static str, Value)> {

@@ -1,4 +1,4 @@
-//! USD ASCII: a [`Layer`] as `.usda` text. Layout in `formats/usd.md`.
+//! USD ASCII: a `Layer` (`export::layer`) as `.usda` text. Layout in `formats/usd.md`.
 //!
 //! Written as text directly (no USD library in Rust): the layout is small and fixed, and
 //! writing it ourselves keeps the bytes deterministic. Floats are f32 in their shortest
@@ -15,12 +15,12 @@ pub(crate) use super::usd::extent;
 pub use super::usd::{prim_name, UsdSettings};
 use crate::mesh::attributes::CornerAttributes;
 
-/// [`super::usd::blendshapes`] as text.
+/// `usd::blendshapes` as text.
 pub fn blendshapes(clip: &BlendShapeClip, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     text(&super::usd::blendshapes(clip, triangles, attributes, settings))
 }
 
-/// [`super::usd::full_frame`] as text.
+/// `usd::full_frame` as text.
 pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> String {
     text(&super::usd::full_frame(frames, triangles, attributes, settings))
 }
@@ -143,13 +143,14 @@ fn push_quoted(out: &mut String, s: &str) {
     out.push('"');
 }
 
-pub(crate) fn header(s: &UsdSettings, start: i64, end: i64) -> String {
+/// The layer header of a streamed file (a vertex cache's), `doc` its documentation string
+/// (plain text: no quote or backslash).
+pub(crate) fn header(s: &UsdSettings, doc: &str, start: i64, end: i64) -> String {
     format!(
-        "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"blendsim {version}\"\n    endTimeCode = {end}\n    \
+        "#usda 1.0\n(\n    defaultPrim = \"{name}\"\n    doc = \"{doc}\"\n    endTimeCode = {end}\n    \
          framesPerSecond = {fps}\n    metersPerUnit = {mpu}\n    startTimeCode = {start}\n    \
          timeCodesPerSecond = {fps}\n    upAxis = \"{up}\"\n)\n\n",
         name = s.name,
-        version = env!("CARGO_PKG_VERSION"),
         fps = s.fps,
         mpu = s.meters_per_unit,
         up = s.up_axis,

@@ -1,4 +1,4 @@
-//! USD binary ("crate", `.usdc`) files written natively from a [`Layer`], the same layer the
+//! USD binary ("crate", `.usdc`) files written natively from a `Layer`, the same layer the
 //! `.usda` text holds, so usd-core reads both as one layer.
 //!
 //! Version 0.8.0 of the format, the one usd-core writes by default: usd-core 26.11 refuses

@@ -58,7 +58,7 @@ pub struct CacheSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prim: Option<String>,
     /// For `"auto"`: bytes of cache frames the key selection may hold at once (default
-    /// [`DEFAULT_WINDOW_BYTES`], 256 MiB). It bounds the selection's memory, not its result
+    /// `DEFAULT_WINDOW_BYTES`, 256 MiB). It bounds the selection's memory, not its result
     /// unless a swing between two keys needs more frames than fit (at least 8 always do).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_bytes: Option<u64>,

@@ -77,6 +77,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 last_decrease: 0.0,
                 predicted_remaining: None,
                 force_scale: None,
+                force_scales: Vec::new(),
                 times: input_times.clone(),
                 input_times,
                 timing_iterations: 0,
@@ -90,11 +91,17 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
         Method::Spacetime => {
             // The total is the stopping rule's own prediction from the W so far
             // (`solver::IterationEstimate`; not max_iterations, which a converging solve never
-            // reaches).
+            // reaches). The force scale S of every iterate is kept for the report (the floor is
+            // `negligible` S), so the estimate can be replayed as the solve made it.
             let bar = progress.iterations("solve: spacetime");
-            let estimate = std::sync::Mutex::new(solver::IterationEstimate::default());
+            let estimate = std::sync::Mutex::new((solver::IterationEstimate::default(), Vec::new()));
             let solved = solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
-                let total = estimate.lock().unwrap_or_else(|e| e.into_inner()).update(k, w, floor, settings.tolerance, settings.max_iterations);
+                let mut guard = estimate.lock().unwrap_or_else(|e| e.into_inner());
+                let (running, scales) = &mut *guard;
+                scales.truncate(k);
+                scales.push(if settings.negligible > 0.0 { floor / settings.negligible } else { 0.0 });
+                let total = running.update(k, w, floor, settings.tolerance, settings.max_iterations);
+                drop(guard);
                 match total {
                     Some(total) => bar.set_length(total as u64),
                     None => bar.unset_length(),
@@ -119,6 +126,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 last_decrease: l.last_decrease,
                 predicted_remaining: l.predicted_remaining,
                 force_scale: Some(l.force_scale),
+                force_scales: estimate.into_inner().unwrap_or_else(|e| e.into_inner()).1,
                 times: solved.trajectory.times.clone(),
                 input_times,
                 timing_iterations: l.timing_iterations,
@@ -169,6 +177,7 @@ fn solve_fit(body: Body) -> Result<Solution> {
         last_decrease: 0.0,
         predicted_remaining: None,
         force_scale: None,
+        force_scales: Vec::new(),
         input_times: body.keys.times.clone(),
         times: body.keys.times.clone(),
         timing_iterations: 0,

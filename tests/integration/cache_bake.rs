@@ -269,7 +269,8 @@ fn bad_caches_are_one_line_errors_and_write_nothing() {
 
 /// `blendsim import --cache-out` converts a cache from format to format: the bar goes
 /// PC2 -> OBJ sequence -> MDD -> usda -> glb -> usdc -> PC2, and every step reads back as the
-/// original frames (to f32 rounding), with the original triangles.
+/// original frames (to f32 rounding), with the original triangles; the usdc holds the usda's
+/// layer.
 #[test]
 fn import_converts_caches_between_every_format() {
     let cache = bar(&BarSettings { duration: 0.25, ..BarSettings::default() });
@@ -302,6 +303,15 @@ fn import_converts_caches_between_every_format() {
         println!("{from} -> {to}: max {d:.2e} of the diagonal from the simulated frames");
         assert!(d < 1e-6, "{from} -> {to}: {d}");
     }
+    // The usdc is written natively (no usd-core): usd-core reads it as the layer of the usda
+    // written from the same frames.
+    std::fs::create_dir_all(dir.join("native")).unwrap();
+    std::fs::write(dir.join("scene.toml"), scene("c.usda", "", "fit", "keyframes = \"auto\"")).unwrap();
+    run(&dir.path, &["import", "scene.toml", "--cache-out", "native/c.usdc"]).success();
+    let same = crate::common::checkers::check_same_layer(&dir.join("c.usda"), &dir.join("native/c.usdc"));
+    // The root, the Xform, the Mesh and its six attributes (extent, the topology's three,
+    // points, subdivisionScheme).
+    assert_eq!(same["specs"].as_u64(), Some(9), "{same}");
     // A keyframe scene has no cache to convert.
     std::fs::write(dir.join("keys.toml"), "name = \"k\"\n[keyframes]\nmeshes = [\"rest.obj\", \"rest.obj\"]\ntimes = [0.0, 1.0]\n").unwrap();
     let r = run(&dir.path, &["import", "keys.toml", "--cache-out", "x.pc2"]);
@@ -430,9 +440,10 @@ fn a_staged_cache_folder_can_be_moved_and_resumed() {
     for (file, cache, rest) in [("keys.json", "\"path\":\"bar.pc2\"", "\"rest\":\"rest.obj\""), ("stages/body.json", "\"path\":\"../bar.pc2\"", "\"rest\":\"../rest.obj\"")] {
         let text = std::fs::read_to_string(staged.join(file)).unwrap();
         assert!(text.contains(cache) && text.contains(rest), "{file}: the cache and its rest mesh relative to it");
-        // (`rest_source`, the name messages give the rest shape, stays the one `import` was given.)
-        assert!(!text.contains(canonical.to_str().unwrap()) && !text.contains("\"path\":\"staged/bar.pc2\""), "{file}: no path from elsewhere");
+        assert!(!text.contains(canonical.to_str().unwrap()) && !text.contains("staged/bar.pc2"), "{file}: no path from elsewhere");
     }
+    // The rest shape's name in messages, like the cache's.
+    assert!(std::fs::read_to_string(staged.join("keys.json")).unwrap().contains("\"rest_source\":\"bar.pc2\""));
     let moved = dir.join("moved");
     std::fs::rename(&staged, &moved).unwrap();
     run(&dir.path, &["solve", "moved/stages/body.json", "-o", "moved/stages/solution.json"]).success();

@@ -258,7 +258,7 @@ fn usdc_needs_no_python_and_has_the_same_bytes_every_run() {
 /// then at most one a second), so the lines are only held to what is true at every iteration
 /// (`K <= N <= max_iterations`, and within a quarter of the iterations taken over the last
 /// quarter); that the estimate exists and is that close over the whole last quarter is checked
-/// on the solve's own W history (report.json), whatever lines were printed.
+/// on the solve's own W and force-scale history (report.json), whatever lines were printed.
 #[test]
 fn progress_estimates_every_phase() {
     use blendsim::internals::{IterationEstimate, NEGLIGIBLE};
@@ -301,12 +301,15 @@ fn progress_estimates_every_phase() {
         assert!(k <= n && n <= 1000, "predicted total {n} at iteration {k} (max_iterations is 1000):\n{shown}");
         assert!(close(k, n), "at iteration {k} the predicted total was {n}, the solve took {iterations}:\n{shown}");
     }
-    // The same estimate at every iteration of this solve, from its W (the floor from the final
-    // force scale S; the solve's floor follows S, which barely moves at the end).
+    // The same estimate at every iteration of this solve, as the solve made it: from the W and
+    // the force scale S of each iterate (the stopping rule's floor is NEGLIGIBLE S).
     let energy = crate::common::cli::energies(&report);
-    let floor = NEGLIGIBLE * report["solver"]["force_scale"].as_f64().expect("solver.force_scale");
+    let scales: Vec<f64> = report["solver"]["force_scales"].as_array().expect("solver.force_scales").iter().map(|s| s.as_f64().unwrap()).collect();
+    assert_eq!(scales.len(), energy.len(), "one force scale per iterate");
+    let last = report["solver"]["force_scale"].as_f64().expect("solver.force_scale");
+    assert!((scales[scales.len() - 1] / last - 1.0).abs() < 1e-12 && scales.iter().all(|&s| s > 0.0), "{scales:?} ends at {last}");
     let mut estimate = IterationEstimate::default();
-    let every: Vec<Option<usize>> = energy.iter().enumerate().map(|(k, &w)| estimate.update(k, w, floor, 1e-3, 1000)).collect();
+    let every: Vec<Option<usize>> = energy.iter().zip(&scales).enumerate().map(|(k, (&w, &s))| estimate.update(k, w, NEGLIGIBLE * s, 1e-3, 1000)).collect();
     let late: Vec<(u64, u64)> = every.iter().enumerate().filter_map(|(k, n)| n.map(|n| (k as u64, n as u64))).filter(|&(k, _)| 4 * k >= 3 * iterations).collect();
     assert!(late.len() >= 10, "a total over the last quarter of the {iterations} iterations: {every:?}");
     for &(k, n) in &late {

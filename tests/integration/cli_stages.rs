@@ -253,3 +253,25 @@ fn explicit_all_and_none_selections_survive_the_stage_files() {
     silent(run(&dir.path, &["embed", "solution.json", "-o", "animation.json"]));
     silent(run(&dir.path, &["export", "animation.json", "--out", "out"]));
 }
+
+/// The keyframes file names the rest shape's source (the name later stages' messages give it)
+/// relative to its own folder, like the cache and the textures: keyframes imported through an
+/// absolute scene path, their folder renamed, are tetrahedralized from the new name, and the
+/// warning about a `max_volume` TetGen cannot honour names the source there, not where it was.
+#[test]
+fn a_moved_keyframes_file_names_the_rest_source_where_it_now_is() {
+    let dir = TempDir::new("stages-rest-source-moved");
+    let staged = dir.join("staged");
+    std::fs::create_dir_all(&staged).unwrap();
+    std::fs::write(staged.join("box.obj"), blendsim::mesh::obj::write(&blendsim::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]))).unwrap();
+    let scene = "name = \"b\"\n[keyframes]\nmeshes = [\"box.obj\", \"box.obj\"]\ntimes = [0.0, 1.0]\n[tet]\nquality = 0.0\nmax_volume = 1e-9\n[solver]\nsamples = 3\n";
+    std::fs::write(staged.join("scene.toml"), scene).unwrap();
+    let absolute = staged.canonicalize().unwrap();
+    silent(run(&dir.path, &["import", absolute.join("scene.toml").to_str().unwrap(), "-o", "staged/keys.json"]));
+    let text = String::from_utf8(bytes(&staged.join("keys.json"))).unwrap();
+    assert!(text.contains("\"rest_source\":\"box.obj\"") && !text.contains(absolute.to_str().unwrap()), "the rest source relative to keys.json, no absolute path");
+    std::fs::rename(&staged, dir.join("moved")).unwrap();
+    let r = run(&dir.path, &["tetrahedralize", "moved/keys.json", "-o", "moved/body.json"]).success();
+    assert!(r.stderr.starts_with("blendsim: warning: moved/box.obj: TetGen could not honour [tet] max_volume = 1e-9"), "{r}");
+    run(&dir.join("moved"), &["solve", "body.json", "-o", "solution.json"]).success();
+}

@@ -74,6 +74,7 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             last_decrease: 0.0,
             predicted_remaining: None,
             force_scale: None,
+            force_scales: Vec::new(),
             input_times: Vec::new(),
             times: Vec::new(),
             timing_iterations: 0,
