@@ -255,9 +255,10 @@ fn the_cyclic_bar_at_a_visible_amplitude_finds_its_period() {
 /// over to the times), where the tangent model's first step lowers it by 8.8%, the minimum for
 /// those times. Run on (tolerance 1e-9) the projective solve plateaus: 1% of the tangent's
 /// decrease after 100 iterations, 3% after 670, 92% after 2000, 95% after 3000 (31 CPU s;
-/// the tangent solve takes 1.1 s wall), its times never moved. So the stop is not the rule's fault: any rule that
-/// waited out the plateau would run every stalled solve thousands of iterations. With the
-/// default rule both phases stop on their windows (23 iterations), the times at the best
+/// the tangent solve takes about 1 s), its times never moved. So the stop is not the rule's
+/// fault: any rule that waited out the plateau would run every stalled solve thousands of
+/// iterations. With the default rule both phases stop on their windows (23-25 iterations,
+/// depending on the thread count's round-off), the times at the best
 /// period for keys that barely moved, 15% short, W still 0.85 of the first guess's; the tangent
 /// model ends within 0.1% of the period with W at 0.04 of it.
 #[test]
