@@ -355,7 +355,7 @@ impl Default for Solver {
             keep_duration: false,
             fixed_times: Vec::new(),
             min_interval: 1e-3,
-            model_hessian: "projective".to_string(),
+            model_hessian: "auto".to_string(),
             global_step: "auto".to_string(),
         }
     }
