@@ -1226,6 +1226,58 @@ mod modal_phases {
         out
     }
 
+    /// The numeric factorization of the global step's matrix: faer's (one thread, both cores
+    /// inside its dense kernels) against ours ([`Cholesky::refactor`]: the two halves of the
+    /// elimination tree on two threads), medians of `REPEAT` (default 3), wall and CPU
+    /// seconds. `CUBE=13 KEYS=5 cargo test --release --lib factor_on_two_cores -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn factor_on_two_cores() {
+        let (el, k, kc) = many_keys_problem();
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let c = TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization));
+        let a = assemble(&obj, &unknowns, &c);
+        let order = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
+        let repeat: usize = std::env::var("REPEAT").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
+        println!("{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}", el.node_count(), unknowns.count(), order.name, order.cost.flops, std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
+        let mut chol = Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0)).unwrap();
+        println!("factor entries {}", chol.factor_nnz());
+        let median = |mut v: Vec<(f64, f64)>| {
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v[v.len() / 2]
+        };
+        let mut run = |name: &str, par: Par, ours: bool| {
+            let times: Vec<(f64, f64)> = (0..repeat)
+                .map(|_| {
+                    let (w, c0) = (std::time::Instant::now(), cpu());
+                    chol.par = par;
+                    if ours { chol.refactor(&a).unwrap() } else { chol.refactor_by_faer(&a).unwrap() }
+                    (w.elapsed().as_secs_f64(), cpu() - c0)
+                })
+                .collect();
+            let (w, c) = median(times);
+            println!("{name:<36} wall {w:8.3} s  cpu {c:8.3} s");
+            (w, chol.values_for_tests().to_vec())
+        };
+        // Our phases' thread CPU seconds on one thread: the two-core time they predict.
+        let _ = run("(warm-up)", Par::Seq, true);
+        *crate::physics::cholesky::phases::CPU.lock().unwrap() = [0.0; 6];
+        let _ = run("ours Par::Seq, phases timed", Par::Seq, true);
+        let p = crate::physics::cholesky::phases::CPU.lock().unwrap().map(|v| v / repeat as f64);
+        let (total, path) = (p[0] + p[1] + p[2] + p[3] + p[4], p[0].max(p[1]) + p[5] + p[4]);
+        println!("phases (thread CPU s): groups {:.3} + {:.3}, top halves {:.3} + {:.3} (longer {:.3}), top dense {:.3}; two-core critical path with the dense blocks on one core {:.3} s: {:.2}x", p[0], p[1], p[2], p[3], p[5], p[4], path, total / path);
+        let (faer_seq, reference) = run("faer Par::Seq", Par::Seq, false);
+        let (faer_par, _) = run("faer Par::rayon", Par::rayon(0), false);
+        let (ours_seq, one) = run("ours Par::Seq", Par::Seq, true);
+        let (ours_par, two) = run("ours Par::rayon", Par::rayon(0), true);
+        assert!(one.iter().zip(&two).all(|(x, y)| x.to_bits() == y.to_bits()));
+        let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = two.iter().zip(&reference).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        println!("speed-up over faer Par::Seq: faer rayon {:.2}x, ours seq {:.2}x, ours rayon {:.2}x; largest difference from faer {:.1e} of the largest entry", faer_seq / faer_par, faer_seq / ours_seq, faer_seq / ours_par, worst / scale);
+    }
+
     /// `cargo test --release --lib modal_setup_phases -- --ignored --nocapture` (CUBE, KEYS).
     #[test]
     #[ignore]

@@ -8,6 +8,9 @@
 //! two threads; [`sweeps`] are the forward and backward sweeps for three right-hand sides
 //! (portable code, compiled for AVX2 when the CPU has it; same bytes either way).
 
+mod numeric;
+#[cfg(test)]
+pub(crate) use numeric::phases;
 mod split;
 mod sweeps;
 
@@ -20,7 +23,8 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::SparseColMat;
 use faer::{Conj, MatMut, Par, Side};
 
-use split::SplitPlan;
+use numeric::Updates;
+use split::{GroupPlan, SplitPlan};
 use sweeps::SupernodalSolve;
 
 use super::ordering::FillOrdering;
@@ -33,9 +37,12 @@ pub struct NotPositiveDefinite;
 pub struct Cholesky {
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
-    par: Par,
+    pub(crate) par: Par,
     /// How [`Cholesky::solve_rows3`] splits a supernodal factor between two threads.
     plan: Option<SplitPlan>,
+    /// A supernodal factor's numeric factorization: which descendants update each supernode,
+    /// and how the elimination tree is split between two threads (balancing flops).
+    numeric: Option<(Updates, Option<GroupPlan>)>,
 }
 
 impl Cholesky {
@@ -57,17 +64,42 @@ impl Cholesky {
         };
         let symbolic = factorize_symbolic_cholesky(lower.symbolic(), Side::Lower, ord, CholeskySymbolicParams::default())
             .expect("symbolic Cholesky of a well-formed matrix");
-        let plan = match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(sym) => SplitPlan::new(sym),
-            SymbolicCholeskyRaw::Simplicial(_) => None,
+        let (plan, numeric) = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(sym) => {
+                let cp = sym.col_ptr_for_val();
+                let entries: Vec<usize> = (0..sym.n_supernodes()).map(|s| cp[s + 1] - cp[s]).collect();
+                (SplitPlan::new(sym, &entries), Some((Updates::new(sym), GroupPlan::new(sym, &numeric::supernode_flops(sym)))))
+            }
+            SymbolicCholeskyRaw::Simplicial(_) => (None, None),
         };
-        let mut chol = Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par, plan };
+        let mut chol = Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par, plan, numeric };
         chol.refactor(lower)?;
         Ok(chol)
     }
 
-    /// Numeric refactorization of a matrix with the same pattern.
+    /// Numeric refactorization of a matrix with the same pattern. A supernodal factor is
+    /// computed by [`numeric::factorize`] (two threads on the two halves of the elimination
+    /// tree, same bytes on one); a simplicial one (small systems) by faer.
     pub fn refactor(&mut self, lower: &SparseColMat<usize, f64>) -> Result<(), NotPositiveDefinite> {
+        let par = self.par;
+        if let (SymbolicCholeskyRaw::Supernodal(sym), Some((updates, plan))) = (self.symbolic.raw(), &self.numeric) {
+            // Our supernodes are in the permuted order: factor P A Pᵀ.
+            let permuted;
+            let a = match self.symbolic.perm() {
+                Some(perm) => {
+                    permuted = permute_lower(lower, perm.arrays().1);
+                    permuted.as_ref()
+                }
+                None => lower.as_ref(),
+            };
+            return numeric::factorize(sym, updates, plan.as_ref(), &mut self.values, a, par);
+        }
+        self.refactor_by_faer(lower)
+    }
+
+    /// Numeric refactorization by faer's own supernodal or simplicial code (the reference the
+    /// tests and benchmarks compare [`Cholesky::refactor`] with).
+    pub(crate) fn refactor_by_faer(&mut self, lower: &SparseColMat<usize, f64>) -> Result<(), NotPositiveDefinite> {
         let par = self.par;
         let mut mem = MemBuffer::new(self.symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()));
         self.symbolic
@@ -128,6 +160,12 @@ impl Cholesky {
         }
     }
 
+    /// The factor's stored values (for comparisons in tests and measurements).
+    #[cfg(test)]
+    pub(crate) fn values_for_tests(&self) -> &[f64] {
+        &self.values
+    }
+
     pub fn dimension(&self) -> usize {
         self.symbolic.nrows()
     }
@@ -136,6 +174,29 @@ impl Cholesky {
     pub fn factor_nnz(&self) -> usize {
         self.values.len()
     }
+}
+
+/// The lower triangle of `P A Pᵀ` from the lower triangle of `A` (entries above the diagonal
+/// are ignored, as faer does), where `inverse[i]` is the new index of unknown `i`. Rows within
+/// a column are in the order met, which the numeric factorization does not need sorted.
+fn permute_lower(lower: &SparseColMat<usize, f64>, inverse: &[usize]) -> SparseColMat<usize, f64> {
+    let n = lower.nrows();
+    let entries = || (0..n).flat_map(|j| lower.row_idx_of_col_raw(j).iter().zip(lower.val_of_col(j)).filter(move |e| *e.0 >= j).map(move |(&i, &v)| (inverse[i].max(inverse[j]), inverse[i].min(inverse[j]), v)));
+    let mut col_ptr = vec![0usize; n + 1];
+    for (_, c, _) in entries() {
+        col_ptr[c + 1] += 1;
+    }
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut next = col_ptr.clone();
+    let (mut rows, mut vals) = (vec![0usize; col_ptr[n]], vec![0.0; col_ptr[n]]);
+    for (r, c, v) in entries() {
+        rows[next[c]] = r;
+        vals[next[c]] = v;
+        next[c] += 1;
+    }
+    SparseColMat::new(faer::sparse::SymbolicSparseColMat::new_unsorted_checked(n, n, col_ptr, None, rows), vals)
 }
 
 #[cfg(test)]
@@ -233,10 +294,136 @@ mod tests {
         }
     }
 
+    /// The 27-point grid operator of `supernodal_sweeps_solve_three_right_hand_sides` on `k³`
+    /// nodes and a nested-dissection order of it.
+    fn grid_problem(k: usize) -> (SparseColMat<usize, f64>, Vec<usize>) {
+        let id = |i: usize, j: usize, l: usize| (i * k + j) * k + l;
+        let (mut t, mut coords, mut lists) = (Vec::new(), Vec::new(), vec![Vec::new(); k * k * k]);
+        for i in 0..k {
+            for j in 0..k {
+                for l in 0..k {
+                    coords.push([i as f64, j as f64, l as f64]);
+                    t.push(Triplet::new(id(i, j, l), id(i, j, l), 27.5));
+                    for (di, dj, dl) in (0..27).map(|c| (c / 9, (c / 3) % 3, c % 3)) {
+                        let (a, b, c) = (i + di, j + dj, l + dl);
+                        if (di, dj, dl) == (1, 1, 1) || a == 0 || b == 0 || c == 0 || a > k || b > k || c > k {
+                            continue;
+                        }
+                        let (row, col) = (id(a - 1, b - 1, c - 1), id(i, j, l));
+                        lists[col].push(row as u32);
+                        if row > col {
+                            t.push(Triplet::new(row, col, -1.0 + 0.01 * ((row + col) % 7) as f64));
+                        }
+                    }
+                }
+            }
+        }
+        let n = k * k * k;
+        let (mut xadj, mut adj) = (vec![0], Vec::new());
+        for l in lists {
+            adj.extend(l);
+            xadj.push(adj.len());
+        }
+        let graph = crate::physics::ordering::Graph { xadj, adj };
+        let order = crate::physics::ordering::nested_dissection(&graph, &coords);
+        (SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).unwrap(), crate::physics::ordering::expand(&order, &(0..=n).collect::<Vec<_>>()))
+    }
+
+    /// `A x` for the symmetric matrix whose lower triangle is `lower`.
+    fn apply(lower: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; x.len()];
+        for j in 0..lower.ncols() {
+            for (&i, &v) in lower.row_idx_of_col_raw(j).iter().zip(lower.val_of_col(j)) {
+                y[i] += v * x[j];
+                if i != j {
+                    y[j] += v * x[i];
+                }
+            }
+        }
+        y
+    }
+
+    /// Our numeric factorization against faer's on `lower`: the factor's entries agree to
+    /// round-off, the solve's relative residual is below 1e-12, and the bytes are the same on
+    /// two threads, a one-thread pool and `Par::Seq`.
+    fn check_against_faer(lower: &SparseColMat<usize, f64>, ordering: &FillOrdering) -> Cholesky {
+        let n = lower.nrows();
+        let chol = Cholesky::factor(lower, ordering, Par::rayon(0)).unwrap();
+        assert!(chol.numeric.is_some(), "the test needs a supernodal factor");
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| Cholesky::factor(lower, ordering, Par::rayon(0)).unwrap());
+        assert!(chol.values.iter().zip(&one.values).all(|(a, b)| a.to_bits() == b.to_bits()), "same bytes on one thread");
+        let seq = Cholesky::factor(lower, ordering, Par::Seq).unwrap();
+        assert!(chol.values.iter().zip(&seq.values).all(|(a, b)| a.to_bits() == b.to_bits()), "same bytes with Par::Seq");
+        let mut reference = Cholesky::factor(lower, ordering, Par::Seq).unwrap();
+        reference.refactor_by_faer(lower).unwrap();
+        let scale = reference.values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = chol.values.iter().zip(&reference.values).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(worst <= 1e-12 * scale, "factor entries differ from faer's by {worst:e} (largest {scale:e})");
+        let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin() + 0.5).collect();
+        let mut x = faer::Mat::<f64>::from_fn(n, 1, |i, _| b[i]);
+        chol.solve_in_place(x.as_mut());
+        let ax = apply(lower, &(0..n).map(|i| x[(i, 0)]).collect::<Vec<_>>());
+        let (r, nb) = (ax.iter().zip(&b).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt(), b.iter().map(|v| v * v).sum::<f64>().sqrt());
+        assert!(r <= 1e-12 * nb, "relative residual {:e}", r / nb);
+        chol
+    }
+
+    #[test]
+    fn numeric_factorization_on_two_threads_matches_faer() {
+        let (a, perm) = grid_problem(12);
+        let chol = check_against_faer(&a, &FillOrdering::Custom(perm));
+        assert!(chol.numeric.as_ref().unwrap().1.is_some(), "the nested-dissection tree splits in two");
+        // Refactorization with new values and the same pattern: same checks.
+        let mut b = a.clone();
+        for (k, v) in b.val_mut().iter_mut().enumerate() {
+            *v *= 1.0 + 0.05 * ((k % 11) as f64 / 11.0);
+        }
+        let mut again = Cholesky::factor(&a, &FillOrdering::Custom(grid_problem(12).1), Par::rayon(0)).unwrap();
+        again.refactor(&b).unwrap();
+        let fresh = check_against_faer(&b, &FillOrdering::Custom(grid_problem(12).1));
+        assert!(again.values.iter().zip(&fresh.values).all(|(x, y)| x.to_bits() == y.to_bits()), "a refactorization equals a fresh factorization");
+    }
+
+    #[test]
+    fn numeric_factorization_matches_faer_on_random_spd_matrices() {
+        let mut rng = crate::testing::Rng(3);
+        for (n, per_column) in [(400, 6), (900, 4)] {
+            // A random symmetric pattern, made SPD by diagonal dominance.
+            let mut t = Vec::new();
+            let mut diagonal = vec![1.0; n];
+            for j in 0..n {
+                for _ in 0..per_column {
+                    let i = ((rng.next() * 0.5 + 0.5) * n as f64) as usize % n;
+                    if i > j {
+                        let v = rng.next();
+                        t.push(Triplet::new(i, j, v));
+                        diagonal[i] += v.abs();
+                        diagonal[j] += v.abs();
+                    }
+                }
+            }
+            t.extend(diagonal.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
+            let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).unwrap();
+            check_against_faer(&a, &FillOrdering::Amd);
+        }
+    }
+
     #[test]
     fn indefinite_matrix_is_reported() {
         let t = [Triplet::new(0, 0, 1.0), Triplet::new(1, 0, 2.0), Triplet::new(1, 1, 1.0)];
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(2, 2, &t).unwrap();
         assert!(Cholesky::factor(&a, &FillOrdering::Amd, Par::Seq).is_err());
+        // A supernodal factor, split in two: a negative pivot in either group or in the top.
+        let (a, perm) = grid_problem(8);
+        let n = a.nrows();
+        for unknown in [perm[0], perm[n / 2], perm[n - 1]] {
+            let mut b = a.clone();
+            let col = b.symbolic().col_ptr()[unknown];
+            assert_eq!(b.symbolic().row_idx()[col], unknown, "the diagonal entry comes first");
+            b.val_mut()[col] = -1.0;
+            for par in [Par::Seq, Par::rayon(0)] {
+                assert!(Cholesky::factor(&b, &FillOrdering::Custom(perm.clone()), par).is_err(), "unknown {unknown}");
+            }
+        }
     }
 }
