@@ -212,13 +212,14 @@ fn main() {
     let global = GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step");
     let tr = initial_trajectory(&keys);
     let reps = 10 * repeats;
-    let mut parts: Vec<Row> = ["local step (projections)", "local step with Jacobians", "residuals + model gradient", "residuals + exact gradient", "global solve (3 coordinates)"]
+    let mut parts: Vec<Row> = ["local step (projections)", "local step with Jacobians", "residuals + model gradient", "residuals + exact gradient", "global solve (3 coordinates)", "exact evaluation in one pass (the solver's: local step + residuals + gradients)"]
         .iter()
         .map(|n| Row::new(n))
         .collect();
     let (p, pj) = (objective.local_step(&tr, false), objective.local_step(&tr, true));
     let e = objective.evaluate(&tr, &pj);
     let g = global.gather(e.exact_gradient.as_ref().expect("exact"));
+    let mut buffers = blendsim::internals::Projections { targets: Vec::new(), jacobians: None };
     for _ in 0..reps {
         let (w, c, _) = timed(|| objective.local_step(&tr, false));
         parts[0].push((w, c));
@@ -231,6 +232,8 @@ fn main() {
         let mut x = g.clone();
         let (w, c, _) = timed(|| global.apply_inverse(&mut x));
         parts[4].push((w, c));
+        let (w, c, _) = timed(|| objective.evaluate_fresh(&tr, true, &mut buffers));
+        parts[5].push((w, c));
     }
     println!();
     println!(

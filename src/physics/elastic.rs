@@ -279,23 +279,41 @@ impl Elastic {
     /// [`Elastic::local_step`] on the calling thread, into a new vector (for callers that are
     /// already parallel, e.g. over samples): no zero-filled buffer, no nested tasks.
     pub fn local_step_sequential(&self, x: &[Point]) -> Vec<Mat3> {
-        let (share, count) = (self.strain_share(), self.tet_count());
-        let mut targets = Vec::with_capacity(count);
-        for first in (0..count).step_by(BATCH) {
-            let p = project_batch(&self.deformation_gradients(first, x), share);
-            targets.extend_from_slice(&p[..BATCH.min(count - first)]);
-        }
+        let mut targets = Vec::new();
+        self.local_step_sequential_into(x, &mut targets);
         targets
     }
 
     /// [`Elastic::local_step_with_jacobians`] on the calling thread, into new vectors.
     pub fn local_step_with_jacobians_sequential(&self, x: &[Point]) -> (Vec<Mat3>, Vec<ProjectionJacobian>) {
-        let (share, count) = (self.strain_share(), self.tet_count());
-        let (mut targets, mut jacobians) = (Vec::with_capacity(count), Vec::with_capacity(count));
-        for first in (0..count).step_by(BATCH) {
-            project_with_jacobian_extend(&self.deformation_gradients(first, x), share, count - first, &mut targets, &mut jacobians);
-        }
+        let (mut targets, mut jacobians) = (Vec::new(), Vec::new());
+        self.local_step_with_jacobians_sequential_into(x, &mut targets, &mut jacobians);
         (targets, jacobians)
+    }
+
+    /// [`Elastic::local_step_sequential`] into `targets` (cleared first; its capacity is
+    /// reused, so an iteration that keeps its buffers allocates nothing). Same bytes.
+    pub fn local_step_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        targets.clear();
+        targets.reserve(count);
+        for first in (0..count).step_by(BATCH) {
+            let p = project_batch(&self.deformation_gradients(first, x), share);
+            targets.extend_from_slice(&p[..BATCH.min(count - first)]);
+        }
+    }
+
+    /// [`Elastic::local_step_with_jacobians_sequential`] into `targets` and `jacobians`
+    /// (cleared first, their capacity reused). Same bytes.
+    pub fn local_step_with_jacobians_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<ProjectionJacobian>) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        targets.clear();
+        jacobians.clear();
+        targets.reserve(count);
+        jacobians.reserve(count);
+        for first in (0..count).step_by(BATCH) {
+            project_with_jacobian_extend(&self.deformation_gradients(first, x), share, count - first, targets, jacobians);
+        }
     }
 
     /// `out = ∇²E(x) u = L u - J DP[dF(u)]`, the exact Hessian of the elastic energy applied to

@@ -67,13 +67,14 @@
 //! constraints ([`super::active_set`]); a check leaves it when its multiplier says the
 //! obstacle would have to pull.
 
+use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::time::Instant;
 
 use super::active_set::{Preconditioner, Projection, Row, RowKind};
 use super::contact::{At, Check, Contacts};
 use super::global_step::{CgLog, GlobalStep};
-use super::objective::{Evaluation, Objective};
+use super::objective::{Evaluation, Objective, Projections};
 use super::quasi_newton::{dot, Lbfgs};
 use super::sampling::{sample_counts, samples, TimeSlots};
 use super::tangent_step::TangentStep;
@@ -493,6 +494,7 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
         curvature: Vec::new(),
         factored_times: keys.times.clone(),
         clearance_tolerance: CLEARANCE_TOLERANCE * size,
+        projections: RefCell::new(std::array::from_fn(|_| Projections { targets: Vec::new(), jacobians: None })),
     };
 
     let t_iterations = Instant::now();
@@ -685,6 +687,9 @@ struct Solver<'a> {
     factored_times: Vec<f64>,
     /// Penetration allowed at a trial point (absolute).
     clearance_tolerance: f64,
+    /// The local step's buffers, kept between evaluations (`[0]` without the Jacobians, `[1]`
+    /// with them): every trial point fills them again instead of allocating them.
+    projections: RefCell<[Projections; 2]>,
 }
 
 /// A step of both kinds of variables: the keyframe unknowns (flat, three per unknown) and the
@@ -713,7 +718,7 @@ impl<'a> Solver<'a> {
     /// is an error naming the iteration.
     fn evaluate(&self, tr: &Trajectory, iteration: usize, exact: bool) -> Result<Evaluation> {
         let objective = self.objective(&tr.times);
-        finite(objective.evaluate(tr, &objective.local_step(tr, exact)), iteration)
+        finite(objective.evaluate_fresh(tr, exact, &mut self.projections.borrow_mut()[exact as usize]), iteration)
     }
 
     /// The joint gradient of an exact evaluation: the free unknowns' (flat), then the interval

@@ -170,6 +170,47 @@ fn exact_gradient_matches_finite_differences_of_w() {
     }
 }
 
+/// The solver's one-pass evaluation (each sample's residual right after its projections, into
+/// kept buffers) is the two-pass `local_step` + `evaluate` to the bit: W, both gradients and
+/// the time gradient, on 1, 2 and 8 threads (8: fewer samples than 4 per thread, the split-tets
+/// path), with buffers left over from another trajectory and from the other kind of evaluation.
+#[test]
+fn one_pass_evaluation_is_local_step_then_evaluate_to_the_bit() {
+    use super::objective::{Evaluation, Projections};
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let fields = |e: &Evaluation| (e.value, e.elastic, e.force_scale, e.gradient.clone(), e.exact_gradient.clone(), e.time_gradient.clone());
+    for cyclic in [false, true] {
+        let tr = wobbly(&mesh.positions, cyclic);
+        let other = wobbly(&mesh.positions.iter().map(|p| [p[0], 1.3 * p[1], p[2]]).collect::<Vec<_>>(), cyclic);
+        let mut k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], cyclic);
+        k.fixed = vec![bottom(&mesh.positions); 4];
+        k.fixed_velocity = k.fixed.clone();
+        let s = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], samples: 4, ..settings() };
+        for time_gradient in [false, true] {
+            let obj = super::objective::Objective { time_gradient, ..objective(&el, &k, &s) };
+            for threads in [1, 2, 8] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| {
+                    let mut scratch = [Projections { targets: Vec::new(), jacobians: None }, Projections { targets: Vec::new(), jacobians: None }];
+                    for exact in [true, false, true, false] {
+                        let _ = obj.evaluate_fresh(&other, !exact, &mut scratch[0]);
+                        let two_pass = obj.evaluate(&tr, &obj.local_step(&tr, exact));
+                        let one_pass = obj.evaluate_fresh(&tr, exact, &mut scratch[0]);
+                        assert_eq!(fields(&one_pass), fields(&two_pass), "cyclic {cyclic}, exact {exact}, {threads} threads");
+                        assert_eq!(one_pass.exact_gradient.is_some(), exact);
+                        assert_eq!(one_pass.time_gradient.is_some(), exact && time_gradient);
+                        // `local_step_into` over kept buffers gives `local_step`'s projections.
+                        obj.local_step_into(&tr, exact, &mut scratch[1]);
+                        let fresh = obj.local_step(&tr, exact);
+                        assert_eq!((&scratch[1].targets, &scratch[1].jacobians), (&fresh.targets, &fresh.jacobians));
+                    }
+                });
+            }
+        }
+    }
+}
+
 #[test]
 fn supports_are_left_out_of_w() {
     // W with supports = W without them minus the supports' rows, computed here by hand:

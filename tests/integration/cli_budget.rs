@@ -17,7 +17,7 @@ fn demo_scene() -> PathBuf {
 /// The demo with 2 samples per interval, copied into `dir`: its spacetime samples (1.8 MB
 /// estimated) and frames (1.5 MB) fit in a 3 MB budget that its factor does not, so
 /// `--max-memory 3M` exercises the iterative step. (`--max-memory` is the one budget of every
-/// estimate, so the demo itself, at 9 MB of samples, is refused below that.)
+/// estimate, so the demo itself, at 5.4 MB of samples, is refused below that.)
 fn lean_demo(dir: &TempDir) -> PathBuf {
     let from = demo_scene().parent().unwrap().to_path_buf();
     let to = dir.join("lean");
@@ -27,8 +27,8 @@ fn lean_demo(dir: &TempDir) -> PathBuf {
         std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
     }
     let scene = std::fs::read_to_string(to.join("twist.toml")).unwrap();
-    assert!(scene.contains("\nsamples = 10\n"));
-    std::fs::write(to.join("twist.toml"), scene.replace("\nsamples = 10\n", "\nsamples = 2\n")).unwrap();
+    assert!(scene.contains("\nsamples = 6\n"));
+    std::fs::write(to.join("twist.toml"), scene.replace("\nsamples = 6\n", "\nsamples = 2\n")).unwrap();
     to.join("twist.toml")
 }
 
@@ -77,7 +77,7 @@ fn over_the_memory_budget_the_iterative_step_gives_the_direct_result() {
 
 #[test]
 fn max_memory_is_the_one_budget_of_every_estimate() {
-    // The demo needs about 9 MB for its spacetime samples and 1.5 MB for its frames: under a
+    // The demo needs about 5.4 MB for its spacetime samples and 1.5 MB for its frames: under a
     // 1 MB budget the bake is the one-line estimate error, before any work, and writes nothing.
     let dir = TempDir::new("budget-estimate");
     let scene = demo_scene();

@@ -271,7 +271,7 @@ fn progress_estimates_every_phase() {
         std::fs::copy(&path, input.join(path.file_name().unwrap())).unwrap();
     }
     let text = std::fs::read_to_string(demo.join("twist.toml")).unwrap();
-    let slow = text.replace("samples = 10", "samples = 50").replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
+    let slow = text.replace("samples = 6", "samples = 50").replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
     assert_ne!(slow, text);
     assert!(slow.contains("tolerance = 0.001"), "the estimate below uses the demo's tolerance");
     std::fs::write(input.join("slow.toml"), &slow).unwrap();
