@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
 use blendsim::stage::Body;
 
 mod common;
@@ -40,6 +40,7 @@ struct Run {
     converged: bool,
     times: Vec<f64>,
     model: String,
+    coarse: usize,
 }
 
 fn run(body: &Body, change: impl Fn(&mut Settings)) -> Run {
@@ -68,6 +69,7 @@ fn run(body: &Body, change: impl Fn(&mut Settings)) -> Run {
         converged: l.converged,
         times: solved.trajectory.times,
         model,
+        coarse: l.coarse_iterations,
     }
 }
 
@@ -113,7 +115,7 @@ fn main() {
             Ok(v) => Some(v),
             Err(_) if bounce => None,
             Err(_) => {
-                let r = run(&body, |s| s.tolerance = 1e-8);
+                let r = run(&body, |s| (s.tolerance, s.coarse_samples) = (1e-8, 0));
                 row(name, "1e-8", &r, None);
                 Some(r.w)
             }
@@ -127,6 +129,17 @@ fn main() {
         }
         for &tol in &tolerances {
             row(name, &format!("{tol:e}"), &run(&body, |s| s.tolerance = tol), w_ref);
+        }
+        // `COARSE=2,3,5`: the default rule after a coarse phase at these samples (`COARSE_TOL`
+        // its tolerance, default the solver's), and with `COARSE=-`, without one (when it is
+        // the default).
+        if let Ok(v) = std::env::var("COARSE") {
+            let tol: f64 = std::env::var("COARSE_TOL").ok().and_then(|t| t.parse().ok()).unwrap_or(DEFAULT_COARSE_TOLERANCE);
+            for c in v.split(',').filter(|x| !x.is_empty()) {
+                let samples = if c == "-" { 0 } else { c.parse().unwrap() };
+                let r = run(&body, |s| (s.coarse_samples, s.coarse_tolerance) = (samples, tol));
+                row(name, &format!("coarse {samples} (tol {tol:e}; {} coarse it.)", r.coarse), &r, w_ref);
+            }
         }
         if models {
             for (label, model) in [("auto", ModelHessian::Auto), ("tangent", ModelHessian::Tangent)] {

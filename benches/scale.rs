@@ -159,6 +159,17 @@ fn main() {
             hold: Some(&[0.0, 1.0]),
             args: &["--max-memory", "2G"],
         },
+        // The coarse-to-fine schedule on the same body (`[solver] coarse_samples`: README).
+        Case {
+            name: "2.6k-nodes-20-keys-coarse",
+            size: [1.2, 3.6, 1.2],
+            divisions: [12, 36, 12],
+            keys: 20,
+            tet: "max_volume = 0.003",
+            solver: "coarse_samples = 5",
+            hold: Some(&[0.0, 1.0]),
+            args: &[],
+        },
         Case { name: "2.6k-nodes-5-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 5, tet: "max_volume = 0.003", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
         Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },

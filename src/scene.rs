@@ -233,6 +233,10 @@ pub struct Solver {
     /// How the global step is inverted: `"auto"` (the cheapest predicted within the memory
     /// budget), `"direct"`, `"modal"` or `"iterative"` (see `spacetime::global_step::Method`).
     pub global_step: String,
+    /// Samples per interval of a first, coarse solve whose result the solve at `samples`
+    /// starts from (0: none; not used with obstacles or `optimize_timing`, nor when not below
+    /// `samples`; see `spacetime::solver`, "Coarse to fine").
+    pub coarse_samples: usize,
 }
 
 /// The `[embed]` table.
@@ -357,6 +361,7 @@ impl Default for Solver {
             min_interval: 1e-3,
             model_hessian: "auto".to_string(),
             global_step: "auto".to_string(),
+            coarse_samples: crate::spacetime::solver::DEFAULT_COARSE_SAMPLES,
         }
     }
 }
@@ -1018,6 +1023,9 @@ times = [0.0, 0.5]
         assert_eq!(s.solver, Solver { samples: 3, ..Solver::default() });
         assert_eq!((&s.tet, &s.export), (&Tet::default(), &Export::default()));
         assert_eq!(s.material.volume, 70.0, "the volume weight does not follow the strain weight");
+        let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nsamples = 10\ncoarse_samples = 5\n")).unwrap();
+        assert_eq!(s.solver, Solver { samples: 10, coarse_samples: 5, ..Solver::default() });
+        assert_eq!(crate::stages::solve::settings(&s).coarse_phase(), Some(5), "the key reaches the solver");
     }
 
     #[test]

@@ -237,6 +237,14 @@ pub struct SolverLog {
     /// How the iterative global step's conjugate-gradient solves went (iterative only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub conjugate_gradients: Option<CgSummary>,
+    /// Iterations of the coarse phase, included in `iterations` (0: none ran; spacetime's
+    /// `[solver] coarse_samples`). `energy` holds W at `samples` only: the first guess, the
+    /// coarse phase's result, then one entry per fine iteration.
+    #[serde(default)]
+    pub coarse_iterations: usize,
+    /// Samples per interval of the coarse phase (0: none ran).
+    #[serde(default)]
+    pub coarse_samples: usize,
 }
 
 /// The conjugate-gradient solves of an iterative global step.

@@ -32,10 +32,12 @@ pub fn render(report: &Report) -> String {
     let sv = &report.solver;
     let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));
     let change = if w0 > 0.0 { format!(" ({:+.1}%)", 100.0 * (w1 - w0) / w0) } else { String::new() };
+    // W is at the configured samples; the coarse phase's iterations are counted apart.
+    let coarse = if sv.coarse_iterations > 0 { format!(" ({} coarse at {} samples per interval + {} fine)", sv.coarse_iterations, sv.coarse_samples, sv.iterations - sv.coarse_iterations) } else { String::new() };
     push(
         &mut s,
         format!(
-            "| solver | {}, {} iterations, W {:.4e} -> {:.4e}{change}, {} |",
+            "| solver | {}, {} iterations{coarse}, W {:.4e} -> {:.4e}{change}, {} |",
             sv.method,
             sv.iterations,
             w0,

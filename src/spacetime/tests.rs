@@ -541,3 +541,56 @@ fn the_learned_h0_scale_keeps_the_bending_scene_within_its_iteration_bound() {
     assert!(*log.energy.last().unwrap() < 1e-20 * log.energy[0], "W {:e}", log.energy.last().unwrap());
     assert!(log.iterations <= 220, "{} iterations (182 measured with the learned scale, 264 without)", log.iterations);
 }
+
+/// A twisting bar (top face turned, bottom held, both at every key): W levels off well above 0.
+fn twisting_scene() -> (Elastic, KeyConstraints) {
+    let mesh = cube_mesh(2);
+    let el = Elastic::new(&mesh, &material()).unwrap();
+    let ends = from_mask(&mesh.positions.iter().map(|p| p[1] == 0.0 || p[1] == 1.0).collect::<Vec<_>>());
+    let pose = |angle: f64| -> Vec<Point> { mesh.positions.iter().map(|&p| rotate_y(p, angle * p[1])).collect() };
+    let poses = vec![pose(0.0), pose(1.0), pose(-0.5), pose(0.0)];
+    (el, keys(vec![0.0, 0.4, 0.8, 1.2], poses, vec![ends; 4], false))
+}
+
+/// Coarse to fine (`solver`, "Coarse to fine"): the fine phase starts from the coarse phase's
+/// result; W at the configured samples never increases from the first guess through the coarse
+/// result to the stop; the log counts both phases and says so; the stop is within 2% of the W
+/// the single-phase solve reaches run to 1e-10; two runs give the same bits.
+#[test]
+fn coarse_to_fine_stops_near_the_converged_w_and_never_raises_it() {
+    use super::solver::{baseline, NEGLIGIBLE};
+    let (el, k) = twisting_scene();
+    let fine = Settings { tolerance: 1e-3, negligible: NEGLIGIBLE, max_iterations: 1000, coarse_samples: 0, ..Settings::new(8, 0.1, [0.0, -9.81, 0.0]) };
+    let coarse = Settings { coarse_samples: 3, ..fine.clone() };
+    let a = solve(&el, &k, &coarse, &|_, _, _| {}).unwrap();
+    let log = &a.log;
+    let w = &log.energy;
+    println!("{} iterations, W {:e} -> {:e}: {}", log.iterations, w[0], w.last().unwrap(), log.stop_reason);
+    assert_eq!((log.coarse_samples, log.converged), (3, true), "{}", log.stop_reason);
+    assert!(log.coarse_iterations > 0 && log.iterations > log.coarse_iterations, "{} of {}", log.coarse_iterations, log.iterations);
+    assert!(log.stop_reason.contains(&format!("{} coarse iterations at 3 samples per interval", log.coarse_iterations)), "{}", log.stop_reason);
+    // The first guess, the coarse result, then one W per fine iteration, all at 8 samples.
+    assert_eq!(w.len(), log.iterations - log.coarse_iterations + 2);
+    assert_eq!(w[0], baseline(&el, &k, &fine).1);
+    assert!(w.windows(2).all(|p| p[1] <= p[0]), "{w:?}");
+    let reference = solve(&el, &k, &Settings { tolerance: 1e-10, ..fine.clone() }, &|_, _, _| {}).unwrap();
+    let w_ref = *reference.log.energy.last().unwrap();
+    let stop = *w.last().unwrap();
+    println!("reference {} iterations, W {w_ref:e}; the coarse-to-fine stop is {:.3}% above", reference.log.iterations, 100.0 * (stop / w_ref - 1.0));
+    assert!(w_ref > 1e-3 * w[0] && stop <= 1.02 * w_ref, "{stop:e} against {w_ref:e}");
+    let b = solve(&el, &k, &coarse, &|_, _, _| {}).unwrap();
+    assert_eq!((&a.trajectory.positions, &a.trajectory.velocities, &a.log.energy), (&b.trajectory.positions, &b.trajectory.velocities, &b.log.energy));
+}
+
+/// The coarse phase runs only where it is defined: below the configured samples, without
+/// obstacles and without moving key times.
+#[test]
+fn the_coarse_phase_is_left_out_where_it_does_not_apply() {
+    let s = Settings { coarse_samples: 3, ..Settings::new(8, 0.0, [0.0; 3]) };
+    assert_eq!(s.coarse_phase(), Some(3));
+    assert_eq!(Settings { coarse_samples: 0, ..s.clone() }.coarse_phase(), None);
+    assert_eq!(Settings { coarse_samples: 8, ..s.clone() }.coarse_phase(), None);
+    assert_eq!(Settings { timing: Some(Default::default()), ..s.clone() }.coarse_phase(), None);
+    let contacts = super::contact::Contacts { obstacles: vec![super::obstacles::Obstacle::Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0] }], frame_rate: 30.0 };
+    assert_eq!(Settings { contacts: Some(contacts), ..s }.coarse_phase(), None);
+}

@@ -447,6 +447,8 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         active_contacts: 0,
         clearance: None,
         conjugate_gradients: None,
+        coarse_iterations: 0,
+        coarse_samples: 0,
     };
     Ok((trajectory, log))
 }

@@ -85,6 +85,8 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 active_contacts: 0,
                 clearance: None,
                 conjugate_gradients: None,
+                coarse_iterations: 0,
+                coarse_samples: 0,
             };
             (trajectory, log)
         }
@@ -141,6 +143,8 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                     tolerance: c.tolerance,
                     worst_residual: c.worst_residual,
                 }),
+                coarse_iterations: l.coarse_iterations,
+                coarse_samples: l.coarse_samples,
             };
             if let Some(c) = log.conjugate_gradients.filter(|c| c.capped > 0) {
                 eprintln!(
@@ -185,6 +189,8 @@ fn solve_fit(body: Body) -> Result<Solution> {
         active_contacts: 0,
         clearance: None,
         conjugate_gradients: None,
+        coarse_iterations: 0,
+        coarse_samples: 0,
     };
     Ok(Solution { body, trajectory, log })
 }
@@ -218,6 +224,8 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
             "iterative" => Some(GlobalMethod::Iterative),
             _ => None,
         },
+        coarse_samples: s.coarse_samples,
+        coarse_tolerance: crate::spacetime::solver::DEFAULT_COARSE_TOLERANCE,
         timing: s.optimize_timing.then(|| TimingSettings {
             min_interval: s.min_interval,
             keep_duration: s.keep_duration,

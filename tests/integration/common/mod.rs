@@ -82,6 +82,8 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             active_contacts: 0,
             clearance: None,
             conjugate_gradients: None,
+            coarse_iterations: 0,
+            coarse_samples: 0,
         },
         cache: None,
         cage: None,
