@@ -177,29 +177,6 @@ pub(super) fn factorize(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updat
 /// Thread CPU seconds of the factorization's phases, collected in tests to predict the
 /// two-core time on a loaded machine (a no-op otherwise): 0, 1 the groups, 2, 3 the top's
 /// halves, 4 the top's dense blocks, 5 the top's longer half summed over supernodes.
-#[cfg(test)]
-pub(crate) mod phases {
-    pub(crate) static CPU: std::sync::Mutex<[f64; 6]> = std::sync::Mutex::new([0.0; 6]);
-
-    fn thread_cpu() -> f64 {
-        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
-        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
-    }
-
-    pub(super) fn timed<T>(phase: usize, f: impl FnOnce() -> T) -> (T, f64) {
-        let t = thread_cpu();
-        let out = f();
-        let dt = thread_cpu() - t;
-        CPU.lock().unwrap()[phase] += dt;
-        (out, dt)
-    }
-
-    pub(super) fn path(dt: f64) {
-        CPU.lock().unwrap()[5] += dt;
-    }
-}
-
 #[cfg(not(test))]
 mod phases {
     #[inline(always)]
@@ -364,5 +341,29 @@ impl Front<'_> {
         cholesky_in_place(diag.rb_mut(), LltRegularization::default(), par, MemStack::new(&mut scratch.dense), Default::default()).map_err(|_| NotPositiveDefinite)?;
         faer::linalg::triangular_solve::solve_lower_triangular_in_place(diag.rb(), below.rb_mut().transpose_mut(), par);
         Ok(())
+    }
+}
+
+/// The phases' thread CPU seconds, summed for the measurement test (see the no-op version).
+#[cfg(test)]
+pub(crate) mod phases {
+    pub(crate) static CPU: std::sync::Mutex<[f64; 6]> = std::sync::Mutex::new([0.0; 6]);
+
+    fn thread_cpu() -> f64 {
+        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    }
+
+    pub(super) fn timed<T>(phase: usize, f: impl FnOnce() -> T) -> (T, f64) {
+        let t = thread_cpu();
+        let out = f();
+        let dt = thread_cpu() - t;
+        CPU.lock().unwrap()[phase] += dt;
+        (out, dt)
+    }
+
+    pub(super) fn path(dt: f64) {
+        CPU.lock().unwrap()[5] += dt;
     }
 }

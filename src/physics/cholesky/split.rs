@@ -108,6 +108,10 @@ pub(super) struct GroupPlan {
 /// use both threads (measured 1.5-1.9x on their updates, about 1.6x on the dense blocks).
 const TOP_SPEEDUP: f64 = 1.6;
 
+/// A candidate split: its predicted time, each hanging subtree with its group, which supernodes
+/// are in the top.
+type Candidate = (f64, Vec<(usize, u8)>, Vec<bool>);
+
 impl GroupPlan {
     /// Start from the top chain (from the roots down to the first branching); while it
     /// predicts a shorter time, move the heaviest hanging subtree's root into the top. The
@@ -160,7 +164,7 @@ impl GroupPlan {
             }
             (load, group)
         };
-        let mut best: Option<(f64, Vec<(usize, u8)>, Vec<bool>)> = None;
+        let mut best: Option<Candidate> = None;
         for _ in 0..64 {
             let (load, group) = deal(&frontier);
             let predicted = load[0].max(load[1]) as f64 + top_work as f64 / TOP_SPEEDUP;
