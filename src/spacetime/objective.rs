@@ -48,6 +48,19 @@ pub struct Projections {
     pub jacobians: Option<Vec<Vec<ProjectionJacobian>>>,
 }
 
+impl Projections {
+    /// One buffer per sample (and per sample's Jacobians when `with_jacobians`), keeping the
+    /// buffers already there.
+    fn shape(&mut self, samples: usize, with_jacobians: bool) {
+        self.targets.resize_with(samples, Vec::new);
+        if with_jacobians {
+            self.jacobians.get_or_insert_with(Vec::new).resize_with(samples, Vec::new);
+        } else {
+            self.jacobians = None;
+        }
+    }
+}
+
 /// The quantities the objective needs besides the trajectory.
 pub struct Objective<'a> {
     /// The body.
@@ -152,13 +165,7 @@ impl<'a> Objective<'a> {
     /// (the demo: 40 samples of 777 tets, 10 MB with the Jacobians) fresh buffers cost more in
     /// page faults and heap trimming on the worker threads than the allocation itself.
     pub fn local_step_into(&self, tr: &Trajectory, with_jacobians: bool, out: &mut Projections) {
-        let count = self.samples.len();
-        out.targets.resize_with(count, Vec::new);
-        if with_jacobians {
-            out.jacobians.get_or_insert_with(Vec::new).resize_with(count, Vec::new);
-        } else {
-            out.jacobians = None;
-        }
+        out.shape(self.samples.len(), with_jacobians);
         let split_tets = self.split_tets();
         let project = |s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<ProjectionJacobian>>| self.project_sample(tr, s, p, j, split_tets);
         match out.jacobians.as_mut() {
@@ -202,13 +209,7 @@ impl<'a> Objective<'a> {
             self.local_step_into(tr, exact, scratch);
             return self.evaluate(tr, scratch);
         }
-        let count = self.samples.len();
-        scratch.targets.resize_with(count, Vec::new);
-        if exact {
-            scratch.jacobians.get_or_insert_with(Vec::new).resize_with(count, Vec::new);
-        } else {
-            scratch.jacobians = None;
-        }
+        scratch.shape(self.samples.len(), exact);
         let residuals: Vec<Residual> = match scratch.jacobians.as_mut() {
             Some(jacobians) => self
                 .samples

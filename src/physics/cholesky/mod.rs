@@ -240,41 +240,8 @@ mod tests {
     fn supernodal_sweeps_solve_three_right_hand_sides() {
         // A 27-point grid operator plus a shift on 12³ nodes, in nested-dissection order:
         // large fronts, so faer builds a supernodal factor and the custom sweeps are used.
-        let k = 12;
-        let id = |i: usize, j: usize, l: usize| (i * k + j) * k + l;
-        let mut t = Vec::new();
-        let mut coords = Vec::new();
-        let mut lists = vec![Vec::new(); k * k * k];
-        for i in 0..k {
-            for j in 0..k {
-                for l in 0..k {
-                    coords.push([i as f64, j as f64, l as f64]);
-                    t.push(Triplet::new(id(i, j, l), id(i, j, l), 27.5));
-                    for (di, dj, dl) in (0..27).map(|c| (c / 9, (c / 3) % 3, c % 3)) {
-                        let (a, b, c) = (i + di, j + dj, l + dl);
-                        if (di, dj, dl) == (1, 1, 1) || a == 0 || b == 0 || c == 0 || a > k || b > k || c > k {
-                            continue;
-                        }
-                        let (row, col) = (id(a - 1, b - 1, c - 1), id(i, j, l));
-                        lists[col].push(row as u32);
-                        if row > col {
-                            t.push(Triplet::new(row, col, -1.0 + 0.01 * ((row + col) % 7) as f64));
-                        }
-                    }
-                }
-            }
-        }
-        let n = k * k * k;
-        let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).unwrap();
-        let mut xadj = vec![0];
-        let mut adj = Vec::new();
-        for l in lists {
-            adj.extend(l);
-            xadj.push(adj.len());
-        }
-        let graph = crate::physics::ordering::Graph { xadj, adj };
-        let order = crate::physics::ordering::nested_dissection(&graph, &coords);
-        let perm = crate::physics::ordering::expand(&order, &(0..=n).collect::<Vec<_>>());
+        let (a, perm) = grid_problem(12);
+        let n = a.nrows();
         let chol = Cholesky::factor(&a, &FillOrdering::Custom(perm), Par::Seq).unwrap();
         assert!(matches!(chol.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_)), "the test needs a supernodal factor");
         let b: Vec<[f64; 3]> = (0..n).map(|i| [(i as f64 * 0.3).sin(), (i as f64 * 0.7).cos(), 1.0 + (i % 5) as f64]).collect();
