@@ -784,4 +784,43 @@ mod tests {
         }
         assert_eq!(bytes.len(), toc + 8 + 32 * 6);
     }
+
+    /// Points streamed into the file give the bytes of the layer that holds them (a repeated
+    /// frame deduplicated alike); a reader's error and a non-finite point are one-line errors.
+    #[test]
+    fn streamed_samples_give_the_bytes_of_the_held_layer() {
+        use crate::export::usd::{sampled_points, sampled_points_layer, UsdSettings};
+        let settings = UsdSettings { name: "cache".into(), fps: 24.0, up_axis: 'Y', meters_per_unit: 1.0 };
+        let triangles = [[0, 1, 2], [0, 2, 3]];
+        let frame = |k: usize| -> Vec<[f32; 3]> { (0..4).map(|a| [a as f32, (k % 3) as f32 * 0.25, 0.5 * a as f32 * k as f32]).collect() };
+        let times = [0.0, 1.0, 2.0, 3.0, 4.5];
+        let frames: Vec<Vec<[f32; 3]>> = [0, 1, 2, 1, 4].map(frame).to_vec();
+        let held = sampled_points(times.iter().copied().zip(frames.iter().cloned()).collect(), &triangles, None, &settings, (0, 5));
+        let want = super::bytes(&held, Path::new("x.usdc")).unwrap();
+        let extents = times.iter().zip(&frames).map(|(t, p)| (*t, crate::export::usd::extent(p))).collect::<Vec<_>>();
+        let layer = sampled_points_layer(extents, Vec::new(), 4, &triangles, None, &settings, (0, 5));
+        let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut read };
+        assert!(bytes_streamed(&layer, Path::new("x.usdc"), streamed).unwrap() == want);
+        let mut failing = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            if i == 2 {
+                return Err(Error::general("frame 2 is unreadable", "fix it"));
+            }
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut failing };
+        assert!(bytes_streamed(&layer, Path::new("x.usdc"), streamed).unwrap_err().to_string().contains("frame 2 is unreadable"));
+        let mut nan = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            out[1][2] = if i == 3 { f32::NAN } else { out[1][2] };
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut nan };
+        let e = bytes_streamed(&layer, Path::new("out/x.usdc"), streamed).unwrap_err().to_string();
+        assert!(!e.contains('\n') && e.contains("out/x.usdc: cannot write the usdc file: /cache/Mesh.points holds a non-finite number"), "{e}");
+    }
 }

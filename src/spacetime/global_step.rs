@@ -94,19 +94,19 @@ pub struct GlobalStats {
     pub assemble_seconds: f64,
     /// Ordering, symbolic analysis and numeric factorization (or the preconditioner's).
     pub factor_seconds: f64,
-    /// The direct factor's predicted peak memory in bytes (see [`predicted_peak_bytes`]), and
+    /// The direct factor's predicted peak memory in bytes (see `predicted_peak_bytes`), and
     /// its predicted factorization time.
     pub predicted_bytes: f64,
     /// See `predicted_bytes`.
     pub predicted_seconds: f64,
     /// `"direct"` (sparse Cholesky), or `"iterative"` when the predicted peak was over the
-    /// memory budget or the predicted time of the iterative step was lower ([`choose`]).
+    /// memory budget or the predicted time of the iterative step was lower (`choose`).
     pub linear_solver: &'static str,
-    /// The iterative step's predicted peak memory and time (see [`choose`]).
+    /// The iterative step's predicted peak memory and time (see `choose`).
     pub predicted_iterative_bytes: f64,
     /// See `predicted_iterative_bytes`.
     pub predicted_iterative_seconds: f64,
-    /// The modal step's predicted peak memory and time (see [`choose`]; 0 when not weighed).
+    /// The modal step's predicted peak memory and time (see `choose`; 0 when not weighed).
     pub predicted_modal_bytes: f64,
     /// See `predicted_modal_bytes`.
     pub predicted_modal_seconds: f64,
