@@ -99,8 +99,11 @@ pub struct StreamedSamples<'a> {
     /// The sample times, in order.
     pub times: &'a [f64],
     /// Sample `i`'s values into the buffer (its length is the reader's to set).
-    pub read: &'a mut dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()>,
+    pub read: &'a mut SampleReader<'a>,
 }
+
+/// Reads sample `i`'s values into a buffer (see [`StreamedSamples`]).
+pub type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()> + 'a;
 
 /// [`bytes`] with the samples of `streamed.attribute` read from `streamed` as they are written:
 /// the same bytes as [`bytes`] of the layer holding them.
