@@ -102,6 +102,8 @@ demo: build deps-tetgen
 test: test-deps
 	@echo "==> running the test suite (release build)"
 	$(CARGO) test --release --locked
+	@echo "==> checking the API documentation builds without warnings (cargo doc)"
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --locked
 
 # The closing tables of the reliability work (issue 7), printed by the tests that check them:
 # every bad input of the corpus with its one-line message (each exits 1 and leaves the output

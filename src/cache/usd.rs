@@ -247,18 +247,30 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     if ascii {
         return write_usda(path, mesh, frames, &codes, (&settings, &doc), start, end);
     }
-    // The binary crate is written natively from the layer the `.usda` text holds; the crate's
-    // values precede its tables, so the layer is built whole: the frames are held once as the
-    // layer's samples and once as the file's bytes (usd-core's writer held its layer too).
-    let mut samples = Vec::with_capacity(codes.len());
+    // The binary crate is written natively from the layer the `.usda` text holds, with the
+    // points streamed: read once for the extents (which come first), then again frame by
+    // frame into one buffer as the writer stores them, so the frames are held once, as the
+    // file's bytes (usd-core's writer held its layer too).
     let mut points = vec![[0.0; 3]; n];
+    let mut extents = Vec::with_capacity(codes.len());
+    let mut f32s: Vec<[f32; 3]> = Vec::with_capacity(n);
     for (i, &code) in codes.iter().enumerate() {
         frames.read_frame(i, &mut points)?;
-        samples.push((code, points.iter().map(|p| p.map(|x| x as f32)).collect::<Vec<[f32; 3]>>()));
+        f32s.clear();
+        f32s.extend(points.iter().map(|p| p.map(|x| x as f32)));
+        extents.push((code, extent(&f32s)));
     }
-    let mut layer = crate::export::usd::sampled_points(samples, &mesh.triangles, None, &settings, (start, end));
+    drop(f32s);
+    let mut layer = crate::export::usd::sampled_points_layer(extents, Vec::new(), n, &mesh.triangles, None, &settings, (start, end));
     layer.metadata.iter_mut().filter(|(key, _)| *key == "doc").for_each(|(_, value)| *value = Value::String(doc.clone()));
-    let bytes = crate::export::usdc::bytes(&layer, path)?;
+    let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+        frames.read_frame(i, &mut points)?;
+        out.clear();
+        out.extend(points.iter().map(|p| p.map(|x| x as f32)));
+        Ok(())
+    };
+    let streamed = crate::export::usdc::StreamedSamples { attribute: format!("/{}/Mesh.points", settings.name), times: &codes, read: &mut read };
+    let bytes = crate::export::usdc::bytes_streamed(&layer, path, streamed)?;
     drop(layer);
     crate::output::write_atomic(path, &bytes)
 }

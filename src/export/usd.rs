@@ -112,16 +112,32 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
 /// and a `.usdc` vertex cache's (`cache::usd`, whose `.usda` text is this layer too).
 /// `time_codes` is the stage's `(startTimeCode, endTimeCode)`.
 pub fn sampled_points(samples: Vec<(f64, Vec<[f32; 3]>)>, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, time_codes: (i64, i64)) -> Layer {
+    let extents = samples.iter().map(|(code, p)| (*code, extent(p))).collect();
+    let vertices = samples.first().map_or(0, |s| s.1.len());
+    // The points move into the layer: a cache is held once, not copied.
+    let points = samples.into_iter().map(|(code, p)| (code, Value::Vec3fs(p))).collect();
+    sampled_points_layer(extents, points, vertices, triangles, attributes, settings, time_codes)
+}
+
+/// [`sampled_points`] from each sample's extent and the points' samples (empty when the usdc
+/// writer streams them: [`crate::export::usdc::bytes_streamed`]) of `vertices` points.
+pub fn sampled_points_layer(
+    extents: Vec<(f64, [[f32; 3]; 2])>,
+    points: Vec<(f64, Value)>,
+    vertices: usize,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    time_codes: (i64, i64),
+) -> Layer {
     let metadata = metadata(settings, time_codes.0, time_codes.1);
     let mut mesh = Prim::new("Mesh", "Mesh");
-    mesh.attribute(Attribute::sampled("extent", "float3[]", samples.iter().map(|(code, p)| (*code, Value::Vec3fs(extent(p).to_vec()))).collect()));
+    mesh.attribute(Attribute::sampled("extent", "float3[]", extents.into_iter().map(|(code, e)| (code, Value::Vec3fs(e.to_vec()))).collect()));
     push_topology(&mut mesh, triangles);
-    let vertices = samples.first().map_or(0, |s| s.1.len());
     if let Some(a) = attributes {
         attrs::push_properties(&mut mesh, triangles, vertices, a);
     }
-    // The points move into the layer: a cache is held once, not copied.
-    mesh.attribute(Attribute::sampled("points", "point3f[]", samples.into_iter().map(|(code, p)| (code, Value::Vec3fs(p))).collect()));
+    mesh.attribute(Attribute::sampled("points", "point3f[]", points));
     mesh.attribute(Attribute::uniform("subdivisionScheme", "token", Value::Token("none".into())));
     Layer { metadata, prims: vec![plain_root(mesh, attributes, &settings.name)] }
 }

@@ -90,6 +90,47 @@ pub fn bytes(layer: &Layer, path: &Path) -> Result<Vec<u8>> {
     Ok(w.finish())
 }
 
+/// One attribute's time samples produced one at a time while the file is written, instead of
+/// held in the layer: a vertex cache's points (40k vertices x 150 frames is 72 MB as `f32`)
+/// are then held once, as the file's bytes, with one frame's buffer reused.
+pub struct StreamedSamples<'a> {
+    /// The attribute's path (`/Root/Mesh.points`); it has no samples in the layer.
+    pub attribute: String,
+    /// The sample times, in order.
+    pub times: &'a [f64],
+    /// Sample `i`'s values into the buffer (its length is the reader's to set).
+    pub read: &'a mut SampleReader<'a>,
+}
+
+/// Reads sample `i`'s values into a buffer (see [`StreamedSamples`]).
+pub type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()> + 'a;
+
+/// [`bytes`] with the samples of `streamed.attribute` read from `streamed` as they are written:
+/// the same bytes as [`bytes`] of the layer holding them.
+pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>) -> Result<Vec<u8>> {
+    let unwritable = |problem: String| Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it");
+    check(layer).map_err(unwritable)?;
+    if streamed.times.iter().any(|t| !t.is_finite()) {
+        return Err(unwritable(format!("{} has a non-finite sample time", streamed.attribute)));
+    }
+    let mut w = Writer { streamed: Some(streamed), ..Writer::default() };
+    w.out.extend_from_slice(&[0; 88]);
+    w.layer(layer);
+    match w.failed.take() {
+        Some(Failure::Read(e)) => Err(e),
+        Some(Failure::Value(problem)) => Err(unwritable(problem)),
+        None => Ok(w.finish()),
+    }
+}
+
+/// Why a streamed sample was not written.
+enum Failure {
+    /// Its reader failed.
+    Read(Error),
+    /// A value the format cannot store (as [`check`] states it).
+    Value(String),
+}
+
 /// A value the format cannot store, or a non-finite number, as a problem statement.
 fn check(layer: &Layer) -> std::result::Result<(), String> {
     fn text(what: &str, s: &str) -> std::result::Result<(), String> {
@@ -167,8 +208,12 @@ struct PathEntry {
 }
 
 #[derive(Default)]
-struct Writer {
+struct Writer<'a> {
     out: Vec<u8>,
+    /// The attribute whose samples are read while written, until written.
+    streamed: Option<StreamedSamples<'a>>,
+    /// The first streamed sample that could not be written (nothing after it is).
+    failed: Option<Failure>,
     tokens: Vec<String>,
     token_index: HashMap<String, u32>,
     strings: Vec<u32>,
@@ -185,7 +230,7 @@ struct Writer {
     stored: HashMap<(u64, u64), Vec<u64>>,
 }
 
-impl Writer {
+impl Writer<'_> {
     fn token(&mut self, s: &str) -> u32 {
         if let Some(&i) = self.token_index.get(s) {
             return i;
@@ -327,6 +372,8 @@ impl Writer {
                     }
                     if !a.samples.is_empty() {
                         fields.push(("timeSamples", self.time_samples(&a.samples)));
+                    } else if self.streamed.as_ref().is_some_and(|s| s.attribute == at) {
+                        fields.push(("timeSamples", self.streamed_samples()));
                     }
                     if let Some(c) = &a.connection {
                         let target = self.existing_path(c);
@@ -419,6 +466,39 @@ impl Writer {
         let values_jump = self.here();
         self.put_u64(0);
         let reps: Vec<u64> = samples.iter().map(|(_, v)| self.value(v)).collect();
+        self.patch_jump(values_jump);
+        self.put_u64(reps.len() as u64);
+        reps.iter().for_each(|&r| self.put_u64(r));
+        rep(ty::TIME_SAMPLES, at)
+    }
+
+    /// [`Writer::time_samples`] of the streamed attribute, each value read into one buffer
+    /// and written before the next is read (the same bytes).
+    fn streamed_samples(&mut self) -> u64 {
+        let s = self.streamed.take().expect("called for the streamed attribute");
+        let at = self.here();
+        self.put_u64(0);
+        let mut times: Vec<u8> = (s.times.len() as u64).to_le_bytes().to_vec();
+        s.times.iter().for_each(|t| times.extend_from_slice(&t.to_le_bytes()));
+        let times = self.stored(rep(ty::DOUBLE_VECTOR, 0), times, false);
+        self.patch_jump(at);
+        self.put_u64(times);
+        let values_jump = self.here();
+        self.put_u64(0);
+        let mut value = Value::Vec3fs(Vec::new());
+        let mut reps = Vec::with_capacity(s.times.len());
+        for i in 0..s.times.len() {
+            let Value::Vec3fs(buffer) = &mut value else { unreachable!("a Vec3fs") };
+            if let Err(e) = (s.read)(i, buffer) {
+                self.failed = Some(Failure::Read(e));
+                break;
+            }
+            if !buffer.iter().flatten().all(|x| x.is_finite()) {
+                self.failed = Some(Failure::Value(format!("{} holds a non-finite number (NaN or infinity)", s.attribute)));
+                break;
+            }
+            reps.push(self.value(&value));
+        }
         self.patch_jump(values_jump);
         self.put_u64(reps.len() as u64);
         reps.iter().for_each(|&r| self.put_u64(r));
@@ -706,5 +786,44 @@ mod tests {
             end = start + size;
         }
         assert_eq!(bytes.len(), toc + 8 + 32 * 6);
+    }
+
+    /// Points streamed into the file give the bytes of the layer that holds them (a repeated
+    /// frame deduplicated alike); a reader's error and a non-finite point are one-line errors.
+    #[test]
+    fn streamed_samples_give_the_bytes_of_the_held_layer() {
+        use crate::export::usd::{sampled_points, sampled_points_layer, UsdSettings};
+        let settings = UsdSettings { name: "cache".into(), fps: 24.0, up_axis: 'Y', meters_per_unit: 1.0 };
+        let triangles = [[0, 1, 2], [0, 2, 3]];
+        let frame = |k: usize| -> Vec<[f32; 3]> { (0..4).map(|a| [a as f32, (k % 3) as f32 * 0.25, 0.5 * a as f32 * k as f32]).collect() };
+        let times = [0.0, 1.0, 2.0, 3.0, 4.5];
+        let frames: Vec<Vec<[f32; 3]>> = [0, 1, 2, 1, 4].map(frame).to_vec();
+        let held = sampled_points(times.iter().copied().zip(frames.iter().cloned()).collect(), &triangles, None, &settings, (0, 5));
+        let want = super::bytes(&held, Path::new("x.usdc")).unwrap();
+        let extents = times.iter().zip(&frames).map(|(t, p)| (*t, crate::export::usd::extent(p))).collect::<Vec<_>>();
+        let layer = sampled_points_layer(extents, Vec::new(), 4, &triangles, None, &settings, (0, 5));
+        let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut read };
+        assert!(bytes_streamed(&layer, Path::new("x.usdc"), streamed).unwrap() == want);
+        let mut failing = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            if i == 2 {
+                return Err(Error::general("frame 2 is unreadable", "fix it"));
+            }
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut failing };
+        assert!(bytes_streamed(&layer, Path::new("x.usdc"), streamed).unwrap_err().to_string().contains("frame 2 is unreadable"));
+        let mut nan = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+            out.clone_from(&frames[i]);
+            out[1][2] = if i == 3 { f32::NAN } else { out[1][2] };
+            Ok(())
+        };
+        let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut nan };
+        let e = bytes_streamed(&layer, Path::new("out/x.usdc"), streamed).unwrap_err().to_string();
+        assert!(!e.contains('\n') && e.contains("out/x.usdc: cannot write the usdc file: /cache/Mesh.points holds a non-finite number"), "{e}");
     }
 }

@@ -239,7 +239,8 @@ impl Newton {
         };
         let block_start: Vec<usize> = (0..=n).map(|v| 3 * v).collect();
         let perm = expand(&postorder(&graph, &order), &block_start);
-        let par = if cost.flops > PARALLEL_FACTOR_FLOPS { Par::rayon(0) } else { Par::Seq };
+        // A fixed split (not the pool's), so the factor's bytes do not depend on the thread count.
+        let par = if cost.flops > PARALLEL_FACTOR_FLOPS { crate::physics::fixed_par::par() } else { Par::Seq };
         // The symbolic analysis needs values only to finish the first numeric factorization:
         // the identity on the full pattern.
         let mut values = vec![0.0; row_idx.len()];

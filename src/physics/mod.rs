@@ -8,6 +8,7 @@ pub mod cholesky;
 pub mod csr;
 pub mod elastic;
 pub mod equilibrium;
+pub mod fixed_par;
 pub mod lanes;
 pub mod mat3;
 pub mod ordering;

@@ -18,11 +18,12 @@
 //! held nodes leave free, e.g. spinning about a single held node) are counted and skipped.
 
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-use faer::{Mat, Par, Side};
+use faer::{Mat, Par};
 
 use super::cholesky::Cholesky;
 use super::csr::Csr;
 use super::elastic::Elastic;
+use super::fixed_par;
 use super::ordering::FillOrdering;
 use super::projection::project_with_jacobian;
 use crate::error::{Error, Result};
@@ -176,8 +177,8 @@ fn dense_eigen(k: &Csr) -> (Vec<f64>, Mat<f64>) {
             a[(i, j)] = v;
         }
     }
-    let eig = a.self_adjoint_eigen(Side::Lower).expect("the symmetric eigensolver converges");
-    ((0..k.n).map(|i| eig.S()[i]).collect(), eig.U().to_owned())
+    // faer's kernels split by a fixed count, not the pool's: the same modes on any thread count.
+    fixed_par::self_adjoint_eigen(a.as_ref()).expect("the symmetric eigensolver converges")
 }
 
 /// The `wanted` smallest eigenvalues (zero ones included), ascending, and their vectors, by
@@ -203,7 +204,7 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
     let mut previous = vec![f64::INFINITY; p];
     for _ in 0..2000 {
         chol.solve_in_place(q.as_mut());
-        q = q.qr().compute_thin_Q();
+        q = fixed_par::thin_q(q);
         // Rayleigh-Ritz: B = Qᵀ K Q.
         let mut kq = Mat::<f64>::zeros(n, p);
         for i in 0..n {
@@ -213,11 +214,10 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
                 }
             }
         }
-        let b = q.transpose() * &kq;
+        let b = fixed_par::product(q.transpose(), kq.as_ref());
         let b = Mat::<f64>::from_fn(p, p, |i, j| 0.5 * (b[(i, j)] + b[(j, i)]));
-        let eig = b.self_adjoint_eigen(Side::Lower).expect("the symmetric eigensolver converges");
-        let theta: Vec<f64> = (0..p).map(|i| eig.S()[i]).collect();
-        q = &q * eig.U();
+        let (theta, u) = fixed_par::self_adjoint_eigen(b.as_ref()).expect("the symmetric eigensolver converges");
+        q = fixed_par::product(q.as_ref(), u.as_ref());
         // Zero modes settle to roundoff, about 1e-16 of the scale.
         let settled = (0..wanted).all(|i| (theta[i] - previous[i]).abs() <= 1e-12 * theta[i].abs() + 1e-14 * scale);
         if settled {

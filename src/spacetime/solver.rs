@@ -115,14 +115,14 @@ pub struct Settings {
     /// Obstacles the nodes may not enter.
     pub contacts: Option<Contacts>,
     /// The quasi-Newton phase's model Hessian (its preconditioner). Default: auto, which keeps
-    /// the projective one wherever a key moves beyond [`LINEAR_REGIME`] (every Table 1 scene
+    /// the projective one wherever a key moves beyond `LINEAR_REGIME` (every Table 1 scene
     /// and the demo) and takes the tangent one for small motions about the rest shape, where
     /// the projective one stalls: on the cyclic bar L-BFGS preconditioned by `L` lowers W at
     /// the first guess's times by 0.26% in 670 iterations, against the 8.8% the tangent model
     /// finds in one, and the stopping rule then rightly ends a solve that is not moving.
     pub model_hessian: ModelHessian,
     /// How the global step is inverted; `None`: the cheapest predicted within the memory
-    /// budget ([`super::global_step::choose`]).
+    /// budget (`super::global_step::choose`).
     pub global_step: Option<super::global_step::Method>,
     /// Residual samples per interval of the coarse phase (0: none; module documentation,
     /// "Coarse to fine"). Not used with obstacles or optimized key times, nor when it is not
@@ -135,13 +135,13 @@ pub struct Settings {
 /// The quasi-Newton phase's initial inverse Hessian.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ModelHessian {
-    /// [`ModelHessian::Tangent`] when every key stays within [`LINEAR_REGIME`] of the body's
+    /// [`ModelHessian::Tangent`] when every key stays within `LINEAR_REGIME` of the body's
     /// size of its rest shape (where the rest tangent stiffness is the body's) and its
     /// factorization succeeds, else [`ModelHessian::Projective`].
     Auto,
     /// The global step's matrix (projective stiffness `L`), factorized anyway for phase 1.
     Projective,
-    /// The same normal matrix with the rest tangent stiffness ([`super::tangent_step`]);
+    /// The same normal matrix with the rest tangent stiffness (`super::tangent_step`);
     /// not with obstacles (the projective one is used there).
     Tangent,
 }
@@ -378,14 +378,14 @@ struct Iterate {
 ///
 /// Two phases share one factorized matrix:
 ///
-/// 1. The paper's local/global step ([`Solver::local_global`]): the minimizer of the quadratic
+/// 1. The paper's local/global step (`Solver::local_global`): the minimizer of the quadratic
 ///    model of W with frozen projections (plus the proximal term, and the active contacts as
 ///    hard constraints). It is fast far from the solution but it is not a descent direction of
 ///    W everywhere (its stiffness is `L`, not `∇²E`), and near its fixed point it turns W back
 ///    up.
 /// 2. Once an iteration lowers W by less than 1% or stops decreasing it: L-BFGS on the exact W
 ///    (whose gradient differentiates the projections), with the same matrix as initial
-///    inverse Hessian ([`Solver::quasi_newton`]), over the key times too when asked.
+///    inverse Hessian (`Solver::quasi_newton`), over the key times too when asked.
 ///
 /// In both, a step that would not decrease W is halved until it does (the trial's local step
 /// is the next iteration's, so an accepted step costs nothing extra). W never increases, and
@@ -635,7 +635,7 @@ pub fn predicted_iterations(energy: &[f64], tolerance: f64, floor: f64) -> Optio
 }
 
 /// The predicted total iteration count of a running solve, for its progress bar: the median
-/// of the last WINDOW [`predicted_iterations`], shown only while most of them exist. After a
+/// of the last WINDOW `predicted_iterations`, shown only while most of them exist. After a
 /// stall W can speed up again (a buckling, a contact settling); the few windows whose decrease
 /// shrinks again right after it extrapolate from one uncertain ratio and can be off by 4x, so
 /// a total waits for a majority of the window to agree rather than show one of them.

@@ -235,9 +235,9 @@ fn the_cyclic_bar_finds_its_first_bending_period() {
 /// intervals per cycle. On the same bar meshed with half the cells per axis (720 tets instead
 /// of 5760; its coarse tets make it stiffer: 0.3999 s instead of 0.4978 s, and the first mode
 /// leans 10% into z), where rapier released from the bent key swings with 0.4005 s (+0.15%).
-/// Measured (load 10): 0.4010 s and 0.4009 s from the two starts (+0.25% and +0.23% of the
-/// eigen period, +0.11% and +0.09% of rapier's), 39 and 68 iterations, 7 CPU s in all with
-/// rapier's simulation (`RAYON_NUM_THREADS=1`). On the fine mesh the same loop found 0.4981 s
+/// Measured (load 19): 0.4009 s from both starts (+0.23% of the eigen period, +0.09% of
+/// rapier's), 59 and 90 iterations on any thread count (the bar's modes are computed with a
+/// fixed split: `physics::fixed_par`), 7 CPU s in all with rapier's simulation. On the fine mesh the same loop found 0.4981 s
 /// and 0.4988 s (+0.05%, +0.20%) in 41 and 66 iterations, for 117 CPU s.
 #[test]
 fn the_cyclic_bar_at_a_visible_amplitude_finds_its_period() {
@@ -257,8 +257,8 @@ fn the_cyclic_bar_at_a_visible_amplitude_finds_its_period() {
 /// decrease after 100 iterations, 3% after 670, 92% after 2000, 95% after 3000 (31 CPU s;
 /// the tangent solve takes about 1 s), its times never moved. So the stop is not the rule's
 /// fault: any rule that waited out the plateau would run every stalled solve thousands of
-/// iterations. With the default rule both phases stop on their windows (23-25 iterations,
-/// depending on the thread count's round-off), the times at the best
+/// iterations. With the default rule both phases stop on their windows (23-25 iterations),
+/// the times at the best
 /// period for keys that barely moved, 15% short, W still 0.85 of the first guess's; the tangent
 /// model ends within 0.1% of the period with W at 0.04 of it.
 #[test]

@@ -23,6 +23,7 @@ mod cli_output;
 mod cli_physics;
 mod cli_scale;
 mod cli_stages;
+mod cli_threads;
 mod cli_timing;
 mod export_formats;
 mod fixtures;
