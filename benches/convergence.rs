@@ -8,13 +8,13 @@
 //!
 //! `cargo bench --bench convergence`; `-- TWIST SPOT` runs some scenes. Environment: `TOLS`
 //! the tolerance rows (default `1e-2,1e-4`; empty: none), `MODELS=1` the model-Hessian rows,
-//! `QUICK=1` leaves out the relative-rule row, `REF=W` (or per scene `REF=TWIST=W,DINO=W`) a
+//! `QUICK=1` leaves out the relative-rule row, `STEPS=1` adds the rows of each quasi-Newton-phase step, `REF=W` (or per scene `REF=TWIST=W,DINO=W`) a
 //! known reference W (skips the 1e-8 solve), `TRACE=1` prints W / S and the key times
 //! per iteration, `NEG=1e-4` runs only the default rule with that `negligible`.
 
 use std::time::Instant;
 
-use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
 use blendsim::stage::Body;
 
 mod common;
@@ -139,6 +139,12 @@ fn main() {
                 let samples = if c == "-" { 0 } else { c.parse().unwrap() };
                 let r = run(&body, |s| (s.coarse_samples, s.coarse_tolerance) = (samples, tol));
                 row(name, &format!("coarse {samples} (tol {tol:e}; {} coarse it.)", r.coarse), &r, w_ref);
+            }
+        }
+        // `STEPS=1`: the default rule with each step of the quasi-Newton phase forced.
+        if std::env::var("STEPS").is_ok() {
+            for (label, step) in [("quasi-newton", Step::QuasiNewton), ("gauss-newton", Step::GaussNewton)] {
+                row(name, &format!("default, step {label}"), &run(&body, |s| s.step = step), w_ref);
             }
         }
         if models {

@@ -237,6 +237,9 @@ pub struct Solver {
     /// starts from (0: none; not used with obstacles or `optimize_timing`, nor when not below
     /// `samples`; see `spacetime::solver`, "Coarse to fine").
     pub coarse_samples: usize,
+    /// The quasi-Newton phase's step: `"auto"`, `"quasi-newton"` (L-BFGS) or `"gauss-newton"`
+    /// (truncated CG on the Gauss-Newton Hessian; see `spacetime::solver::Step`).
+    pub step: String,
 }
 
 /// The `[embed]` table.
@@ -362,6 +365,7 @@ impl Default for Solver {
             model_hessian: "auto".to_string(),
             global_step: "auto".to_string(),
             coarse_samples: crate::spacetime::solver::DEFAULT_COARSE_SAMPLES,
+            step: "auto".to_string(),
         }
     }
 }
@@ -870,6 +874,9 @@ impl Solver {
         }
         if !["auto", "projective", "tangent"].contains(&self.model_hessian.as_str()) {
             return invalid(format!("[solver] model_hessian = {:?} is not a model", self.model_hessian), "use \"auto\", \"projective\" or \"tangent\"");
+        }
+        if !["auto", "quasi-newton", "gauss-newton"].contains(&self.step.as_str()) {
+            return invalid(format!("[solver] step = {:?} is not a step", self.step), "use \"auto\", \"quasi-newton\" or \"gauss-newton\"");
         }
         if !["auto", "direct", "modal", "iterative"].contains(&self.global_step.as_str()) {
             return invalid(format!("[solver] global_step = {:?} is not a way to solve the global step", self.global_step), "use \"auto\", \"direct\", \"modal\" or \"iterative\"");
