@@ -1033,6 +1033,10 @@ times = [0.0, 0.5]
         let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nsamples = 10\ncoarse_samples = 5\n")).unwrap();
         assert_eq!(s.solver, Solver { samples: 10, coarse_samples: 5, ..Solver::default() });
         assert_eq!(crate::stages::solve::settings(&s).coarse_phase(), Some(5), "the key reaches the solver");
+        let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"gauss-newton\"\n")).unwrap();
+        assert_eq!(crate::stages::solve::settings(&s).step, crate::spacetime::solver::Step::GaussNewton, "the key reaches the solver");
+        let e = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"newton\"\n")).unwrap_err().to_string();
+        assert!(e.contains("[solver] step = \"newton\" is not a step") && e.contains("(fix: "), "{e}");
     }
 
     #[test]

@@ -417,6 +417,30 @@ mod tests {
         assert!(worst < 1e-12, "relative error {worst:e}");
     }
 
+    /// The solver with Gauss-Newton steps: every step lowers W, the steps are Gauss-Newton
+    /// ones, and it settles where L-BFGS does (the wobbly cube's keys, bottom face held, damped,
+    /// with gravity); `Auto` and moving key times keep L-BFGS.
+    #[test]
+    fn gauss_newton_steps_lower_w_to_the_quasi_newton_minimum() {
+        use super::super::solver::{solve, Step};
+        let mesh = cube_mesh(2);
+        let el = Elastic::new(&mesh, &material()).unwrap();
+        let tr = wobbly(&mesh.positions, false);
+        let mut k = wobbly_keys(&mesh.positions, &tr, false, false);
+        k.fixed = vec![(0..mesh.positions.len() as u32).filter(|&a| mesh.positions[a as usize][1] == 0.0).collect(); 4];
+        let base = Settings { damping: 0.7, gravity: [0.0, -4.0, 1.0], samples: 4, tolerance: 1e-7, ..settings() };
+        let run = |step| solve(&el, &k, &Settings { step, ..base.clone() }, &|_, _, _| {}).unwrap().log;
+        let (qn, gn) = (run(Step::QuasiNewton), run(Step::GaussNewton));
+        assert!(qn.converged && gn.converged, "{} / {}", qn.stop_reason, gn.stop_reason);
+        assert!(gn.stop_reason.contains("Gauss-Newton steps") && !qn.stop_reason.contains("Gauss-Newton"), "{}", gn.stop_reason);
+        assert!(gn.energy.windows(2).all(|w| w[1] < w[0]), "W rose: {:?}", gn.energy);
+        let (wq, wg) = (*qn.energy.last().unwrap(), *gn.energy.last().unwrap());
+        assert!((wg - wq).abs() <= 1e-4 * wq, "W {wg:e} (Gauss-Newton) against {wq:e} (L-BFGS)");
+        assert_eq!(Step::Auto.resolve(&base), Step::QuasiNewton);
+        let timed = Settings { timing: Some(Default::default()), step: Step::GaussNewton, ..base.clone() };
+        assert_eq!(timed.step.resolve(&timed), Step::QuasiNewton);
+    }
+
     /// Where the residual vanishes (a rotated body in free fall, undamped: `f = M (g - g) + 0`),
     /// W's Hessian is its Gauss-Newton part: `H v` equals central differences of the exact
     /// gradient along random directions.

@@ -51,11 +51,25 @@
 //!
 //! With [`Settings::step`] = [`Step::GaussNewton`], each quasi-Newton-phase iteration first
 //! tries the truncated Gauss-Newton step of [`super::gauss_newton`]: `H d = -g` with `H` the
-//! Gauss-Newton Hessian of W (the projections' Jacobians included), solved by CG preconditioned
-//! with the model Hessian's factor (the global step's matrix is `H` without the projections'
-//! Jacobians), at most [`GAUSS_NEWTON_CG`] products, to the Eisenstat-Walker forcing
-//! tolerance. The same line search on W takes it (W never increases); where it fails, the
-//! L-BFGS step is taken instead, whose curvature pairs are kept from every step.
+//! Gauss-Newton Hessian of W (the projections' Jacobians included), solved by CG to the
+//! Eisenstat-Walker forcing tolerance, at most [`GAUSS_NEWTON_CG`] products. The same line
+//! search on W takes it (W never increases); where it fails, the L-BFGS step is taken instead.
+//! CG is preconditioned by the L-BFGS inverse Hessian, the curvature pairs of the last steps
+//! on the model Hessian's factor (Morales & Nocedal's automatic preconditioning): the factor
+//! alone (the global step's matrix is `H` without the projections' Jacobians, stiffer along
+//! bending and twisting) left CG at its cap on 52 of TWIST's 54 steps.
+//!
+//! Measured (1 thread, `benches/convergence.rs` with `STEPS=1`; load 10 to 18 on 2 cores):
+//! it halves the iterations, not the cost. A product with `H` costs about 0.6 of an iteration
+//! (two stiffness and two projection-Jacobian passes per sample, against one of each and the
+//! projections themselves), and a step takes 3 to 6 products.
+//!
+//! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CG products, CPU s |
+//! |---|---:|---:|
+//! | TWIST | 98, 3.1 | 66, 199, 6.3 |
+//! | the demo | 117, 0.69 | 54, 177, 1.1 |
+//!
+//! So [`Step::Auto`] (the default) keeps L-BFGS.
 //!
 //! # Key times
 //!
@@ -161,7 +175,7 @@ pub enum Step {
 }
 
 /// The default of [`Settings::step`].
-pub const DEFAULT_STEP: Step = Step::QuasiNewton;
+pub const DEFAULT_STEP: Step = Step::Auto;
 
 /// CG iterations (products with the Gauss-Newton Hessian) per Gauss-Newton step at most.
 pub const GAUSS_NEWTON_CG: usize = 20;
@@ -173,6 +187,8 @@ impl Step {
             return Step::QuasiNewton;
         }
         match self {
+            // Measured: Gauss-Newton halves the iterations but costs 1.6 to 2x the CPU time
+            // (module documentation, "Gauss-Newton steps").
             Step::Auto => Step::QuasiNewton,
             other => other,
         }
@@ -1105,7 +1121,15 @@ impl<'a> Solver<'a> {
             };
             let mut gauss_newton_step = None;
             if gauss_newton {
-                let cg = self.gauss_newton_direction(it, &g, &precondition, forcing.next(dot(&g, &g).sqrt()));
+                // CG is preconditioned by the L-BFGS inverse Hessian (the curvature pairs of the
+                // last steps on top of the model's): the model alone is too stiff along the slow
+                // motions, and CG then ran into its cap on 52 of TWIST's 54 steps (measured;
+                // module documentation).
+                let lbfgs_precondition = |q: &mut [f64]| {
+                    let d = lbfgs.direction(q, precondition);
+                    q.iter_mut().zip(&d).for_each(|(a, b)| *a = -b);
+                };
+                let cg = self.gauss_newton_direction(it, &g, &lbfgs_precondition, forcing.next(dot(&g, &g).sqrt()));
                 it.gauss_newton.1 += cg.products;
                 it.gauss_newton.2 += usize::from(cg.end == CgEnd::Capped);
                 if dot(&g, &cg.direction) < 0.0 {
