@@ -205,7 +205,8 @@ pub fn truncated_cg(h: impl Fn(&[f64]) -> Vec<f64>, precondition: impl Fn(&mut [
         let hp = h(&p);
         products += 1;
         let curvature = dot(&p, &hp);
-        if !(curvature > 1e-14 * dot(&p, &p).sqrt() * dot(&hp, &hp).sqrt()) {
+        // Written so that NaN curvature also stops.
+        if curvature.is_nan() || curvature <= 1e-14 * dot(&p, &p).sqrt() * dot(&hp, &hp).sqrt() {
             if products == 1 {
                 // The preconditioned gradient: still a descent direction.
                 d = p;
