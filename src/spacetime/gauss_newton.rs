@@ -24,26 +24,17 @@ use super::objective::{Objective, Projections};
 use super::quasi_newton::dot;
 use super::sampling::Sample;
 use crate::mesh::Point;
-use crate::physics::lanes::BATCH;
-use crate::physics::mat3::Mat3;
-use crate::physics::projection::{apply_jacobians_batch, ProjectionJacobian};
+use crate::physics::projection::JacobianBatch;
 
 impl Objective<'_> {
     /// `K_s u = L u - J DP_s[dF(u)]` at one sample (its projection Jacobians `jac`).
-    fn sample_stiffness(&self, jac: &[ProjectionJacobian], u: &[Point]) -> Vec<Point> {
+    fn sample_stiffness(&self, jac: &[JacobianBatch], u: &[Point]) -> Vec<Point> {
         let el = self.elastic;
         let n = el.node_count();
         let mut lu = vec![[0.0; 3]; n];
         el.stiffness.mul_points_sequential(u, &mut lu);
         let mut jp = vec![[0.0; 3]; n];
-        el.apply_j_sequential_batched(
-            |first, out| {
-                let count = BATCH.min(el.tet_count() - first);
-                let df: [Mat3; BATCH] = std::array::from_fn(|l| if l < count { el.deformation_gradient(first + l, u) } else { [[0.0; 3]; 3] });
-                *out = apply_jacobians_batch(&jac[first..first + count], &df);
-            },
-            &mut jp,
-        );
+        el.apply_jacobians_sequential(jac, u, &mut jp);
         for (a, b) in lu.iter_mut().zip(&jp) {
             for d in 0..3 {
                 a[d] -= b[d];
@@ -54,7 +45,7 @@ impl Objective<'_> {
 
     /// `δf_s = ∂f_s/∂u · v` at sample `s` (projection Jacobians `jac`) for the per-slot
     /// direction `v` (`[slot][node]`): `M δa + K_s δx`, zero at supports.
-    pub fn residual_derivative(&self, s: &Sample, jac: &[ProjectionJacobian], v: &[Vec<Point>]) -> Vec<Point> {
+    pub fn residual_derivative(&self, s: &Sample, jac: &[JacobianBatch], v: &[Vec<Point>]) -> Vec<Point> {
         let el = self.elastic;
         let n = el.node_count();
         let (c, l) = self.coefficients(s);
