@@ -59,17 +59,20 @@
 //! alone (the global step's matrix is `H` without the projections' Jacobians, stiffer along
 //! bending and twisting) left CG at its cap on 52 of TWIST's 54 steps.
 //!
-//! Measured (1 thread, `benches/convergence.rs` with `STEPS=1`; load 10 to 18 on 2 cores):
-//! it halves the iterations, not the cost. A product with `H` costs about 0.6 of an iteration
-//! (two stiffness and two projection-Jacobian passes per sample, against one of each and the
-//! projections themselves), and a step takes 3 to 6 products.
+//! Measured side by side (1 thread, `benches/convergence.rs` with `STEPS=1`, load 9 to 15 on
+//! 2 cores): it halves the iterations or better, not the cost. A product with `H` costs about
+//! 0.6 of an iteration (two stiffness and two projection-Jacobian passes per sample, against
+//! one of each and the projections themselves), and a step takes 3 to 6 products.
 //!
-//! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CG products, CPU s |
+//! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CPU s (CG products) |
 //! |---|---:|---:|
-//! | TWIST | 98, 3.1 | 66, 199, 6.3 |
-//! | the demo | 117, 0.69 | 54, 177, 1.1 |
+//! | TWIST | 98, 3.59 | 66, 7.55 (199) |
+//! | DINO | 130, 5.24 | 38, 9.91 |
+//! | the demo | 117, 0.80 | 54, 1.23 (177) |
+//! | the scale benchmark's 20-key 2.6k body | 202, 175 | more than 319 CPU s (stopped) |
 //!
-//! So [`Step::Auto`] (the default) keeps L-BFGS.
+//! Both stop within the 2% of the W reached at 1e-8 (Gauss-Newton closer: TWIST 0.00% against
+//! 0.04%, DINO 0.20% against 0.72%). So [`Step::Auto`] (the default) keeps L-BFGS.
 //!
 //! # Key times
 //!
@@ -187,7 +190,7 @@ impl Step {
             return Step::QuasiNewton;
         }
         match self {
-            // Measured: Gauss-Newton halves the iterations but costs 1.6 to 2x the CPU time
+            // Measured: Gauss-Newton halves the iterations but costs 1.5 to 2.1x the CPU time
             // (module documentation, "Gauss-Newton steps").
             Step::Auto => Step::QuasiNewton,
             other => other,
