@@ -69,7 +69,8 @@
 //! | TWIST | 98, 3.59 | 66, 7.55 (199) |
 //! | DINO | 130, 5.24 | 38, 9.91 |
 //! | the demo | 117, 0.80 | 54, 1.23 (177) |
-//! | the scale benchmark's 20-key 2.6k body | 202, 175 | more than 319 CPU s (stopped) |
+//! | a 20-key body on 400 nodes (`KEY20-small`) | 98, 14.1 | 65, 33.4 |
+//! | the scale benchmark's 20-key 2.6k body (`KEY20-2.6k`) | 202, 175 | 72, 391 (578) |
 //!
 //! Both stop within the 2% of the W reached at 1e-8 (Gauss-Newton closer: TWIST 0.00% against
 //! 0.04%, DINO 0.20% against 0.72%). So [`Step::Auto`] (the default) keeps L-BFGS.
