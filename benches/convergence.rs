@@ -8,17 +8,17 @@
 //!
 //! `cargo bench --bench convergence`; `-- TWIST SPOT` runs some scenes. Environment: `TOLS`
 //! the tolerance rows (default `1e-2,1e-4`; empty: none), `MODELS=1` the model-Hessian rows,
-//! `QUICK=1` leaves out the relative-rule row, `REF=W` (or per scene `REF=TWIST=W,DINO=W`) a
+//! `QUICK=1` leaves out the relative-rule row, `STEPS=1` adds the rows of each quasi-Newton-phase step, `REF=W` (or per scene `REF=TWIST=W,DINO=W`) a
 //! known reference W (skips the 1e-8 solve), `TRACE=1` prints W / S and the key times
 //! per iteration, `NEG=1e-4` runs only the default rule with that `negligible`.
 
 use std::time::Instant;
 
-use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
 use blendsim::stage::Body;
 
 mod common;
-use common::{cheb_size, load, scene_body, twenty_keys};
+use common::{cheb_size, load, scene_body, twenty_keys, twenty_keys_held};
 
 /// CPU seconds of this process so far (user + system, every thread), from `/proc/self/stat`.
 fn cpu_seconds() -> f64 {
@@ -86,6 +86,8 @@ fn main() {
         // The scale benchmark's 20-key body on 400 nodes, its surface held at every key (held
         // by the bottom face only, as there, W falls to 0 with the body at rest: README).
         ("KEY20-small", Box::new(|| twenty_keys([6, 18, 6], 0.024, true))),
+        // The scale benchmark's "2.6k-nodes-20-keys" (bottom and top held): long, run by name.
+        ("KEY20-2.6k", Box::new(|| twenty_keys_held([12, 36, 12], 0.003, Some(&[0.0, 1.0])))),
     ];
     let only: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
     let tolerances: Vec<f64> = std::env::var("TOLS").map(|v| v.split(',').filter(|x| !x.is_empty()).map(|x| x.parse().unwrap()).collect()).unwrap_or(vec![1e-2, 1e-4]);
@@ -94,7 +96,7 @@ fn main() {
     println!();
     println!("| scene | rule | model | iterations | CPU s | wall s | W | above the 1e-8 W | W / S | predicted remaining | converged | key times | load |");
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---|---|");
-    for (name, make) in cases.iter().filter(|c| only.is_empty() || only.iter().any(|o| o == c.0)) {
+    for (name, make) in cases.iter().filter(|c| if only.is_empty() { c.0 != "KEY20-2.6k" } else { only.iter().any(|o| o == c.0) }) {
         let body = make();
         if let Ok(v) = std::env::var("NEG") {
             // One row: the default rule with this floor (a measurement aid, with TRACE).
@@ -120,7 +122,10 @@ fn main() {
                 Some(r.w)
             }
         };
-        row(name, "default", &run(&body, |_| {}), w_ref);
+        // With `STEPS`, the quasi-newton row is the default's.
+        if std::env::var("STEPS").is_err() {
+            row(name, "default", &run(&body, |_| {}), w_ref);
+        }
         // Before: the relative rule alone; it never stops BALL and SPOT, whose scene files capped
         // them at 300 iterations.
         let cap = if bounce { 300 } else { 20000 };
@@ -139,6 +144,14 @@ fn main() {
                 let samples = if c == "-" { 0 } else { c.parse().unwrap() };
                 let r = run(&body, |s| (s.coarse_samples, s.coarse_tolerance) = (samples, tol));
                 row(name, &format!("coarse {samples} (tol {tol:e}; {} coarse it.)", r.coarse), &r, w_ref);
+            }
+        }
+        // `STEPS=1`: the default rule with each step of the quasi-Newton phase forced.
+        if std::env::var("STEPS").is_ok() {
+            // `STEPS=gauss-newton` (or `quasi-newton`): that row only.
+            let only_step = std::env::var("STEPS").unwrap_or_default();
+            for (label, step) in [("quasi-newton", Step::QuasiNewton), ("gauss-newton", Step::GaussNewton)].into_iter().filter(|(l, _)| !only_step.contains('-') || only_step == *l) {
+                row(name, &format!("default, step {label}"), &run(&body, |s| s.step = step), w_ref);
             }
         }
         if models {

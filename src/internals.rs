@@ -13,7 +13,7 @@ pub use crate::physics::equilibrium::{loaded_equilibrium, EquilibriumInfo};
 pub use crate::spacetime::global_step::{GlobalStats, GlobalStep};
 pub use crate::spacetime::objective::{Evaluation, Objective, Projections};
 pub use crate::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Log, Settings, Solved, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, WINDOW};
-pub use crate::spacetime::solver::{IterationEstimate, ModelHessian, NEGLIGIBLE};
+pub use crate::spacetime::solver::{IterationEstimate, ModelHessian, Step, NEGLIGIBLE};
 pub use crate::spacetime::timing::{ProjectionMode, TimeDerivatives, Timing, TimingSettings, TimingStep};
 pub use crate::spacetime::unknowns::{KeyConstraints, Unknowns};
 pub use crate::tetgen::{run as tetgen, TetgenOptions};

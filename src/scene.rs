@@ -237,6 +237,9 @@ pub struct Solver {
     /// starts from (0: none; not used with obstacles or `optimize_timing`, nor when not below
     /// `samples`; see `spacetime::solver`, "Coarse to fine").
     pub coarse_samples: usize,
+    /// The quasi-Newton phase's step: `"auto"`, `"quasi-newton"` (L-BFGS) or `"gauss-newton"`
+    /// (truncated CG on the Gauss-Newton Hessian; see `spacetime::solver::Step`).
+    pub step: String,
 }
 
 /// The `[embed]` table.
@@ -362,6 +365,7 @@ impl Default for Solver {
             model_hessian: "auto".to_string(),
             global_step: "auto".to_string(),
             coarse_samples: crate::spacetime::solver::DEFAULT_COARSE_SAMPLES,
+            step: "auto".to_string(),
         }
     }
 }
@@ -871,6 +875,9 @@ impl Solver {
         if !["auto", "projective", "tangent"].contains(&self.model_hessian.as_str()) {
             return invalid(format!("[solver] model_hessian = {:?} is not a model", self.model_hessian), "use \"auto\", \"projective\" or \"tangent\"");
         }
+        if !["auto", "quasi-newton", "gauss-newton"].contains(&self.step.as_str()) {
+            return invalid(format!("[solver] step = {:?} is not a step", self.step), "use \"auto\", \"quasi-newton\" or \"gauss-newton\"");
+        }
         if !["auto", "direct", "modal", "iterative"].contains(&self.global_step.as_str()) {
             return invalid(format!("[solver] global_step = {:?} is not a way to solve the global step", self.global_step), "use \"auto\", \"direct\", \"modal\" or \"iterative\"");
         }
@@ -1026,6 +1033,10 @@ times = [0.0, 0.5]
         let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nsamples = 10\ncoarse_samples = 5\n")).unwrap();
         assert_eq!(s.solver, Solver { samples: 10, coarse_samples: 5, ..Solver::default() });
         assert_eq!(crate::stages::solve::settings(&s).coarse_phase(), Some(5), "the key reaches the solver");
+        let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"gauss-newton\"\n")).unwrap();
+        assert_eq!(crate::stages::solve::settings(&s).step, crate::spacetime::solver::Step::GaussNewton, "the key reaches the solver");
+        let e = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"newton\"\n")).unwrap_err().to_string();
+        assert!(e.contains("[solver] step = \"newton\" is not a step") && e.contains("(fix: "), "{e}");
     }
 
     #[test]

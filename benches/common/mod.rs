@@ -117,9 +117,17 @@ pub fn cheb_size() -> Body {
 /// `held_surface` every surface vertex is held at every key (`fixed = "all"`, the default)
 /// instead of the bottom face only, whose free keys let W fall to 0 with the body at rest.
 pub fn twenty_keys(divisions: [usize; 3], max_volume: f64, held_surface: bool) -> Body {
+    twenty_keys_held(divisions, max_volume, if held_surface { None } else { Some(&[0.0]) })
+}
+
+/// [`twenty_keys`] with the faces at these fractions of the height held at every key (`None`:
+/// the whole surface): `Some(&[0.0, 1.0])` is the scale benchmark's "2.6k-nodes-20-keys"
+/// (bottom and top held) on `[12, 36, 12]` and 0.003.
+pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[f64]>) -> Body {
     use blendsim::mesh::obj;
+    let held_surface = faces.is_none();
     let keys = 20;
-    let dir = std::env::temp_dir().join(format!("blendsim-twenty-keys-{}-{}-{held_surface}", std::process::id(), divisions[0]));
+    let dir = std::env::temp_dir().join(format!("blendsim-twenty-keys-{}-{}-{held_surface}-{}", std::process::id(), divisions[0], faces.map_or(0, <[f64]>::len)));
     std::fs::create_dir_all(&dir).unwrap();
     let rest = procedural::prism([1.2, 3.6, 1.2], divisions);
     let height = rest.positions.iter().map(|p| p[1]).fold(0.0, f64::max);
@@ -140,7 +148,8 @@ pub fn twenty_keys(divisions: [usize; 3], max_volume: f64, held_surface: bool) -
         std::fs::write(dir.join(format!("k{k}.obj")), obj::write(&m)).unwrap();
         names.push(format!("\"k{k}.obj\""));
     }
-    let bottom: String = rest.positions.iter().enumerate().filter(|(_, p)| p[1] == 0.0).map(|(i, _)| format!("{i}\n")).collect();
+    let faces = faces.unwrap_or(&[]);
+    let bottom: String = rest.positions.iter().enumerate().filter(|(_, p)| faces.iter().any(|&f| (p[1] - f * height).abs() <= 1e-9 * height)).map(|(i, _)| format!("{i}\n")).collect();
     std::fs::write(dir.join("bottom.txt"), bottom).unwrap();
     let times: Vec<String> = (0..keys).map(|k| format!("{:.1}", 0.5 * k as f64)).collect();
     let fixed = if held_surface { String::new() } else { format!("fixed = [{}]\n", vec!["\"bottom.txt\""; keys].join(", ")) };

@@ -8,6 +8,7 @@
 //! - [`global_step`]: the normal matrix, assembled and factorized once (refactorized on the
 //!   kept symbolic analysis when the key times move);
 //! - [`modal`]: the global step solved exactly in the body's vibration modes (many keys);
+//! - [`gauss_newton`]: the Gauss-Newton product `Jᵀ M⁻¹ J v` and truncated CG for its step;
 //! - [`quasi_newton`]: L-BFGS preconditioned by the global step or the tangent model;
 //! - [`tangent_step`]: the normal matrix with the rest tangent stiffness (a Newton model for
 //!   small motions about the rest shape);
@@ -27,6 +28,7 @@ pub mod global_step;
 pub mod modal;
 pub mod objective;
 pub mod obstacles;
+pub mod gauss_newton;
 pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;

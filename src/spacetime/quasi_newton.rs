@@ -81,6 +81,18 @@ impl Lbfgs {
         self.pairs.push_back((s, y, 1.0 / sy));
     }
 
+    /// Record a step `s` and gradient change `y` (skipped without positive curvature) without
+    /// learning `H₀`'s scale from it: for steps that did not come from [`Lbfgs::direction`].
+    pub fn push_pair(&mut self, s: Vec<f64>, y: Vec<f64>) {
+        let sy = dot(&s, &y);
+        if sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt() {
+            if self.pairs.len() == self.memory {
+                self.pairs.pop_front();
+            }
+            self.pairs.push_back((s, y, 1.0 / sy));
+        }
+    }
+
     pub fn clear(&mut self) {
         self.pairs.clear();
     }

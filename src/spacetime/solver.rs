@@ -47,6 +47,34 @@
 //! takes about as many iterations as a single-phase solve, so it saves 20-40% of the cost on
 //! the paper scenes and nothing on a 20-key body). Not with obstacles or moving key times.
 //!
+//! # Gauss-Newton steps
+//!
+//! With [`Settings::step`] = [`Step::GaussNewton`], each quasi-Newton-phase iteration first
+//! tries the truncated Gauss-Newton step of [`super::gauss_newton`]: `H d = -g` with `H` the
+//! Gauss-Newton Hessian of W (the projections' Jacobians included), solved by CG to the
+//! Eisenstat-Walker forcing tolerance, at most [`GAUSS_NEWTON_CG`] products. The same line
+//! search on W takes it (W never increases); where it fails, the L-BFGS step is taken instead.
+//! CG is preconditioned by the L-BFGS inverse Hessian, the curvature pairs of the last steps
+//! on the model Hessian's factor (Morales & Nocedal's automatic preconditioning): the factor
+//! alone (the global step's matrix is `H` without the projections' Jacobians, stiffer along
+//! bending and twisting) left CG at its cap on 52 of TWIST's 54 steps.
+//!
+//! Measured side by side (1 thread, `benches/convergence.rs` with `STEPS=1`, load 9 to 15 on
+//! 2 cores): it halves the iterations or better, not the cost. A product with `H` costs about
+//! 0.6 of an iteration (two stiffness and two projection-Jacobian passes per sample, against
+//! one of each and the projections themselves), and a step takes 3 to 6 products.
+//!
+//! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CPU s (CG products) |
+//! |---|---:|---:|
+//! | TWIST | 98, 3.59 | 66, 7.55 (199) |
+//! | DINO | 130, 5.24 | 38, 9.91 |
+//! | the demo | 117, 0.80 | 54, 1.23 (177) |
+//! | a 20-key body on 400 nodes (`KEY20-small`) | 98, 14.1 | 65, 33.4 |
+//! | the scale benchmark's 20-key 2.6k body (`KEY20-2.6k`) | 202, 175 | 72, 391 (578) |
+//!
+//! Both stop within the 2% of the W reached at 1e-8 (Gauss-Newton closer: TWIST 0.00% against
+//! 0.04%, DINO 0.20% against 0.72%). So [`Step::Auto`] (the default) keeps L-BFGS.
+//!
 //! # Key times
 //!
 //! With [`Settings::timing`], the quasi-Newton phase runs on the keyframe unknowns and the
@@ -73,6 +101,7 @@ use std::time::Instant;
 
 use super::active_set::{Preconditioner, Projection, Row, RowKind};
 use super::contact::{At, Check, Contacts};
+use super::gauss_newton::{truncated_cg, CgEnd, Forcing, TruncatedCg};
 use super::global_step::{CgLog, GlobalStep};
 use super::objective::{Evaluation, Objective, Projections};
 use super::quasi_newton::{dot, Lbfgs};
@@ -130,6 +159,44 @@ pub struct Settings {
     pub coarse_samples: usize,
     /// The coarse phase's own `tolerance` (its stopping rule is the fine one's otherwise).
     pub coarse_tolerance: f64,
+    /// The quasi-Newton phase's step: L-BFGS, or a Gauss-Newton step solved by truncated CG
+    /// ([`Step`]).
+    pub step: Step,
+}
+
+/// The step of the quasi-Newton phase (module documentation, "Gauss-Newton steps").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// L-BFGS on the exact W, preconditioned by the model Hessian.
+    QuasiNewton,
+    /// A truncated Gauss-Newton step ([`super::gauss_newton`]), preconditioned by the model
+    /// Hessian, falling back to the L-BFGS step where its line search fails. Not with obstacles
+    /// or moving key times (L-BFGS is used there).
+    GaussNewton,
+    /// [`Step::GaussNewton`] where it was measured to win, else [`Step::QuasiNewton`]
+    /// ([`Step::resolve`]).
+    Auto,
+}
+
+/// The default of [`Settings::step`].
+pub const DEFAULT_STEP: Step = Step::Auto;
+
+/// CG iterations (products with the Gauss-Newton Hessian) per Gauss-Newton step at most.
+pub const GAUSS_NEWTON_CG: usize = 20;
+
+impl Step {
+    /// The step taken: `Auto` decided, and L-BFGS wherever Gauss-Newton does not apply.
+    pub fn resolve(self, settings: &Settings) -> Step {
+        if settings.contacts.is_some() || settings.timing.is_some() {
+            return Step::QuasiNewton;
+        }
+        match self {
+            // Measured: Gauss-Newton halves the iterations but costs 1.5 to 2.1x the CPU time
+            // (module documentation, "Gauss-Newton steps").
+            Step::Auto => Step::QuasiNewton,
+            other => other,
+        }
+    }
 }
 
 /// The quasi-Newton phase's initial inverse Hessian.
@@ -185,6 +252,7 @@ impl Settings {
             global_step: None,
             coarse_samples: DEFAULT_COARSE_SAMPLES,
             coarse_tolerance: DEFAULT_COARSE_TOLERANCE,
+            step: DEFAULT_STEP,
         }
     }
 
@@ -371,6 +439,9 @@ struct Iterate {
     refactorizations: usize,
     /// The key times after each iteration (when they are optimized).
     times: Vec<Vec<f64>>,
+    /// Gauss-Newton steps taken, their products with the Gauss-Newton Hessian, and the CG
+    /// solves stopped by the iteration cap.
+    gauss_newton: (usize, usize, usize),
 }
 
 /// Optimize keyframe positions and velocities (and key times). `on_iteration(k, W, floor)`
@@ -513,7 +584,7 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
     on_iteration(0, eval.value, settings.negligible * eval.force_scale);
     let at_minimum = vec![false; solver.intervals.len()];
     let times = if solver.blocks.is_some() { vec![tr.times.clone()] } else { Vec::new() };
-    let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0, active, at_minimum, timing_iterations: 0, refactorizations: 0, times };
+    let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0, active, at_minimum, timing_iterations: 0, refactorizations: 0, times, gauss_newton: (0, 0, 0) };
     let mut label = String::new();
     if let Some((tr, eval, words)) = warm {
         on_iteration(1, eval.value, settings.negligible * eval.force_scale);
@@ -947,6 +1018,9 @@ impl<'a> Solver<'a> {
         if self.tangent.is_some() {
             phases += ", preconditioned by the tangent model Hessian";
         }
+        if it.gauss_newton.0 > 0 {
+            phases += &format!(", {} of them Gauss-Newton steps ({} CG products, {} solves capped at {GAUSS_NEWTON_CG})", it.gauss_newton.0, it.gauss_newton.1, it.gauss_newton.2);
+        }
         if self.blocks.is_some() {
             phases += &format!(", {} moving the key times, {} refactorizations", it.timing_iterations, it.refactorizations);
         }
@@ -1022,6 +1096,8 @@ impl<'a> Solver<'a> {
         let mut lbfgs = Lbfgs::new(LBFGS_MEMORY, self.settings.contacts.is_none());
         let mut g = self.joint_gradient(&it.eval, times);
         let (mut blocked, mut holds) = (None, 0);
+        let gauss_newton = !times && self.settings.step.resolve(self.settings) == Step::GaussNewton;
+        let mut forcing = Forcing::default();
         loop {
             let k = it.energy.len() - 1;
             if k >= since + WINDOW {
@@ -1047,19 +1123,45 @@ impl<'a> Solver<'a> {
             let precondition = |q: &mut [f64]| {
                 projection.apply(q, &h0);
             };
-            let mut d = lbfgs.direction(&g, precondition);
-            // Not a descent direction (or NaN): start over from the preconditioned gradient.
-            if dot(&g, &d).partial_cmp(&0.0) != Some(std::cmp::Ordering::Less) {
-                lbfgs.clear();
-                d = lbfgs.direction(&g, precondition);
+            let mut gauss_newton_step = None;
+            if gauss_newton {
+                // CG is preconditioned by the L-BFGS inverse Hessian (the curvature pairs of the
+                // last steps on top of the model's): the model alone is too stiff along the slow
+                // motions, and CG then ran into its cap on 52 of TWIST's 54 steps (measured;
+                // module documentation).
+                let lbfgs_precondition = |q: &mut [f64]| {
+                    let d = lbfgs.direction(q, precondition);
+                    q.iter_mut().zip(&d).for_each(|(a, b)| *a = -b);
+                };
+                let cg = self.gauss_newton_direction(it, &g, &lbfgs_precondition, forcing.next(dot(&g, &g).sqrt()));
+                it.gauss_newton.1 += cg.products;
+                it.gauss_newton.2 += usize::from(cg.end == CgEnd::Capped);
+                if dot(&g, &cg.direction) < 0.0 {
+                    if let Outcome::Taken(step) = self.line_search(it, &cg.direction, true, 1.0)? {
+                        it.gauss_newton.0 += 1;
+                        gauss_newton_step = Some((cg.direction, step));
+                    }
+                }
             }
-            let mut outcome = self.line_search(it, &d, true, 1.0)?;
-            if matches!(outcome, Outcome::Failed) && !lbfgs.is_empty() {
-                // Restart from the preconditioned gradient.
-                lbfgs.clear();
-                d = lbfgs.direction(&g, precondition);
-                outcome = self.line_search(it, &d, true, 1.0)?;
-            }
+            let (d, outcome) = match gauss_newton_step {
+                Some((d, step)) => (d, Outcome::Taken(step)),
+                None => {
+                    let mut d = lbfgs.direction(&g, precondition);
+                    // Not a descent direction (or NaN): start over from the preconditioned gradient.
+                    if dot(&g, &d).partial_cmp(&0.0) != Some(std::cmp::Ordering::Less) {
+                        lbfgs.clear();
+                        d = lbfgs.direction(&g, precondition);
+                    }
+                    let mut outcome = self.line_search(it, &d, true, 1.0)?;
+                    if matches!(outcome, Outcome::Failed) && !lbfgs.is_empty() {
+                        // Restart from the preconditioned gradient.
+                        lbfgs.clear();
+                        d = lbfgs.direction(&g, precondition);
+                        outcome = self.line_search(it, &d, true, 1.0)?;
+                    }
+                    (d, outcome)
+                }
+            };
             let step = match outcome {
                 Outcome::Taken(step) => step,
                 Outcome::Held(stop) => {
@@ -1082,7 +1184,12 @@ impl<'a> Solver<'a> {
             let g_new = self.joint_gradient(&it.eval, times);
             let s: Vec<f64> = d.iter().map(|v| v * step.scale).collect();
             let y: Vec<f64> = g_new.iter().zip(&g).map(|(a, b)| a - b).collect();
-            lbfgs.push(s, y, step.scale, &g);
+            if gauss_newton {
+                // A Gauss-Newton step's length says nothing of H₀'s scale.
+                lbfgs.push_pair(s, y);
+            } else {
+                lbfgs.push(s, y, step.scale, &g);
+            }
             g = g_new;
             if times && step.moved_times {
                 it.timing_iterations += 1;
@@ -1102,6 +1209,22 @@ impl<'a> Solver<'a> {
                 }
             }
         }
+    }
+
+    /// The truncated Gauss-Newton step at the current iterate (the keyframe unknowns only):
+    /// `H d = -g` by CG preconditioned with `precondition`, to the relative residual `forcing`,
+    /// with the projection Jacobians of the iterate's exact evaluation (the kept buffer: the
+    /// last exact evaluation is the accepted iterate's).
+    fn gauss_newton_direction(&self, it: &Iterate, g: &[f64], precondition: &dyn Fn(&mut [f64]), forcing: f64) -> TruncatedCg {
+        let objective = self.objective(&it.tr.times);
+        let buffers = self.projections.borrow();
+        let projections = &buffers[1];
+        let product = |v: &[f64]| -> Vec<f64> {
+            let points: Vec<Point> = v.as_chunks::<3>().0.to_vec();
+            let hv = objective.gauss_newton_product(projections, &self.global.scatter(&points));
+            self.global.gather(&hv).as_flattened().to_vec()
+        };
+        truncated_cg(product, precondition, g, forcing, GAUSS_NEWTON_CG)
     }
 
     /// `D_T` from the held-keys curvature of W at `tr` (made positive where it is not).

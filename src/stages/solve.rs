@@ -17,7 +17,7 @@ use crate::scene::{Method, ObstacleSpec, Scene};
 use crate::spacetime::contact::Contacts;
 use crate::spacetime::global_step::Method as GlobalMethod;
 use crate::spacetime::obstacles::Obstacle;
-use crate::spacetime::solver::{self, ModelHessian, Settings};
+use crate::spacetime::solver::{self, ModelHessian, Settings, Step};
 use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
 use crate::stage::{Body, CgSummary, KeyPoses, Solution, SolverLog};
@@ -230,6 +230,11 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         },
         coarse_samples: s.coarse_samples,
         coarse_tolerance: crate::spacetime::solver::DEFAULT_COARSE_TOLERANCE,
+        step: match s.step.as_str() {
+            "gauss-newton" => Step::GaussNewton,
+            "quasi-newton" => Step::QuasiNewton,
+            _ => Step::Auto,
+        },
         timing: s.optimize_timing.then(|| TimingSettings {
             min_interval: s.min_interval,
             keep_duration: s.keep_duration,
