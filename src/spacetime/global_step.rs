@@ -236,8 +236,8 @@ fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: 
 
 /// Bytes a direct factorization needs per predicted factor entry, measured as the whole
 /// process's peak over the predicted entries (`factor_peak_memory`; cube-13, 5 keys, 6.86e7
-/// entries predicted: 949 MB with our two-thread factorization, 915 MB with faer's; the
-/// 2.6k-node prism bake at 5 keys: 652 MB for 5.0e7). What it holds: the factor's values, 8
+/// entries predicted: 949 MB with our two-thread factorization, 915 MB with faer's: 13.8 and
+/// 13.3 bytes per entry). What it holds: the factor's values, 8
 /// bytes per stored entry, and faer's supernodes store 1.26 entries per predicted one (their
 /// relaxed patterns' explicit zeros): 10.1 bytes; the assembled matrix and, while it is
 /// factorized, its copy in the factor's order (16 bytes per matrix entry each: 1.7 bytes per
