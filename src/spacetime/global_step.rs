@@ -237,12 +237,16 @@ fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: 
 /// Bytes a direct factorization needs per predicted factor entry, measured as the whole
 /// process's peak over the predicted entries (`factor_peak_memory`; cube-13, 5 keys, 6.86e7
 /// entries predicted: 949 MB with our two-thread factorization, 915 MB with faer's: 13.8 and
-/// 13.3 bytes per entry). What it holds: the factor's values, 8
+/// 13.3 bytes per entry; at 20 keys, 7.66e8 entries, ours: 8,660 MB, 11.3 bytes). What it
+/// holds: the factor's values, 8
 /// bytes per stored entry, and faer's supernodes store 1.26 entries per predicted one (their
 /// relaxed patterns' explicit zeros): 10.1 bytes; the assembled matrix and, while it is
 /// factorized, its copy in the factor's order (16 bytes per matrix entry each: 1.7 bytes per
-/// factor entry at 5 keys, fewer with more keys); the numeric scratch (the update products, 64
-/// columns at a time, and the dense kernels', under 1%); and the rest of the process.
+/// factor entry at 5 keys, 0.7 at 20); the numeric scratch (the update products, 64 columns at
+/// a time, and the dense kernels', about 1%); and the rest of the process. The rest shrinks
+/// per entry with more keys, so one constant over-predicts many keys (by 24% at 20); it is
+/// set to the 5-key measurement so that no measured factorization exceeds its prediction.
+/// (Closer: 10.1 bytes per predicted entry plus about 65 per matrix entry, measured 59-72.)
 pub const BYTES_PER_FACTOR_ENTRY: f64 = 14.0;
 
 /// The predicted peak memory of a direct solve with `cost`.
