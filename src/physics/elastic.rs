@@ -19,7 +19,7 @@ use super::csr::Csr;
 use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
-use super::projection::{project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, volume_preserving, ProjectionJacobian};
+use super::projection::{project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, project_with_jacobian_lanes_into, volume_preserving, JacobianBatch, ProjectionJacobian};
 use super::lanes::{Lanes, M3, BATCH};
 use super::svd3::svd3;
 use crate::error::{Error, Result};
@@ -316,6 +316,56 @@ impl Elastic {
         }
     }
 
+    /// [`Elastic::local_step_with_jacobians`] with the Jacobians kept in lane layout, one
+    /// [`JacobianBatch`] per [`BATCH`] tets (`jacobians.len()` is `tet_count().div_ceil(BATCH)`).
+    /// The same bytes, tet by tet.
+    pub fn local_step_with_jacobian_batches(&self, x: &[Point], targets: &mut [Mat3], jacobians: &mut [JacobianBatch]) {
+        let share = self.strain_share();
+        targets.par_chunks_mut(BATCH).zip(jacobians.par_iter_mut()).enumerate().with_min_len(4).for_each(|(c, (out, jac))| {
+            let mut f = [[Lanes::splat(0.0); 3]; 3];
+            self.deformation_gradient_lanes(c * BATCH, x, None, &mut f);
+            project_with_jacobian_lanes_into(&f, share, out, jac);
+        });
+    }
+
+    /// [`Elastic::local_step_with_jacobian_batches`] on the calling thread, into `targets` and
+    /// `jacobians` (resized; their capacity reused, so an iteration that keeps its buffers
+    /// allocates nothing). Same bytes.
+    pub fn local_step_with_jacobian_batches_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        targets.resize(count, [[0.0; 3]; 3]);
+        jacobians.resize_with(count.div_ceil(BATCH), JacobianBatch::default);
+        let mut f = [[Lanes::splat(0.0); 3]; 3];
+        for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.iter_mut()).enumerate() {
+            self.deformation_gradient_lanes(c * BATCH, x, None, &mut f);
+            project_with_jacobian_lanes_into(&f, share, out, jac);
+        }
+    }
+
+    /// `out = J DP[dF(u)]` from the projection Jacobians of every tet in lane layout, on the
+    /// calling thread: the part of the elastic Hessian product `∇²E u` that the projections
+    /// contribute. The bytes of [`Elastic::apply_j_sequential`] of the per-tet products
+    /// [`ProjectionJacobian::apply`] (the same sums in the same order; tested).
+    pub fn apply_jacobians_sequential(&self, jacobians: &[JacobianBatch], u: &[Point], out: &mut [Point]) {
+        out.fill([0.0; 3]);
+        let count = self.tet_count();
+        let mut df = [[Lanes::splat(0.0); 3]; 3];
+        for (c, jac) in jacobians.iter().enumerate().take(count.div_ceil(BATCH)) {
+            let first = c * BATCH;
+            self.deformation_gradient_lanes(first, u, None, &mut df);
+            let dp = jac.apply(&df);
+            for (l, e) in (first..count.min(first + BATCH)).enumerate() {
+                let w = self.weights[e];
+                for (&a, g) in self.tets[e].iter().zip(&self.grads[e]) {
+                    let o = &mut out[a as usize];
+                    for i in 0..3 {
+                        o[i] += w * (dp[i][0].0[l] * g[0] + dp[i][1].0[l] * g[1] + dp[i][2].0[l] * g[2]);
+                    }
+                }
+            }
+        }
+    }
+
     /// `out = ∇²E(x) u = L u - J DP[dF(u)]`, the exact Hessian of the elastic energy applied to
     /// `u`, from the projection Jacobians at `x`.
     pub fn hessian_apply(&self, jacobians: &[ProjectionJacobian], u: &[Point], out: &mut [Point]) {
@@ -529,6 +579,24 @@ mod tests {
         el.local_step_with_jacobians(&x, &mut with_jacobians, &mut jac);
         assert_eq!(el.local_step_sequential(&x), targets);
         assert_eq!(el.local_step_with_jacobians_sequential(&x), (with_jacobians.clone(), jac.clone()));
+        // The Jacobians in lane layout: the same targets and, lane by lane, the same Jacobians;
+        // their products the bytes of the per-tet ones scattered in tet order.
+        let batches = el.tet_count().div_ceil(BATCH);
+        let (mut lane_targets, mut lane_jac) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![JacobianBatch::default(); batches]);
+        el.local_step_with_jacobian_batches(&x, &mut lane_targets, &mut lane_jac);
+        let (mut seq_targets, mut seq_jac) = (vec![[[1.0; 3]; 3]; 3], vec![JacobianBatch::default(); 1]);
+        el.local_step_with_jacobian_batches_sequential_into(&x, &mut seq_targets, &mut seq_jac);
+        assert_eq!((&lane_targets, &lane_jac), (&with_jacobians, &seq_jac));
+        assert_eq!(seq_targets, with_jacobians);
+        for e in 0..el.tet_count() {
+            assert_eq!(lane_jac[e / BATCH].lane(e % BATCH), jac[e], "tet {e}");
+        }
+        let u: Vec<Point> = (0..x.len()).map(|a| [(a as f64 * 0.37).sin(), (a as f64 * 0.91).cos(), 0.5 - (a % 3) as f64 * 0.4]).collect();
+        let (mut lanes, mut per_tet) = (vec![[1.0; 3]; x.len()], vec![[0.0; 3]; x.len()]);
+        el.apply_jacobians_sequential(&lane_jac, &u, &mut lanes);
+        let products: Vec<Mat3> = (0..el.tet_count()).map(|e| jac[e].apply(&el.deformation_gradient(e, &u))).collect();
+        el.apply_j_sequential(&products, &mut per_tet);
+        assert_eq!(lanes, per_tet);
         for e in 0..el.tet_count() {
             let f = el.deformation_gradient(e, &x);
             assert_eq!(targets[e], crate::physics::projection::project(&f, el.strain_share()), "tet {e}");

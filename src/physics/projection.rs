@@ -276,25 +276,65 @@ impl ProjectionJacobian {
     }
 }
 
-/// [`ProjectionJacobian::apply`] of up to [`BATCH`] Jacobians, each to its own `df` (lanes past
-/// `jacobians.len()` are computed on zeros and dropped): the same operations on lanes, so
-/// every product gets the bytes of the scalar one (tested). Why: the exact gradient and the
-/// time gradient apply a Jacobian per tet at every sample.
-pub fn apply_jacobians_batch(jacobians: &[ProjectionJacobian], df: &[Mat3; BATCH]) -> [Mat3; BATCH] {
-    let z = Lanes::splat(0.0);
-    let mut j = JacobianLanes { u: [[z; 3]; 3], v: [[z; 3]; 3], diag: [[z; 3]; 3], sym: [z; 3], anti: [z; 3] };
-    for (l, jac) in jacobians.iter().enumerate().take(BATCH) {
-        for a in 0..3 {
-            for b in 0..3 {
-                j.u[a][b].0[l] = jac.u[a][b];
-                j.v[a][b].0[l] = jac.v[a][b];
-                j.diag[a][b].0[l] = jac.diag[a][b];
-            }
-            j.sym[a].0[l] = jac.sym[a];
-            j.anti[a].0[l] = jac.anti[a];
-        }
+/// The [`ProjectionJacobian`]s of [`BATCH`] consecutive tets in lane layout (a struct of
+/// arrays: each factor's entry `[l]` is tet `first + l`'s), as the vectorized local step makes
+/// them and as the exact gradient applies them: no transposition out to per-tet structs and
+/// back per product. Lanes past a body's last tet hold whatever the local step computed for
+/// its padding (the identity's Jacobian); their products are computed and dropped.
+#[derive(Debug, Clone)]
+pub struct JacobianBatch(JacobianLanes<BATCH>);
+
+impl Default for JacobianBatch {
+    /// Zero factors (a placeholder the local step overwrites).
+    fn default() -> JacobianBatch {
+        let z = Lanes::splat(0.0);
+        JacobianBatch(JacobianLanes { u: [[z; 3]; 3], v: [[z; 3]; 3], diag: [[z; 3]; 3], sym: [z; 3], anti: [z; 3] })
     }
-    let dp = dispatch_apply_jacobian(&j, &to_lanes(df));
+}
+
+/// Lane by lane (every lane, padding included).
+impl PartialEq for JacobianBatch {
+    fn eq(&self, other: &JacobianBatch) -> bool {
+        (0..BATCH).all(|l| self.lane(l) == other.lane(l))
+    }
+}
+
+impl JacobianBatch {
+    /// Up to [`BATCH`] Jacobians gathered into lanes (the rest zero).
+    pub fn from_jacobians(jacobians: &[ProjectionJacobian]) -> JacobianBatch {
+        let mut j = JacobianBatch::default();
+        for (l, jac) in jacobians.iter().enumerate().take(BATCH) {
+            for a in 0..3 {
+                for b in 0..3 {
+                    j.0.u[a][b].0[l] = jac.u[a][b];
+                    j.0.v[a][b].0[l] = jac.v[a][b];
+                    j.0.diag[a][b].0[l] = jac.diag[a][b];
+                }
+                j.0.sym[a].0[l] = jac.sym[a];
+                j.0.anti[a].0[l] = jac.anti[a];
+            }
+        }
+        j
+    }
+
+    /// The Jacobian of lane `l`.
+    pub fn lane(&self, l: usize) -> ProjectionJacobian {
+        jacobian_lane(&self.0, l)
+    }
+
+    /// `dP_l = DP_l[df_l]` in every lane: [`ProjectionJacobian::apply`]'s operations on lanes, so
+    /// every product gets the bytes of the scalar one (tested).
+    pub(crate) fn apply(&self, df: &M3<BATCH>) -> M3<BATCH> {
+        dispatch_apply_jacobian(&self.0, df)
+    }
+}
+
+/// [`ProjectionJacobian::apply`] of up to [`BATCH`] Jacobians, each to its own `df` (lanes past
+/// `jacobians.len()` are computed on zeros and dropped), through [`JacobianBatch`]: the bytes of
+/// the scalar products. For callers that hold per-tet Jacobians.
+#[cfg_attr(not(test), allow(dead_code))]
+pub fn apply_jacobians_batch(jacobians: &[ProjectionJacobian], df: &[Mat3; BATCH]) -> [Mat3; BATCH] {
+    let dp = JacobianBatch::from_jacobians(jacobians).apply(&to_lanes(df));
     std::array::from_fn(|l| lane(&dp, l))
 }
 
@@ -341,11 +381,28 @@ pub fn project_with_jacobian_extend(f: &[Mat3; BATCH], strain_share: f64, count:
     jacobians.extend((0..count).map(|l| jacobian_lane(&j, l)));
 }
 
+/// [`project_with_jacobian_batch`] from deformation gradients on lanes: the targets of the first
+/// `targets.len()` (at most [`BATCH`]) lanes into `targets`, the Jacobians into `jacobians` in
+/// lane layout, as computed (the same bytes, per lane).
+pub fn project_with_jacobian_lanes_into(f: &M3<BATCH>, strain_share: f64, targets: &mut [Mat3], jacobians: &mut JacobianBatch) {
+    let p = dispatch_project_with_jacobian_into(f, strain_share, &mut jacobians.0);
+    for (l, t) in targets.iter_mut().enumerate().take(BATCH) {
+        *t = lane(&p, l);
+    }
+}
+
 with_widest_simd!(dispatch_project_with_jacobian, fn(f: &M3<BATCH>, strain_share: f64) -> (M3<BATCH>, JacobianLanes<BATCH>) {
     project_with_jacobian_lanes(f, strain_share)
 });
 
+with_widest_simd!(dispatch_project_with_jacobian_into, fn(f: &M3<BATCH>, strain_share: f64, out: &mut JacobianLanes<BATCH>) -> M3<BATCH> {
+    let (p, j) = project_with_jacobian_lanes(f, strain_share);
+    *out = j;
+    p
+});
+
 /// [`ProjectionJacobian`] on lanes.
+#[derive(Debug, Clone)]
 struct JacobianLanes<const N: usize> {
     u: M3<N>,
     v: M3<N>,

@@ -36,7 +36,7 @@ use crate::mesh::Point;
 use crate::physics::elastic::Elastic;
 use crate::physics::mat3::Mat3;
 use crate::physics::lanes::BATCH;
-use crate::physics::projection::{apply_jacobians_batch, ProjectionJacobian};
+use crate::physics::projection::JacobianBatch;
 
 /// The local step: element projections of every sample (`[sample][tet]`), and optionally
 /// their Jacobians (for the exact gradient).
@@ -44,8 +44,10 @@ use crate::physics::projection::{apply_jacobians_batch, ProjectionJacobian};
 pub struct Projections {
     /// `targets[sample][tet]`.
     pub targets: Vec<Vec<Mat3>>,
-    /// `jacobians[sample][tet]`, when asked for.
-    pub jacobians: Option<Vec<Vec<ProjectionJacobian>>>,
+    /// `jacobians[sample][batch]`, when asked for: tets `BATCH * batch..` of the sample in
+    /// lane layout ([`JacobianBatch`]; `tet_count().div_ceil(BATCH)` per sample), as the local
+    /// step computes them and the gradients apply them.
+    pub jacobians: Option<Vec<Vec<JacobianBatch>>>,
 }
 
 impl Projections {
@@ -167,7 +169,7 @@ impl<'a> Objective<'a> {
     pub fn local_step_into(&self, tr: &Trajectory, with_jacobians: bool, out: &mut Projections) {
         out.shape(self.samples.len(), with_jacobians);
         let split_tets = self.split_tets();
-        let project = |s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<ProjectionJacobian>>| self.project_sample(tr, s, p, j, split_tets);
+        let project = |s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<JacobianBatch>>| self.project_sample(tr, s, p, j, split_tets);
         match out.jacobians.as_mut() {
             Some(jacobians) => self.samples.par_iter().zip(out.targets.par_iter_mut()).zip(jacobians.par_iter_mut()).for_each(|((s, p), j)| project(s, p, Some(j))),
             None => self.samples.par_iter().zip(out.targets.par_iter_mut()).for_each(|(s, p)| project(s, p, None)),
@@ -181,21 +183,21 @@ impl<'a> Objective<'a> {
     }
 
     /// The local step of one sample into `p` (and `j`), reusing their buffers.
-    fn project_sample(&self, tr: &Trajectory, s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<ProjectionJacobian>>, split_tets: bool) {
+    fn project_sample(&self, tr: &Trajectory, s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<JacobianBatch>>, split_tets: bool) {
         let (el, m) = (self.elastic, self.elastic.tet_count());
         let mut x = vec![[0.0; 3]; el.node_count()];
         Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
         match (j, split_tets) {
             (None, false) => el.local_step_sequential_into(&x, p),
-            (Some(j), false) => el.local_step_with_jacobians_sequential_into(&x, p, j),
+            (Some(j), false) => el.local_step_with_jacobian_batches_sequential_into(&x, p, j),
             (None, true) => {
                 p.resize(m, [[0.0; 3]; 3]);
                 el.local_step(&x, p);
             }
             (Some(j), true) => {
                 p.resize(m, [[0.0; 3]; 3]);
-                j.resize(m, ProjectionJacobian::default());
-                el.local_step_with_jacobians(&x, p, j);
+                j.resize_with(m.div_ceil(BATCH), JacobianBatch::default);
+                el.local_step_with_jacobian_batches(&x, p, j);
             }
         }
     }
@@ -304,21 +306,13 @@ impl<'a> Objective<'a> {
         (f, w, w_el, w_forces)
     }
 
-    /// `DP_e[dF_e(u)]` of the [`BATCH`] tets from `first` (vectorized; the bytes of
-    /// [`ProjectionJacobian::apply`] per tet).
-    fn jacobian_products(el: &Elastic, jacobians: &[ProjectionJacobian], first: usize, u: &[Point]) -> [Mat3; BATCH] {
-        let count = BATCH.min(el.tet_count() - first);
-        let df: [Mat3; BATCH] = std::array::from_fn(|l| if l < count { el.deformation_gradient(first + l, u) } else { [[0.0; 3]; 3] });
-        apply_jacobians_batch(&jacobians[first..first + count], &df)
-    }
-
     /// The residual of every sample, with the projections held at `p`.
     fn residuals(&self, tr: &Trajectory, p: &Projections) -> Vec<Residual> {
         self.samples.par_iter().enumerate().map(|(k, s)| self.sample_residual(tr, s, &p.targets[k], p.jacobians.as_ref().map(|j| j[k].as_slice()))).collect()
     }
 
     /// One sample's residual with its projections held at `targets` (and their Jacobians `jac`).
-    fn sample_residual(&self, tr: &Trajectory, s: &Sample, targets: &[Mat3], jac: Option<&[ProjectionJacobian]>) -> Residual {
+    fn sample_residual(&self, tr: &Trajectory, s: &Sample, targets: &[Mat3], jac: Option<&[JacobianBatch]>) -> Residual {
         let el = self.elastic;
         let n = el.node_count();
         // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
@@ -328,7 +322,7 @@ impl<'a> Objective<'a> {
         let correction = jac.map(|jac| {
             let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
             let mut z = vec![[0.0; 3]; n];
-            el.apply_j_sequential_batched(|first, out| *out = Self::jacobian_products(el, jac, first, &u), &mut z);
+            el.apply_jacobians_sequential(jac, &u, &mut z);
             z
         });
         // ∂W_s/∂T = (dτ/T) ½|f|² + dτ f_T·f with f_T = M (ẍ_T + α ẋ_T) + L x_T - J DP[dF(x_T)].
@@ -341,7 +335,7 @@ impl<'a> Objective<'a> {
             Self::combine(&u, &c_t, &mut acc_t);
             let (mut lx_t, mut jp_t) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
             el.stiffness.mul_points_sequential(&x_t, &mut lx_t);
-            el.apply_j_sequential_batched(|first, out| *out = Self::jacobian_products(el, jac, first, &x_t), &mut jp_t);
+            el.apply_jacobians_sequential(jac, &x_t, &mut jp_t);
             let mut ftf = 0.0;
             for a in (0..n).filter(|&a| !self.supports[a]) {
                 for d in 0..3 {
