@@ -134,8 +134,9 @@ bench-demo: build deps-tetgen deps-usd
 	@echo "==> demo benchmark: where the bake's time goes (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench demo
 
-# Production-size bakes through the CLI (100k-vertex cage, 20 keys, CHEB-style volume);
-# peak memory by GNU time (Debian package `time`).
+# The scaling table (issue 11): production-size bakes through the CLI, one process per row
+# (prism series, 20 keys, CHEB-style volume, 25k and 100k cages); peak memory by GNU time
+# (Debian package `time`). `SCALE_CASES=10k,100k` runs the rows whose names hold those words.
 bench-scale: build deps-tetgen
 	@command -v /usr/bin/time >/dev/null 2>&1 || { echo "==> installing GNU time (apt-get)"; $(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq time; }
 	@echo "==> scale benchmark: whole bakes of production-size surfaces (mind the load average printed with it)"

@@ -1,19 +1,26 @@
-//! Production-size bakes through the CLI, as a user runs them: each scene is generated into a
-//! scratch folder (procedural prisms, twisted and bent, keyframes as OBJ surfaces) and baked by
-//! the `blendsim` binary under `/usr/bin/time -v`. Printed per scene: surface vertices, body
-//! nodes (cage or TetGen), keys, the global step's solver (direct or iterative) and ordering,
-//! bake seconds, whole-process peak memory, the cage's key reproduction error and the
-//! in-between volume loss. Medians of `SCALE_REPEATS` runs (default 1: these are long).
+//! The scaling table (issue 11), printed by `make bench-scale`: whole bakes through the CLI, as a
+//! user runs them. Each scene is generated into a scratch folder (procedural prisms, twisted and
+//! bent, keyframes as OBJ surfaces) and baked by the `blendsim` binary under `/usr/bin/time -v`,
+//! one fresh process per row (so a row's peak memory is its own). Per row: tet nodes (the body
+//! solved: TetGen's, or the cage's), the fill-reducing order and factorization of the global
+//! step (the solver's precompute), the mean solver iteration, the whole bake (wall and CPU),
+//! the process's peak resident memory, the cage's key reproduction error and the in-between
+//! volume loss. Medians of `SCALE_REPEATS` runs (default 1: these are long).
 //!
-//! `cargo bench --bench scale` (or `make bench-scale`); `cargo bench --bench scale -- 100k`
-//! runs only the scenes whose name contains an argument. `SCALE_KEEP=1` keeps the generated
-//! scenes and outputs (their folder is printed) for profiling a bake by hand.
+//! The rows: the prism series at 5 keys without the cage (1k, 2.6k, 10k, 21k and 30k tet
+//! nodes; the three large ones stop after 20 iterations, [`SERIES_ITERATIONS`], enough
+//! to time an iteration, and say so), the 2.6k-node body at 20 keys, the CHEB-style 6.8k
+//! surface on its cage and in full (in-between volume within one percentage point), and the
+//! 25k and 100k surfaces on their cages (10 keys: under 60 s and 4 GB, embedded keys within 1%
+//! of the bbox diagonal). Held at every key: both end faces (the prisms and the 2.6k and 6.8k
+//! bodies), or the whole surface (the default; the 25k and 100k surfaces).
 //!
-//! The rows answer the targets of the issue on production meshes: a 100k-vertex surface with
-//! 10 keys (under 60 s and 4 GB on 2 cores, embedded keys within 1% of the bbox diagonal), the
-//! 20-key 2.6k-node body (under 20 s and 3 GB), and the CHEB-style check (a 6.8k-vertex surface
-//! on a ~1k-node cage against the same scene on the full surface: in-between volume within one
-//! percentage point).
+//! `cargo bench --bench scale` (or `make bench-scale`). `SCALE_CASES=10k,100k` (or arguments
+//! after `--`) runs only the rows whose name contains one of the words; a few extra rows (the
+//! 20-key body with each global step forced, `2.6k-20-keys-direct` and
+//! `2.6k-20-keys-iterative-2G`, and with the coarse-to-fine schedule, `2.6k-20-keys-coarse`)
+//! run only when named in full. `SCALE_KEEP=1` keeps the generated scenes and outputs (their folder is printed)
+//! for profiling a bake by hand.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -42,6 +49,10 @@ fn pose(rest: &[Point], degrees: f64, bend: f64) -> Vec<Point> {
         .collect()
 }
 
+/// The `[solver]` line of the prism series' large rows (10k nodes and up, without the cage):
+/// 20 iterations are enough to time one; a converged bake of those takes hundreds.
+const SERIES_ITERATIONS: &str = "max_iterations = 20";
+
 struct Case {
     name: &'static str,
     /// Prism size and divisions of the surface.
@@ -60,6 +71,25 @@ struct Case {
     hold: Option<&'static [f64]>,
     /// Extra `bake` arguments.
     args: &'static [&'static str],
+    /// Run only when named by a filter.
+    extra: bool,
+}
+
+/// Both end faces held at every key.
+const ENDS: Option<&[f64]> = Some(&[0.0, 1.0]);
+/// The prism of the series and of the 2.6k-node body: 1.2 x 3.6 x 1.2.
+const BODY: [f64; 3] = [1.2, 3.6, 1.2];
+/// The CHEB-style and the cage surfaces' prism: 1 x 3 x 1.
+const SLIM: [f64; 3] = [1.0, 3.0, 1.0];
+
+/// A row of the prism series: 5 keys, no cage, TetGen's `max_volume`.
+const fn series(name: &'static str, d: usize, tet: &'static str, solver: &'static str) -> Case {
+    Case { name, size: BODY, divisions: [d, 3 * d, d], keys: 5, tet, solver, hold: ENDS, args: &[], extra: false }
+}
+
+/// The 2.6k-node body with 20 keys, both end faces held.
+const fn twenty_keys(name: &'static str, solver: &'static str, args: &'static [&'static str], extra: bool) -> Case {
+    Case { name, size: BODY, divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver, hold: ENDS, args, extra }
 }
 
 /// Write the scene of `case` into `dir`; returns the scene file.
@@ -119,92 +149,74 @@ fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value
 
 /// The global step's solver, with the CG solves and their mean iterations when iterative.
 fn global_step(solver: &serde_json::Value) -> String {
-    let name = format!("{}, {} iterations", solver["linear_solver"].as_str().unwrap_or("-"), solver["iterations"]);
+    let name = solver["linear_solver"].as_str().unwrap_or("-").to_string();
     let cg = &solver["conjugate_gradients"];
     match (cg["solves"].as_u64(), cg["iterations"].as_u64()) {
         (Some(solves), Some(iterations)) if solves > 0 => {
             let capped = cg["capped"].as_u64().unwrap_or(0);
-            format!("{name} ({solves} CG solves x {:.0} iterations{})", iterations as f64 / solves as f64, if capped > 0 { format!(", {capped} capped") } else { String::new() })
+            format!("{name} ({solves} CG solves x {:.0}{})", iterations as f64 / solves as f64, if capped > 0 { format!(", {capped} capped") } else { String::new() })
         }
         _ => name,
     }
 }
 
 fn main() {
-    let filters: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
+    let mut filters: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
+    filters.extend(std::env::var("SCALE_CASES").unwrap_or_default().split(',').map(str::trim).filter(|f| !f.is_empty()).map(String::from));
     let keep = std::env::var_os("SCALE_KEEP").is_some_and(|v| v != "0");
-    let repeats: usize = std::env::var("SCALE_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    let repeats: usize = std::env::var("SCALE_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1).max(1);
     let cases = [
-        // The benchmark's ARMADILLO-size body (2645 TetGen nodes) with 20 keys, its bottom and top
-        // faces held at every key (the rest of the body free): the global step the cost model
-        // chooses, then each of the other two forced.
-        Case { name: "2.6k-nodes-20-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
-        Case {
-            name: "2.6k-nodes-20-keys-direct",
-            size: [1.2, 3.6, 1.2],
-            divisions: [12, 36, 12],
-            keys: 20,
-            tet: "max_volume = 0.003",
-            solver: "global_step = \"direct\"",
-            hold: Some(&[0.0, 1.0]),
-            args: &[],
-        },
-        Case {
-            name: "2.6k-nodes-20-keys-iterative-2G",
-            size: [1.2, 3.6, 1.2],
-            divisions: [12, 36, 12],
-            keys: 20,
-            tet: "max_volume = 0.003",
-            solver: "global_step = \"iterative\"",
-            hold: Some(&[0.0, 1.0]),
-            args: &["--max-memory", "2G"],
-        },
-        // The coarse-to-fine schedule on the same body (`[solver] coarse_samples`: README).
-        Case {
-            name: "2.6k-nodes-20-keys-coarse",
-            size: [1.2, 3.6, 1.2],
-            divisions: [12, 36, 12],
-            keys: 20,
-            tet: "max_volume = 0.003",
-            solver: "coarse_samples = 5",
-            hold: Some(&[0.0, 1.0]),
-            args: &[],
-        },
-        Case { name: "2.6k-nodes-5-keys", size: [1.2, 3.6, 1.2], divisions: [12, 36, 12], keys: 5, tet: "max_volume = 0.003", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
+        // The prism series (5 keys, no cage; TetGen's 1.1k, 2.6k, 10k, 21k and 30k nodes).
+        series("prism-1k", 8, "cage = false\nmax_volume = 0.008", ""),
+        series("prism-2.6k", 12, "cage = false\nmax_volume = 0.003", ""),
+        series("prism-10k", 22, "cage = false\nmax_volume = 0.0005", SERIES_ITERATIONS),
+        series("prism-21k", 30, "cage = false\nmax_volume = 0.0002", SERIES_ITERATIONS),
+        series("prism-30k", 36, "cage = false\nmax_volume = 0.00016", SERIES_ITERATIONS),
+        // The 2.6k-node body with 20 keys: the global step the cost model chooses; then (named
+        // only) each forced, and the coarse-to-fine schedule (`[solver] coarse_samples`: README).
+        twenty_keys("2.6k-20-keys", "", &[], false),
+        twenty_keys("2.6k-20-keys-direct", "global_step = \"direct\"", &[], true),
+        twenty_keys("2.6k-20-keys-iterative-2G", "global_step = \"iterative\"", &["--max-memory", "2G"], true),
+        twenty_keys("2.6k-20-keys-coarse", "coarse_samples = 5", &[], true),
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
-        Case { name: "6.8k-cage", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
-        Case { name: "6.8k-full", size: [1.0, 3.0, 1.0], divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold: Some(&[0.0, 1.0]), args: &[] },
-        Case { name: "25k-cage", size: [1.0, 3.0, 1.0], divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold: None, args: &[] },
-        Case { name: "100k-cage", size: [1.0, 3.0, 1.0], divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold: None, args: &[] },
+        Case { name: "6.8k-cage", size: SLIM, divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: ENDS, args: &[], extra: false },
+        Case { name: "6.8k-full", size: SLIM, divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold: ENDS, args: &[], extra: false },
+        Case { name: "25k-cage", size: SLIM, divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
+        Case { name: "100k-cage", size: SLIM, divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
     ];
+    // A word picks the rows whose name contains it; an extra row only by its whole name.
+    let chosen = |c: &&Case| if filters.is_empty() { !c.extra } else { filters.iter().any(|f| c.name == f || (!c.extra && c.name.contains(f.as_str()))) };
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
-    println!("machine: {} threads, load average {}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
+    println!("machine: {} threads, load average {}; one `blendsim bake` process per row, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
     println!();
-    println!("| scene | surface vertices | body nodes | cage | keys | global step | bake s | CPU s | peak MB | cage key error max | in-between volume loss | load |");
-    println!("|---|---:|---:|---|---:|---|---:|---:|---:|---:|---:|---|");
-    for case in cases.iter().filter(|c| filters.is_empty() || filters.iter().any(|f| c.name.contains(f.as_str()))) {
+    println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
+    println!("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    for case in cases.iter().filter(chosen) {
         let dir = scratch.join(case.name);
         let scene = write_scene(case, &dir);
         let runs: Vec<(f64, u64, serde_json::Value, f64)> = (0..repeats).map(|r| bake(&scene, &dir.join(format!("out{r}")), case.args)).collect();
         let seconds = median(runs.iter().map(|r| r.0).collect());
         let peak = median(runs.iter().map(|r| r.1 as f64).collect());
         let cpu = median(runs.iter().map(|r| r.3).collect());
+        let factor = median(runs.iter().map(|r| r.2["solver"]["precompute_seconds"].as_f64().unwrap_or(f64::NAN)).collect());
+        let iteration = median(runs.iter().map(|r| r.2["solver"]["iteration_seconds"].as_f64().unwrap_or(f64::NAN)).collect());
         let report = &runs[0].2;
+        let solver = &report["solver"];
         let cage = &report["cage"];
-        let (cage_text, key_error) = if cage.is_null() {
-            ("no".to_string(), "-".to_string())
-        } else {
-            (format!("{} nodes", cage["nodes"]), format!("{:.2}%", 100.0 * cage["key_error_max"].as_f64().unwrap()))
-        };
+        let key_error = if cage.is_null() { "-".to_string() } else { format!("{:.2}%", 100.0 * cage["key_error_max"].as_f64().unwrap()) };
+        let nodes = if cage.is_null() { format!("{}", report["tet_nodes"]) } else { format!("{} (cage)", report["tet_nodes"]) };
+        let iterations = format!("{}{}", solver["iterations"], if solver["converged"].as_bool() == Some(false) { " (cap)" } else { "" });
         let loss = report["volume"]["animation"]["in_between_loss"].as_f64().map_or("-".into(), |l| format!("{:.2}%", 100.0 * l));
         println!(
-            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
             case.name,
             report["vertices"],
-            report["tet_nodes"],
-            cage_text,
+            nodes,
             case.keys,
-            global_step(&report["solver"]),
+            global_step(solver),
+            iterations,
+            factor,
+            iteration,
             seconds,
             cpu,
             peak / 1024.0,

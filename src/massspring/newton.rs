@@ -48,10 +48,7 @@ use super::springs::Springs;
 use crate::error::{Error, Result};
 use crate::mesh::{norm, Point};
 use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
-
-/// Predicted factorization flops above which faer factorizes on all threads (as the spacetime
-/// global step measured: parallel supernodal factorization pays off only for large fronts).
-const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
+use crate::physics::cholesky::PARALLEL_FACTOR_FLOPS;
 
 /// When to stop and when to trust the exact Hessian.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -19,7 +19,8 @@
 //! Cost: `L M⁻¹ L` couples nodes two rings apart, so the factor fills in heavily (50M entries
 //! for 25k unknowns on a 2.6k-node body). Every node's free slots stay together: the
 //! fill-reducing order is found on the node graph ([`fill_reducing_order`]), the numeric
-//! factorization is faer's supernodal one (parallel above 1 G predicted flops), and the
+//! factorization is supernodal over faer's symbolic analysis, the two halves of the
+//! elimination tree on two threads above 1 G predicted flops ([`Cholesky::refactor`]), and the
 //! solves sweep the factor once per direction for all three coordinates, on two threads
 //! ([`Cholesky::solve_rows3`]).
 //!
@@ -42,7 +43,7 @@ use super::objective::Objective;
 use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
-use crate::physics::cholesky::Cholesky;
+use crate::physics::cholesky::{Cholesky, PARALLEL_FACTOR_FLOPS};
 use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 use crate::physics::csr::Csr;
 use crate::physics::pcg::{pcg, BlockJacobi, SymmetricOperator};
@@ -233,19 +234,34 @@ fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: 
     (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
 }
 
-/// Bytes a direct factorization needs per stored factor entry, measured as the whole
-/// process's peak over the predicted entries (values, faer's row indices and its numeric
-/// scratch, the assembled matrix, and the rest of the solve): see [`predicted_peak_bytes`].
-pub const BYTES_PER_FACTOR_ENTRY: f64 = 12.0;
+/// Bytes a direct factorization needs per predicted factor entry, measured as the whole
+/// process's peak over the predicted entries (`factor_peak_memory`; cube-13, 5 keys, 6.86e7
+/// entries predicted: 949 MB with our two-thread factorization, 915 MB with faer's: 13.8 and
+/// 13.3 bytes per entry; at 20 keys, 7.66e8 entries, ours: 8,660 MB, 11.3 bytes). What it
+/// holds: the factor's values, 8
+/// bytes per stored entry, and faer's supernodes store 1.26 entries per predicted one (their
+/// relaxed patterns' explicit zeros): 10.1 bytes; the assembled matrix and, while it is
+/// factorized, its copy in the factor's order (16 bytes per matrix entry each: 1.7 bytes per
+/// factor entry at 5 keys, 0.7 at 20); the numeric scratch (the update products, 64 columns at
+/// a time, and the dense kernels', about 1%); and the rest of the process. The rest shrinks
+/// per entry with more keys, so one constant over-predicts many keys (by 24% at 20); it is
+/// set to the 5-key measurement so that no measured factorization exceeds its prediction.
+/// (Closer: 10.1 bytes per predicted entry plus about 65 per matrix entry, measured 59-72.)
+pub const BYTES_PER_FACTOR_ENTRY: f64 = 14.0;
 
 /// The predicted peak memory of a direct solve with `cost`.
 pub fn predicted_peak_bytes(cost: &Cost) -> f64 {
     BYTES_PER_FACTOR_ENTRY * cost.entries
 }
 
-/// Predicted flops per second of the numeric factorization (measured on 2 cores: 85 G flops
-/// in 1.4 s parallel, 2.3 s sequential).
-const FACTOR_FLOPS_PER_SECOND: [f64; 2] = [3.7e10, 6.0e10];
+/// Predicted flops per second of the numeric factorization ([`Cholesky::refactor`]), on one
+/// thread and on two. One: 3.28-3.36e10 per CPU second (`factor_on_two_cores`, cube-13 at 5
+/// keys, 2.19e11 flops, `Par::Seq`; CPU time holds under load, measured at load average 6-9).
+/// Two: that times 1.58, the ratio of the phases' thread CPU seconds (both groups, both top
+/// halves, the dense blocks) to the critical path of the split (the longer group, the longer
+/// half of each top supernode, the dense blocks counted on one core); a wall-clock ratio needs
+/// an idle machine (faer's own parallel factorization gave 1.6x on 85 G flops idle).
+const FACTOR_FLOPS_PER_SECOND: [f64; 2] = [3.3e10, 5.2e10];
 
 /// The default memory budget: the bake's one budget ([`crate::resources::memory_budget`]:
 /// `--max-memory`, else 60% of `MemAvailable`), or 4 GiB when that cannot be read.
@@ -492,11 +508,6 @@ pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeC
     SparseColMat::new(symbolic, vals)
 }
 
-/// Predicted flops above which the numeric factorization runs in parallel (measured on 2
-/// cores: 0.37 G flops, DINO: 24-40 ms sequential, 31-55 ms parallel; 2.6 G, TWIST: 101-134 ms
-/// vs 77-106 ms; 85 G, ARMADILLO-size: 2.3 s vs 1.4 s).
-const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
-
 /// A fill-reducing order of the unknowns and how it was found.
 pub struct FillReducingOrder {
     /// `perm[k]` = the unknown eliminated k-th.
@@ -683,7 +694,7 @@ impl GlobalStep {
             }
         };
         let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest, could_be_direct);
-        // faer's parallel supernodal factorization pays off only for large fronts.
+        // Two threads pay off only for large factorizations.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
         let (mut method, [(predicted_seconds, predicted_bytes), (predicted_modal_seconds, predicted_modal_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, Some(&size), parallel, budget);
@@ -1261,7 +1272,7 @@ mod modal_phases {
                 })
                 .collect();
             let (w, c) = median(times);
-            println!("{name:<36} wall {w:8.3} s  cpu {c:8.3} s");
+            println!("{name:<36} wall {w:8.3} s  cpu {c:8.3} s  {:.3e} predicted flops per wall s, {:.3e} per CPU s", order.cost.flops / w, order.cost.flops / c);
             (w, chol.values_for_tests().to_vec())
         };
         // Our phases' thread CPU seconds on one thread: the two-core time they predict.
@@ -1271,6 +1282,7 @@ mod modal_phases {
         let p = crate::physics::cholesky::phases::CPU.lock().unwrap().map(|v| v / repeat as f64);
         let (total, path) = (p[0] + p[1] + p[2] + p[3] + p[4], p[0].max(p[1]) + p[5] + p[4]);
         println!("phases (thread CPU s): groups {:.3} + {:.3}, top halves {:.3} + {:.3} (longer {:.3}), top dense {:.3}; two-core critical path with the dense blocks on one core {:.3} s: {:.2}x", p[0], p[1], p[2], p[3], p[5], p[4], path, total / path);
+        println!("one thread: {:.3e} predicted flops per CPU s of the phases; two cores by the critical path: {:.3e}", order.cost.flops / total, order.cost.flops / path);
         let (faer_seq, reference) = run("faer Par::Seq", Par::Seq, false);
         let (faer_par, _) = run("faer Par::rayon", Par::rayon(0), false);
         let (ours_seq, one) = run("ours Par::Seq", Par::Seq, true);
@@ -1279,6 +1291,61 @@ mod modal_phases {
         let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let worst = two.iter().zip(&reference).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
         println!("speed-up over faer Par::Seq: faer rayon {:.2}x, ours seq {:.2}x, ours rayon {:.2}x; largest difference from faer {:.1e} of the largest entry", faer_seq / faer_par, faer_seq / ours_seq, faer_seq / ours_par, worst / scale);
+    }
+
+    /// A field of `/proc/self/status` in bytes (`VmHWM`: the peak resident set, `VmRSS`).
+    fn status_bytes(field: &str) -> f64 {
+        let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+        status.lines().find_map(|l| l.strip_prefix(field)?.trim().strip_suffix("kB")?.trim().parse::<f64>().ok()).map_or(0.0, |kb| kb * 1024.0)
+    }
+
+    /// The numeric factorization's own peak memory against what [`predicted_peak_bytes`]
+    /// assumes: the resident peak is reset (`/proc/self/clear_refs`) after the assembly, the
+    /// ordering and the symbolic analysis, then the factor is computed by ours (`FACTOR=ours`,
+    /// the default) or by faer (`FACTOR=faer`). One factorization per process, so the two
+    /// compare: `CUBE=13 KEYS=5 FACTOR=faer cargo test --release --lib factor_peak_memory --
+    /// --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn factor_peak_memory() {
+        let (el, k, kc) = many_keys_problem();
+        let s = settings();
+        let obj = objective(&el, &k, &s);
+        let unknowns = Unknowns::new(&k, el.node_count());
+        let c = TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization));
+        let a = assemble(&obj, &unknowns, &c);
+        let order = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
+        let faer = std::env::var("FACTOR").is_ok_and(|v| v == "faer");
+        let mut chol = Cholesky::analyse(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0));
+        let before = status_bytes("VmRSS:");
+        std::fs::write("/proc/self/clear_refs", "5").expect("reset the peak resident set");
+        let (w, c0) = (std::time::Instant::now(), cpu());
+        if faer { chol.refactor_by_faer(&a).unwrap() } else { chol.refactor(&a).unwrap() }
+        let (wall, cpu_s) = (w.elapsed().as_secs_f64(), cpu() - c0);
+        let peak = status_bytes("VmHWM:");
+        let entries = chol.factor_nnz() as f64;
+        let matrix = a.compute_nnz() as f64;
+        println!(
+            "{} nodes, {kc} keys, {} unknowns, {} ({:.3e} flops, {:.3e} entries predicted; {:.3e} stored), matrix {:.3e} entries, load {}",
+            el.node_count(),
+            unknowns.count(),
+            order.name,
+            order.cost.flops,
+            order.cost.entries,
+            entries,
+            matrix,
+            std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+        );
+        println!(
+            "{}: {wall:.2} s wall, {cpu_s:.2} CPU s; resident before {:.0} MB (of which the factor's zero pages are not resident), peak during {:.0} MB: {:.0} MB over before = {:.2} bytes per factor entry; process peak {:.2} bytes per entry; predicted peak {:.0} MB",
+            if faer { "faer" } else { "ours" },
+            before / 1e6,
+            peak / 1e6,
+            (peak - before) / 1e6,
+            (peak - before) / entries,
+            peak / entries,
+            predicted_peak_bytes(&order.cost) / 1e6
+        );
     }
 
     /// `cargo test --release --lib modal_setup_phases -- --ignored --nocapture` (CUBE, KEYS).

@@ -29,6 +29,12 @@ use sweeps::SupernodalSolve;
 
 use super::ordering::FillOrdering;
 
+/// Predicted flops (see [`super::ordering::Cost`]) above which a factorization is given both
+/// threads (`Par::rayon`): below, the thread hand-offs cost more than the second core saves
+/// (measured with faer's factorization on 2 cores: 0.37 G flops, 24-40 ms on one thread, 31-55
+/// ms on two; 2.6 G flops, 101-134 ms against 77-106 ms).
+pub const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
+
 /// The matrix is not (numerically) positive definite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NotPositiveDefinite;
@@ -48,6 +54,13 @@ pub struct Cholesky {
 impl Cholesky {
     /// Analyse and factor the symmetric matrix whose lower triangle is `lower`.
     pub fn factor(lower: &SparseColMat<usize, f64>, ordering: &FillOrdering, par: Par) -> Result<Cholesky, NotPositiveDefinite> {
+        let mut chol = Cholesky::analyse(lower, ordering, par);
+        chol.refactor(lower)?;
+        Ok(chol)
+    }
+
+    /// The symbolic analysis alone (the factor's values are zero until [`Cholesky::refactor`]).
+    pub(crate) fn analyse(lower: &SparseColMat<usize, f64>, ordering: &FillOrdering, par: Par) -> Cholesky {
         let n = lower.nrows();
         let (fwd, inv);
         let ord = match ordering {
@@ -72,9 +85,7 @@ impl Cholesky {
             }
             SymbolicCholeskyRaw::Simplicial(_) => (None, None),
         };
-        let mut chol = Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par, plan, numeric };
-        chol.refactor(lower)?;
-        Ok(chol)
+        Cholesky { values: vec![0.0; symbolic.len_val()], symbolic, par, plan, numeric }
     }
 
     /// Numeric refactorization of a matrix with the same pattern. A supernodal factor is
