@@ -45,7 +45,7 @@ pub struct Projections {
     /// `targets[sample][tet]`.
     pub targets: Vec<Vec<Mat3>>,
     /// `jacobians[sample][batch]`, when asked for: tets `BATCH * batch..` of the sample in
-    /// lane layout ([`JacobianBatch`]; `tet_count().div_ceil(BATCH)` per sample), as the local
+    /// lane layout (`JacobianBatch`; `tet_count().div_ceil(BATCH)` per sample), as the local
     /// step computes them and the gradients apply them.
     pub jacobians: Option<Vec<Vec<JacobianBatch>>>,
 }

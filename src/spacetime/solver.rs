@@ -169,7 +169,7 @@ pub struct Settings {
 pub enum Step {
     /// L-BFGS on the exact W, preconditioned by the model Hessian.
     QuasiNewton,
-    /// A truncated Gauss-Newton step ([`super::gauss_newton`]), preconditioned by the model
+    /// A truncated Gauss-Newton step (module `gauss_newton`), preconditioned by the model
     /// Hessian, falling back to the L-BFGS step where its line search fails. Not with obstacles
     /// or moving key times (L-BFGS is used there).
     GaussNewton,
