@@ -62,7 +62,7 @@
 //! Measured side by side (1 thread, `benches/convergence.rs` with `STEPS=1`, load 9 to 15 on
 //! 2 cores): it halves the iterations or better, not the cost. A product with `H` costs about
 //! 0.6 of an iteration (two stiffness and two projection-Jacobian passes per sample, against
-//! one of each and the projections themselves), and a step takes 3 to 6 products.
+//! one of each and the projections themselves), and a step takes 3 to 8 products.
 //!
 //! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CPU s (CG products) |
 //! |---|---:|---:|
@@ -173,7 +173,7 @@ pub enum Step {
     /// Hessian, falling back to the L-BFGS step where its line search fails. Not with obstacles
     /// or moving key times (L-BFGS is used there).
     GaussNewton,
-    /// [`Step::GaussNewton`] where it was measured to win, else [`Step::QuasiNewton`]
+    /// [`Step::GaussNewton`] where it was measured to win (nowhere yet: every scene measured costs more), else [`Step::QuasiNewton`]
     /// ([`Step::resolve`]).
     Auto,
 }
@@ -191,7 +191,7 @@ impl Step {
             return Step::QuasiNewton;
         }
         match self {
-            // Measured: Gauss-Newton halves the iterations but costs 1.5 to 2.1x the CPU time
+            // Measured: Gauss-Newton cuts the iterations 1.5 to 3.4x but costs 1.5 to 2.4x the CPU time
             // (module documentation, "Gauss-Newton steps").
             Step::Auto => Step::QuasiNewton,
             other => other,
