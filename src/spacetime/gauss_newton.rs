@@ -273,7 +273,7 @@ mod tests {
     }
 
     use super::super::solver::{apply_step, objective, Settings};
-    use super::super::tests::{keys, material, settings, wobbly, Nodes};
+    use super::super::tests::{bottom, keys, material, settings, wobbly, Nodes};
     use super::super::trajectory::Trajectory;
     use crate::physics::elastic::Elastic;
     use crate::testing::{cube_mesh, Rng};
@@ -310,8 +310,7 @@ mod tests {
     fn wobbly_keys(rest: &[Point], tr: &Trajectory, cyclic: bool, supports: bool) -> super::super::unknowns::KeyConstraints {
         let mut k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 4], cyclic);
         if supports {
-            let bottom: Nodes = (0..rest.len() as u32).filter(|&a| rest[a as usize][1] == 0.0).collect();
-            k.fixed = vec![bottom; 4];
+            k.fixed = vec![bottom(rest); 4];
             k.fixed_velocity = k.fixed.clone();
         }
         k

@@ -1240,13 +1240,9 @@ mod modal_phases {
         out
     }
 
-    /// The numeric factorization of the global step's matrix: faer's (one thread, both cores
-    /// inside its dense kernels) against ours ([`Cholesky::refactor`]: the two halves of the
-    /// elimination tree on two threads), medians of `REPEAT` (default 3), wall and CPU
-    /// seconds. `CUBE=13 KEYS=5 cargo test --release --lib factor_on_two_cores -- --ignored --nocapture`
-    #[test]
-    #[ignore]
-    fn factor_on_two_cores() {
+    /// The global step's matrix of [`many_keys_problem`] with its fill-reducing order (every
+    /// order allowed): what the factorization measurements factor.
+    fn many_keys_matrix() -> (usize, Unknowns, SparseColMat<usize, f64>, FillReducingOrder) {
         let (el, k, kc) = many_keys_problem();
         let s = settings();
         let obj = objective(&el, &k, &s);
@@ -1254,8 +1250,19 @@ mod modal_phases {
         let c = TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization));
         let a = assemble(&obj, &unknowns, &c);
         let order = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
+        (kc, unknowns, a, order)
+    }
+
+    /// The numeric factorization of the global step's matrix: faer's (one thread, both cores
+    /// inside its dense kernels) against ours ([`Cholesky::refactor`]: the two halves of the
+    /// elimination tree on two threads), medians of `REPEAT` (default 3), wall and CPU
+    /// seconds. `CUBE=13 KEYS=5 cargo test --release --lib factor_on_two_cores -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn factor_on_two_cores() {
+        let (kc, unknowns, a, order) = many_keys_matrix();
         let repeat: usize = std::env::var("REPEAT").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
-        println!("{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}", el.node_count(), unknowns.count(), order.name, order.cost.flops, std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
+        println!("{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}", unknowns.nodes, unknowns.count(), order.name, order.cost.flops, std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
         let mut chol = Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0)).unwrap();
         println!("factor entries {}", chol.factor_nnz());
         let median = |mut v: Vec<(f64, f64)>| {
@@ -1308,13 +1315,7 @@ mod modal_phases {
     #[test]
     #[ignore]
     fn factor_peak_memory() {
-        let (el, k, kc) = many_keys_problem();
-        let s = settings();
-        let obj = objective(&el, &k, &s);
-        let unknowns = Unknowns::new(&k, el.node_count());
-        let c = TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization));
-        let a = assemble(&obj, &unknowns, &c);
-        let order = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
+        let (kc, unknowns, a, order) = many_keys_matrix();
         let faer = std::env::var("FACTOR").is_ok_and(|v| v == "faer");
         let mut chol = Cholesky::analyse(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0));
         let before = status_bytes("VmRSS:");
@@ -1327,7 +1328,7 @@ mod modal_phases {
         let matrix = a.compute_nnz() as f64;
         println!(
             "{} nodes, {kc} keys, {} unknowns, {} ({:.3e} flops, {:.3e} entries predicted; {:.3e} stored), matrix {:.3e} entries, load {}",
-            el.node_count(),
+            unknowns.nodes,
             unknowns.count(),
             order.name,
             order.cost.flops,

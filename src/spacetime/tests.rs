@@ -108,7 +108,7 @@ fn rigid_motion_costs_no_elastic_energy() {
 }
 
 /// The nodes of the cube's bottom face (y = 0).
-fn bottom(rest: &[Point]) -> Nodes {
+pub(super) fn bottom(rest: &[Point]) -> Nodes {
     from_mask(&rest.iter().map(|p| p[1] == 0.0).collect::<Vec<_>>())
 }
 
