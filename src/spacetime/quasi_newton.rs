@@ -45,6 +45,13 @@ pub struct Lbfgs {
     h0_scale: f64,
 }
 
+/// `sᵀy` when the pair has positive curvature (so the implied Hessian stays positive definite);
+/// written so that NaN curvature fails too.
+fn positive_curvature(s: &[f64], y: &[f64]) -> Option<f64> {
+    let sy = dot(s, y);
+    (sy > 1e-12 * dot(s, s).sqrt() * dot(y, y).sqrt()).then_some(sy)
+}
+
 impl Lbfgs {
     /// Up to `memory` pairs; `scaled`: learn the scale of `H₀` from the steps (module
     /// documentation).
@@ -62,12 +69,7 @@ impl Lbfgs {
     /// change `y = g₊ - g` and the gradient `g` at its start; pairs without positive curvature
     /// are skipped so the implied Hessian stays positive definite (and do not rescale `H₀`).
     pub fn push(&mut self, s: Vec<f64>, y: Vec<f64>, t: f64, g: &[f64]) {
-        let sy = dot(&s, &y);
-        // Written so that NaN curvature is also skipped.
-        let positive_curvature = sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt();
-        if !positive_curvature {
-            return;
-        }
+        let Some(sy) = positive_curvature(&s, &y) else { return };
         if self.scaled {
             // The step along d = s / t that the curvature sᵀy / t² calls for: -gᵀd t² / sᵀy.
             let best = -dot(g, &s) * t / sy;
@@ -75,22 +77,23 @@ impl Lbfgs {
                 self.h0_scale = (self.h0_scale * best).clamp(H0_SCALE_RANGE.0, H0_SCALE_RANGE.1);
             }
         }
-        if self.pairs.len() == self.memory {
-            self.pairs.pop_front();
-        }
-        self.pairs.push_back((s, y, 1.0 / sy));
+        self.store(s, y, sy);
     }
 
     /// Record a step `s` and gradient change `y` (skipped without positive curvature) without
     /// learning `H₀`'s scale from it: for steps that did not come from [`Lbfgs::direction`].
     pub fn push_pair(&mut self, s: Vec<f64>, y: Vec<f64>) {
-        let sy = dot(&s, &y);
-        if sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt() {
-            if self.pairs.len() == self.memory {
-                self.pairs.pop_front();
-            }
-            self.pairs.push_back((s, y, 1.0 / sy));
+        if let Some(sy) = positive_curvature(&s, &y) {
+            self.store(s, y, sy);
         }
+    }
+
+    /// Keep the pair (with `1 / sᵀy`), dropping the oldest beyond the memory.
+    fn store(&mut self, s: Vec<f64>, y: Vec<f64>, sy: f64) {
+        if self.pairs.len() == self.memory {
+            self.pairs.pop_front();
+        }
+        self.pairs.push_back((s, y, 1.0 / sy));
     }
 
     pub fn clear(&mut self) {
