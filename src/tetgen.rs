@@ -351,35 +351,57 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, b
     let stdout = drain(child.stdout.take());
     let stderr = drain(child.stderr.take());
     let started = Instant::now();
-    let mut pause = Duration::from_millis(1);
-    let status = loop {
-        let elapsed = started.elapsed();
-        match child.try_wait() {
-            Ok(Some(status)) => break status,
-            Ok(None) if elapsed < timeout => {
-                std::thread::sleep(pause.min(timeout - elapsed));
-                pause = (pause * 2).min(Duration::from_millis(50));
-            }
-            outcome => {
-                let _ = child.kill();
-                let _ = child.wait();
-                return Err(match outcome {
-                    Err(e) => Error::in_file(
-                        source,
-                        format!("lost track of the TetGen process: {e}"),
-                        "retry; if it persists, check the system's process limits",
-                    ),
-                    _ if by_max_time => crate::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64())),
-                    _ => Error::in_file(
-                        source,
-                        format!("TetGen did not finish within {} s and was stopped", timeout.as_secs_f64()),
-                        "raise [tet] timeout, or ask for fewer tetrahedra: a larger [tet] max_volume, a looser quality, or a coarser surface",
-                    ),
-                });
-            }
+    // A helper thread blocks until the exit and says so: the exit is seen at once (polling
+    // with growing pauses saw the demo's 13 ms TetGen up to 8 ms late) and this thread sleeps
+    // until then or the timeout.
+    let (exited, exit) = std::sync::mpsc::channel();
+    let pid = child.id();
+    let watcher = std::thread::spawn(move || {
+        wait_for_exit(pid);
+        let _ = exited.send(());
+    });
+    let waited = exit.recv_timeout(timeout);
+    let elapsed = started.elapsed();
+    let outcome = match waited {
+        Ok(()) => child.wait().map(Some),
+        Err(_) => child.try_wait(),
+    };
+    let status = match outcome {
+        Ok(Some(status)) => status,
+        outcome => {
+            let _ = child.kill();
+            let _ = child.wait();
+            let _ = watcher.join();
+            return Err(match outcome {
+                Err(e) => Error::in_file(
+                    source,
+                    format!("lost track of the TetGen process: {e}"),
+                    "retry; if it persists, check the system's process limits",
+                ),
+                _ if by_max_time => crate::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64())),
+                _ => Error::in_file(
+                    source,
+                    format!("TetGen did not finish within {} s and was stopped", timeout.as_secs_f64()),
+                    "raise [tet] timeout, or ask for fewer tetrahedra: a larger [tet] max_volume, a looser quality, or a coarser surface",
+                ),
+            });
         }
     };
+    let _ = watcher.join();
     Ok(Finished { status, stdout: stdout.join().unwrap_or_default(), stderr: stderr.join().unwrap_or_default() })
+}
+
+/// Block until the child `pid` has exited, without reaping it (`waitid` with `WNOWAIT`: its
+/// `Child` still collects the status). Returns at once if it is gone or cannot be waited for.
+fn wait_for_exit(pid: u32) {
+    loop {
+        // SAFETY: waitid writes one siginfo_t it is given.
+        let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
+        let r = unsafe { libc::waitid(libc::P_PID, pid as libc::id_t, &mut info, libc::WEXITED | libc::WNOWAIT) };
+        if r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR) {
+            return;
+        }
+    }
 }
 
 /// A fresh folder only this run uses (so no stray `surface.poly` is picked up), removed
