@@ -11,6 +11,8 @@
 //! and keeps the report and other scenes' files. The layouts are specified in
 //! `formats/usd.md` and `formats/gltf.md`.
 
+use rayon::prelude::*;
+
 use super::cache::error_against;
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
@@ -71,6 +73,7 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
         forms.push((OutputKind::FullFrame, ".full".into()));
     }
 
+    let exported_points = animation.mesh.positions.len() * full.as_ref().map_or(1, |f| f.frames.len());
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
     for (kind, suffix) in forms {
@@ -79,29 +82,40 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
             (OutputKind::FullFrame, Some(full)) => usd::full_frame(full, triangles, attributes, &settings),
             _ => usd::blendshapes(clip, triangles, attributes, &settings),
         });
-        for &format in &formats {
+        let usdc_path = staging.final_path(&format!("{stem}.{}", Format::Usdc.extension()));
+        let encode = |format: Format| -> Result<Vec<u8>> {
+            let layer = || layer.as_ref().expect("built for USD");
+            Ok(match format {
+                Format::Usda => usda::text(layer()).into_bytes(),
+                Format::Usdc => usdc::bytes(layer(), &usdc_path)?,
+                Format::Glb => match (&kind, &full) {
+                    (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
+                    _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
+                        let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
+                        glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
+                    }
+                    _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
+                },
+            })
+        };
+        // A small animation's files are encoded at once, one format per thread (the demo's
+        // export is the bake's critical path after the solve; the report's measures run beside
+        // it), then staged in order: the same bytes. A large one's one after the other, so only
+        // one file's bytes are held at a time.
+        let mut encoded: Vec<Option<Result<Vec<u8>>>> = if exported_points <= PARALLEL_EXPORT_POINTS {
+            formats.par_iter().map(|&f| Some(encode(f))).collect()
+        } else {
+            formats.iter().map(|_| None).collect()
+        };
+        for (&format, bytes) in formats.iter().zip(&mut encoded) {
             let name = format!("{stem}.{}", format.extension());
             bar.set_message(format!("export: {name}"));
-            match format {
-                Format::Usda => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
-                Format::Usdc => {
-                    // The interruption tests stop here: in the export, before the usdc is staged.
-                    crate::interrupt::pause_point("usdc", "");
-                    let bytes = usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?;
-                    staging.write(&name, &bytes)?;
-                }
-                Format::Glb => {
-                    let bytes = match (&kind, &full) {
-                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
-                        _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
-                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
-                        }
-                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
-                    };
-                    staging.write(&name, &bytes)?;
-                }
+            if format == Format::Usdc {
+                // The interruption tests stop here: in the export, before the usdc is staged.
+                crate::interrupt::pause_point("usdc", "");
             }
+            let bytes = bytes.take().unwrap_or_else(|| encode(format))?;
+            staging.write(&name, &bytes)?;
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
             bar.inc(1);
         }
@@ -109,6 +123,10 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     bar.finish_and_clear();
     Ok(Outputs { files, rank })
 }
+
+/// Exported vertices times full-frame frames up to which a form's files are encoded
+/// concurrently (about 12 MB of f32 points per file; the demo: 128 x 121).
+pub const PARALLEL_EXPORT_POINTS: usize = 1 << 20;
 
 /// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
 /// the trajectory to f32 precision, of the bounding-box diagonal.
