@@ -450,6 +450,26 @@ impl Staging {
         Ok(())
     }
 
+    /// Write a file into the staging folder from `fill`, through a buffer: a large file made
+    /// in pieces is never held whole.
+    pub fn write_with(&mut self, name: &str, fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
+        self.check_name(name)?;
+        let p = self.path(name);
+        // Created in a critical section, as `write`'s file is (a signal's cleanup lists the
+        // staging folder after it, or removed the folder before and the creation fails);
+        // what is written after a cleanup goes to a file already unlinked.
+        let created = {
+            let _critical = interrupt::critical();
+            File::create(&p)
+        };
+        let fail = |e: std::io::Error| Error::io(self.final_path(name), &e, "write an output file");
+        let mut w = std::io::BufWriter::new(created.map_err(fail)?);
+        fill(&mut w).and_then(|_| w.flush()).map_err(fail)?;
+        drop(w);
+        self.record(name);
+        Ok(())
+    }
+
     /// Record a file that an external tool wrote at [`Staging::path`].
     pub fn record(&mut self, name: &str) {
         match self.files.iter_mut().find(|(f, _)| f == name) {
@@ -938,6 +958,26 @@ mod tests {
         let one = Committed { removed: vec!["a\u{1b}[2J".into()], kept: vec![] };
         assert_eq!(one.messages(Path::new("x"), "bake"), ["removed from x 1 file of an earlier run that this bake did not write again: a\\u{1b}[2J"]);
         assert_eq!(listing(&target), [MANIFEST, "new.glb", "notes.txt", "other.glb", "renders", "report.md", "shared.png"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A file written in pieces is staged and committed like a written one; a failed fill is
+    /// an error naming the file, and nothing of that run is committed.
+    #[test]
+    fn a_file_written_in_pieces_is_staged_like_any() {
+        let d = scratch("pieces");
+        let target = d.join("out");
+        let mut s = Staging::new(&target).unwrap();
+        s.write_with("big.usda", |f| (0..3).try_for_each(|i| f.write_all(format!("piece {i}\n").as_bytes()))).unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(target.join("big.usda")).unwrap(), "piece 0\npiece 1\npiece 2\n");
+        assert_eq!(read_manifest(&target).keys().collect::<Vec<_>>(), ["big.usda"]);
+        let mut s = Staging::new(&target).unwrap();
+        let e = s.write_with("big.usda", |_| Err(std::io::Error::other("disk full"))).unwrap_err().to_string();
+        assert!(e.contains("big.usda") && e.contains("disk full"), "{e}");
+        drop(s);
+        assert_eq!(std::fs::read_to_string(target.join("big.usda")).unwrap(), "piece 0\npiece 1\npiece 2\n");
+        assert_eq!(listing(&d), ["out"]);
         std::fs::remove_dir_all(&d).unwrap();
     }
 
