@@ -3,7 +3,8 @@
 //! bent, keyframes as OBJ surfaces) and baked by the `blendsim` binary under `/usr/bin/time -v`,
 //! one fresh process per row (so a row's peak memory is its own). Per row: tet nodes (the body
 //! solved: TetGen's, or the cage's), the fill-reducing order and factorization of the global
-//! step (the solver's precompute), the mean solver iteration, the whole bake (wall and CPU),
+//! step (the solver's precompute), the mean solver iteration and its W evaluations' and global
+//! step solves' share (the report's `iteration_split`), the whole bake (wall and CPU),
 //! the process's peak resident memory, the cage's key reproduction error and the in-between
 //! volume loss. Medians of `SCALE_REPEATS` runs (default 1: these are long).
 //!
@@ -189,8 +190,8 @@ fn main() {
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
     println!("machine: {} threads, load average {}; one `blendsim bake` process per row, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
     println!();
-    println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
-    println!("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | evaluate + solve s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
+    println!("|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---|");
     for case in cases.iter().filter(chosen) {
         let dir = scratch.join(case.name);
         let scene = write_scene(case, &dir);
@@ -200,6 +201,10 @@ fn main() {
         let cpu = median(runs.iter().map(|r| r.3).collect());
         let factor = median(runs.iter().map(|r| r.2["solver"]["precompute_seconds"].as_f64().unwrap_or(f64::NAN)).collect());
         let iteration = median(runs.iter().map(|r| r.2["solver"]["iteration_seconds"].as_f64().unwrap_or(f64::NAN)).collect());
+        // The iteration taken apart: W's evaluations and the global step's solves, seconds per
+        // iteration (the rest is the quasi-Newton bookkeeping).
+        let per = |field: &str| median(runs.iter().map(|r| r.2["solver"]["iteration_split"][field].as_f64().unwrap_or(f64::NAN) / r.2["solver"]["iterations"].as_f64().unwrap_or(f64::NAN)).collect());
+        let (evaluate, solve) = (per("evaluation_seconds"), per("solve_seconds"));
         let report = &runs[0].2;
         let solver = &report["solver"];
         let cage = &report["cage"];
@@ -208,7 +213,7 @@ fn main() {
         let iterations = format!("{}{}", solver["iterations"], if solver["converged"].as_bool() == Some(false) { " (cap)" } else { "" });
         let loss = report["volume"]["animation"]["in_between_loss"].as_f64().map_or("-".into(), |l| format!("{:.2}%", 100.0 * l));
         println!(
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.3} + {:.3} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
             case.name,
             report["vertices"],
             nodes,
@@ -217,6 +222,8 @@ fn main() {
             iterations,
             factor,
             iteration,
+            evaluate,
+            solve,
             seconds,
             cpu,
             peak / 1024.0,

@@ -245,6 +245,25 @@ pub struct SolverLog {
     /// Samples per interval of the coarse phase (0: none ran).
     #[serde(default)]
     pub coarse_samples: usize,
+    /// Where the spacetime iterations' time went: W's evaluations and the global step's solves.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iteration_split: Option<IterationSplit>,
+}
+
+/// Where a spacetime solve's iterations spent their time (wall seconds summed over the solve;
+/// the rest of the iterations' time is the quasi-Newton bookkeeping).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct IterationSplit {
+    /// Evaluations of W (first guess and every line-search trial).
+    pub evaluations: usize,
+    /// Of them, with the projections' Jacobians (the exact gradient).
+    pub exact_evaluations: usize,
+    /// Seconds in the evaluations.
+    pub evaluation_seconds: f64,
+    /// Solves with the global step's matrix (or the quasi-Newton model).
+    pub solves: usize,
+    /// Seconds in the solves.
+    pub solve_seconds: f64,
 }
 
 /// The conjugate-gradient solves of an iterative global step.

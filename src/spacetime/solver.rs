@@ -339,6 +339,30 @@ pub struct Log {
     pub coarse_iterations: usize,
     /// Samples per interval of the coarse phase (0 when none ran).
     pub coarse_samples: usize,
+    /// Where the iterations' time went: W's evaluations and the global step's solves.
+    pub split: IterationSplit,
+}
+
+/// Where a solve's iterations spend their time (wall seconds summed over the solve, the first
+/// guess's evaluation included, the precompute not): what an iteration costs, taken apart.
+/// The remainder of the iterations' time (the L-BFGS two-loop recursion, gathering and
+/// scattering the unknowns, Gauss-Newton products) is `iteration time - evaluation_seconds -
+/// solve_seconds`. Timing only: nothing here changes a result.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct IterationSplit {
+    /// Evaluations of W (the local step and the residuals): the first guess, every trial
+    /// point of every line search.
+    pub evaluations: usize,
+    /// How many of them also formed the projections' Jacobians and the exact gradient (the
+    /// quasi-Newton phase's).
+    pub exact_evaluations: usize,
+    /// Seconds in those evaluations.
+    pub evaluation_seconds: f64,
+    /// Solves with the global step's matrix or the quasi-Newton model (one per local/global
+    /// step and per quasi-Newton direction, one per three active rows).
+    pub solves: usize,
+    /// Seconds in those solves.
+    pub solve_seconds: f64,
 }
 
 /// A finished solve.
@@ -490,6 +514,12 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     log.coarse_samples = samples;
     log.halvings += coarse.log.halvings;
     log.precompute_seconds += coarse.log.precompute_seconds;
+    let (c, f) = (&coarse.log.split, &mut log.split);
+    f.evaluations += c.evaluations;
+    f.exact_evaluations += c.exact_evaluations;
+    f.evaluation_seconds += c.evaluation_seconds;
+    f.solves += c.solves;
+    f.solve_seconds += c.solve_seconds;
     log.seconds = start.elapsed().as_secs_f64();
     if !warm {
         log.stop_reason += &format!("; the coarse phase's result ({n} iterations at {samples} samples per interval) was not below the first guess at {} samples, so the fine phase started from the first guess", settings.samples);
@@ -569,6 +599,7 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
         factored_times: keys.times.clone(),
         clearance_tolerance: CLEARANCE_TOLERANCE * size,
         projections: RefCell::new(std::array::from_fn(|_| Projections { targets: Vec::new(), jacobians: None })),
+        split: RefCell::default(),
     };
 
     let t_iterations = Instant::now();
@@ -621,6 +652,7 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
         energy: it.energy,
         coarse_iterations: 0,
         coarse_samples: 0,
+        split: solver.split.take(),
     };
     Ok((Solved { trajectory: it.tr, log }, warm == 1, Factors { global: solver.global, tangent: solver.tangent }))
 }
@@ -764,6 +796,8 @@ struct Solver<'a> {
     /// The local step's buffers, kept between evaluations (`[0]` without the Jacobians, `[1]`
     /// with them): every trial point fills them again instead of allocating them.
     projections: RefCell<[Projections; 2]>,
+    /// The evaluations' and solves' count and time ([`Log::split`]).
+    split: RefCell<IterationSplit>,
 }
 
 /// A step of both kinds of variables: the keyframe unknowns (flat, three per unknown) and the
@@ -791,8 +825,23 @@ impl<'a> Solver<'a> {
     /// W at `tr` with fresh projections (and the exact gradients when `exact`); a non-finite W
     /// is an error naming the iteration.
     fn evaluate(&self, tr: &Trajectory, iteration: usize, exact: bool) -> Result<Evaluation> {
+        let start = Instant::now();
         let objective = self.objective(&tr.times);
-        finite(objective.evaluate_fresh(tr, exact, &mut self.projections.borrow_mut()[exact as usize]), iteration)
+        let eval = objective.evaluate_fresh(tr, exact, &mut self.projections.borrow_mut()[exact as usize]);
+        let mut split = self.split.borrow_mut();
+        split.evaluations += 1;
+        split.exact_evaluations += usize::from(exact);
+        split.evaluation_seconds += start.elapsed().as_secs_f64();
+        finite(eval, iteration)
+    }
+
+    /// `x ← A⁻¹ x` with the global step's matrix, timed ([`Log::split`]).
+    fn global_solve(&self, x: &mut [Point]) {
+        let start = Instant::now();
+        self.global.apply_inverse(x);
+        let mut split = self.split.borrow_mut();
+        split.solves += 1;
+        split.solve_seconds += start.elapsed().as_secs_f64();
     }
 
     /// The joint gradient of an exact evaluation: the free unknowns' (flat), then the interval
@@ -845,15 +894,21 @@ impl<'a> Solver<'a> {
     /// The quasi-Newton phase's initial inverse Hessian on the keyframe unknowns.
     fn model_inverse(&self, x: &mut [Point]) {
         match &self.tangent {
-            Some(t) => t.apply_inverse(x),
-            None => self.global.apply_inverse(x),
+            Some(t) => {
+                let start = Instant::now();
+                t.apply_inverse(x);
+                let mut split = self.split.borrow_mut();
+                split.solves += 1;
+                split.solve_seconds += start.elapsed().as_secs_f64();
+            }
+            None => self.global_solve(x),
         }
     }
 
     /// The step preconditioner restricted to the rows of `it` (with the times when `times`):
     /// the global step's, or the quasi-Newton model's when `model`.
     fn projection(&self, it: &Iterate, times: bool, model: bool) -> Projection {
-        let solve = |x: &mut [Point]| if model { self.model_inverse(x) } else { self.global.apply_inverse(x) };
+        let solve = |x: &mut [Point]| if model { self.model_inverse(x) } else { self.global_solve(x) };
         let d_t: &[f64] = if times { &self.curvature } else { &[] };
         Projection::new(self.rows(it, times), &Preconditioner { unknowns: self.unknown_count(), solve: &solve, times: d_t })
     }
@@ -974,7 +1029,7 @@ impl<'a> Solver<'a> {
                     targets.push(0.0);
                 }
             }
-            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let solve = |x: &mut [Point]| self.global_solve(x);
             let h0 = self.preconditioner(&solve, false);
             let projection = Projection::new(rows, &h0);
             let kept: Vec<f64> = projection.rows.iter().map(|r| match r.kind {
@@ -1048,7 +1103,7 @@ impl<'a> Solver<'a> {
             }
             let mut d: Vec<f64> = self.global.gather(&it.eval.gradient).as_flattened().to_vec();
             let mut projection = self.projection(it, false, false);
-            let solve = |x: &mut [Point]| self.global.apply_inverse(x);
+            let solve = |x: &mut [Point]| self.global_solve(x);
             let h0 = self.preconditioner(&solve, false);
             let g = d.clone();
             let lambda = projection.apply(&mut d, &h0);

@@ -542,6 +542,26 @@ fn the_learned_h0_scale_keeps_the_bending_scene_within_its_iteration_bound() {
     assert!(log.iterations <= 220, "{} iterations (182 measured with the learned scale, 264 without)", log.iterations);
 }
 
+/// The log's split of the iterations' time counts what an iteration does: the first guess and
+/// every line-search trial are evaluations (the quasi-Newton phase's with the exact gradient),
+/// every accepted step came from at least one global-step solve, and the timed parts fit in the
+/// solve's wall time (they are disjoint parts of it, whatever the timing).
+#[test]
+fn the_iteration_split_counts_evaluations_and_solves() {
+    use super::solver::{DEFAULT_TOLERANCE, NEGLIGIBLE};
+    let (el, k) = bending_scene(false);
+    let default = Settings { tolerance: DEFAULT_TOLERANCE, negligible: NEGLIGIBLE, max_iterations: 1000, ..settings() };
+    let log = solve(&el, &k, &default, &|_, _, _| {}).unwrap().log;
+    let s = &log.split;
+    println!("{} iterations, {} halvings: {s:?}", log.iterations, log.halvings);
+    assert!(log.iterations > 0 && log.converged, "{}", log.stop_reason);
+    assert!(s.evaluations > log.iterations + log.halvings, "{s:?}");
+    assert!(s.exact_evaluations > 0 && s.exact_evaluations < s.evaluations, "{s:?}");
+    assert!(s.solves >= log.iterations, "{s:?}");
+    assert!(s.evaluation_seconds > 0.0 && s.solve_seconds > 0.0, "{s:?}");
+    assert!(s.evaluation_seconds + s.solve_seconds <= log.seconds, "{s:?} in {} s", log.seconds);
+}
+
 /// A twisting bar (top face turned, bottom held, both at every key): W levels off well above 0.
 fn twisting_scene() -> (Elastic, KeyConstraints) {
     let mesh = cube_mesh(2);

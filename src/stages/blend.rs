@@ -447,6 +447,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         active_contacts: 0,
         clearance: None,
         conjugate_gradients: None,
+        iteration_split: None,
         coarse_iterations: 0,
         coarse_samples: 0,
     };

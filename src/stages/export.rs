@@ -11,8 +11,6 @@
 //! and keeps the report and other scenes' files. The layouts are specified in
 //! `formats/usd.md` and `formats/gltf.md`.
 
-use rayon::prelude::*;
-
 use super::cache::error_against;
 use crate::error::{Error, Result};
 use crate::export::clip::BlendShapeClip;
@@ -73,49 +71,44 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
         forms.push((OutputKind::FullFrame, ".full".into()));
     }
 
-    let exported_points = animation.mesh.positions.len() * full.as_ref().map_or(1, |f| f.frames.len());
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
-        let layer = formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)).then(|| match (&kind, &full) {
-            (OutputKind::FullFrame, Some(full)) => usd::full_frame(full, triangles, attributes, &settings),
-            _ => usd::blendshapes(clip, triangles, attributes, &settings),
-        });
-        let usdc_path = staging.final_path(&format!("{stem}.{}", Format::Usdc.extension()));
-        let encode = |format: Format| -> Result<Vec<u8>> {
-            let layer = || layer.as_ref().expect("built for USD");
-            Ok(match format {
-                Format::Usda => usda::text(layer()).into_bytes(),
-                Format::Usdc => usdc::bytes(layer(), &usdc_path)?,
-                Format::Glb => match (&kind, &full) {
-                    (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
-                    _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
-                        let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                        glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
-                    }
-                    _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
-                },
-            })
-        };
-        // A small animation's files are encoded at once, one format per thread (the demo's
-        // export is the bake's critical path after the solve; the report's measures run beside
-        // it), then staged in order: the same bytes. A large one's one after the other, so only
-        // one file's bytes are held at a time.
-        let mut encoded: Vec<Option<Result<Vec<u8>>>> = if exported_points <= PARALLEL_EXPORT_POINTS {
-            formats.par_iter().map(|&f| Some(encode(f))).collect()
-        } else {
-            formats.iter().map(|_| None).collect()
-        };
-        for (&format, bytes) in formats.iter().zip(&mut encoded) {
+        // The full-frame USD files are written from `full` itself, its points streamed
+        // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
+        // text: only the blendshape form builds its layer.
+        let streamed = kind == OutputKind::FullFrame;
+        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| usd::blendshapes(clip, triangles, attributes, &settings));
+        for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
             bar.set_message(format!("export: {name}"));
-            if format == Format::Usdc {
-                // The interruption tests stop here: in the export, before the usdc is staged.
-                crate::interrupt::pause_point("usdc", "");
+            match format {
+                Format::Usda => match &full {
+                    Some(full) if streamed => staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?,
+                    _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
+                },
+                Format::Usdc => {
+                    // The interruption tests stop here: in the export, before the usdc is staged.
+                    crate::interrupt::pause_point("usdc", "");
+                    let bytes = match &full {
+                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, &staging.final_path(&name))?,
+                        _ => usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?,
+                    };
+                    staging.write(&name, &bytes)?;
+                }
+                Format::Glb => {
+                    let bytes = match (&kind, &full) {
+                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
+                        _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
+                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
+                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
+                        }
+                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
+                    };
+                    staging.write(&name, &bytes)?;
+                }
             }
-            let bytes = bytes.take().unwrap_or_else(|| encode(format))?;
-            staging.write(&name, &bytes)?;
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
             bar.inc(1);
         }
@@ -123,10 +116,6 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     bar.finish_and_clear();
     Ok(Outputs { files, rank })
 }
-
-/// Exported vertices times full-frame frames up to which a form's files are encoded
-/// concurrently (about 12 MB of f32 points per file; the demo: 128 x 121).
-pub const PARALLEL_EXPORT_POINTS: usize = 1 << 20;
 
 /// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
 /// the trajectory to f32 precision, of the bounding-box diagonal.

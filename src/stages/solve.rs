@@ -20,7 +20,7 @@ use crate::spacetime::obstacles::Obstacle;
 use crate::spacetime::solver::{self, ModelHessian, Settings, Step};
 use crate::spacetime::timing::TimingSettings;
 use crate::spacetime::unknowns::KeyConstraints;
-use crate::stage::{Body, CgSummary, KeyPoses, Solution, SolverLog};
+use crate::stage::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
 
 /// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
 /// the solution's scene records the method used.
@@ -85,6 +85,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 active_contacts: 0,
                 clearance: None,
                 conjugate_gradients: None,
+                iteration_split: None,
                 coarse_iterations: 0,
                 coarse_samples: 0,
             };
@@ -149,6 +150,13 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
                 }),
                 coarse_iterations: l.coarse_iterations,
                 coarse_samples: l.coarse_samples,
+                iteration_split: Some(IterationSplit {
+                    evaluations: l.split.evaluations,
+                    exact_evaluations: l.split.exact_evaluations,
+                    evaluation_seconds: l.split.evaluation_seconds,
+                    solves: l.split.solves,
+                    solve_seconds: l.split.solve_seconds,
+                }),
             };
             if let Some(c) = log.conjugate_gradients.filter(|c| c.capped > 0) {
                 eprintln!(
@@ -193,6 +201,7 @@ fn solve_fit(body: Body) -> Result<Solution> {
         active_contacts: 0,
         clearance: None,
         conjugate_gradients: None,
+        iteration_split: None,
         coarse_iterations: 0,
         coarse_samples: 0,
     };

@@ -142,6 +142,12 @@ pub fn without_timings(mut report: Value) -> Value {
     for key in ["seconds", "precompute_seconds", "iteration_seconds"] {
         assert!(solver.remove(key).is_some(), "report.json solver.{key} is missing");
     }
+    // The iterations' split: its counts are the solve's, its seconds the clock's.
+    if let Some(split) = solver.get_mut("iteration_split").and_then(Value::as_object_mut) {
+        for key in ["evaluation_seconds", "solve_seconds"] {
+            assert!(split.remove(key).is_some(), "report.json solver.iteration_split.{key} is missing");
+        }
+    }
     report
 }
 

@@ -84,6 +84,7 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
             conjugate_gradients: None,
             coarse_iterations: 0,
             coarse_samples: 0,
+            iteration_split: None,
         },
         cache: None,
         cage: None,
