@@ -19,7 +19,11 @@
 //!   formats leaves no stale file) and keeps everything else: other groups' files (`export`
 //!   then `report` into one folder) and files that are not blendsim's, which are hard-linked
 //!   into the new folder (folders re-created and their files linked), so they are never copied,
-//!   moved or lost. A file of the same name as one the commit writes is replaced.
+//!   moved or lost. A file of the same name as one the commit writes is replaced. A run that
+//!   writes a folder's whole content ([`Staging::replace_every_group`]: a bake) removes every
+//!   file of the manifest it does not write again, whatever its group (a renamed scene's files
+//!   too), so the folder holds one bake. [`Staging::commit_with_summary`] says what was
+//!   removed and what was kept, for the command line to say it.
 //! - **Locked.** `P/.NAME.blendsim-lock` is held with `flock` from [`Staging::open`] to the
 //!   end of the commit (it is beside `DIR`, so it survives the swap). A second run into the
 //!   same folder waits and says so on stderr, or fails at once with [`LockWait::Fail`]. The
@@ -226,6 +230,42 @@ fn same_file(_file: &File, path: &Path) -> bool {
     path.exists()
 }
 
+/// What a commit did to the entries the output folder held before it (for messages).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Committed {
+    /// Files an earlier run wrote (listed in the manifest) that this commit removed because it
+    /// replaces their group and did not write them again, sorted.
+    pub removed: Vec<String>,
+    /// Top-level entries that blendsim did not write (not in the manifest), kept through the
+    /// commit, sorted. Entries the commit wrote under the same name were replaced instead.
+    pub kept: Vec<String>,
+}
+
+impl Committed {
+    /// One line for each list that is not empty (cargo-like: say what was replaced), naming the
+    /// first few entries; `folder` as the user named it, `run` what wrote it (`bake`).
+    pub fn messages(&self, folder: &Path, run: &str) -> Vec<String> {
+        const SHOWN: usize = 5;
+        let folder = crate::error::printable(&folder.display().to_string());
+        let names = |list: &[String]| {
+            let mut text = list.iter().take(SHOWN).map(|n| crate::error::printable(n)).collect::<Vec<_>>().join(", ");
+            if list.len() > SHOWN {
+                text.push_str(&format!(" and {} more", list.len() - SHOWN));
+            }
+            text
+        };
+        let count = |n: usize, one: &str, many: &str| if n == 1 { format!("1 {one}") } else { format!("{n} {many}") };
+        let mut lines = Vec::new();
+        if !self.removed.is_empty() {
+            lines.push(format!("removed from {folder} {} of an earlier run that this {run} did not write again: {}", count(self.removed.len(), "file", "files"), names(&self.removed)));
+        }
+        if !self.kept.is_empty() {
+            lines.push(format!("kept in {folder} {} that blendsim did not write: {}", count(self.kept.len(), "entry", "entries"), names(&self.kept)));
+        }
+        lines
+    }
+}
+
 /// Files for one output folder, kept out of sight until the whole run has succeeded.
 #[derive(Debug)]
 pub struct Staging {
@@ -240,6 +280,8 @@ pub struct Staging {
     /// Staged files and their groups.
     files: Vec<(String, String)>,
     group: String,
+    /// The commit replaces every group of the manifest, not only those it staged.
+    every_group: bool,
     committed: bool,
     /// Parents of `folder` this run created, outermost first (removed again on failure).
     created: Vec<(PathBuf, Token)>,
@@ -283,6 +325,7 @@ impl Staging {
             dir: PathBuf::new(),
             files: Vec::new(),
             group: DEFAULT_GROUP.into(),
+            every_group: false,
             committed: false,
             created: Vec::new(),
             lock: None,
@@ -372,6 +415,13 @@ impl Staging {
         self.group = group.to_string();
     }
 
+    /// This run writes the folder's whole content (a bake): the commit removes every file an
+    /// earlier run wrote (the manifest's) that this one does not write, whatever its group,
+    /// not only those of the groups it staged. Files that are not blendsim's are kept.
+    pub fn replace_every_group(&mut self) {
+        self.every_group = true;
+    }
+
     /// Where a staged file lives until commit (for external tools that write it themselves).
     /// Never outside the staging folder: a name that is not a plain file name maps to a
     /// harmless one there, and [`Staging::write`] and [`Staging::commit`] refuse it.
@@ -396,6 +446,26 @@ impl Staging {
             std::fs::write(&p, bytes)
         };
         written.map_err(|e| Error::io(self.final_path(name), &e, "write an output file"))?;
+        self.record(name);
+        Ok(())
+    }
+
+    /// Write a file into the staging folder from `fill`, through a buffer: a large file made
+    /// in pieces is never held whole.
+    pub fn write_with(&mut self, name: &str, fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
+        self.check_name(name)?;
+        let p = self.path(name);
+        // Created in a critical section, as `write`'s file is (a signal's cleanup lists the
+        // staging folder after it, or removed the folder before and the creation fails);
+        // what is written after a cleanup goes to a file already unlinked.
+        let created = {
+            let _critical = interrupt::critical();
+            File::create(&p)
+        };
+        let fail = |e: std::io::Error| Error::io(self.final_path(name), &e, "write an output file");
+        let mut w = std::io::BufWriter::new(created.map_err(fail)?);
+        fill(&mut w).and_then(|_| w.flush()).map_err(fail)?;
+        drop(w);
         self.record(name);
         Ok(())
     }
@@ -431,7 +501,12 @@ impl Staging {
     }
 
     /// Replace the output folder by the staged files (plus the files kept from it) in one step.
-    pub fn commit(mut self) -> Result<()> {
+    pub fn commit(self) -> Result<()> {
+        self.commit_with_summary().map(drop)
+    }
+
+    /// [`Staging::commit`], returning what it removed and kept of the folder's earlier files.
+    pub fn commit_with_summary(mut self) -> Result<Committed> {
         for (name, _) in &self.files {
             self.check_name(name)?;
         }
@@ -441,12 +516,14 @@ impl Staging {
         result
     }
 
-    fn swap_in(&mut self) -> Result<()> {
+    fn swap_in(&mut self) -> Result<Committed> {
         let folder_exists = self.folder.is_dir();
         let old_manifest = if folder_exists { read_manifest(&self.folder) } else { BTreeMap::new() };
         let mine: BTreeMap<&str, &str> = self.files.iter().map(|(n, g)| (n.as_str(), g.as_str())).collect();
         let my_groups: BTreeSet<&str> = mine.values().copied().collect();
-        let replaced = |name: &str| mine.contains_key(name) || old_manifest.get(name).is_some_and(|g| my_groups.contains(g.as_str()));
+        let every_group = self.every_group;
+        let replaced = |name: &str| mine.contains_key(name) || old_manifest.get(name).is_some_and(|g| every_group || my_groups.contains(g.as_str()));
+        let removed: Vec<String> = old_manifest.keys().filter(|n| replaced(n) && !mine.contains_key(n.as_str()) && self.folder.join(n).symlink_metadata().is_ok()).cloned().collect();
         let mut manifest: BTreeMap<String, String> = old_manifest
             .iter()
             .filter(|(n, _)| !replaced(n) && self.folder.join(n).symlink_metadata().is_ok())
@@ -457,6 +534,7 @@ impl Staging {
         std::fs::write(&manifest_path, manifest_json(&manifest)).map_err(|e| Error::io(&manifest_path, &e, "write the output manifest"))?;
 
         // Everything else in the folder comes along, by hard links.
+        let mut kept = Vec::new();
         if folder_exists {
             let entries = std::fs::read_dir(&self.folder).map_err(|e| Error::io(&self.target, &e, "list the output folder"))?;
             for entry in entries {
@@ -467,6 +545,9 @@ impl Staging {
                     continue;
                 }
                 link_tree(&entry.path(), &self.dir.join(&file_name))?;
+                if !old_manifest.contains_key(n.as_ref()) {
+                    kept.push(n.into_owned());
+                }
             }
         }
         for name in mine.keys().copied().chain([MANIFEST]) {
@@ -513,7 +594,8 @@ impl Staging {
                 }
             }
         }
-        Ok(())
+        kept.sort();
+        Ok(Committed { removed, kept })
     }
 
     /// Swap the staging folder with the output folder. `Ok(None)`: exchanged in one step (the
@@ -832,6 +914,69 @@ mod tests {
         let manifest = read_manifest(&target);
         assert_eq!(manifest.keys().collect::<Vec<_>>(), ["report.md", "t.glb", "t.outputs.json"]);
         assert_eq!(manifest["report.md"], "report");
+        assert_eq!(listing(&d), ["out"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A run that replaces every group (a bake of a renamed scene) removes the earlier run's
+    /// files of every group and says which; files that are not blendsim's are kept and listed.
+    #[test]
+    fn a_commit_of_every_group_removes_every_earlier_file_it_does_not_write() {
+        let d = scratch("every");
+        let target = d.join("out");
+        bake(&target, "export:old", &[("old.usda", "a"), ("old.glb", "b"), ("shared.png", "t")]);
+        bake(&target, "summary", &[("summary.md", "s")]);
+        std::fs::write(target.join("notes.txt"), "mine").unwrap();
+        std::fs::create_dir(target.join("renders")).unwrap();
+        let mut s = Staging::new(&target).unwrap();
+        s.replace_every_group();
+        s.set_group("export:new");
+        s.write("new.glb", b"B").unwrap();
+        s.write("shared.png", b"T").unwrap();
+        s.set_group("report");
+        s.write("report.md", b"r").unwrap();
+        let summary = s.commit_with_summary().unwrap();
+        assert_eq!(summary, Committed { removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()], kept: vec!["notes.txt".into(), "renders".into()] });
+        assert_eq!(
+            summary.messages(Path::new("build/x"), "bake"),
+            [
+                "removed from build/x 3 files of an earlier run that this bake did not write again: old.glb, old.usda, summary.md",
+                "kept in build/x 2 entries that blendsim did not write: notes.txt, renders"
+            ]
+        );
+        assert_eq!(listing(&target), [MANIFEST, "new.glb", "notes.txt", "renders", "report.md", "shared.png"]);
+        assert_eq!(read_manifest(&target).keys().collect::<Vec<_>>(), ["new.glb", "report.md", "shared.png"]);
+        // Without it, a commit keeps the other groups (and has nothing of its own to remove).
+        let mut s = Staging::new(&target).unwrap();
+        s.set_group("export:other");
+        s.write("other.glb", b"O").unwrap();
+        let summary = s.commit_with_summary().unwrap();
+        assert_eq!(summary.removed, Vec::<String>::new());
+        assert!(Committed::default().messages(Path::new("x"), "bake").is_empty());
+        let many = Committed { removed: vec![], kept: (0..7).map(|i| format!("f{i}")).chain(["bad\nname".into()]).collect() };
+        assert_eq!(many.messages(Path::new("x"), "bake"), ["kept in x 8 entries that blendsim did not write: f0, f1, f2, f3, f4 and 3 more"]);
+        let one = Committed { removed: vec!["a\u{1b}[2J".into()], kept: vec![] };
+        assert_eq!(one.messages(Path::new("x"), "bake"), ["removed from x 1 file of an earlier run that this bake did not write again: a\\u{1b}[2J"]);
+        assert_eq!(listing(&target), [MANIFEST, "new.glb", "notes.txt", "other.glb", "renders", "report.md", "shared.png"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A file written in pieces is staged and committed like a written one; a failed fill is
+    /// an error naming the file, and nothing of that run is committed.
+    #[test]
+    fn a_file_written_in_pieces_is_staged_like_any() {
+        let d = scratch("pieces");
+        let target = d.join("out");
+        let mut s = Staging::new(&target).unwrap();
+        s.write_with("big.usda", |f| (0..3).try_for_each(|i| f.write_all(format!("piece {i}\n").as_bytes()))).unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(target.join("big.usda")).unwrap(), "piece 0\npiece 1\npiece 2\n");
+        assert_eq!(read_manifest(&target).keys().collect::<Vec<_>>(), ["big.usda"]);
+        let mut s = Staging::new(&target).unwrap();
+        let e = s.write_with("big.usda", |_| Err(std::io::Error::other("disk full"))).unwrap_err().to_string();
+        assert!(e.contains("big.usda") && e.contains("disk full"), "{e}");
+        drop(s);
+        assert_eq!(std::fs::read_to_string(target.join("big.usda")).unwrap(), "piece 0\npiece 1\npiece 2\n");
         assert_eq!(listing(&d), ["out"]);
         std::fs::remove_dir_all(&d).unwrap();
     }

@@ -13,7 +13,8 @@ use super::MethodArg;
 /// Writes NAME.usda / NAME.glb (and the other formats of [export]), their full-frame
 /// versions NAME.full.EXT, report.json and report.md into --out. Nothing is written unless
 /// the whole bake succeeds; the folder is then replaced in one step, keeping files that are
-/// not blendsim's and removing those an earlier bake wrote that this one does not.
+/// not blendsim's and removing those an earlier run wrote that this one does not (whatever
+/// scene they were of), and says on stderr which it removed and which it kept.
 #[derive(clap::Args)]
 pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
@@ -58,9 +59,15 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
+    // A bake is the folder's whole blendsim content: an earlier bake's files go, whatever
+    // scene wrote them (a renamed scene's too); files blendsim did not write stay.
+    staging.replace_every_group();
     let r = stages::Bake::new(&scene, progress).method(args.method.map(Into::into)).max_memory(args.max_memory).files(&mut staging)?;
-    staging.commit()?;
+    let committed = staging.commit_with_summary()?;
     if !quiet {
+        for line in committed.messages(&args.out, "bake") {
+            eprintln!("blendsim: {line}");
+        }
         let best = r.ratios.iter().map(|(f, x)| format!("{f} {x:.1}x")).collect::<Vec<_>>().join(", ");
         eprintln!(
             "blendsim: baked {} in {:.2} s ({} keys, {} tets, {} {} iterations); blendshapes smaller by {best}; report in {}",

@@ -107,6 +107,20 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
     sampled_points(samples, triangles, attributes, settings, (first, last))
 }
 
+/// [`full_frame`] without the points' samples, for a writer that streams them from `frames`
+/// (`usdc::full_frame`): the points are not copied into the layer.
+pub fn full_frame_unsampled(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> Layer {
+    let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
+    let extents = frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, extent(p))).collect();
+    let vertices = frames.points.first().map_or(0, Vec::len);
+    sampled_points_layer(extents, Vec::new(), vertices, triangles, attributes, settings, (first, last))
+}
+
+/// The path of the points attribute of [`full_frame`] and [`sampled_points`]' layers.
+pub fn points_path(settings: &UsdSettings) -> String {
+    format!("/{}/Mesh.points", settings.name)
+}
+
 /// A mesh whose `points` (and `extent`) are sampled at `samples`' time codes (increasing,
 /// every sample with the same vertex count), under `Xform ROOT`: the full-frame file's layout,
 /// and a `.usdc` vertex cache's (`cache::usd`, whose `.usda` text is this layer too).

@@ -28,10 +28,57 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
 /// The layer as `.usda` text: metadata, then each prim with its properties, then its children
 /// (a blank line before a child that follows anything).
 pub fn text(layer: &Layer) -> String {
-    let mut out = String::from("#usda 1.0\n(\n");
+    let mut out = String::new();
+    push_layer(&mut out, layer, &mut None);
+    out
+}
+
+/// `text(&usd::full_frame(frames, ..))` written to `file` as it is made: the points are
+/// formatted from `frames` one sample at a time and the text passed on in pieces of about
+/// [`PIECE`] bytes, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
+/// the points is held. The same bytes.
+pub fn write_full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, file: &mut dyn std::io::Write) -> std::io::Result<()> {
+    let layer = super::usd::full_frame_unsampled(frames, triangles, attributes, settings);
+    let mut stream = Some(Streamed { attribute: super::usd::points_path(settings), frames, file, failed: None });
+    let mut out = String::with_capacity(2 * PIECE);
+    push_layer(&mut out, &layer, &mut stream);
+    let Some(Streamed { file, failed, .. }) = stream else { unreachable!("taken only here") };
+    match failed {
+        Some(e) => Err(e),
+        None => file.write_all(out.as_bytes()),
+    }
+}
+
+/// The text passed on to the file of [`write_full_frame`] once it is this long.
+const PIECE: usize = 1 << 20;
+
+/// The points of a full-frame layer written from the frames (`write_full_frame`).
+struct Streamed<'a> {
+    /// The points attribute's path; the layer holds no samples for it.
+    attribute: String,
+    frames: &'a FullFrame,
+    file: &'a mut dyn std::io::Write,
+    /// The first write that failed (nothing is written after it).
+    failed: Option<std::io::Error>,
+}
+
+impl Streamed<'_> {
+    /// Pass `out` on to the file once it is a [`PIECE`] long.
+    fn pass_on(&mut self, out: &mut String) {
+        if out.len() >= PIECE && self.failed.is_none() {
+            if let Err(e) = self.file.write_all(out.as_bytes()) {
+                self.failed = Some(e);
+            }
+            out.clear();
+        }
+    }
+}
+
+fn push_layer(out: &mut String, layer: &Layer, stream: &mut Option<Streamed<'_>>) {
+    out.push_str("#usda 1.0\n(\n");
     for (key, value) in &layer.metadata {
         let _ = write!(out, "    {key} = ");
-        push_value(&mut out, value);
+        push_value(out, value);
         out.push('\n');
     }
     out.push_str(")\n\n");
@@ -39,12 +86,12 @@ pub fn text(layer: &Layer) -> String {
         if i > 0 {
             out.push('\n');
         }
-        push_prim(&mut out, prim, 0);
+        push_prim(out, prim, "", 0, stream);
     }
-    out
 }
 
-fn push_prim(out: &mut String, prim: &Prim, indent: usize) {
+fn push_prim(out: &mut String, prim: &Prim, parent: &str, indent: usize, stream: &mut Option<Streamed<'_>>) {
+    let path = format!("{parent}/{}", prim.name);
     let _ = write!(out, "{:indent$}def {} \"{}\"", "", prim.type_name, prim.name);
     if !prim.api_schemas.is_empty() {
         let _ = write!(out, " (\n{:w$}prepend apiSchemas = ", "", w = indent + 4);
@@ -58,7 +105,10 @@ fn push_prim(out: &mut String, prim: &Prim, indent: usize) {
     for property in &prim.properties {
         let _ = write!(out, "{:inner$}", "");
         match property {
-            Property::Attribute(a) => push_attribute(out, a, inner),
+            Property::Attribute(a) => {
+                let streamed = stream.as_mut().filter(|s| a.samples.is_empty() && s.attribute == format!("{path}.{}", a.name));
+                push_attribute(out, a, inner, streamed)
+            }
             Property::Relationship { name, targets } => {
                 let _ = write!(out, "rel {name} = ");
                 if let [one] = &targets[..] {
@@ -76,15 +126,26 @@ fn push_prim(out: &mut String, prim: &Prim, indent: usize) {
         if i > 0 || !prim.properties.is_empty() {
             out.push('\n');
         }
-        push_prim(out, child, inner);
+        push_prim(out, child, &path, inner, stream);
     }
     let _ = writeln!(out, "{:indent$}}}", "");
 }
 
-fn push_attribute(out: &mut String, a: &Attribute, indent: usize) {
+/// `streamed`: the attribute's samples are the frames' points (see [`write_full_frame`]).
+fn push_attribute(out: &mut String, a: &Attribute, indent: usize, streamed: Option<&mut Streamed<'_>>) {
     let _ = write!(out, "{}{} {}", if a.uniform { "uniform " } else { "" }, a.type_name, a.name);
     if let Some(path) = &a.connection {
         let _ = write!(out, ".connect = <{path}>");
+    } else if let Some(s) = streamed {
+        // As the samples below, with each `Value::Vec3fs` taken from the frames.
+        out.push_str(".timeSamples = {\n");
+        for (&frame, points) in s.frames.frames.iter().zip(&s.frames.points) {
+            let _ = write!(out, "{:w$}{}: ", "", frame as f64, w = indent + 4);
+            push_vec3s(out, points.iter());
+            out.push_str(",\n");
+            s.pass_on(out);
+        }
+        let _ = write!(out, "{:indent$}}}", "");
     } else if !a.samples.is_empty() {
         out.push_str(".timeSamples = {\n");
         for (time, value) in &a.samples {
@@ -307,5 +368,40 @@ mod tests {
         assert!(text.contains("    startTimeCode = 3\n"), "{text}");
         assert!(text.contains("            4: [(0, 0, 0), (2, 2, 2)],\n"), "{text}");
         assert_eq!(text.matches("3: [(0, 0, 0), (1, 1, 1)],\n").count(), 2, "extent and points at frame 3:\n{text}");
+    }
+
+    /// The full-frame text written in pieces from the frames is the text of the layer holding
+    /// them, byte for byte, also with material groups (prims after the mesh) and across
+    /// several pieces; a failing write is an error.
+    #[test]
+    fn full_frame_written_in_pieces_is_the_text_of_the_held_layer() {
+        use crate::mesh::attributes::CornerAttributes;
+        let n = 20_000;
+        let triangles: Vec<[u32; 3]> = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
+        let pose = |k: usize| -> Vec<[f32; 3]> { (0..n).map(|a| [a as f32 * 0.001, (k as f32 * 0.37).sin(), -0.5 * (a * k) as f32]).collect() };
+        let frames = FullFrame { frames: vec![-1, 0, 1, 2], times: vec![-0.1, 0.0, 0.1, 0.2], points: (0..4).map(pose).collect() };
+        let groups = CornerAttributes { groups: vec!["a".into(), "b".into()], triangle_groups: (0..n - 2).map(|t| (t % 2) as u32).collect(), ..Default::default() };
+        for attributes in [None, Some(&groups)] {
+            let want = text(&crate::export::usd::full_frame(&frames, &triangles, attributes, &settings()));
+            assert!(want.len() > 2 * PIECE, "several pieces: {}", want.len());
+            let mut got = Vec::new();
+            write_full_frame(&frames, &triangles, attributes, &settings(), &mut got).unwrap();
+            assert!(got == want.as_bytes());
+        }
+        struct Full(usize);
+        impl std::io::Write for Full {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                if self.0 < buf.len() {
+                    return Err(std::io::Error::new(std::io::ErrorKind::StorageFull, "disk full"));
+                }
+                self.0 -= buf.len();
+                Ok(buf.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let e = write_full_frame(&frames, &triangles, None, &settings(), &mut Full(PIECE + 10)).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
     }
 }

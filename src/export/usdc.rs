@@ -27,7 +27,10 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use self::compression::{compressed_ints, fast_compression};
+use super::fullframe::FullFrame;
 use super::layer::{Attribute, Layer, Prim, Property, Value};
+use super::usd::{self, UsdSettings};
+use crate::mesh::attributes::CornerAttributes;
 use crate::error::{Error, Result};
 
 const VERSION: [u8; 3] = [0, 8, 0];
@@ -121,6 +124,21 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
         Some(Failure::Value(problem)) => Err(unwritable(problem)),
         None => Ok(w.finish()),
     }
+}
+
+/// The `.usdc` bytes of the full-frame layer (`usd::full_frame`), the same bytes as [`bytes`]
+/// of it, with the points streamed from `frames` instead of copied into the layer: a large
+/// animation's frames (40k vertices x 151 frames is 72 MB) are held by `frames` and once more
+/// as the file's bytes, not a third time in the layer.
+pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, path: &Path) -> Result<Vec<u8>> {
+    let layer = usd::full_frame_unsampled(frames, triangles, attributes, settings);
+    let times: Vec<f64> = frames.frames.iter().map(|&f| f as f64).collect();
+    let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
+        out.clear();
+        out.extend_from_slice(&frames.points[i]);
+        Ok(())
+    };
+    bytes_streamed(&layer, path, StreamedSamples { attribute: usd::points_path(settings), times: &times, read: &mut read })
 }
 
 /// Why a streamed sample was not written.
@@ -825,5 +843,26 @@ mod tests {
         let streamed = StreamedSamples { attribute: "/cache/Mesh.points".into(), times: &times, read: &mut nan };
         let e = bytes_streamed(&layer, Path::new("out/x.usdc"), streamed).unwrap_err().to_string();
         assert!(!e.contains('\n') && e.contains("out/x.usdc: cannot write the usdc file: /cache/Mesh.points holds a non-finite number"), "{e}");
+    }
+
+    /// The full-frame file with its points streamed from the frames is byte for byte the file
+    /// of the layer holding them, with material groups (prims after the mesh) and a repeated
+    /// frame (stored once); a non-finite point is still refused.
+    #[test]
+    fn full_frame_streamed_gives_the_bytes_of_the_held_layer() {
+        use crate::export::fullframe::FullFrame;
+        use crate::mesh::attributes::CornerAttributes;
+        let settings = UsdSettings { name: "twist".into(), fps: 30.0, up_axis: 'Z', meters_per_unit: 0.01 };
+        let triangles = [[0, 1, 2], [0, 2, 3]];
+        let pose = |k: usize| -> Vec<[f32; 3]> { (0..4).map(|a| [a as f32 * 0.5, (k % 2) as f32 * 0.25 - 1.0, 0.125 * (a * k) as f32]).collect() };
+        let mut frames = FullFrame { frames: vec![3, 4, 5, 6], times: vec![0.1, 0.133, 0.167, 0.2], points: [0, 1, 2, 1].map(pose).to_vec() };
+        let groups = CornerAttributes { groups: vec!["side".into(), "cap".into()], triangle_groups: vec![0, 1], ..Default::default() };
+        for attributes in [None, Some(&groups)] {
+            let want = bytes(&usd::full_frame(&frames, &triangles, attributes, &settings), Path::new("x.usdc")).unwrap();
+            assert!(full_frame(&frames, &triangles, attributes, &settings, Path::new("x.usdc")).unwrap() == want);
+        }
+        frames.points[2][3][1] = f32::INFINITY;
+        let e = full_frame(&frames, &triangles, None, &settings, Path::new("out/x.usdc")).unwrap_err().to_string();
+        assert!(e.contains("out/x.usdc: cannot write the usdc file") && e.contains("non-finite"), "{e}");
     }
 }

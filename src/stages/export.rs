@@ -75,19 +75,26 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     let mut files = Vec::new();
     for (kind, suffix) in forms {
         let stem = format!("{}{suffix}", scene.name);
-        let layer = formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)).then(|| match (&kind, &full) {
-            (OutputKind::FullFrame, Some(full)) => usd::full_frame(full, triangles, attributes, &settings),
-            _ => usd::blendshapes(clip, triangles, attributes, &settings),
-        });
+        // The full-frame USD files are written from `full` itself, its points streamed
+        // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
+        // text: only the blendshape form builds its layer.
+        let streamed = kind == OutputKind::FullFrame;
+        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| usd::blendshapes(clip, triangles, attributes, &settings));
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
             bar.set_message(format!("export: {name}"));
             match format {
-                Format::Usda => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
+                Format::Usda => match &full {
+                    Some(full) if streamed => staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?,
+                    _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
+                },
                 Format::Usdc => {
                     // The interruption tests stop here: in the export, before the usdc is staged.
                     crate::interrupt::pause_point("usdc", "");
-                    let bytes = usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?;
+                    let bytes = match &full {
+                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, &staging.final_path(&name))?,
+                        _ => usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?,
+                    };
                     staging.write(&name, &bytes)?;
                 }
                 Format::Glb => {

@@ -1,6 +1,7 @@
 //! The output folder through the `blendsim` binary: concurrent bakes into one folder (the
 //! second waits and says so, or fails at once with `--no-wait`), a re-bake with fewer formats
-//! (stale files of the earlier bake removed, the user's files kept as the same files), the
+//! (stale files of the earlier bake removed, the user's files kept as the same files), a bake
+//! of another scene (the earlier bake's files removed whatever their name, and said), the
 //! `export` + `report` chain sharing a folder, and folders that cannot be output folders.
 
 use std::ffi::OsStr;
@@ -11,7 +12,7 @@ use std::path::Path;
 use blendsim::mesh::{obj, TriMesh};
 use blendsim::procedural::prism;
 use crate::common::checkers::check_same_layer;
-use crate::common::cli::{names, read_json, run, run_env, Spawned, TempDir};
+use crate::common::cli::{names, read_json, run, run_env, snapshot, Spawned, TempDir};
 
 fn cube() -> TriMesh {
     prism([1.0, 1.0, 1.0], [2, 2, 2])
@@ -65,6 +66,48 @@ fn a_rebake_with_fewer_formats_removes_its_stale_files_and_keeps_the_users() {
     let listed: Vec<&str> = report["outputs"].as_array().unwrap().iter().map(|f| f["path"].as_str().unwrap()).collect();
     assert_eq!(listed, ["box.glb", "box.full.glb"], "the report lists exactly the files in the folder");
     assert_eq!(names(&dir.path), set(&["in", "out"]), "nothing left beside the folder");
+}
+
+/// A bake owns its folder's blendsim files, so the folder holds one bake: a bake of the box
+/// renamed `crate`, with other formats, killed once its new folder is complete but before the
+/// swap, leaves the first bake byte for byte; run again, it removes every file of the first
+/// bake (another scene's names, formats it does not write), keeps the user's file as the same
+/// file, and says both on stderr; its report lists exactly the files in the folder.
+#[test]
+fn a_bake_replaces_an_earlier_bake_of_another_scene_and_says_so() {
+    let dir = TempDir::new("output-renamed");
+    scene(&dir.path, "all.toml", "[\"usda\", \"usdc\", \"glb\"]");
+    let renamed = std::fs::read_to_string(dir.join("in/all.toml")).unwrap().replace("name = \"box\"", "name = \"crate\"");
+    std::fs::write(dir.join("in/crate.toml"), renamed.replace("[\"usda\", \"usdc\", \"glb\"]", "[\"glb\"]")).unwrap();
+    run(&dir.path, &["bake", "in/all.toml", "--out", "out", "-q"]).success();
+    let out = dir.join("out");
+    std::fs::write(out.join("notes.txt"), "keep me").unwrap();
+    let first = snapshot(&out);
+    let notes = std::fs::metadata(out.join("notes.txt")).unwrap().ino();
+
+    let mut killed = Spawned::start(&dir.path, &["bake", "in/crate.toml", "--out", "out"], &[("BLENDSIM_TEST_PAUSE", OsStr::new("commit-staged"))]);
+    killed.wait_for_line("paused at commit-staged", 600.0);
+    killed.kill();
+    assert!(snapshot(&out) == first, "an interrupted bake leaves the previous one, complete and alone");
+
+    let r = run(&dir.path, &["bake", "in/crate.toml", "--out", "out"]).success();
+    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "crate.full.glb", "crate.glb", "notes.txt", "report.json", "report.md"]));
+    assert_eq!(manifest_files(&out), ["crate.full.glb", "crate.glb", "report.json", "report.md"]);
+    assert_eq!(std::fs::metadata(out.join("notes.txt")).unwrap().ino(), notes, "the user's file, untouched");
+    let lines: Vec<&str> = r.stderr.lines().collect();
+    assert_eq!(
+        lines[..2],
+        [
+            "blendsim: removed from out 6 files of an earlier run that this bake did not write again: box.full.glb, box.full.usda, box.full.usdc, box.glb, box.usda and 1 more",
+            "blendsim: kept in out 1 entry that blendsim did not write: notes.txt",
+        ],
+        "{r}"
+    );
+    assert!(lines.len() == 3 && lines[2].starts_with("blendsim: baked crate"), "{r}");
+    let report = read_json(&out.join("report.json"));
+    let listed: Vec<&str> = report["outputs"].as_array().unwrap().iter().map(|f| f["path"].as_str().unwrap()).collect();
+    assert_eq!(listed, ["crate.glb", "crate.full.glb"], "the report lists exactly the bake's files");
+    assert_eq!(names(&dir.path), set(&["in", "out"]), "the killed run's staging folder is gone");
 }
 
 #[test]
