@@ -344,30 +344,6 @@ impl Front<'_> {
     }
 }
 
-/// The phases' thread CPU seconds, summed for the measurement test (see the no-op version).
-#[cfg(test)]
-pub(crate) mod phases {
-    pub(crate) static CPU: std::sync::Mutex<[f64; 6]> = std::sync::Mutex::new([0.0; 6]);
-
-    fn thread_cpu() -> f64 {
-        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
-        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
-    }
-
-    pub(super) fn timed<T>(phase: usize, f: impl FnOnce() -> T) -> (T, f64) {
-        let t = thread_cpu();
-        let out = f();
-        let dt = thread_cpu() - t;
-        CPU.lock().unwrap()[phase] += dt;
-        (out, dt)
-    }
-
-    pub(super) fn path(dt: f64) {
-        CPU.lock().unwrap()[5] += dt;
-    }
-}
-
 /// The factorization's shape, for the measurement tests: supernode widths and the update
 /// products' inner dimensions (the descendant's width) and column counts, each bucket with
 /// its count and share of the predicted flops; and the plan's flops per group and in the top.
@@ -410,4 +386,28 @@ pub(super) fn shape_report(sym: &SymbolicSupernodalCholesky<usize>, updates: &Up
     out += &row("update products by target columns", &by_cols, total);
     out += &format!("own flops by owner: group 0 {:.1}%, group 1 {:.1}%, top {:.1}%\n", 100.0 * by_owner[0] / all, 100.0 * by_owner[1] / all, 100.0 * by_owner[2] / all);
     out
+}
+
+/// The phases' thread CPU seconds, summed for the measurement test (see the no-op version).
+#[cfg(test)]
+pub(crate) mod phases {
+    pub(crate) static CPU: std::sync::Mutex<[f64; 6]> = std::sync::Mutex::new([0.0; 6]);
+
+    fn thread_cpu() -> f64 {
+        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    }
+
+    pub(super) fn timed<T>(phase: usize, f: impl FnOnce() -> T) -> (T, f64) {
+        let t = thread_cpu();
+        let out = f();
+        let dt = thread_cpu() - t;
+        CPU.lock().unwrap()[phase] += dt;
+        (out, dt)
+    }
+
+    pub(super) fn path(dt: f64) {
+        CPU.lock().unwrap()[5] += dt;
+    }
 }
