@@ -1158,10 +1158,20 @@ mod experiment {
     pub(super) fn many_keys_problem() -> (Elastic, crate::spacetime::unknowns::KeyConstraints, usize) {
         let n: usize = std::env::var("CUBE").ok().and_then(|v| v.parse().ok()).unwrap_or(13);
         let kc: usize = std::env::var("KEYS").ok().and_then(|v| v.parse().ok()).unwrap_or(20);
-        let mut mesh = cube_mesh(n);
-        for p in &mut mesh.positions {
-            *p = [p[0] * 1.2, p[1] * 3.6, p[2] * 1.2];
-        }
+        // `PRISM=d MAX_VOLUME=v`: the benchmark's prism series body instead (TetGen on the
+        // 1.2 x 3.6 x 1.2 prism of d x 3d x d cells: 22 and 0.0005 give its 10k-node row).
+        let prism: usize = std::env::var("PRISM").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+        let mesh = if prism > 0 {
+            let max_volume: f64 = std::env::var("MAX_VOLUME").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0005);
+            let surface = crate::procedural::prism([1.2, 3.6, 1.2], [prism, 3 * prism, prism]);
+            crate::tetgen::run(&surface, &crate::tetgen::TetgenOptions { quality: 1.414, max_volume, timeout: 600.0 }, std::path::Path::new("prism")).unwrap()
+        } else {
+            let mut mesh = cube_mesh(n);
+            for p in &mut mesh.positions {
+                *p = [p[0] * 1.2, p[1] * 3.6, p[2] * 1.2];
+            }
+            mesh
+        };
         let el = Elastic::new(&mesh, &material()).unwrap();
         let times: Vec<f64> = (0..kc).map(|k| 0.5 * k as f64).collect();
         let poses = (0..kc).map(|k| mesh.positions.iter().map(|p| [p[0] + 0.05 * (k as f64).sin() * p[1] * p[1], p[1], p[2]]).collect()).collect();
@@ -1267,7 +1277,7 @@ mod modal_phases {
         let repeat: usize = std::env::var("REPEAT").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
         println!("{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}", unknowns.nodes, unknowns.count(), order.name, order.cost.flops, std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
         let mut chol = Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0)).unwrap();
-        println!("factor entries {}", chol.factor_nnz());
+        println!("factor entries {}\n{}", chol.factor_nnz(), chol.shape_report());
         let median = |mut v: Vec<(f64, f64)>| {
             v.sort_by(|a, b| a.0.total_cmp(&b.0));
             v[v.len() / 2]

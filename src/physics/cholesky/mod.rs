@@ -171,6 +171,15 @@ impl Cholesky {
         }
     }
 
+    /// The supernodal factor's shape (see [`numeric::shape_report`]), for measurements.
+    #[cfg(test)]
+    pub(crate) fn shape_report(&self) -> String {
+        match (self.symbolic.raw(), &self.numeric) {
+            (SymbolicCholeskyRaw::Supernodal(sym), Some((updates, plan))) => numeric::shape_report(sym, updates, plan.as_ref()),
+            _ => "simplicial".into(),
+        }
+    }
+
     /// The factor's stored values (for comparisons in tests and measurements).
     #[cfg(test)]
     pub(crate) fn values_for_tests(&self) -> &[f64] {
@@ -360,6 +369,26 @@ mod tests {
         again.refactor(&b).unwrap();
         let fresh = check_against_faer(&b, &FillOrdering::Custom(grid_problem(12).1));
         assert!(again.values.iter().zip(&fresh.values).all(|(x, y)| x.to_bits() == y.to_bits()), "a refactorization equals a fresh factorization");
+    }
+
+    #[test]
+    fn the_numeric_split_deals_whole_subtrees_to_two_groups() {
+        let (a, perm) = grid_problem(12);
+        let chol = Cholesky::analyse(&a, &FillOrdering::Custom(perm), Par::Seq);
+        let (SymbolicCholeskyRaw::Supernodal(sym), Some((_, Some(plan)))) = (chol.symbolic.raw(), &chol.numeric) else { panic!("the nested-dissection tree splits in two") };
+        let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
+        let owner_of_row = |row: usize| (0..sym.n_supernodes()).find(|&s| begin[s] <= row && row < end[s]).unwrap();
+        let flops = numeric::supernode_flops(sym);
+        let mut group_flops = [0usize; 3];
+        for s in 0..sym.n_supernodes() {
+            group_flops[plan.owner[s] as usize] += flops[s];
+            // A group supernode's parent is in its group or in the top; a top one's is in the top.
+            if let Some(&row) = sym.supernode(s).pattern().first() {
+                let p = plan.owner[owner_of_row(row)];
+                assert!(p == split::TOP || p == plan.owner[s], "supernode {s}: owner {} under {p}", plan.owner[s]);
+            }
+        }
+        assert!(group_flops[0] > 0 && group_flops[1] > 0, "{group_flops:?}");
     }
 
     #[test]

@@ -344,6 +344,50 @@ impl Front<'_> {
     }
 }
 
+/// The factorization's shape, for the measurement tests: supernode widths and the update
+/// products' inner dimensions (the descendant's width) and column counts, each bucket with
+/// its count and share of the predicted flops; and the plan's flops per group and in the top.
+#[cfg(test)]
+pub(super) fn shape_report(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updates, plan: Option<&GroupPlan>) -> String {
+    const EDGES: [usize; 8] = [1, 10, 20, 50, 100, 200, 500, 2000];
+    let bucket = |v: usize| EDGES.iter().rposition(|&e| v >= e).unwrap_or(0);
+    let width = |s: usize| sym.supernode_end()[s] - sym.supernode_begin()[s];
+    let own = supernode_flops(sym);
+    let (mut by_width, mut by_depth, mut by_cols) = ([(0usize, 0f64); 8], [(0usize, 0f64); 8], [(0usize, 0f64); 8]);
+    let mut by_owner = [0f64; 3];
+    for s in 0..sym.n_supernodes() {
+        let b = bucket(width(s));
+        by_width[b].0 += 1;
+        by_width[b].1 += own[s] as f64;
+        by_owner[plan.map_or(2, |p| p.owner[s] as usize)] += own[s] as f64;
+        let (begin, end) = (sym.supernode_begin()[s], sym.supernode_end()[s]);
+        for &d in updates.of(s) {
+            let pattern = sym.supernode(d).pattern();
+            let below = &pattern[pattern.partition_point(|&r| r < begin)..];
+            let k = below.partition_point(|&r| r < end);
+            let m = below.len();
+            let flops = (2 * m - k) as f64 * k as f64 * width(d) as f64;
+            let (bd, bc) = (bucket(width(d)), bucket(k));
+            by_depth[bd].0 += 1;
+            by_depth[bd].1 += flops;
+            by_cols[bc].0 += 1;
+            by_cols[bc].1 += flops;
+        }
+    }
+    let total: f64 = by_depth.iter().map(|b| b.1).sum();
+    let all: f64 = own.iter().map(|&f| f as f64).sum();
+    let row = |name: &str, v: &[(usize, f64); 8], of: f64| {
+        let cells: Vec<String> = (0..8).map(|i| format!("{}+: {} ({:.1}%)", EDGES[i], v[i].0, 100.0 * v[i].1 / of)).collect();
+        format!("{name}: {}\n", cells.join(", "))
+    };
+    let mut out = format!("{} supernodes, {:.3e} own flops (update products {:.3e})\n", sym.n_supernodes(), all, total);
+    out += &row("supernode widths (count, share of own flops)", &by_width, all);
+    out += &row("update products by descendant width (count, share of product flops)", &by_depth, total);
+    out += &row("update products by target columns", &by_cols, total);
+    out += &format!("own flops by owner: group 0 {:.1}%, group 1 {:.1}%, top {:.1}%\n", 100.0 * by_owner[0] / all, 100.0 * by_owner[1] / all, 100.0 * by_owner[2] / all);
+    out
+}
+
 /// The phases' thread CPU seconds, summed for the measurement test (see the no-op version).
 #[cfg(test)]
 pub(crate) mod phases {
