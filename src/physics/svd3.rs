@@ -132,6 +132,12 @@ fn gram<const N: usize>(f: &M3<N>, i: usize, j: usize) -> Lanes<N> {
     f[0][i] * f[0][j] + f[1][i] * f[1][j] + f[2][i] * f[2][j]
 }
 
+/// The diagonal and the off-diagonal entries (0,1), (0,2), (1,2) of `GᵀG`.
+#[inline(always)]
+fn gram_entries<const N: usize>(g: &M3<N>) -> (V3<N>, V3<N>) {
+    ([gram(g, 0, 0), gram(g, 1, 1), gram(g, 2, 2)], [gram(g, 0, 1), gram(g, 0, 2), gram(g, 1, 2)])
+}
+
 #[inline(always)]
 fn column<const N: usize>(m: &M3<N>, j: usize) -> V3<N> {
     [m[0][j], m[1][j], m[2][j]]
@@ -183,14 +189,19 @@ pub(crate) fn svd_lanes_from<const N: usize>(f: &M3<N>, seed: Option<&M3<N>>) ->
     // Scaled by a power of two (exact: every operation below commutes with it) so that the
     // fourth powers in the stopping rule neither overflow nor underflow for any finite F.
     let (down, up) = power_of_two_scale(f);
-    let f = f.map(|row| row.map(|x| x * down));
+    // Loops, not `array::map`: its closures are not reliably inlined into the SIMD-compiled callers.
+    let mut f = *f;
+    for row in f.iter_mut() {
+        for x in row.iter_mut() {
+            *x = *x * down;
+        }
+    }
     let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
     // FᵀF (or (F V₀)ᵀ(F V₀)): its diagonal and the off-diagonal entries (0,1), (0,2), (1,2).
-    let (g, v0) = match seed {
-        None => (f, [[one, zero, zero], [zero, one, zero], [zero, zero, one]]),
-        Some(v0) => (mul_lanes(&f, v0), *v0),
+    let ((d, o), v0) = match seed {
+        None => (gram_entries(&f), [[one, zero, zero], [zero, one, zero], [zero, zero, one]]),
+        Some(v0) => (gram_entries(&mul_lanes(&f, v0)), *v0),
     };
-    let (d, o) = ([gram(&g, 0, 0), gram(&g, 1, 1), gram(&g, 2, 2)], [gram(&g, 0, 1), gram(&g, 0, 2), gram(&g, 1, 2)]);
     let (lambda, mut v, sweeps, lane_sweeps) = symmetric_eigen(d, o, v0);
     let counts = &SWEEPS[seed.is_some() as usize];
     counts[0].fetch_add(1, Ordering::Relaxed);
@@ -227,12 +238,10 @@ pub(crate) fn svd_lanes_from<const N: usize>(f: &M3<N>, seed: Option<&M3<N>>) ->
         let inv = one / n2.sqrt();
         let c = big * inv;
         let sn = h.sign() * gamma * inv;
-        for m in [&mut b, &mut v] {
-            for row in m.iter_mut() {
-                let (x2, x3) = (row[1], row[2]);
-                row[1] = Lanes::select(go, c * x2 - sn * x3, x2);
-                row[2] = Lanes::select(go, sn * x2 + c * x3, x3);
-            }
+        for row in b.iter_mut().chain(v.iter_mut()) {
+            let (x2, x3) = (row[1], row[2]);
+            row[1] = Lanes::select(go, c * x2 - sn * x3, x2);
+            row[2] = Lanes::select(go, sn * x2 + c * x3, x3);
         }
     }
     // QR of B = F V by Gram-Schmidt: B = U R, diag(R) = σ (the last one signed).
