@@ -20,10 +20,9 @@
 //! one-sided Jacobi rotation of columns 2 and 3 of `F V` before the QR fixes that plane from `F`
 //! itself (reconstructions within 2e-15 |F|, tested against the first-written method).
 //!
-//! Warm starts ([`svd3_from`], [`svd_lanes_from`]): the sweeps can start from a seed rotation
-//! `V₀` instead of the identity, on `(F V₀)ᵀ(F V₀)`. With `V₀` the right singular vectors of the
-//! same element a small step earlier this is nearly diagonal, and Jacobi's quadratic convergence
-//! reaches the same stopping threshold in about 2 sweeps instead of 4.
+//! Warm starts (the sweeps started from a tet's previous `V`) were measured and not kept: they
+//! halve the sweeps (4 to 2 on near rotations), but a sweep is ~10 ns of a ~125 ns
+//! decomposition; the Gram matrix, the sort, `F V` and the QR are the rest.
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
 //! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
@@ -37,7 +36,6 @@
 use super::lanes::{cross, det, dot, lane, mul_lanes, select3, to_lanes, Lanes, Mask, M3, V3};
 use super::lanes::{with_widest_simd, BATCH};
 use super::mat3::Mat3;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 /// `F = U diag(sigma) Vᵀ`, see the module documentation.
@@ -69,18 +67,14 @@ const PLANES: [(usize, usize, usize, usize, usize); 3] = [(0, 1, 0, 1, 2), (0, 2
 const OFF_TOLERANCE: f64 = 1e-30;
 
 /// Eigen-decomposition of the symmetric lane matrices with diagonal `d` and off-diagonal `o` by
-/// cyclic Jacobi rotations, accumulated onto the rotation `v` (the identity, or a warm start's
-/// seed `V₀` when `d`, `o` are those of `V₀ᵀ FᵀF V₀`): eigenvalues, the eigenvectors as the
-/// columns of the product, and the number of sweeps the slowest lane took and their sum over
-/// the lanes. Only the six
-/// distinct entries are updated; a lane stops once its off-diagonal part is negligible relative
-/// to its diagonal (typically 2 to 4 sweeps from the identity).
+/// cyclic Jacobi rotations: eigenvalues, and eigenvectors as the columns of a rotation. Only the
+/// six distinct entries are updated; a lane stops once its off-diagonal part is negligible
+/// relative to its diagonal (typically 2 to 4 sweeps).
 #[inline(always)]
-fn symmetric_eigen<const N: usize>(mut d: V3<N>, mut o: V3<N>, mut v: M3<N>) -> (V3<N>, M3<N>, usize, usize) {
-    let zero = Lanes::splat(0.0);
-    let one = Lanes::splat(1.0);
+fn symmetric_eigen<const N: usize>(mut d: V3<N>, mut o: V3<N>) -> (V3<N>, M3<N>) {
+    let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
+    let mut v = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
     let mut active = Mask::splat(true);
-    let (mut sweeps, mut lane_sweeps) = (0, 0);
     for _sweep in 0..12 {
         let off = o[0] * o[0] + o[1] * o[1] + o[2] * o[2];
         let scale = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
@@ -88,8 +82,6 @@ fn symmetric_eigen<const N: usize>(mut d: V3<N>, mut o: V3<N>, mut v: M3<N>) -> 
         if !active.any() {
             break;
         }
-        sweeps += 1;
-        lane_sweeps += active.0.iter().filter(|&&a| a).count();
         for (p, q, pq, rp, rq) in PLANES {
             let apq = o[pq];
             // The rotation that zeroes (p, q) (Golub & Van Loan, sym.schur2: t = tan φ the smaller
@@ -123,7 +115,7 @@ fn symmetric_eigen<const N: usize>(mut d: V3<N>, mut o: V3<N>, mut v: M3<N>) -> 
             }
         }
     }
-    (d, v, sweeps, lane_sweeps)
+    (d, v)
 }
 
 /// `(FᵀF)_ij`.
@@ -163,29 +155,9 @@ fn power_of_two_scale<const N: usize>(f: &M3<N>) -> (Lanes<N>, Lanes<N>) {
     (down, up)
 }
 
-/// Counts of the Jacobi sweeps, cold-started (`[0]`) and warm-started (`[1]`): calls of
-/// [`svd_lanes_from`] (batches), the sweeps they ran (their slowest lanes'), and the sweeps each
-/// lane needed, summed. Relaxed counters, one update per batch: for the benchmark's
-/// sweeps-per-decomposition figures ([`sweep_counts`]).
-static SWEEPS: [[AtomicU64; 3]; 2] = [[AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)], [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)]];
-
-/// The Jacobi sweep counts so far: `[cold, warm]`, each `[batches, sweeps of the batches,
-/// sweeps of the lanes]` (a batch of `N` lanes runs as many sweeps as its slowest lane).
-pub fn sweep_counts() -> [[u64; 3]; 2] {
-    SWEEPS.each_ref().map(|c| c.each_ref().map(|x| x.load(Ordering::Relaxed)))
-}
-
 /// The signed SVD of lane matrices (see the module documentation).
 #[inline(always)]
 pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
-    let (u, sigma, v, _) = svd_lanes_from(f, None);
-    (u, sigma, v)
-}
-
-/// [`svd_lanes`] with the Jacobi sweeps started from the rotation `seed` (a warm start, see
-/// [`svd3_from`]) when given, and the number of sweeps the slowest lane took.
-#[inline(always)]
-pub(crate) fn svd_lanes_from<const N: usize>(f: &M3<N>, seed: Option<&M3<N>>) -> (M3<N>, V3<N>, M3<N>, usize) {
     // Scaled by a power of two (exact: every operation below commutes with it) so that the
     // fourth powers in the stopping rule neither overflow nor underflow for any finite F.
     let (down, up) = power_of_two_scale(f);
@@ -197,16 +169,9 @@ pub(crate) fn svd_lanes_from<const N: usize>(f: &M3<N>, seed: Option<&M3<N>>) ->
         }
     }
     let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
-    // FᵀF (or (F V₀)ᵀ(F V₀)): its diagonal and the off-diagonal entries (0,1), (0,2), (1,2).
-    let ((d, o), v0) = match seed {
-        None => (gram_entries(&f), [[one, zero, zero], [zero, one, zero], [zero, zero, one]]),
-        Some(v0) => (gram_entries(&mul_lanes(&f, v0)), *v0),
-    };
-    let (lambda, mut v, sweeps, lane_sweeps) = symmetric_eigen(d, o, v0);
-    let counts = &SWEEPS[seed.is_some() as usize];
-    counts[0].fetch_add(1, Ordering::Relaxed);
-    counts[1].fetch_add(sweeps as u64, Ordering::Relaxed);
-    counts[2].fetch_add(lane_sweeps as u64, Ordering::Relaxed);
+    // FᵀF: its diagonal and the off-diagonal entries (0,1), (0,2), (1,2).
+    let (d, o) = gram_entries(&f);
+    let (lambda, mut v) = symmetric_eigen(d, o);
     // Sort eigenpairs by decreasing eigenvalue: a stable bubble sort over (0,1), (1,2), (0,1).
     let mut l = lambda;
     for (i, j) in [(0, 1), (1, 2), (0, 1)] {
@@ -260,7 +225,7 @@ pub(crate) fn svd_lanes_from<const N: usize>(f: &M3<N>, seed: Option<&M3<N>>) ->
     let u3 = cross(u1, u2);
     let s3 = dot(u3, b3);
     let u = [[u1[0], u2[0], u3[0]], [u1[1], u2[1], u3[1]], [u1[2], u2[2], u3[2]]];
-    (u, [s1 * up, Lanes::select(full, s2, zero) * up, s3 * up], v, sweeps)
+    (u, [s1 * up, Lanes::select(full, s2, zero) * up, s3 * up], v)
 }
 
 /// Signed SVD of `f` (see the module documentation).
@@ -269,34 +234,16 @@ pub fn svd3(f: &Mat3) -> Svd3 {
     Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
 }
 
-/// [`svd3`] warm-started from `seed`, a proper rotation close to the right singular vectors of
-/// `f` (typically those of a nearby matrix, the same element a step earlier): the Jacobi sweeps
-/// start from `seedᵀ FᵀF seed`, nearly diagonal, and stop at the same threshold, so the result is
-/// as accurate as [`svd3`]'s (and equal to it up to round-off, and up to the choice of singular
-/// vectors where singular values coincide) in fewer sweeps. Any rotation is a valid seed.
-#[cfg_attr(not(test), allow(dead_code))]
-pub fn svd3_from(f: &Mat3, seed: &Mat3) -> Svd3 {
-    let (u, sigma, v, _) = svd_lanes_from::<1>(&to_lanes(&[*f]), Some(&to_lanes(&[*seed])));
-    Svd3 { u: lane(&u, 0), sigma: [sigma[0].0[0], sigma[1].0[0], sigma[2].0[0]], v: lane(&v, 0) }
-}
-
 /// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by lane). The batched
 /// kernels (the local step, the timing derivatives) run [`svd_lanes`] inside themselves; this
 /// entry point is for callers that need the decompositions themselves.
 #[cfg_attr(not(test), allow(dead_code))]
 pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
-    svd3_batch_from(f, None).0
+    let (u, sigma, v) = dispatch_svd(&to_lanes(f));
+    std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })
 }
 
-/// [`svd3_batch`], warm-started lane by lane from `seed` when given (bit-identical to
-/// [`svd3_from`] lane by lane), and the number of Jacobi sweeps the batch took (its slowest
-/// lane's: what the batch costs).
-pub fn svd3_batch_from(f: &[Mat3; BATCH], seed: Option<&[Mat3; BATCH]>) -> ([Svd3; BATCH], usize) {
-    let (u, sigma, v, sweeps) = dispatch_svd(&to_lanes(f), seed.map(to_lanes).as_ref());
-    (std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) }), sweeps)
-}
-
-with_widest_simd!(dispatch_svd, fn(f: &M3<BATCH>, seed: Option<&M3<BATCH>>) -> (M3<BATCH>, V3<BATCH>, M3<BATCH>, usize) { svd_lanes_from(f, seed) });
+with_widest_simd!(dispatch_svd, fn(f: &M3<BATCH>) -> (M3<BATCH>, V3<BATCH>, M3<BATCH>) { svd_lanes(f) });
 
 #[cfg(test)]
 mod tests {
@@ -492,52 +439,6 @@ mod tests {
         }
     }
 
-    /// Seeded decompositions: any rotation is a valid seed (same accuracy as a cold start); a
-    /// seed from a nearby matrix saves sweeps; batches give the bytes of single ones.
-    #[test]
-    fn warm_starts_decompose_in_fewer_sweeps() {
-        let mut rng = Rng(0x51ed);
-        let (mut cold, mut warm, mut batches) = (0, 0, 0);
-        for (strain, step) in [(1e-2, 1e-4), (0.3, 1e-3), (0.3, 1e-2)] {
-            let (cold_before, warm_before) = (cold, warm);
-            for _ in 0..40 {
-                // Near rotations moved a little, as one tet between two evaluations.
-                let before: [Mat3; BATCH] = std::array::from_fn(|_| {
-                    let (r, m) = (rotation(&mut rng), rng.mat());
-                    std::array::from_fn(|i| std::array::from_fn(|j| r[i][j] + strain * m[i][j]))
-                });
-                let after: [Mat3; BATCH] = std::array::from_fn(|l| {
-                    let m = rng.mat();
-                    std::array::from_fn(|i| std::array::from_fn(|j| before[l][i][j] + step * m[i][j]))
-                });
-                let seeds = svd3_batch(&before).map(|d| d.v);
-                let ((c, cs), (w, ws)) = (svd3_batch_from(&after, None), svd3_batch_from(&after, Some(&seeds)));
-                (cold, warm, batches) = (cold + cs, warm + ws, batches + 1);
-                for l in 0..BATCH {
-                    assert_eq!(w[l], svd3_from(&after[l], &seeds[l]), "batch lane {l}");
-                    assert_eq!(c[l], svd3(&after[l]));
-                    check(&after[l]);
-                    let norm = after[l].iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-                    assert!(distance(&scaled_product(&w[l].u, w[l].sigma, &w[l].v), &after[l]) <= 1e-14 * norm);
-                    assert!((0..3).all(|i| (w[l].sigma[i] - c[l].sigma[i]).abs() <= 1e-14 * norm), "{:?} against {:?}", w[l].sigma, c[l].sigma);
-                    assert!(distance(&mul_transpose(&w[l].u, &w[l].v), &mul_transpose(&c[l].u, &c[l].v)) <= 1e-12, "the same polar rotation");
-                }
-            }
-            eprintln!("strain {strain:e}, step {step:e}: sweeps per batch of {BATCH}: cold {:.2}, warm {:.2}", (cold - cold_before) as f64 / 40.0, (warm - warm_before) as f64 / 40.0);
-        }
-        // Measured: 4.00 cold, 2.29 warm (quadratic convergence from off-diagonals of the step's size).
-        assert!(5 * warm <= 3 * cold, "warm {warm} against cold {cold} sweeps in {batches} batches");
-        // Far seeds (random rotations, the identity): as accurate, just not faster.
-        for _ in 0..200 {
-            let f = rng.mat();
-            for seed in [rotation(&mut rng), IDENTITY] {
-                let (w, c) = (svd3_from(&f, &seed), svd3(&f));
-                let norm = f.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-                assert!(distance(&scaled_product(&w.u, w.sigma, &w.v), &f) <= 1e-14 * norm && (0..3).all(|i| (w.sigma[i] - c.sigma[i]).abs() <= 1e-14 * norm));
-                assert!(distance(&mul_transpose(&w.v, &w.v), &IDENTITY) < 1e-13 && (det(&w.v) - 1.0).abs() < 1e-13);
-            }
-        }
-    }
 
     #[test]
     fn random_matrices_decompose() {
