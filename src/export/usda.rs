@@ -35,7 +35,7 @@ pub fn text(layer: &Layer) -> String {
 
 /// `text(&usd::full_frame(frames, ..))` written to `file` as it is made: the points are
 /// formatted from `frames` one sample at a time and the text passed on in pieces of about
-/// [`PIECE`] bytes, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
+/// 1 MB, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
 /// the points is held. The same bytes.
 pub fn write_full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, file: &mut dyn std::io::Write) -> std::io::Result<()> {
     let layer = super::usd::full_frame_unsampled(frames, triangles, attributes, settings);
