@@ -13,17 +13,6 @@
 //! fourth sweep is saved in about a quarter of 8-matrix batches of near rotations, but
 //! reconstructions drift to 2e-12 of `|F|` (1e-20: 2e-10).
 //!
-//! Accuracy: `F` is first scaled by a power of two (exact) so that its largest entry is in
-//! `[1, 2)`: the stopping rule's fourth powers neither overflow nor underflow for any finite `F`.
-//! When two singular values are small (σ = 1, 1e-6, 1e-12), `FᵀF`'s round-off (ε σ1²) swamps
-//! their gap and mixes the last two columns of `V` (1e-9 |F| of reconstruction error); one
-//! one-sided Jacobi rotation of columns 2 and 3 of `F V` before the QR fixes that plane from `F`
-//! itself (reconstructions within 2e-15 |F|, tested against the first-written method).
-//!
-//! Warm starts (the sweeps started from a tet's previous `V`) were measured and not kept: they
-//! halve the sweeps (4 to 2 on near rotations), but a sweep is ~10 ns of a ~125 ns
-//! decomposition; the Gram matrix, the sort, `F V` and the QR are the rest.
-//!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
 //! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
 //! ([`svd_lanes`]): the same code runs on lanes ([`super::lanes`]: `[f64; N]` arithmetic that
@@ -124,53 +113,16 @@ fn gram<const N: usize>(f: &M3<N>, i: usize, j: usize) -> Lanes<N> {
     f[0][i] * f[0][j] + f[1][i] * f[1][j] + f[2][i] * f[2][j]
 }
 
-/// The diagonal and the off-diagonal entries (0,1), (0,2), (1,2) of `GᵀG`.
-#[inline(always)]
-fn gram_entries<const N: usize>(g: &M3<N>) -> (V3<N>, V3<N>) {
-    ([gram(g, 0, 0), gram(g, 1, 1), gram(g, 2, 2)], [gram(g, 0, 1), gram(g, 0, 2), gram(g, 1, 2)])
-}
-
 #[inline(always)]
 fn column<const N: usize>(m: &M3<N>, j: usize) -> V3<N> {
     [m[0][j], m[1][j], m[2][j]]
 }
 
-/// Per lane, the power of two `2^-e` that brings the largest entry of `f` into `[1, 2)`, and
-/// its inverse `2^e` (clamped to normal numbers; a zero matrix gets `2^1022`).
-#[inline(always)]
-fn power_of_two_scale<const N: usize>(f: &M3<N>) -> (Lanes<N>, Lanes<N>) {
-    let mut m = Lanes::splat(0.0);
-    for row in f {
-        for x in row {
-            m = m.max(x.abs());
-        }
-    }
-    let (mut down, mut up) = (m, m);
-    for l in 0..N {
-        // The biased exponent e + 1023 of the largest entry, kept where both 2^-e and 2^e are normal.
-        let biased = ((m.0[l].to_bits() >> 52) & 0x7ff).clamp(1, 2045);
-        down.0[l] = f64::from_bits((2046 - biased) << 52);
-        up.0[l] = f64::from_bits(biased << 52);
-    }
-    (down, up)
-}
-
 /// The signed SVD of lane matrices (see the module documentation).
 #[inline(always)]
 pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
-    // Scaled by a power of two (exact: every operation below commutes with it) so that the
-    // fourth powers in the stopping rule neither overflow nor underflow for any finite F.
-    let (down, up) = power_of_two_scale(f);
-    // Loops, not `array::map`: its closures are not reliably inlined into the SIMD-compiled callers.
-    let mut f = *f;
-    for row in f.iter_mut() {
-        for x in row.iter_mut() {
-            *x = *x * down;
-        }
-    }
-    let (zero, one) = (Lanes::splat(0.0), Lanes::splat(1.0));
     // FᵀF: its diagonal and the off-diagonal entries (0,1), (0,2), (1,2).
-    let (d, o) = gram_entries(&f);
+    let (d, o) = ([gram(f, 0, 0), gram(f, 1, 1), gram(f, 2, 2)], [gram(f, 0, 1), gram(f, 0, 2), gram(f, 1, 2)]);
     let (lambda, mut v) = symmetric_eigen(d, o);
     // Sort eigenpairs by decreasing eigenvalue: a stable bubble sort over (0,1), (1,2), (0,1).
     let mut l = lambda;
@@ -181,36 +133,14 @@ pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
             (row[i], row[j]) = (Lanes::select(swap, row[j], row[i]), Lanes::select(swap, row[i], row[j]));
         }
     }
-    let flip = det(&v).lt(zero);
+    let flip = det(&v).lt(Lanes::splat(0.0));
     for row in v.iter_mut() {
         row[2] = Lanes::select(flip, -row[2], row[2]);
     }
-    let mut b = mul_lanes(&f, &v);
-    // One one-sided Jacobi rotation of columns 2 and 3 of B = F V (and of V): FᵀF's round-off
-    // (ε σ1²) mixes v2 and v3 by up to ε σ1² / (σ2² - σ3²), which is large when both are small
-    // (σ = 1, 1e-6, 1e-12: 1e-9 |F| of reconstruction error). Orthogonalizing b2 and b3 directly
-    // fixes the plane from F's entries, where the mixing costs only ε σ1 |F|. The rotation is the
-    // one of `symmetric_eigen` on [[b2·b2, b2·b3], [b2·b3, b3·b3]] (the smaller angle, so the
-    // order of |b2| >= |b3| is kept); near the identity when V is already accurate.
-    {
-        let (b2, b3) = (column(&b, 1), column(&b, 2));
-        let (alpha, beta, gamma) = (dot(b2, b2), dot(b3, b3), dot(b2, b3));
-        let h = Lanes::splat(0.5) * (beta - alpha);
-        let r = (h * h + gamma * gamma).sqrt();
-        let big = h.abs() + r;
-        let n2 = Lanes::splat(2.0) * r * big;
-        let go = !gamma.eq(zero) & n2.gt(zero);
-        let inv = one / n2.sqrt();
-        let c = big * inv;
-        let sn = h.sign() * gamma * inv;
-        for row in b.iter_mut().chain(v.iter_mut()) {
-            let (x2, x3) = (row[1], row[2]);
-            row[1] = Lanes::select(go, c * x2 - sn * x3, x2);
-            row[2] = Lanes::select(go, sn * x2 + c * x3, x3);
-        }
-    }
     // QR of B = F V by Gram-Schmidt: B = U R, diag(R) = σ (the last one signed).
+    let b = mul_lanes(f, &v);
     let (b1, b2, b3) = (column(&b, 0), column(&b, 1), column(&b, 2));
+    let one = Lanes::splat(1.0);
     let scale = dot(b1, b1).sqrt().max(dot(b2, b2).sqrt()).max(dot(b3, b3).sqrt());
     let tiny = Lanes::splat(1e-300).max(scale * Lanes::splat(1e-15));
     let s1 = dot(b1, b1).sqrt();
@@ -225,7 +155,7 @@ pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
     let u3 = cross(u1, u2);
     let s3 = dot(u3, b3);
     let u = [[u1[0], u2[0], u3[0]], [u1[1], u2[1], u3[1]], [u1[2], u2[2], u3[2]]];
-    (u, [s1 * up, Lanes::select(full, s2, zero) * up, s3 * up], v)
+    (u, [s1, Lanes::select(full, s2, Lanes::splat(0.0)), s3], v)
 }
 
 /// Signed SVD of `f` (see the module documentation).
@@ -351,23 +281,19 @@ mod tests {
         for m in [&s.u, &s.v] {
             assert!(distance(&mul_transpose(m, m), &IDENTITY) <= 1e-13 && (det(m) - 1.0).abs() <= 1e-13, "{f:?}: not a rotation {m:?}");
         }
-        let rec = |d: &Svd3| distance(&scaled_product(&d.u, d.sigma, &d.v), f) / norm;
-        if !(1e-75..=1e75).contains(&norm) {
-            // Outside the reference's range (its stopping sums over- or underflow): this method alone.
-            return (0.0, rec(&s), f64::NAN);
-        }
         let sig = (0..3).map(|i| (s.sigma[i] - r.sigma[i]).abs()).fold(0.0, f64::max) / norm;
         assert!(sig <= 1e-12, "{f:?}: σ {:?} against {:?}", s.sigma, r.sigma);
         if s.sigma[1] + s.sigma[2] > 1e-3 * norm {
             let (p, pr) = (mul_transpose(&s.u, &s.v), mul_transpose(&r.u, &r.v));
             assert!(distance(&p, &pr) <= 1e-10, "{f:?}: polar rotation {p:?} against {pr:?}");
         }
+        let rec = |d: &Svd3| distance(&scaled_product(&d.u, d.sigma, &d.v), f) / norm;
         (sig, rec(&s), rec(&r))
     }
 
     #[test]
     fn agrees_with_the_reference_method() {
-        const FAMILIES: usize = 11;
+        const FAMILIES: usize = 10;
         let mut rng = Rng(0x2545f4914f6cdd1d);
         // Per family: the largest σ error, and reconstruction errors of this method and the reference.
         let mut worst = [[0.0f64; 3]; FAMILIES + 1];
@@ -383,14 +309,12 @@ mod tests {
                 // Inverted: a random matrix with one row negated, a flattened-through element.
                 3 => [m[0], m[1], m[2].map(|x| -x)],
                 4 => mul(&mul(&r1, &[[a, 0.0, 0.0], [0.0, 0.9 * a, 0.0], [0.0, 0.0, -0.2]]), &transpose(&r2)),
-                // Near-singular: one singular value down to 1e-10; two small ones (1e-6, 1e-12),
-                // random and exactly those.
+                // Near-singular: one singular value down to 1e-10; two small ones (1e-6, 1e-12).
                 5 => scaled_product(&r1, [1.0, a, 1e-10 * rng.next()], &r2),
                 6 => scaled_product(&r1, [1.0, 1e-6 * a, 1e-12 * rng.next()], &r2),
-                7 => scaled_product(&r1, [1.0, 1e-6, 1e-12], &r2),
                 // Repeated and nearly repeated singular values.
-                8 => scaled_product(&r1, [a, a, 0.5 * rng.next()], &r2),
-                9 => scaled_product(&r1, [a, a * (1.0 + 1e-9 * rng.next()), a], &r2),
+                7 => scaled_product(&r1, [a, a, 0.5 * rng.next()], &r2),
+                8 => scaled_product(&r1, [a, a * (1.0 + 1e-9 * rng.next()), a], &r2),
                 _ => scaled_product(&r1, [1.0, a, a * (1.0 + 1e-12)], &r2),
             };
             let e = against_reference(&f);
@@ -398,16 +322,11 @@ mod tests {
                 *w = w.max(x);
             }
         }
-        // Exact cases, and scales far from 1: within the reference's range (|F| ~ 1e±75, where
-        // the squares of FᵀF's entries neither overflow nor underflow) and beyond it (1e±100,
-        // 1e±300, this method alone: it scales F by a power of two first).
+        // Exact cases, and scales far from 1 (within the range where the squares of FᵀF's
+        // entries neither overflow nor underflow, |F| ~ 1e±75: the reference's range too).
         let mut rng = Rng(7);
         let mut extra = vec![IDENTITY, [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [3.0, 6.0, 9.0]], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]];
-        for scale in [1e-300, 1e-100, 1e-60, 1e-30, 1e30, 1e60, 1e100, 1e300] {
-            let (r1, r2) = (rotation(&mut rng), rotation(&mut rng));
-            extra.push(rng.mat().map(|row| row.map(|x| scale * x)));
-            extra.push(scaled_product(&r1, [scale, 1e-6 * scale, 1e-12 * scale], &r2));
-        }
+        extra.extend([1e-60, 1e-30, 1e30, 1e60].map(|scale| rng.mat().map(|row| row.map(|x| scale * x))));
         for f in extra {
             let e = against_reference(&f);
             for (w, x) in worst[FAMILIES].iter_mut().zip([e.0, e.1, e.2]) {
@@ -416,29 +335,16 @@ mod tests {
         }
         for (family, [sig, rec, rec_reference]) in worst.iter().enumerate() {
             eprintln!("family {family}: largest errors relative to |F|: σ {sig:.1e}, reconstruction {rec:.1e} (reference {rec_reference:.1e})");
-            // Two small singular values (families 6, 7) included: the reference's V comes from
-            // FᵀF alone, whose round-off (ε σ1²) swamps the gap σ2² - σ3² and leaves ~1e-9 |F|.
-            assert!(*rec <= 1e-14, "family {family}: reconstruction {rec:e} (reference {rec_reference:e})");
-        }
-    }
-
-    /// Scaling F by a power of two scales σ by it and changes nothing else, to the bit, down to
-    /// the smallest and up to the largest scales (the stopping rule's sums do not over- or
-    /// underflow).
-    #[test]
-    fn powers_of_two_scale_sigma_exactly() {
-        let mut rng = Rng(31);
-        for k in 0..200 {
-            let f = if k % 2 == 0 { rng.mat() } else { scaled_product(&rotation(&mut rng), [1.0, 1e-6, 1e-12], &rotation(&mut rng)) };
-            let s = svd3(&f);
-            for e in [-1000, -332, -60, 60, 332, 1000] {
-                let p = 2f64.powi(e);
-                let t = svd3(&f.map(|row| row.map(|x| x * p)));
-                assert_eq!((t.u, t.v, t.sigma), (s.u, s.v, s.sigma.map(|x| x * p)), "{f:?} scaled by 2^{e}");
+            if family == 6 {
+                // Two small singular values: V comes from FᵀF, whose round-off (ε σ1²) swamps the
+                // gap σ2² - σ3², so the last two columns of V, and the reconstruction, are off by up
+                // to ~1e-9 |F| in both methods (the reference alike). Hold this one to the reference.
+                assert!(*rec <= 2.0 * rec_reference, "family {family}: reconstruction {rec:e} against the reference's {rec_reference:e}");
+            } else {
+                assert!(*rec <= 1e-12, "family {family}: reconstruction {rec:e} (reference {rec_reference:e})");
             }
         }
     }
-
 
     #[test]
     fn random_matrices_decompose() {
