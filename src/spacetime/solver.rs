@@ -837,8 +837,13 @@ impl<'a> Solver<'a> {
 
     /// `x ← A⁻¹ x` with the global step's matrix, timed ([`Log::split`]).
     fn global_solve(&self, x: &mut [Point]) {
+        self.timed_solve(|| self.global.apply_inverse(x));
+    }
+
+    /// Run one solve and count it and its wall time in [`Log::split`].
+    fn timed_solve(&self, solve: impl FnOnce()) {
         let start = Instant::now();
-        self.global.apply_inverse(x);
+        solve();
         let mut split = self.split.borrow_mut();
         split.solves += 1;
         split.solve_seconds += start.elapsed().as_secs_f64();
@@ -894,13 +899,7 @@ impl<'a> Solver<'a> {
     /// The quasi-Newton phase's initial inverse Hessian on the keyframe unknowns.
     fn model_inverse(&self, x: &mut [Point]) {
         match &self.tangent {
-            Some(t) => {
-                let start = Instant::now();
-                t.apply_inverse(x);
-                let mut split = self.split.borrow_mut();
-                split.solves += 1;
-                split.solve_seconds += start.elapsed().as_secs_f64();
-            }
+            Some(t) => self.timed_solve(|| t.apply_inverse(x)),
             None => self.global_solve(x),
         }
     }
