@@ -269,7 +269,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         out.extend(points.iter().map(|p| p.map(|x| x as f32)));
         Ok(())
     };
-    let streamed = crate::export::usdc::StreamedSamples { attribute: format!("/{}/Mesh.points", settings.name), times: &codes, read: &mut read };
+    let streamed = crate::export::usdc::StreamedSamples { attribute: crate::export::usd::points_path(&settings), times: &codes, read: &mut read };
     let bytes = crate::export::usdc::bytes_streamed(&layer, path, streamed)?;
     drop(layer);
     crate::output::write_atomic(path, &bytes)
