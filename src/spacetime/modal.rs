@@ -28,7 +28,7 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Conj, Mat, Par};
+use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use super::global_step::TimeCoefficients;
@@ -263,32 +263,37 @@ impl ModalStep {
         Ok(())
     }
 
-    /// `y ← B_i⁻¹ y` for every mode (`y` is `3 slots × n`, column `i` the mode's `(slot, coordinate)` values).
-    fn per_mode(&self, y: &mut Mat<f64>) {
+    /// `y ← B_i⁻¹ y` for every mode, or `y ← y + B_i⁻¹ c` with `add = Some(c)` (`y` and `c`
+    /// column-major `3 slots × n`, column `i` the mode's `(slot, coordinate)` values: each
+    /// mode's column is contiguous, worked on in place).
+    fn per_mode(&self, y: &mut [f64], add: Option<&[f64]>) {
         let ss = self.slots * self.slots;
         let slots = self.slots;
         let rows = 3 * slots;
-        let mut data: Vec<f64> = (0..y.ncols()).flat_map(|i| (0..rows).map(move |r| (i, r))).map(|(i, r)| y[(r, i)]).collect();
-        data.par_chunks_mut(rows).enumerate().for_each(|(i, col)| {
-            let inv = &self.inverse[i * ss..(i + 1) * ss];
-            let mut out = vec![0.0; rows];
-            for s in 0..slots {
-                let row = &inv[s * slots..(s + 1) * slots];
-                let mut acc = [0.0; 3];
-                for (t, &w) in row.iter().enumerate() {
-                    for d in 0..3 {
-                        acc[d] += w * col[3 * t + d];
+        y.par_chunks_mut(rows).enumerate().for_each_init(
+            || vec![0.0; rows],
+            |out, (i, col)| {
+                let inv = &self.inverse[i * ss..(i + 1) * ss];
+                let from: &[f64] = match add {
+                    Some(c) => &c[i * rows..(i + 1) * rows],
+                    None => col,
+                };
+                for s in 0..slots {
+                    let row = &inv[s * slots..(s + 1) * slots];
+                    let mut acc = [0.0; 3];
+                    for (t, &w) in row.iter().enumerate() {
+                        for d in 0..3 {
+                            acc[d] += w * from[3 * t + d];
+                        }
                     }
+                    out[3 * s..3 * s + 3].copy_from_slice(&acc);
                 }
-                out[3 * s..3 * s + 3].copy_from_slice(&acc);
-            }
-            col.copy_from_slice(&out);
-        });
-        for i in 0..y.ncols() {
-            for r in 0..rows {
-                y[(r, i)] = data[i * rows + r];
-            }
-        }
+                match add {
+                    Some(_) => col.iter_mut().zip(out.iter()).for_each(|(v, o)| *v += o),
+                    None => col.copy_from_slice(out),
+                }
+            },
+        );
     }
 
     /// `x ← A⁻¹ x` on the free unknowns (three coordinates as three right-hand sides).
@@ -297,15 +302,16 @@ impl ModalStep {
         let rows = 3 * slots;
         // Rᵀ: (slot, coordinate) × basis node, zero at held entries.
         let r = Mat::from_fn(rows, n, |row, j| unknowns.get(self.modes.nodes[j] as usize, row / 3).map_or(0.0, |u| x[u][row % 3]));
-        // Yᵀ = Rᵀ Φ, then B_i⁻¹ per mode.
-        let mut y = Mat::<f64>::zeros(rows, n);
-        matmul(y.as_mut(), Accum::Replace, r.as_ref(), self.modes.phi.as_ref(), 1.0, self.par);
-        self.per_mode(&mut y);
+        // Yᵀ = Rᵀ Φ, then B_i⁻¹ per mode (column-major, each mode's column contiguous).
+        let mut y = vec![0.0; rows * n];
+        matmul(MatMut::from_column_major_slice_mut(&mut y, rows, n), Accum::Replace, r.as_ref(), self.modes.phi.as_ref(), 1.0, self.par);
+        drop(r);
+        self.per_mode(&mut y, None);
         if let Some(g) = &self.capacitance {
             // The unconstrained solution at the held entries, then λ = -G⁻¹ of it.
             let held_rows = self.phi_held.nrows();
             let mut at_held = Mat::<f64>::zeros(rows, held_rows);
-            matmul(at_held.as_mut(), Accum::Replace, y.as_ref(), self.phi_held.transpose(), 1.0, self.par);
+            matmul(at_held.as_mut(), Accum::Replace, MatRef::from_column_major_slice(&y, rows, n), self.phi_held.transpose(), 1.0, self.par);
             let mut lambda = Mat::<f64>::zeros(self.held.len(), 3);
             for (p, &(s, h)) in self.held.iter().enumerate() {
                 for d in 0..3 {
@@ -320,18 +326,17 @@ impl ModalStep {
                     spread[(3 * s + d, h)] = lambda[(p, d)];
                 }
             }
-            let mut correction = Mat::<f64>::zeros(rows, n);
-            matmul(correction.as_mut(), Accum::Replace, spread.as_ref(), self.phi_held.as_ref(), 1.0, self.par);
-            self.per_mode(&mut correction);
-            y += &correction;
+            let mut correction = vec![0.0; rows * n];
+            matmul(MatMut::from_column_major_slice_mut(&mut correction, rows, n), Accum::Replace, spread.as_ref(), self.phi_held.as_ref(), 1.0, self.par);
+            self.per_mode(&mut y, Some(&correction));
         }
         // Xᵀ = Yᵀ Φᵀ.
-        let mut out = Mat::<f64>::zeros(rows, n);
-        matmul(out.as_mut(), Accum::Replace, y.as_ref(), self.modes.phi.transpose(), 1.0, self.par);
-        for (j, &a) in self.modes.nodes.iter().enumerate() {
+        let mut out = vec![0.0; rows * n];
+        matmul(MatMut::from_column_major_slice_mut(&mut out, rows, n), Accum::Replace, MatRef::from_column_major_slice(&y, rows, n), self.modes.phi.transpose(), 1.0, self.par);
+        for (&a, col) in self.modes.nodes.iter().zip(out.chunks_exact(rows)) {
             for s in 0..slots {
                 if let Some(u) = unknowns.get(a as usize, s) {
-                    x[u] = [out[(3 * s, j)], out[(3 * s + 1, j)], out[(3 * s + 2, j)]];
+                    x[u] = [col[3 * s], col[3 * s + 1], col[3 * s + 2]];
                 }
             }
         }
