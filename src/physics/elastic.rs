@@ -342,6 +342,55 @@ impl Elastic {
         }
     }
 
+    /// [`Elastic::local_step_sequential_into`] and `jp = J p` of its targets
+    /// ([`Elastic::apply_j_sequential`]) in the same pass, as
+    /// [`Elastic::local_step_with_jacobian_batches_and_forces_sequential_into`]. The bytes of the two.
+    pub fn local_step_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jp: &mut [Point]) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        targets.clear();
+        targets.reserve(count);
+        jp.fill([0.0; 3]);
+        for first in (0..count).step_by(BATCH) {
+            let p = project_batch(&self.deformation_gradients(first, x), share);
+            let p = &p[..BATCH.min(count - first)];
+            targets.extend_from_slice(p);
+            self.scatter_targets(first, p, jp);
+        }
+    }
+
+    /// `jp += J p` of the tets from `first` with targets `p`, in tet order.
+    #[inline]
+    fn scatter_targets(&self, first: usize, p: &[Mat3], jp: &mut [Point]) {
+        for (e, p) in (first..).zip(p) {
+            let w = self.weights[e];
+            for (&a, g) in self.tets[e].iter().zip(&self.grads[e]) {
+                let o = &mut jp[a as usize];
+                for i in 0..3 {
+                    o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
+                }
+            }
+        }
+    }
+
+    /// [`Elastic::local_step_with_jacobian_batches_sequential_into`] and `jp = J p` of its
+    /// targets ([`Elastic::apply_j_sequential`]) in the same pass: each batch's targets go into
+    /// `jp` right after their projection, while they and the batch's gradients are in cache,
+    /// instead of in a second pass over every tet. The bytes of the two (every node sums its
+    /// tets in increasing order from zero).
+    pub fn local_step_with_jacobian_batches_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>, jp: &mut [Point]) {
+        let (share, count) = (self.strain_share(), self.tet_count());
+        targets.resize(count, [[0.0; 3]; 3]);
+        jacobians.resize_with(count.div_ceil(BATCH), JacobianBatch::default);
+        jp.fill([0.0; 3]);
+        let mut f = [[Lanes::splat(0.0); 3]; 3];
+        for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.iter_mut()).enumerate() {
+            let first = c * BATCH;
+            self.deformation_gradient_lanes(first, x, None, &mut f);
+            project_with_jacobian_lanes_into(&f, share, out, jac);
+            self.scatter_targets(first, out, jp);
+        }
+    }
+
     /// `out = J DP[dF(u)]` from the projection Jacobians of every tet in lane layout, on the
     /// calling thread: the part of the elastic Hessian product `∇²E u` that the projections
     /// contribute. The bytes of [`Elastic::apply_j_sequential`] of the per-tet products
@@ -620,6 +669,18 @@ mod tests {
         assert_ne!(el.tet_count() % BATCH, 0);
         el.projected_forces_sequential(&x, &mut b);
         assert_eq!(a, b);
+        // The local step with the Jacobians and J p in one pass: the bytes of the two passes
+        // (into buffers holding other values).
+        let (mut t, mut j) = (Vec::new(), Vec::new());
+        el.local_step_with_jacobian_batches_sequential_into(&x, &mut t, &mut j);
+        let (mut fused_t, mut fused_j) = (vec![[[2.0; 3]; 3]; 1], vec![JacobianBatch::default(); 50]);
+        b.fill([3.0; 3]);
+        el.local_step_with_jacobian_batches_and_forces_sequential_into(&x, &mut fused_t, &mut fused_j, &mut b);
+        assert_eq!((&fused_t, &fused_j, &b), (&t, &j, &a));
+        let mut fused_t = vec![[[2.0; 3]; 3]; 3];
+        b.fill([3.0; 3]);
+        el.local_step_and_forces_sequential_into(&x, &mut fused_t, &mut b);
+        assert_eq!((&fused_t, &b), (&targets, &a));
         el.stiffness.mul_points(&x, &mut a);
         el.stiffness.mul_points_sequential(&x, &mut b);
         assert_eq!(a, b);

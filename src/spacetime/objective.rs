@@ -213,14 +213,18 @@ impl<'a> Objective<'a> {
         }
         scratch.shape(self.samples.len(), exact);
         let residuals: Vec<Residual> = match scratch.jacobians.as_mut() {
+            // The projections' node forces `J p` taken in the local step's pass over the tets
+            // (the same sums; both branches), and the positions combined once for both.
             Some(jacobians) => self
                 .samples
                 .par_iter()
                 .zip(scratch.targets.par_iter_mut())
                 .zip(jacobians.par_iter_mut())
                 .map(|((s, p), j)| {
-                    self.project_sample(tr, s, p, Some(j), false);
-                    self.sample_residual(tr, s, p, Some(j))
+                    let x = self.positions(tr, s);
+                    let mut jp = vec![[0.0; 3]; x.len()];
+                    self.elastic.local_step_with_jacobian_batches_and_forces_sequential_into(&x, p, j, &mut jp);
+                    self.sample_residual_from(tr, s, self.residual_at(tr, s, &x, &jp), Some(j))
                 })
                 .collect(),
             None => self
@@ -228,8 +232,10 @@ impl<'a> Objective<'a> {
                 .par_iter()
                 .zip(scratch.targets.par_iter_mut())
                 .map(|(s, p)| {
-                    self.project_sample(tr, s, p, None, false);
-                    self.sample_residual(tr, s, p, None)
+                    let x = self.positions(tr, s);
+                    let mut jp = vec![[0.0; 3]; x.len()];
+                    self.elastic.local_step_and_forces_sequential_into(&x, p, &mut jp);
+                    self.sample_residual_from(tr, s, self.residual_at(tr, s, &x, &jp), None)
                 })
                 .collect(),
         };
@@ -274,20 +280,34 @@ impl<'a> Objective<'a> {
     /// share; all without the weight), with the projections held at `targets`, or fresh ones.
     fn residual(&self, tr: &Trajectory, s: &Sample, targets: Option<&[Mat3]>) -> (Vec<Point>, f64, f64, f64) {
         let el = self.elastic;
-        let n = el.node_count();
-        let g = self.gravity;
-        let u = Self::unknowns(tr, s);
-        let (c, l) = self.coefficients(s);
-        let (mut x, mut acc) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-        Self::combine(&u, &l, &mut x);
-        Self::combine(&u, &c, &mut acc);
-        let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        let x = self.positions(tr, s);
+        let mut jp = vec![[0.0; 3]; x.len()];
         // Samples run in parallel: the products run on this thread (same bytes).
-        el.stiffness.mul_points_sequential(&x, &mut lx);
         match targets {
             Some(targets) => el.apply_j_sequential(targets, &mut jp),
             None => el.projected_forces_sequential(&x, &mut jp),
         }
+        self.residual_at(tr, s, &x, &jp)
+    }
+
+    /// The positions `x(t_s)` of a sample.
+    fn positions(&self, tr: &Trajectory, s: &Sample) -> Vec<Point> {
+        let mut x = vec![[0.0; 3]; self.elastic.node_count()];
+        Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
+        x
+    }
+
+    /// [`Objective::residual`] at the sample's positions `x` with the projections' node forces
+    /// `jp = J p`.
+    fn residual_at(&self, tr: &Trajectory, s: &Sample, x: &[Point], jp: &[Point]) -> (Vec<Point>, f64, f64, f64) {
+        let el = self.elastic;
+        let n = el.node_count();
+        let g = self.gravity;
+        let (c, _) = self.coefficients(s);
+        let mut acc = vec![[0.0; 3]; n];
+        Self::combine(&Self::unknowns(tr, s), &c, &mut acc);
+        let mut lx = vec![[0.0; 3]; n];
+        el.stiffness.mul_points_sequential(x, &mut lx);
         let (mut w, mut w_el, mut w_forces) = (0.0, 0.0, 0.0);
         let mut f = vec![[0.0; 3]; n];
         for a in 0..n {
@@ -313,11 +333,16 @@ impl<'a> Objective<'a> {
 
     /// One sample's residual with its projections held at `targets` (and their Jacobians `jac`).
     fn sample_residual(&self, tr: &Trajectory, s: &Sample, targets: &[Mat3], jac: Option<&[JacobianBatch]>) -> Residual {
+        // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
+        self.sample_residual_from(tr, s, self.residual(tr, s, Some(targets)), jac)
+    }
+
+    /// [`Objective::sample_residual`] from the sample's [`Objective::residual`].
+    fn sample_residual_from(&self, tr: &Trajectory, s: &Sample, residual: (Vec<Point>, f64, f64, f64), jac: Option<&[JacobianBatch]>) -> Residual {
         let el = self.elastic;
         let n = el.node_count();
-        // Residual per sample: f = M (a - g) + L x - J p, and its elastic part L x - J p.
         let u = Self::unknowns(tr, s);
-        let (f, w, w_el, w_forces) = self.residual(tr, s, Some(targets));
+        let (f, w, w_el, w_forces) = residual;
         // J DP[dF(M⁻¹ f)]: the part of ∇²E M⁻¹ f that the frozen model leaves out.
         let correction = jac.map(|jac| {
             let u: Vec<Point> = f.iter().zip(&el.mass).map(|(v, m)| crate::mesh::scale(*v, 1.0 / m)).collect();
