@@ -22,6 +22,14 @@
 //! `2.6k-20-keys-iterative-2G`, and with the coarse-to-fine schedule, `2.6k-20-keys-coarse`)
 //! run only when named in full. `SCALE_KEEP=1` keeps the generated scenes and outputs (their folder is printed)
 //! for profiling a bake by hand.
+//!
+//! The cost of one iteration, side by side with another build (a loaded machine: CPU seconds,
+//! not wall): `SCALE_ITERATIONS=10,30` bakes every chosen row capped at each of those iteration
+//! counts and prints the CPU seconds of the iterations between them (the difference over the
+//! extra iterations: the set-up, TetGen and the export cancel out); with `SCALE_OTHER=PATH` (a
+//! `blendsim` binary, e.g. the baseline's) each bake alternates with the same bake by that
+//! binary, and the two are printed with their ratio and whether their output files are the same
+//! bytes. `SCALE_REPEATS` bakes of each, medians.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -93,8 +101,9 @@ const fn twenty_keys(name: &'static str, solver: &'static str, args: &'static [&
     Case { name, size: BODY, divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver, hold: ENDS, args, extra }
 }
 
-/// Write the scene of `case` into `dir`; returns the scene file.
-fn write_scene(case: &Case, dir: &Path) -> PathBuf {
+/// Write the scene of `case` into `dir`, its solver capped at `iterations` when given; returns
+/// the scene file.
+fn write_scene(case: &Case, dir: &Path, iterations: Option<usize>) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     let rest: TriMesh = prism(case.size, case.divisions);
     let mut meshes = Vec::new();
@@ -118,8 +127,10 @@ fn write_scene(case: &Case, dir: &Path) -> PathBuf {
         std::fs::write(dir.join("held.txt"), held).unwrap();
         text.push_str(&format!("fixed = [{}]\n", vec!["\"held.txt\""; case.keys].join(", ")));
     }
-    if !case.solver.is_empty() {
-        text.push_str(&format!("[solver]\n{}\n", case.solver));
+    let mut solver: Vec<String> = case.solver.lines().filter(|l| iterations.is_none() || !l.starts_with("max_iterations")).map(String::from).collect();
+    solver.extend(iterations.map(|n| format!("max_iterations = {n}")));
+    if !solver.is_empty() {
+        text.push_str(&format!("[solver]\n{}\n", solver.join("\n")));
     }
     text.push_str(&format!("[tet]\n{}\n[export]\nformats = [\"usdc\", \"glb\"]\nfull_frame = false\n", case.tet));
     let scene = dir.join("scene.toml");
@@ -130,9 +141,14 @@ fn write_scene(case: &Case, dir: &Path) -> PathBuf {
 /// Bake `scene` under `/usr/bin/time -v`: (seconds, peak KiB of the process tree, report, CPU
 /// seconds (user + system)).
 fn bake(scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value, f64) {
+    bake_with(Path::new(env!("CARGO_BIN_EXE_blendsim")), scene, out, args)
+}
+
+/// [`bake`] by the `blendsim` binary `bin`.
+fn bake_with(bin: &Path, scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, serde_json::Value, f64) {
     let output = Command::new("/usr/bin/time")
         .arg("-v")
-        .arg(env!("CARGO_BIN_EXE_blendsim"))
+        .arg(bin)
         .args(["bake", "-q", scene.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .args(args)
         .output()
@@ -188,13 +204,25 @@ fn main() {
     // A word picks the rows whose name contains it; an extra row only by its whole name.
     let chosen = |c: &&Case| if filters.is_empty() { !c.extra } else { filters.iter().any(|f| c.name == f || (!c.extra && c.name.contains(f.as_str()))) };
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
+    let iterations: Vec<usize> = std::env::var("SCALE_ITERATIONS").unwrap_or_default().split(',').filter_map(|v| v.trim().parse().ok()).collect();
+    if !iterations.is_empty() {
+        assert!(iterations.len() == 2 && iterations[0] < iterations[1], "SCALE_ITERATIONS=FEW,MANY (two increasing counts)");
+        let other = std::env::var_os("SCALE_OTHER").map(PathBuf::from);
+        per_iteration(cases.iter().filter(chosen), [iterations[0], iterations[1]], other.as_deref(), repeats, &scratch);
+        if keep {
+            println!("\nscenes kept in {}", scratch.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&scratch);
+        }
+        return;
+    }
     println!("machine: {} threads, load average {}; one `blendsim bake` process per row, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
     println!();
     println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | evaluate + solve s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
     println!("|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---|");
     for case in cases.iter().filter(chosen) {
         let dir = scratch.join(case.name);
-        let scene = write_scene(case, &dir);
+        let scene = write_scene(case, &dir, None);
         let runs: Vec<(f64, u64, serde_json::Value, f64)> = (0..repeats).map(|r| bake(&scene, &dir.join(format!("out{r}")), case.args)).collect();
         let seconds = median(runs.iter().map(|r| r.0).collect());
         let peak = median(runs.iter().map(|r| r.1 as f64).collect());
@@ -239,5 +267,73 @@ fn main() {
         println!("\nscenes kept in {}", scratch.display());
     } else {
         let _ = std::fs::remove_dir_all(&scratch);
+    }
+}
+
+/// Whether the files of `a` and `b` (an output folder each) named with these extensions are the
+/// same bytes, and there are some.
+fn same_outputs(a: &Path, b: &Path) -> bool {
+    let files = |d: &Path| -> Vec<PathBuf> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(d).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "usda" || x == "usdc" || x == "glb")).collect();
+        v.sort();
+        v
+    };
+    let (fa, fb) = (files(a), files(b));
+    !fa.is_empty() && fa.iter().map(|p| p.file_name()).eq(fb.iter().map(|p| p.file_name())) && fa.iter().zip(&fb).all(|(x, y)| std::fs::read(x).ok() == std::fs::read(y).ok())
+}
+
+/// `SCALE_ITERATIONS=FEW,MANY` (module documentation): per row, the CPU seconds of an iteration
+/// from bakes capped at `few` and at `many` iterations, by this build and, alternating with it,
+/// by `other`.
+fn per_iteration<'c>(cases: impl Iterator<Item = &'c Case>, [few, many]: [usize; 2], other: Option<&Path>, repeats: usize, scratch: &Path) {
+    let ours = PathBuf::from(env!("CARGO_BIN_EXE_blendsim"));
+    let bins: Vec<&Path> = std::iter::once(ours.as_path()).chain(other).collect();
+    println!("machine: {} threads, load average {}; CPU s of an iteration from bakes of {few} and {many} iterations, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
+    println!("this build: {}{}", ours.display(), other.map_or(String::new(), |o| format!("; other: {}", o.display())));
+    println!();
+    println!("| scene | iterations | CPU s per iteration | other's | ratio | evaluate + solve s (wall) | same bytes | load |");
+    println!("|---|---|---:|---:|---:|---|---|---|");
+    for case in cases {
+        // [binary][repeat] (CPU s per iteration, evaluation and solve wall s per iteration, iterations).
+        let mut figures = vec![Vec::new(); bins.len()];
+        let mut same = true;
+        for r in 0..repeats {
+            let mut cpu = vec![[0.0; 2]; bins.len()];
+            let mut done = vec![[0.0; 2]; bins.len()];
+            let mut split = vec![[[0.0; 2]; 2]; bins.len()];
+            for (k, &cap) in [few, many].iter().enumerate() {
+                let dir = scratch.join(format!("{}-{cap}", case.name));
+                let scene = write_scene(case, &dir, Some(cap));
+                for (b, bin) in bins.iter().enumerate() {
+                    let out = dir.join(format!("out{r}-{b}"));
+                    let (_, _, report, seconds) = bake_with(bin, &scene, &out, case.args);
+                    let solver = &report["solver"];
+                    cpu[b][k] = seconds;
+                    done[b][k] = solver["iterations"].as_f64().unwrap_or(f64::NAN);
+                    split[b][k] = ["evaluation_seconds", "solve_seconds"].map(|f| solver["iteration_split"][f].as_f64().unwrap_or(f64::NAN));
+                }
+                same &= bins.len() < 2 || same_outputs(&dir.join(format!("out{r}-0")), &dir.join(format!("out{r}-1")));
+            }
+            for b in 0..bins.len() {
+                let extra = done[b][1] - done[b][0];
+                let per = |x: [f64; 2]| (x[1] - x[0]) / extra;
+                figures[b].push((per(cpu[b]), per([split[b][0][0], split[b][1][0]]), per([split[b][0][1], split[b][1][1]]), format!("{}..{}", done[b][0], done[b][1])));
+            }
+        }
+        let med = |b: usize, f: fn(&(f64, f64, f64, String)) -> f64| median(figures[b].iter().map(f).collect());
+        let ours_cpu = med(0, |f| f.0);
+        let other_cpu = if bins.len() > 1 { med(1, |f| f.0) } else { f64::NAN };
+        println!(
+            "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} + {:.3} | {} | {} |",
+            case.name,
+            figures[0][0].3,
+            ours_cpu,
+            other_cpu,
+            ours_cpu / other_cpu,
+            med(0, |f| f.1),
+            med(0, |f| f.2),
+            if bins.len() > 1 { if same { "yes" } else { "NO" } } else { "-" },
+            load()
+        );
     }
 }
