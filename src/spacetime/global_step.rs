@@ -224,14 +224,33 @@ fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSize {
 /// The order of every key's block in the iterative step's preconditioner, and the blocks'
 /// predicted cost: the node graph ordered by the better of nested dissection and minimum
 /// degree, two unknowns (position, velocity) per node and key.
-fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> (Vec<u32>, Cost) {
-    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+fn key_block_order(orders: &NodeOrders, unknowns: &Unknowns) -> (Vec<u32>, Cost) {
+    let graph = &orders.graph;
     let weights = vec![2usize; unknowns.nodes];
-    let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
-    let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+    let (cost_nd, cost_md) = (predicted_cost(graph, &orders.dissection, &weights), predicted_cost(graph, &orders.degree, &weights));
     let keys = (unknowns.slots.count() / 2) as f64;
-    let (order, cost) = if cost_nd.flops <= cost_md.flops { (dissection, cost_nd) } else { (degree, cost_md) };
-    (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
+    let (order, cost) = if cost_nd.flops <= cost_md.flops { (&orders.dissection, cost_nd) } else { (&orders.degree, cost_md) };
+    (order.clone(), Cost { flops: keys * cost.flops, entries: keys * cost.entries })
+}
+
+/// The node graph of the normal matrix (its vertices the nodes, its edges the nodes' coupled
+/// unknowns) and its two candidate orders, computed once for both the direct step's order
+/// ([`fill_reducing_order_of`]) and the iterative step's key blocks ([`key_block_order`]):
+/// the graph is the same for both, only the weights of its vertices differ.
+pub struct NodeOrders {
+    graph: Graph,
+    dissection: Vec<u32>,
+    degree: Vec<u32>,
+}
+
+impl NodeOrders {
+    /// Geometric nested dissection (at the nodes' `rest` positions) and minimum degree of the
+    /// node graph of `lower`.
+    pub fn new(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> NodeOrders {
+        let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+        let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
+        NodeOrders { graph, dissection, degree }
+    }
 }
 
 /// Bytes a direct factorization needs per predicted factor entry, measured as the whole
@@ -536,40 +555,36 @@ pub struct FillReducingOrder {
 /// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
 /// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
 /// direct step could use it.
+#[cfg(test)]
 pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+    fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
+}
+
+/// [`fill_reducing_order`] from the node graph's orders computed already.
+pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, orders: &NodeOrders, weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
-    let mut block_of = vec![0u32; unknowns.count()];
     let mut block_start = vec![0usize; nodes + 1];
     for a in 0..nodes {
-        let mut count = 0;
-        for s in 0..slots {
-            if let Some(u) = unknowns.get(a, s) {
-                block_of[u] = a as u32;
-                count += 1;
-            }
-        }
-        block_start[a + 1] = block_start[a] + count;
+        block_start[a + 1] = block_start[a] + (0..slots).filter(|&s| unknowns.get(a, s).is_some()).count();
     }
-    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &block_of, nodes);
+    let graph = &orders.graph;
     let weights: Vec<usize> = (0..nodes).map(|a| block_start[a + 1] - block_start[a]).collect();
-    let dissection = nested_dissection(&graph, rest);
-    let degree = minimum_degree(&graph);
-    let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+    let (cost_nd, cost_md) = (predicted_cost(graph, &orders.dissection, &weights), predicted_cost(graph, &orders.degree, &weights));
     let (order, name, cost) = if cost_nd.flops <= cost_md.flops {
-        (dissection, "nested dissection (nodes)", cost_nd)
+        (&orders.dissection, "nested dissection (nodes)", cost_nd)
     } else {
-        (degree, "minimum degree (nodes)", cost_md)
+        (&orders.degree, "minimum degree (nodes)", cost_md)
     };
     let keys = slots / 2;
     if keys >= KEY_SEPARATOR_MIN_KEYS && weigh_keys(&cost) {
-        if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
+        if let Some(by_keys) = key_separator_order(lower, unknowns, order) {
             if by_keys.cost.flops < by_keys.node_cost.flops {
                 return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
             }
         }
     }
-    FillReducingOrder { perm: expand(&postorder(&graph, &order), &block_start), name, cost }
+    FillReducingOrder { perm: expand(&postorder(graph, order), &block_start), name, cost }
 }
 
 /// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
@@ -679,7 +694,9 @@ impl GlobalStep {
         let a = assemble(objective, &unknowns, &coefficients);
         let assemble_seconds = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
-        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
+        // One node graph and its two orders for both candidates' orders.
+        let node_orders = NodeOrders::new(&a, &unknowns, &objective.elastic.rest);
+        let (block_order, block_cost) = key_block_order(&node_orders, &unknowns);
         let size = modal_size(objective, &unknowns);
         // The key-separator order only where the direct step could use it: even cut by
         // KEY_SEPARATOR_MAX_GAIN and factorized at the parallel rate, would the node order's
@@ -693,7 +710,8 @@ impl GlobalStep {
                 m == Method::Direct || seconds <= MODAL_MIN_DIRECT_SECONDS
             }
         };
-        let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest, could_be_direct);
+        let order = fill_reducing_order_of(&a, &unknowns, &node_orders, could_be_direct);
+        drop(node_orders);
         // Two threads pay off only for large factorizations.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
@@ -1375,7 +1393,7 @@ mod modal_phases {
         let a = timed("assemble", || assemble(&obj, &unknowns, &c));
         let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest, |_| true));
         println!("  {} {:.3e} flops", order.name, order.cost.flops);
-        let _ = timed("key_block_order", || key_block_order(&a, &unknowns, &el.rest));
+        let _ = timed("key_block_order", || key_block_order(&NodeOrders::new(&a, &unknowns, &el.rest), &unknowns));
         let size = modal_size(&obj, &unknowns);
         println!("  modal size {size:?}, predicted {:?}", size.predicted());
         let _ = timed("fill_reducing_order without keys", || fill_reducing_order(&a, &unknowns, &el.rest, |_| false));
