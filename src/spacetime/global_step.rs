@@ -18,14 +18,14 @@
 //!
 //! Cost: `L M⁻¹ L` couples nodes two rings apart, so the factor fills in heavily (50M entries
 //! for 25k unknowns on a 2.6k-node body). Every node's free slots stay together: the
-//! fill-reducing order is found on the node graph ([`fill_reducing_order`]), the numeric
+//! fill-reducing order is found on the node graph ([`fill_reducing_order_of`]), the numeric
 //! factorization is supernodal over faer's symbolic analysis, the two halves of the
 //! elimination tree on two threads above 1 G predicted flops ([`Cholesky::refactor`]), and the
 //! solves sweep the factor once per direction for all three coordinates, on two threads
 //! ([`Cholesky::solve_rows3`]).
 //!
 //! Bounded: the factor's size and time are predicted from the symbolic count before anything
-//! is allocated ([`fill_reducing_order`]), and when the predicted peak is over the memory
+//! is allocated ([`fill_reducing_order_of`]), and when the predicted peak is over the memory
 //! budget the step is solved by preconditioned conjugate gradients instead (per-key block
 //! Jacobi, warm-started from the previous solution; see [`crate::physics::pcg`]): slower per
 //! iteration, but in memory that grows like the matrix, not like its factor.
@@ -235,7 +235,7 @@ fn key_block_order(orders: &NodeOrders, unknowns: &Unknowns) -> (Vec<u32>, Cost)
 
 /// The node graph of the normal matrix (its vertices the nodes, its edges the nodes' coupled
 /// unknowns) and its two candidate orders, computed once for both the direct step's order
-/// ([`fill_reducing_order_of`]) and the iterative step's key blocks ([`key_block_order`]):
+/// ([`fill_reducing_order_of`]) and the iterative step's key blocks (`key_block_order`):
 /// the graph is the same for both, only the weights of its vertices differ.
 pub struct NodeOrders {
     graph: Graph,
@@ -536,6 +536,12 @@ pub struct FillReducingOrder {
     pub cost: Cost,
 }
 
+/// [`fill_reducing_order_of`] with the node graph's orders computed here.
+#[cfg(test)]
+pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+    fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
+}
+
 /// Order the normal matrix by its node graph: every node's free slots are contiguous unknowns
 /// (node-major layout) and stay together, so ordering the 2-ring graph of the nodes (a few
 /// thousand vertices) orders the matrix (tens of thousands of rows).
@@ -555,12 +561,8 @@ pub struct FillReducingOrder {
 /// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
 /// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
 /// direct step could use it.
-#[cfg(test)]
-pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
-    fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
-}
-
-/// [`fill_reducing_order`] from the node graph's orders computed already.
+///
+/// `orders` are the node graph's orders ([`NodeOrders`]), shared with the iterative step's key blocks.
 pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, orders: &NodeOrders, weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
@@ -604,7 +606,7 @@ struct KeySeparators {
     node_cost: Cost,
 }
 
-/// See [`fill_reducing_order`]. Blocks are (node `a`, key `k`) with id `k * nodes + a`, holding
+/// See [`fill_reducing_order_of`]. Blocks are (node `a`, key `k`) with id `k * nodes + a`, holding
 /// that node's free position and velocity of key `k`.
 fn key_separator_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, node_order: &[u32]) -> Option<KeySeparators> {
     let nodes = unknowns.nodes;
