@@ -63,7 +63,7 @@ impl Row {
         self.cpu.push(cpu);
     }
     fn print(&self) {
-        println!("| {} | {:.4} | {:.4} | {} |", self.name, median(self.wall.clone()), median(self.cpu.clone()), self.note);
+        println!("| {} | {:.5} | {:.5} | {} |", self.name, median(self.wall.clone()), median(self.cpu.clone()), self.note);
     }
 }
 
@@ -219,6 +219,15 @@ fn main() {
     let body = stages::Bake::new(&scene, &progress).body().expect("body");
     let (elastic, keys, settings) = solver_inputs(&body).expect("solver inputs");
     let objective = objective(&elastic, &keys, &settings);
+    let mut build = Row::new("global step built (assembly; ordering, symbolic analysis, factorization)");
+    let mut stages = (Vec::new(), Vec::new());
+    for _ in 0..repeats {
+        let (w, c, g) = timed(|| GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step"));
+        build.push((w, c));
+        stages.0.push(g.stats.assemble_seconds);
+        stages.1.push(g.stats.factor_seconds);
+    }
+    build.note = format!("assembly {:.4} s, the rest {:.4} s (wall)", median(stages.0), median(stages.1));
     let global = GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step");
     let tr = initial_trajectory(&keys);
     let reps = 10 * repeats;
@@ -249,15 +258,22 @@ fn main() {
     });
     println!();
     println!(
-        "one iteration's parts ({} nodes, {} tets, {} samples, {} unknowns per coordinate), on a worker of the pool as the solve runs them, medians of {reps}:",
+        "one iteration's parts ({} nodes, {} tets, {} samples, {} unknowns per coordinate, {} matrix entries, factor {} entries ({}), {:.1} MB), on a worker of the pool as the solve runs them, medians of {reps}:",
         elastic.node_count(),
         elastic.tet_count(),
         objective.samples.len(),
-        global.unknowns().count()
+        global.unknowns().count(),
+        global.stats.matrix_nnz,
+        global.stats.factor_nnz,
+        global.stats.ordering,
+        8e-6 * global.stats.factor_nnz as f64
     );
     println!();
     println!("| part | wall s | CPU s | |");
     println!("|---|---:|---:|---|");
+    // The two sweeps read every factor entry once each: the solve's rate through the factor.
+    parts[4].note = format!("{:.1} GB/s of factor read (two sweeps)", 2.0 * 8e-9 * global.stats.factor_nnz as f64 / median(parts[4].wall.clone()));
+    build.print();
     for row in &parts {
         row.print();
     }

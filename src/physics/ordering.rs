@@ -467,6 +467,19 @@ pub fn cheapest(graph: &Graph, coords: &[Point], weights: &[usize]) -> (Candidat
     candidates(graph, coords, weights).into_iter().reduce(|best, c| if c.2.flops < best.2.flops { c } else { best }).expect("at least two candidates")
 }
 
+/// [`cheapest`] among orders already computed (listed in [`Candidate`]'s order, so that ties go
+/// the same way), each costed here for nodes of `weights` unknowns.
+pub fn cheapest_of(graph: &Graph, weights: &[usize], orders: Vec<(Candidate, Vec<u32>)>) -> (Candidate, Vec<u32>, Cost) {
+    orders
+        .into_iter()
+        .map(|(c, order)| {
+            let cost = predicted_cost(graph, &order, weights);
+            (c, order, cost)
+        })
+        .reduce(|best, c| if c.2.flops < best.2.flops { c } else { best })
+        .expect("at least one candidate")
+}
+
 /// Lower triangle (with the diagonal) of the adjacency pattern, optionally permuted: with
 /// `order`, row/column k is node `order[k]`.
 fn lower_pattern(graph: &Graph, order: Option<&[u32]>) -> SymbolicSparseColMat<usize> {

@@ -18,14 +18,14 @@
 //!
 //! Cost: `L M⁻¹ L` couples nodes two rings apart, so the factor fills in heavily (50M entries
 //! for 25k unknowns on a 2.6k-node body). Every node's free slots stay together: the
-//! fill-reducing order is found on the node graph ([`fill_reducing_order`]), the numeric
+//! fill-reducing order is found on the node graph ([`fill_reducing_order_of`]), the numeric
 //! factorization is supernodal over faer's symbolic analysis, the two halves of the
 //! elimination tree on two threads above 1 G predicted flops ([`Cholesky::refactor`]), and the
 //! solves sweep the factor once per direction for all three coordinates, on two threads
 //! ([`Cholesky::solve_rows3`]).
 //!
 //! Bounded: the factor's size and time are predicted from the symbolic count before anything
-//! is allocated ([`fill_reducing_order`]), and when the predicted peak is over the memory
+//! is allocated ([`fill_reducing_order_of`]), and when the predicted peak is over the memory
 //! budget the step is solved by preconditioned conjugate gradients instead (per-key block
 //! Jacobi, warm-started from the previous solution; see [`crate::physics::pcg`]): slower per
 //! iteration, but in memory that grows like the matrix, not like its factor.
@@ -44,7 +44,7 @@ use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::cholesky::{Cholesky, PARALLEL_FACTOR_FLOPS};
-use crate::physics::ordering::{cheapest, expand, postorder, predicted_cost, Candidate, Cost, FillOrdering, Graph};
+use crate::physics::ordering::{cheapest_of, expand, minimum_degree, multilevel_dissection, nested_dissection, postorder, predicted_cost, Candidate, Cost, FillOrdering, Graph};
 use crate::physics::csr::Csr;
 use crate::physics::pcg::{pcg, BlockJacobi, SymmetricOperator};
 
@@ -224,12 +224,41 @@ fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSize {
 /// The order of every key's block in the iterative step's preconditioner, and the blocks'
 /// predicted cost: the node graph ordered by the better of nested dissection and minimum
 /// degree, two unknowns (position, velocity) per node and key.
-fn key_block_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> (Vec<u32>, Cost) {
-    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+fn key_block_order(orders: &NodeOrders, unknowns: &Unknowns) -> (Vec<u32>, Cost) {
+    let graph = &orders.graph;
     let weights = vec![2usize; unknowns.nodes];
-    let (_, order, cost) = cheapest(&graph, rest, &weights);
+    let (_, order, cost) = orders.cheapest(&weights);
     let keys = (unknowns.slots.count() / 2) as f64;
     (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
+}
+
+/// The node graph of the normal matrix (its vertices the nodes, its edges the nodes' coupled
+/// unknowns) and its candidate orders that do not depend on the nodes' weights, computed once for both the direct step's order
+/// ([`fill_reducing_order_of`]) and the iterative step's key blocks (`key_block_order`):
+/// the graph is the same for both, only the weights of its vertices differ.
+pub struct NodeOrders {
+    graph: Graph,
+    dissection: Vec<u32>,
+    degree: Vec<u32>,
+}
+
+impl NodeOrders {
+    /// Geometric nested dissection (at the nodes' `rest` positions) and minimum degree of the
+    /// node graph of `lower`.
+    pub fn new(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point]) -> NodeOrders {
+        let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
+        let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
+        NodeOrders { graph, dissection, degree }
+    }
+
+    /// The candidate of fewest predicted flops for nodes of `weights` unknowns: the two orders
+    /// held and METIS's multilevel dissection, which weighs the nodes ([`cheapest_of`]).
+    fn cheapest(&self, weights: &[usize]) -> (Candidate, Vec<u32>, Cost) {
+        let mut orders = vec![(Candidate::Geometric, self.dissection.clone())];
+        orders.extend(multilevel_dissection(&self.graph, weights).map(|o| (Candidate::Multilevel, o)));
+        orders.push((Candidate::MinimumDegree, self.degree.clone()));
+        cheapest_of(&self.graph, weights, orders)
+    }
 }
 
 /// Bytes a direct factorization needs per predicted factor entry, measured as the whole
@@ -515,18 +544,24 @@ pub struct FillReducingOrder {
     pub cost: Cost,
 }
 
+/// [`fill_reducing_order_of`] with the node graph's orders computed here.
+#[cfg(test)]
+pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+    fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
+}
+
 /// Order the normal matrix by its node graph: every node's free slots are contiguous unknowns
 /// (node-major layout) and stay together, so ordering the 2-ring graph of the nodes (a few
 /// thousand vertices) orders the matrix (tens of thousands of rows).
 ///
-/// Three candidates ([`cheapest`]), and the one with fewer predicted flops wins: geometric
+/// Three node orders ([`cheapest`](crate::physics::ordering::cheapest)), and the one with fewer predicted flops wins: geometric
 /// nested dissection (best on large 3D bodies: 85 G vs 101 G flops for minimum degree on the
 /// 2.6k-node benchmark body, whose matrix faer's AMD orders to 127 G), METIS's multilevel
 /// nested dissection (within a few percent of it, either ahead: 1.45e12 against 1.54e12 flops
 /// on the 10k-node prism, 3.84e12 against 3.68e12 on a 13k-node one) and minimum degree
 /// (better on small or thin bodies: 0.37 G vs 0.98 G on DINO). All three and their
-/// predictions take about 1.5 CPU s on the 10k-node body. With many keys a third candidate is weighed on the finer graph of (node,
-/// key) blocks: the keys as the top-level separators (the middle key last, each half ordered
+/// predictions take about 1.5 CPU s on the 10k-node body. With many keys one more candidate is
+/// weighed on the finer graph of (node, key) blocks: the keys as the top-level separators (the middle key last, each half ordered
 /// the same way, every key's nodes in the better node order), which cuts the fill that the
 /// coupling of neighbouring keys causes once there are more than about ten keys
 /// ([`KEY_SEPARATOR_MIN_KEYS`]). The winner is put in postorder of its elimination tree (same
@@ -536,24 +571,18 @@ pub struct FillReducingOrder {
 /// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
 /// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
 /// direct step could use it.
-pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+///
+/// `orders` are the node graph's orders ([`NodeOrders`]), shared with the iterative step's key blocks.
+pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, orders: &NodeOrders, weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
-    let mut block_of = vec![0u32; unknowns.count()];
     let mut block_start = vec![0usize; nodes + 1];
     for a in 0..nodes {
-        let mut count = 0;
-        for s in 0..slots {
-            if let Some(u) = unknowns.get(a, s) {
-                block_of[u] = a as u32;
-                count += 1;
-            }
-        }
-        block_start[a + 1] = block_start[a] + count;
+        block_start[a + 1] = block_start[a] + (0..slots).filter(|&s| unknowns.get(a, s).is_some()).count();
     }
-    let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &block_of, nodes);
+    let graph = &orders.graph;
     let weights: Vec<usize> = (0..nodes).map(|a| block_start[a + 1] - block_start[a]).collect();
-    let (candidate, order, cost) = cheapest(&graph, rest, &weights);
+    let (candidate, order, cost) = orders.cheapest(&weights);
     let name = match candidate {
         Candidate::Geometric => "nested dissection (nodes)",
         Candidate::Multilevel => "multilevel nested dissection (nodes)",
@@ -561,13 +590,13 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
     };
     let keys = slots / 2;
     if keys >= KEY_SEPARATOR_MIN_KEYS && weigh_keys(&cost) {
-        if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
+        if let Some(by_keys) = key_separator_order(lower, unknowns, order) {
             if by_keys.cost.flops < by_keys.node_cost.flops {
                 return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
             }
         }
     }
-    FillReducingOrder { perm: expand(&postorder(&graph, &order), &block_start), name, cost }
+    FillReducingOrder { perm: expand(&postorder(graph, order), &block_start), name, cost }
 }
 
 /// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
@@ -587,7 +616,7 @@ struct KeySeparators {
     node_cost: Cost,
 }
 
-/// See [`fill_reducing_order`]. Blocks are (node `a`, key `k`) with id `k * nodes + a`, holding
+/// See [`fill_reducing_order_of`]. Blocks are (node `a`, key `k`) with id `k * nodes + a`, holding
 /// that node's free position and velocity of key `k`.
 fn key_separator_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, node_order: &[u32]) -> Option<KeySeparators> {
     let nodes = unknowns.nodes;
@@ -677,7 +706,9 @@ impl GlobalStep {
         let a = assemble(objective, &unknowns, &coefficients);
         let assemble_seconds = t0.elapsed().as_secs_f64();
         let t1 = std::time::Instant::now();
-        let (block_order, block_cost) = key_block_order(&a, &unknowns, &objective.elastic.rest);
+        // One node graph and its two orders for both candidates' orders.
+        let node_orders = NodeOrders::new(&a, &unknowns, &objective.elastic.rest);
+        let (block_order, block_cost) = key_block_order(&node_orders, &unknowns);
         let size = modal_size(objective, &unknowns);
         // The key-separator order only where the direct step could use it: even cut by
         // KEY_SEPARATOR_MAX_GAIN and factorized at the parallel rate, would the node order's
@@ -691,7 +722,8 @@ impl GlobalStep {
                 m == Method::Direct || seconds <= MODAL_MIN_DIRECT_SECONDS
             }
         };
-        let order = fill_reducing_order(&a, &unknowns, &objective.elastic.rest, could_be_direct);
+        let order = fill_reducing_order_of(&a, &unknowns, &node_orders, could_be_direct);
+        drop(node_orders);
         // Two threads pay off only for large factorizations.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
@@ -1418,7 +1450,7 @@ mod modal_phases {
         let a = timed("assemble", || assemble(&obj, &unknowns, &c));
         let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest, |_| true));
         println!("  {} {:.3e} flops", order.name, order.cost.flops);
-        let _ = timed("key_block_order", || key_block_order(&a, &unknowns, &el.rest));
+        let _ = timed("key_block_order", || key_block_order(&NodeOrders::new(&a, &unknowns, &el.rest), &unknowns));
         let size = modal_size(&obj, &unknowns);
         println!("  modal size {size:?}, predicted {:?}", size.predicted());
         let _ = timed("fill_reducing_order without keys", || fill_reducing_order(&a, &unknowns, &el.rest, |_| false));
