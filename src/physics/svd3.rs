@@ -11,8 +11,9 @@
 //! QR divides once per column (a reciprocal, then products) and takes three square roots:
 //! divisions and square roots are what a decomposition waits on. A batch computes the
 //! rank-deficient fallback of `U` (a square root and a division) only when some lane needs
-//! it. The stopping rule stays tight (`OFF_TOLERANCE`): at 1e-24 the fourth sweep is saved in about a quarter of 8-matrix batches of near rotations, but
-//! reconstructions drift to 2e-12 of `|F|` (1e-20: 2e-10).
+//! it. The stopping rule stays tight (`OFF_TOLERANCE`): at 1e-24 the fourth sweep is saved in
+//! about a quarter of 8-matrix batches of near rotations, but reconstructions drift to 2e-12
+//! of `|F|` (1e-20: 2e-10).
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
 //! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
