@@ -358,8 +358,8 @@ mod tests {
     #[test]
     fn square_root_of_the_max_is_the_max_of_the_square_roots() {
         let mut rng = Rng(0x5eed);
-        for k in 0..100_000 {
-            let e = [(k % 7) as i32 - 3, (k % 5) as i32 - 2, 0].map(|p| 10f64.powi(p));
+        for k in 0..100_000i32 {
+            let e = [k % 7 - 3, k % 5 - 2, 0].map(|p| 10f64.powi(p));
             let x: [f64; 3] = std::array::from_fn(|i| (rng.next() * e[i]).abs());
             // Near ties, where a rounding could tell them apart.
             let x = if k % 3 == 0 { [x[0], x[0] * (1.0 + f64::EPSILON), x[2]] } else { x };
