@@ -8,10 +8,12 @@
 //! Method: cyclic Jacobi on `FᵀF` gives `V`; a Gram-Schmidt QR of `F V` gives `U` and the
 //! signed singular values (so small `σ` are read off `F` directly, not as square roots of
 //! small eigenvalues). Each Jacobi rotation costs two square roots and one division, and the
-//! QR divides once per column (a reciprocal, then products): divisions and square roots are
-//! what a decomposition waits on. The stopping rule stays tight (`OFF_TOLERANCE`): at 1e-24 the
-//! fourth sweep is saved in about a quarter of 8-matrix batches of near rotations, but
-//! reconstructions drift to 2e-12 of `|F|` (1e-20: 2e-10).
+//! QR divides once per column (a reciprocal, then products) and takes three square roots:
+//! divisions and square roots are what a decomposition waits on. A batch computes the
+//! rank-deficient fallback of `U` (a square root and a division) only when some lane needs
+//! it. The stopping rule stays tight (`OFF_TOLERANCE`): at 1e-24 the fourth sweep is saved in
+//! about a quarter of 8-matrix batches of near rotations, but reconstructions drift to 2e-12
+//! of `|F|` (1e-20: 2e-10).
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
 //! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
@@ -141,9 +143,12 @@ pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
     let b = mul_lanes(f, &v);
     let (b1, b2, b3) = (column(&b, 0), column(&b, 1), column(&b, 2));
     let one = Lanes::splat(1.0);
-    let scale = dot(b1, b1).sqrt().max(dot(b2, b2).sqrt()).max(dot(b3, b3).sqrt());
+    // The largest column norm, one square root: sqrt is monotonic and correctly rounded, so
+    // sqrt(max) is the max of the square roots bit for bit.
+    let b11 = dot(b1, b1);
+    let scale = b11.max(dot(b2, b2)).max(dot(b3, b3)).sqrt();
     let tiny = Lanes::splat(1e-300).max(scale * Lanes::splat(1e-15));
-    let s1 = dot(b1, b1).sqrt();
+    let s1 = b11.sqrt();
     let i1 = one / s1;
     let u1 = select3(s1.gt(tiny), [b1[0] * i1, b1[1] * i1, b1[2] * i1], column(&v, 0));
     let r12 = dot(u1, b2);
@@ -151,7 +156,9 @@ pub(crate) fn svd_lanes<const N: usize>(f: &M3<N>) -> (M3<N>, V3<N>, M3<N>) {
     let s2 = dot(w2, w2).sqrt();
     let full = s2.gt(tiny);
     let i2 = one / s2;
-    let u2 = select3(full, [w2[0] * i2, w2[1] * i2, w2[2] * i2], any_orthogonal(u1));
+    let u2 = [w2[0] * i2, w2[1] * i2, w2[2] * i2];
+    // The fallback's square root and division only for a batch with a rank-deficient lane.
+    let u2 = if (!full).any() { select3(full, u2, any_orthogonal(u1)) } else { u2 };
     let u3 = cross(u1, u2);
     let s3 = dot(u3, b3);
     let u = [[u1[0], u2[0], u3[0]], [u1[1], u2[1], u3[1]], [u1[2], u2[2], u3[2]]];
@@ -343,6 +350,21 @@ mod tests {
             } else {
                 assert!(*rec <= 1e-12, "family {family}: reconstruction {rec:e} (reference {rec_reference:e})");
             }
+        }
+    }
+
+    /// The QR's scale takes one square root of the largest squared column norm: the same bytes
+    /// as the largest of the three square roots (sqrt is monotonic and correctly rounded).
+    #[test]
+    fn square_root_of_the_max_is_the_max_of_the_square_roots() {
+        let mut rng = Rng(0x5eed);
+        for k in 0..100_000i32 {
+            let e = [k % 7 - 3, k % 5 - 2, 0].map(|p| 10f64.powi(p));
+            let x: [f64; 3] = std::array::from_fn(|i| (rng.next() * e[i]).abs());
+            // Near ties, where a rounding could tell them apart.
+            let x = if k % 3 == 0 { [x[0], x[0] * (1.0 + f64::EPSILON), x[2]] } else { x };
+            let one = x[0].max(x[1]).max(x[2]).sqrt();
+            assert_eq!(one.to_bits(), x[0].sqrt().max(x[1].sqrt()).max(x[2].sqrt()).to_bits(), "{x:?}");
         }
     }
 
