@@ -222,10 +222,9 @@ fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSize {
 }
 
 /// The order of every key's block in the iterative step's preconditioner, and the blocks'
-/// predicted cost: the node graph ordered by the better of nested dissection and minimum
-/// degree, two unknowns (position, velocity) per node and key.
+/// predicted cost: the node graph's cheapest order ([`NodeOrders::cheapest`]), two unknowns
+/// (position, velocity) per node and key.
 fn key_block_order(orders: &NodeOrders, unknowns: &Unknowns) -> (Vec<u32>, Cost) {
-    let graph = &orders.graph;
     let weights = vec![2usize; unknowns.nodes];
     let (_, order, cost) = orders.cheapest(&weights);
     let keys = (unknowns.slots.count() / 2) as f64;
@@ -590,13 +589,13 @@ pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unkno
     };
     let keys = slots / 2;
     if keys >= KEY_SEPARATOR_MIN_KEYS && weigh_keys(&cost) {
-        if let Some(by_keys) = key_separator_order(lower, unknowns, order) {
+        if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
             if by_keys.cost.flops < by_keys.node_cost.flops {
                 return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
             }
         }
     }
-    FillReducingOrder { perm: expand(&postorder(graph, order), &block_start), name, cost }
+    FillReducingOrder { perm: expand(&postorder(graph, &order), &block_start), name, cost }
 }
 
 /// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
