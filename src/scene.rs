@@ -764,6 +764,19 @@ impl KeyframeSpec {
         if let Some(i) = self.times.iter().position(|t| !t.is_finite()) {
             return invalid(format!("[keyframes] times[{i}] is not a number"), "use seconds, e.g. 0.5");
         }
+        for (i, twist) in self.meshes.iter().enumerate().filter_map(|(i, m)| Some((i, m.twist()?))) {
+            // Non-finite values would also not survive the scene's trip through a stage file
+            // (JSON has no infinity).
+            if !twist.degrees.is_finite() {
+                return invalid(format!("[keyframes] meshes[{i}] has a twist of {} degrees", twist.degrees), "give the twist angle as a finite number of degrees, e.g. 90.0");
+            }
+            if !(twist.axial_scale.is_finite() && twist.axial_scale > 0.0) {
+                return invalid(
+                    format!("[keyframes] meshes[{i}] has a twist with axial_scale = {} (it scales the axial coordinate: a zero or negative one flattens or mirrors the mesh)", twist.axial_scale),
+                    "give a positive axial_scale, e.g. 0.8, or leave it out (1)",
+                );
+            }
+        }
         for i in 1..n {
             if self.times[i] < self.times[i - 1] {
                 return invalid(
@@ -1102,6 +1115,12 @@ rest = "rest.mesh"
         for bad in ["[0.0, 1.0]", "[0.0, nan, 1.0]"] {
             let e = Scene::parse(&text.replace("[0.0, 1.5, -2.0]", bad)).unwrap_err().to_string();
             assert!(e.contains("expected 3 components") || e.contains("offset must be three finite numbers"), "{e}");
+        }
+        // A twist the solver could not use, or a stage file could not carry (found by the fuzzer).
+        for (bad, says) in [("degrees = inf", "twist of inf degrees"), ("degrees = nan", "twist of NaN degrees"), ("axial_scale = 0.0", "axial_scale = 0")] {
+            let twist = if bad.starts_with("degrees") { format!("{bad}, axial_scale = 0.8") } else { format!("degrees = 180.0, {bad}") };
+            let e = Scene::parse(&text.replace("degrees = 180.0, axial_scale = 0.8", &twist)).unwrap_err().to_string();
+            assert!(e.contains("meshes[1]") && e.contains(says) && e.contains("fix:"), "{e}");
         }
         assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Mesh("rest.mesh".into()));
         let fixed = s.keyframes.unwrap().fixed.unwrap();
