@@ -47,7 +47,7 @@ use super::energy::{spring_hessian, Definiteness, SpringSystem};
 use super::springs::Springs;
 use crate::error::{Error, Result};
 use crate::mesh::{norm, Point};
-use crate::physics::ordering::{cheapest, expand, postorder, Candidate, Graph};
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
 use crate::physics::cholesky::PARALLEL_FACTOR_FLOPS;
 
 /// When to stop and when to trust the exact Hessian.
@@ -226,11 +226,13 @@ impl Newton {
         }
         let graph = Graph { xadj, adj };
         let weights = vec![3usize; n];
-        let (candidate, order, cost) = cheapest(&graph, coords, &weights);
-        let ordering = match candidate {
-            Candidate::Geometric => "nested dissection (vertices)",
-            Candidate::Multilevel => "multilevel nested dissection (vertices)",
-            Candidate::MinimumDegree => "minimum degree (vertices)",
+        let dissection = nested_dissection(&graph, coords);
+        let degree = minimum_degree(&graph);
+        let (cost_nd, cost_md) = (predicted_cost(&graph, &dissection, &weights), predicted_cost(&graph, &degree, &weights));
+        let (order, ordering, cost) = if cost_nd.flops <= cost_md.flops {
+            (dissection, "nested dissection (vertices)", cost_nd)
+        } else {
+            (degree, "minimum degree (vertices)", cost_md)
         };
         let block_start: Vec<usize> = (0..=n).map(|v| 3 * v).collect();
         let perm = expand(&postorder(&graph, &order), &block_start);

@@ -15,12 +15,6 @@
 //! smallest for its balance wins. Everything is deterministic: ties break by candidate order and
 //! node index.
 //!
-//! Multilevel nested dissection ([`multilevel_dissection`], METIS's) is the other dissection:
-//! it bisects the graph alone (no coordinates), coarsening it and refining the separator by
-//! Fiduccia-Mattheyses on every level. On the prism bodies the two are within a few percent of
-//! each other in predicted flops, either ahead; [`cheapest`] takes the better of both and of
-//! minimum degree for each body.
-//!
 //! [`predicted_cost`] compares orders in milliseconds from a symbolic factorization of the node
 //! graph with node weights (slots per node); [`postorder`] renumbers an order along its
 //! elimination tree so that subtrees are contiguous; [`expand`] turns a node order into an
@@ -390,96 +384,6 @@ pub fn minimum_degree(graph: &Graph) -> Vec<u32> {
     perm.into_iter().map(|v| v as u32).collect()
 }
 
-/// Separators METIS computes at every level of [`multilevel_dissection`], keeping the smallest
-/// (its `NSEPS`; default 1). Predicted flops on the prism bodies (5 keys; 9.4k, 10.4k, 13.1k
-/// nodes): 1 separator 8.40e11, 1.62e12, 4.15e12; 3: 8.08e11, 1.54e12, 3.71e12; 8: 8.07e11,
-/// 1.45e12, 3.84e12 (geometric dissection: 8.14e11, 1.54e12, 3.68e12), for 0.4-0.9 CPU s.
-const SEPARATORS_TRIED: i32 = 8;
-
-/// Multilevel nested dissection of `graph` by METIS (`METIS_NodeND`): the graph is coarsened
-/// by heavy-edge matchings, the coarsest one bisected, the separator refined by
-/// Fiduccia-Mattheyses on every level back up, and the small parts ordered by minimum degree.
-/// Node `v` weighs `weights[v]` (its unknowns; at least 1), so the halves balance unknowns.
-/// METIS seeds its random choices with a fixed seed: the same graph gives the same order.
-/// `None` when METIS reports an error (the other candidates remain).
-pub fn multilevel_dissection(graph: &Graph, weights: &[usize]) -> Option<Vec<u32>> {
-    multilevel_dissection_with(graph, weights, &[])
-}
-
-/// [`multilevel_dissection`] with METIS options set (`(METIS_OPTION_*, value)`).
-pub(crate) fn multilevel_dissection_with(graph: &Graph, weights: &[usize], set: &[(usize, i32)]) -> Option<Vec<u32>> {
-    use metis_sys as m;
-    let n = graph.node_count();
-    if n == 0 || graph.adj.len() >= i32::MAX as usize {
-        return None;
-    }
-    let mut xadj: Vec<m::idx_t> = graph.xadj.iter().map(|&v| v as m::idx_t).collect();
-    let mut adjncy: Vec<m::idx_t> = graph.adj.iter().map(|&v| v as m::idx_t).collect();
-    let mut vwgt: Vec<m::idx_t> = weights.iter().map(|&w| w.clamp(1, i32::MAX as usize) as m::idx_t).collect();
-    let mut options = [0 as m::idx_t; m::METIS_NOPTIONS as usize];
-    let (mut perm, mut iperm) = (vec![0 as m::idx_t; n], vec![0 as m::idx_t; n]);
-    let mut nvtxs = n as m::idx_t;
-    // SAFETY: the arrays have the lengths METIS reads and writes (n + 1, 2 x edges, n, the
-    // option count, n, n), and it keeps no pointer past the call.
-    let status = unsafe {
-        m::METIS_SetDefaultOptions(options.as_mut_ptr());
-        options[m::moptions_et_METIS_OPTION_NUMBERING as usize] = 0;
-        options[m::moptions_et_METIS_OPTION_NSEPS as usize] = SEPARATORS_TRIED;
-        for &(o, v) in set {
-            options[o] = v;
-        }
-        m::METIS_NodeND(&mut nvtxs, xadj.as_mut_ptr(), adjncy.as_mut_ptr(), vwgt.as_mut_ptr(), options.as_mut_ptr(), perm.as_mut_ptr(), iperm.as_mut_ptr())
-    };
-    // METIS's `perm[k]` is the vertex eliminated k-th (its `iperm` the inverse).
-    (status == m::rstatus_et_METIS_OK).then(|| perm.into_iter().map(|v| v as u32).collect())
-}
-
-/// The orders a node graph is given: geometric nested dissection ([`nested_dissection`]),
-/// METIS's multilevel nested dissection ([`multilevel_dissection`]) and minimum degree
-/// ([`minimum_degree`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Candidate {
-    Geometric,
-    Multilevel,
-    MinimumDegree,
-}
-
-/// Every candidate order of `graph` (node coordinates `coords`, unknowns per node `weights`)
-/// with its predicted cost, in the order of [`Candidate`]'s variants; [`cheapest`] picks one.
-pub fn candidates(graph: &Graph, coords: &[Point], weights: &[usize]) -> Vec<(Candidate, Vec<u32>, Cost)> {
-    let mut out = Vec::with_capacity(3);
-    let mut add = |c: Candidate, order: Vec<u32>| {
-        let cost = predicted_cost(graph, &order, weights);
-        out.push((c, order, cost));
-    };
-    add(Candidate::Geometric, nested_dissection(graph, coords));
-    if let Some(order) = multilevel_dissection(graph, weights) {
-        add(Candidate::Multilevel, order);
-    }
-    add(Candidate::MinimumDegree, minimum_degree(graph));
-    out
-}
-
-/// The candidate order of fewest predicted flops (the first of equals, in [`candidates`]'
-/// order): geometric dissection wins ties, so a body it orders as well as METIS keeps its
-/// order and its bytes.
-pub fn cheapest(graph: &Graph, coords: &[Point], weights: &[usize]) -> (Candidate, Vec<u32>, Cost) {
-    candidates(graph, coords, weights).into_iter().reduce(|best, c| if c.2.flops < best.2.flops { c } else { best }).expect("at least two candidates")
-}
-
-/// [`cheapest`] among orders already computed (listed in [`Candidate`]'s order, so that ties go
-/// the same way), each costed here for nodes of `weights` unknowns.
-pub fn cheapest_of(graph: &Graph, weights: &[usize], orders: Vec<(Candidate, Vec<u32>)>) -> (Candidate, Vec<u32>, Cost) {
-    orders
-        .into_iter()
-        .map(|(c, order)| {
-            let cost = predicted_cost(graph, &order, weights);
-            (c, order, cost)
-        })
-        .reduce(|best, c| if c.2.flops < best.2.flops { c } else { best })
-        .expect("at least one candidate")
-}
-
 /// Lower triangle (with the diagonal) of the adjacency pattern, optionally permuted: with
 /// `order`, row/column k is node `order[k]`.
 fn lower_pattern(graph: &Graph, order: Option<&[u32]>) -> SymbolicSparseColMat<usize> {
@@ -680,45 +584,6 @@ mod tests {
         assert!(plane.is_some(), "the top separator is the middle plane");
         // Deterministic.
         assert_eq!(order, nested_dissection(&g, &coords));
-    }
-
-    #[test]
-    fn multilevel_dissection_is_a_deterministic_fill_reducing_permutation() {
-        let (g, coords) = grid(9);
-        let n = g.node_count();
-        // Uneven weights, as held nodes have fewer free slots (and none: weight 0 counts as 1).
-        let weights: Vec<usize> = (0..n).map(|v| [0, 2, 4][v % 3]).collect();
-        let order = multilevel_dissection(&g, &weights).expect("METIS orders a grid");
-        let mut sorted = order.clone();
-        sorted.sort_unstable();
-        assert_eq!(sorted, (0..n as u32).collect::<Vec<_>>());
-        assert_eq!(multilevel_dissection(&g, &weights), Some(order.clone()), "the same order twice");
-        // Far fewer flops than the natural (banded) order, within 2x of the geometric planes'.
-        let cost = predicted_cost(&g, &order, &weights).flops;
-        let natural = predicted_cost(&g, &(0..n as u32).collect::<Vec<_>>(), &weights).flops;
-        let geometric = predicted_cost(&g, &nested_dissection(&g, &coords), &weights).flops;
-        assert!(cost < 0.5 * natural && cost < 2.0 * geometric, "{cost:e} vs natural {natural:e}, geometric {geometric:e}");
-        // Isolated nodes (held at every key) and an empty graph.
-        let lone = Graph { xadj: vec![0, 1, 2, 2], adj: vec![1, 0] };
-        let order = multilevel_dissection(&lone, &[1, 1, 0]).unwrap();
-        assert_eq!({ let mut o = order.clone(); o.sort_unstable(); o }, vec![0, 1, 2]);
-        assert_eq!(multilevel_dissection(&Graph { xadj: vec![0], adj: vec![] }, &[]), None);
-    }
-
-    #[test]
-    fn the_cheapest_candidate_has_the_fewest_predicted_flops() {
-        for k in [4, 9] {
-            let (g, coords) = grid(k);
-            let weights = vec![3; g.node_count()];
-            let all = candidates(&g, &coords, &weights);
-            assert_eq!(all.iter().map(|c| c.0).collect::<Vec<_>>(), [Candidate::Geometric, Candidate::Multilevel, Candidate::MinimumDegree]);
-            let (candidate, order, cost) = cheapest(&g, &coords, &weights);
-            let least = all.iter().map(|c| c.2.flops).fold(f64::INFINITY, f64::min);
-            assert_eq!(cost.flops, least);
-            let first = all.iter().find(|c| c.2.flops == least).unwrap();
-            assert_eq!((candidate, &order), (first.0, &first.1), "the first of equals");
-            assert_eq!(predicted_cost(&g, &order, &weights), cost);
-        }
     }
 
     #[test]

@@ -44,7 +44,7 @@ use super::unknowns::Unknowns;
 use crate::error::{Error, Result};
 use crate::mesh::Point;
 use crate::physics::cholesky::{Cholesky, PARALLEL_FACTOR_FLOPS};
-use crate::physics::ordering::{cheapest_of, expand, minimum_degree, multilevel_dissection, nested_dissection, postorder, predicted_cost, Candidate, Cost, FillOrdering, Graph};
+use crate::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 use crate::physics::csr::Csr;
 use crate::physics::pcg::{pcg, BlockJacobi, SymmetricOperator};
 
@@ -222,17 +222,19 @@ fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSize {
 }
 
 /// The order of every key's block in the iterative step's preconditioner, and the blocks'
-/// predicted cost: the node graph's cheapest order ([`NodeOrders::cheapest`]), two unknowns
-/// (position, velocity) per node and key.
+/// predicted cost: the node graph ordered by the better of nested dissection and minimum
+/// degree, two unknowns (position, velocity) per node and key.
 fn key_block_order(orders: &NodeOrders, unknowns: &Unknowns) -> (Vec<u32>, Cost) {
+    let graph = &orders.graph;
     let weights = vec![2usize; unknowns.nodes];
-    let (_, order, cost) = orders.cheapest(&weights);
+    let (cost_nd, cost_md) = (predicted_cost(graph, &orders.dissection, &weights), predicted_cost(graph, &orders.degree, &weights));
     let keys = (unknowns.slots.count() / 2) as f64;
-    (order, Cost { flops: keys * cost.flops, entries: keys * cost.entries })
+    let (order, cost) = if cost_nd.flops <= cost_md.flops { (&orders.dissection, cost_nd) } else { (&orders.degree, cost_md) };
+    (order.clone(), Cost { flops: keys * cost.flops, entries: keys * cost.entries })
 }
 
 /// The node graph of the normal matrix (its vertices the nodes, its edges the nodes' coupled
-/// unknowns) and its candidate orders that do not depend on the nodes' weights, computed once for both the direct step's order
+/// unknowns) and its two candidate orders, computed once for both the direct step's order
 /// ([`fill_reducing_order_of`]) and the iterative step's key blocks (`key_block_order`):
 /// the graph is the same for both, only the weights of its vertices differ.
 pub struct NodeOrders {
@@ -248,15 +250,6 @@ impl NodeOrders {
         let graph = Graph::of_blocks(lower.symbolic().col_ptr(), lower.symbolic().row_idx(), &node_blocks(unknowns), unknowns.nodes);
         let (dissection, degree) = (nested_dissection(&graph, rest), minimum_degree(&graph));
         NodeOrders { graph, dissection, degree }
-    }
-
-    /// The candidate of fewest predicted flops for nodes of `weights` unknowns: the two orders
-    /// held and METIS's multilevel dissection, which weighs the nodes ([`cheapest_of`]).
-    fn cheapest(&self, weights: &[usize]) -> (Candidate, Vec<u32>, Cost) {
-        let mut orders = vec![(Candidate::Geometric, self.dissection.clone())];
-        orders.extend(multilevel_dissection(&self.graph, weights).map(|o| (Candidate::Multilevel, o)));
-        orders.push((Candidate::MinimumDegree, self.degree.clone()));
-        cheapest_of(&self.graph, weights, orders)
     }
 }
 
@@ -553,14 +546,12 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
 /// (node-major layout) and stay together, so ordering the 2-ring graph of the nodes (a few
 /// thousand vertices) orders the matrix (tens of thousands of rows).
 ///
-/// Three node orders ([`cheapest`](crate::physics::ordering::cheapest)), and the one with fewer predicted flops wins: geometric
-/// nested dissection (best on large 3D bodies: 85 G vs 101 G flops for minimum degree on the
-/// 2.6k-node benchmark body, whose matrix faer's AMD orders to 127 G), METIS's multilevel
-/// nested dissection (within a few percent of it, either ahead: 1.45e12 against 1.54e12 flops
-/// on the 10k-node prism, 3.84e12 against 3.68e12 on a 13k-node one) and minimum degree
-/// (better on small or thin bodies: 0.37 G vs 0.98 G on DINO). All three and their
-/// predictions take about 1.5 CPU s on the 10k-node body. With many keys one more candidate is
-/// weighed on the finer graph of (node, key) blocks: the keys as the top-level separators (the middle key last, each half ordered
+/// Two candidates, and the one with fewer predicted flops wins: geometric nested dissection
+/// (best on large 3D bodies: 85 G vs 101 G flops for minimum degree on the 2.6k-node benchmark
+/// body, whose matrix faer's AMD orders to 127 G) and minimum degree (better on small or thin
+/// bodies: 0.37 G vs 0.98 G on DINO). Both and their predictions take about 60 ms on the
+/// 2.6k-node body. With many keys a third candidate is weighed on the finer graph of (node,
+/// key) blocks: the keys as the top-level separators (the middle key last, each half ordered
 /// the same way, every key's nodes in the better node order), which cuts the fill that the
 /// coupling of neighbouring keys causes once there are more than about ten keys
 /// ([`KEY_SEPARATOR_MIN_KEYS`]). The winner is put in postorder of its elimination tree (same
@@ -581,21 +572,21 @@ pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unkno
     }
     let graph = &orders.graph;
     let weights: Vec<usize> = (0..nodes).map(|a| block_start[a + 1] - block_start[a]).collect();
-    let (candidate, order, cost) = orders.cheapest(&weights);
-    let name = match candidate {
-        Candidate::Geometric => "nested dissection (nodes)",
-        Candidate::Multilevel => "multilevel nested dissection (nodes)",
-        Candidate::MinimumDegree => "minimum degree (nodes)",
+    let (cost_nd, cost_md) = (predicted_cost(graph, &orders.dissection, &weights), predicted_cost(graph, &orders.degree, &weights));
+    let (order, name, cost) = if cost_nd.flops <= cost_md.flops {
+        (&orders.dissection, "nested dissection (nodes)", cost_nd)
+    } else {
+        (&orders.degree, "minimum degree (nodes)", cost_md)
     };
     let keys = slots / 2;
     if keys >= KEY_SEPARATOR_MIN_KEYS && weigh_keys(&cost) {
-        if let Some(by_keys) = key_separator_order(lower, unknowns, &order) {
+        if let Some(by_keys) = key_separator_order(lower, unknowns, order) {
             if by_keys.cost.flops < by_keys.node_cost.flops {
                 return FillReducingOrder { perm: by_keys.perm, name: "keys as separators, nodes inside", cost: by_keys.cost };
             }
         }
     }
-    FillReducingOrder { perm: expand(&postorder(graph, &order), &block_start), name, cost }
+    FillReducingOrder { perm: expand(&postorder(graph, order), &block_start), name, cost }
 }
 
 /// Keys (slot pairs) from which the key-separator order is weighed (measured: 2.5x fewer
@@ -911,7 +902,6 @@ impl Iterative {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::ordering::nested_dissection;
     use crate::physics::elastic::Elastic;
     use crate::spacetime::solver::objective;
     use crate::spacetime::tests::{keys, material, settings};
@@ -1264,7 +1254,6 @@ mod experiment {
 mod modal_phases {
     use super::experiment::many_keys_problem;
     use super::*;
-    use crate::physics::ordering::{minimum_degree, nested_dissection};
     use crate::spacetime::solver::objective;
     use crate::spacetime::tests::settings;
     use crate::testing::Rng;
@@ -1301,7 +1290,6 @@ mod modal_phases {
     /// inside its dense kernels) against ours ([`Cholesky::refactor`]: the two halves of the
     /// elimination tree on two threads), medians of `REPEAT` (default 3), wall and CPU
     /// seconds. `CUBE=13 KEYS=5 cargo test --release --lib factor_on_two_cores -- --ignored --nocapture`
-    /// (`PHASES_ONLY=1`: the warm-up and the timed phases alone, `REPEAT=1` once each).
     #[test]
     #[ignore]
     fn factor_on_two_cores() {
@@ -1335,9 +1323,6 @@ mod modal_phases {
         let (total, path) = (p[0] + p[1] + p[2] + p[3] + p[4], p[0].max(p[1]) + p[5] + p[4]);
         println!("phases (thread CPU s): groups {:.3} + {:.3}, top halves {:.3} + {:.3} (longer {:.3}), top dense {:.3}; two-core critical path with the dense blocks on one core {:.3} s: {:.2}x", p[0], p[1], p[2], p[3], p[5], p[4], path, total / path);
         println!("one thread: {:.3e} predicted flops per CPU s of the phases; two cores by the critical path: {:.3e}", order.cost.flops / total, order.cost.flops / path);
-        if std::env::var("PHASES_ONLY").is_ok() {
-            return;
-        }
         let (faer_seq, reference) = run("faer Par::Seq", Par::Seq, false);
         let (faer_par, _) = run("faer Par::rayon", Par::rayon(0), false);
         let (ours_seq, one) = run("ours Par::Seq", Par::Seq, true);
@@ -1346,45 +1331,6 @@ mod modal_phases {
         let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let worst = two.iter().zip(&reference).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
         println!("speed-up over faer Par::Seq: faer rayon {:.2}x, ours seq {:.2}x, ours rayon {:.2}x; largest difference from faer {:.1e} of the largest entry", faer_seq / faer_par, faer_seq / ours_seq, faer_seq / ours_par, worst / scale);
-    }
-
-    /// The node-order candidates' predicted flops and factor entries on the global step's
-    /// matrix of [`many_keys_problem`], and the one chosen with the keys as separators
-    /// weighed: `PRISM=22 MAX_VOLUME=0.0005 KEYS=5 cargo test --release --lib
-    /// node_order_candidates -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn node_order_candidates() {
-        let (el, k, kc) = many_keys_problem();
-        let s = settings();
-        let obj = objective(&el, &k, &s);
-        let unknowns = Unknowns::new(&k, el.node_count());
-        let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization)));
-        let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
-        let weights: Vec<usize> = (0..unknowns.nodes).map(|n| (0..unknowns.slots.count()).filter(|&s| unknowns.get(n, s).is_some()).count()).collect();
-        println!("{} nodes, {kc} keys, {} unknowns, load {}", unknowns.nodes, unknowns.count(), std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
-        for candidate in [crate::physics::ordering::Candidate::Geometric, crate::physics::ordering::Candidate::Multilevel, crate::physics::ordering::Candidate::MinimumDegree] {
-            let (t, c0) = (std::time::Instant::now(), cpu());
-            let order = match candidate {
-                crate::physics::ordering::Candidate::Geometric => nested_dissection(&graph, &el.rest),
-                crate::physics::ordering::Candidate::Multilevel => crate::physics::ordering::multilevel_dissection(&graph, &weights).unwrap(),
-                crate::physics::ordering::Candidate::MinimumDegree => minimum_degree(&graph),
-            };
-            let (wall, cpu_s) = (t.elapsed().as_secs_f64(), cpu() - c0);
-            let cost = predicted_cost(&graph, &order, &weights);
-            println!("{candidate:?}: {:.3e} flops, {:.3e} entries; ordered in {wall:.3} s wall, {cpu_s:.3} CPU s", cost.flops, cost.entries);
-        }
-        // Other METIS options (`METIS_OPTION_*`: 9 SEED, 16 NSEPS, 17 UFACTOR) and unit weights.
-        let unit = vec![1usize; unknowns.nodes];
-        for (name, set, w) in [("nseps 1", vec![(16, 1)], &weights), ("nseps 3", vec![(16, 3)], &weights), ("ufactor 100", vec![(17, 100)], &weights), ("unit weights", vec![], &unit), ("seed 1", vec![(9, 1)], &weights)] {
-            let c0 = cpu();
-            let order = crate::physics::ordering::multilevel_dissection_with(&graph, w, &set).unwrap();
-            let dt = cpu() - c0;
-            let cost = predicted_cost(&graph, &order, &weights);
-            println!("METIS {name}: {:.3e} flops, {:.3e} entries, {dt:.3} CPU s", cost.flops, cost.entries);
-        }
-        let chosen = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
-        println!("chosen: {} {:.3e} flops, {:.3e} entries", chosen.name, chosen.cost.flops, chosen.cost.entries);
     }
 
     /// A field of `/proc/self/status` in bytes (`VmHWM`: the peak resident set, `VmRSS`).
