@@ -294,12 +294,25 @@ impl Elastic {
     /// [`Elastic::local_step_sequential`] into `targets` (cleared first; its capacity is
     /// reused, so an iteration that keeps its buffers allocates nothing). Same bytes.
     pub fn local_step_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>) {
+        self.local_step_scattered(x, targets, None);
+    }
+
+    /// [`Elastic::local_step_sequential_into`], with `jp = J p` of its targets scattered batch by
+    /// batch when `jp` is given.
+    fn local_step_scattered(&self, x: &[Point], targets: &mut Vec<Mat3>, mut jp: Option<&mut [Point]>) {
         let (share, count) = (self.strain_share(), self.tet_count());
         targets.clear();
         targets.reserve(count);
+        if let Some(jp) = jp.as_deref_mut() {
+            jp.fill([0.0; 3]);
+        }
         for first in (0..count).step_by(BATCH) {
             let p = project_batch(&self.deformation_gradients(first, x), share);
-            targets.extend_from_slice(&p[..BATCH.min(count - first)]);
+            let p = &p[..BATCH.min(count - first)];
+            targets.extend_from_slice(p);
+            if let Some(jp) = jp.as_deref_mut() {
+                self.scatter_targets(first, p, jp);
+            }
         }
     }
 
@@ -332,13 +345,25 @@ impl Elastic {
     /// `jacobians` (resized; their capacity reused, so an iteration that keeps its buffers
     /// allocates nothing). Same bytes.
     pub fn local_step_with_jacobian_batches_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>) {
+        self.local_step_with_jacobian_batches_scattered(x, targets, jacobians, None);
+    }
+
+    /// [`Elastic::local_step_with_jacobian_batches_sequential_into`], with `jp = J p` of its
+    /// targets scattered batch by batch when `jp` is given.
+    fn local_step_with_jacobian_batches_scattered(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>, mut jp: Option<&mut [Point]>) {
         let (share, count) = (self.strain_share(), self.tet_count());
         targets.resize(count, [[0.0; 3]; 3]);
         jacobians.resize_with(count.div_ceil(BATCH), JacobianBatch::default);
+        if let Some(jp) = jp.as_deref_mut() {
+            jp.fill([0.0; 3]);
+        }
         let mut f = [[Lanes::splat(0.0); 3]; 3];
         for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.iter_mut()).enumerate() {
             self.deformation_gradient_lanes(c * BATCH, x, None, &mut f);
             project_with_jacobian_lanes_into(&f, share, out, jac);
+            if let Some(jp) = jp.as_deref_mut() {
+                self.scatter_targets(c * BATCH, out, jp);
+            }
         }
     }
 
@@ -346,16 +371,7 @@ impl Elastic {
     /// ([`Elastic::apply_j_sequential`]) in the same pass, as
     /// [`Elastic::local_step_with_jacobian_batches_and_forces_sequential_into`]. The bytes of the two.
     pub fn local_step_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jp: &mut [Point]) {
-        let (share, count) = (self.strain_share(), self.tet_count());
-        targets.clear();
-        targets.reserve(count);
-        jp.fill([0.0; 3]);
-        for first in (0..count).step_by(BATCH) {
-            let p = project_batch(&self.deformation_gradients(first, x), share);
-            let p = &p[..BATCH.min(count - first)];
-            targets.extend_from_slice(p);
-            self.scatter_targets(first, p, jp);
-        }
+        self.local_step_scattered(x, targets, Some(jp));
     }
 
     /// `jp += J p` of the tets from `first` with targets `p`, in tet order.
@@ -378,17 +394,7 @@ impl Elastic {
     /// instead of in a second pass over every tet. The bytes of the two (every node sums its
     /// tets in increasing order from zero).
     pub fn local_step_with_jacobian_batches_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>, jp: &mut [Point]) {
-        let (share, count) = (self.strain_share(), self.tet_count());
-        targets.resize(count, [[0.0; 3]; 3]);
-        jacobians.resize_with(count.div_ceil(BATCH), JacobianBatch::default);
-        jp.fill([0.0; 3]);
-        let mut f = [[Lanes::splat(0.0); 3]; 3];
-        for (c, (out, jac)) in targets.chunks_mut(BATCH).zip(jacobians.iter_mut()).enumerate() {
-            let first = c * BATCH;
-            self.deformation_gradient_lanes(first, x, None, &mut f);
-            project_with_jacobian_lanes_into(&f, share, out, jac);
-            self.scatter_targets(first, out, jp);
-        }
+        self.local_step_with_jacobian_batches_scattered(x, targets, jacobians, Some(jp));
     }
 
     /// `out = J DP[dF(u)]` from the projection Jacobians of every tet in lane layout, on the
@@ -459,14 +465,8 @@ impl Elastic {
     /// per tet in increasing order.
     pub fn apply_j_sequential_with(&self, mut target: impl FnMut(usize) -> Mat3, out: &mut [Point]) {
         out.fill([0.0; 3]);
-        for (e, ((tet, g), &w)) in self.tets.iter().zip(&self.grads).zip(&self.weights).enumerate() {
-            let p = &target(e);
-            for (&a, g) in tet.iter().zip(g) {
-                let o = &mut out[a as usize];
-                for i in 0..3 {
-                    o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
-                }
-            }
+        for e in 0..self.tet_count() {
+            self.scatter_targets(e, &[target(e)], out);
         }
     }
 
@@ -503,15 +503,7 @@ impl Elastic {
         let mut batch = [[[0.0; 3]; 3]; BATCH];
         for first in (0..self.tet_count()).step_by(BATCH) {
             targets(first, &mut batch);
-            for (e, p) in (first..self.tet_count()).zip(&batch) {
-                let w = self.weights[e];
-                for (&a, g) in self.tets[e].iter().zip(&self.grads[e]) {
-                    let o = &mut out[a as usize];
-                    for i in 0..3 {
-                        o[i] += w * (p[i][0] * g[0] + p[i][1] * g[1] + p[i][2] * g[2]);
-                    }
-                }
-            }
+            self.scatter_targets(first, &batch[..BATCH.min(self.tet_count() - first)], out);
         }
     }
 

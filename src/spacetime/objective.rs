@@ -185,8 +185,7 @@ impl<'a> Objective<'a> {
     /// The local step of one sample into `p` (and `j`), reusing their buffers.
     fn project_sample(&self, tr: &Trajectory, s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<JacobianBatch>>, split_tets: bool) {
         let (el, m) = (self.elastic, self.elastic.tet_count());
-        let mut x = vec![[0.0; 3]; el.node_count()];
-        Self::combine(&Self::unknowns(tr, s), &s.basis.pos, &mut x);
+        let x = self.positions(tr, s);
         match (j, split_tets) {
             (None, false) => el.local_step_sequential_into(&x, p),
             (Some(j), false) => el.local_step_with_jacobian_batches_sequential_into(&x, p, j),
