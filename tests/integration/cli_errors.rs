@@ -517,6 +517,8 @@ fn corpus() -> Vec<Bad> {
         bad_scene("times-decrease", base.replace("times = [0.0, 1.0]", "times = [1.0, 0.0]"), &["times decrease at key 1"]),
         bad_scene("times-equal", base.replace("times = [0.0, 1.0]", "times = [0.5, 0.5]"), &["keys 0 and 1 share the time 0.5"]),
         bad_scene("times-inf", base.replace("times = [0.0, 1.0]", "times = [0.0, inf]"), &["times[1] is not a number"]),
+        bad_scene("twist-inf", base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = inf } }"), &["meshes[1] has a twist of inf degrees", "(fix: give the twist angle as a finite number"]),
+        bad_scene("twist-axial-scale", base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = 90.0, axial_scale = -1.0 } }"), &["meshes[1] has a twist with axial_scale = -1", "(fix: give a positive axial_scale"]),
         bad_scene("rest-range", with("rest = 5"), &["rest = 5 but there are 2 keys"]),
         bad_scene("rest-negative", with("rest = -1"), &["rest key index must be >= 0"]),
         bad_scene("cyclic-two-keys", with("cyclic = true"), &["cyclic = true needs at least 3 keys"]),
