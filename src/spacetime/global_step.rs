@@ -173,8 +173,6 @@ impl ModalSize {
 /// 5.7-6.8 CPU s (2.8e-10 to 3.3e-10 per n³, on one thread or two), 16 s wall on two threads
 /// against 23 s on one under the same load: 1.4x from the second core.
 const EIGEN_SECONDS_PER_NODE3: f64 = 2.2e-10;
-/// Predicted seconds of the direct step below which the modal step is not weighed.
-pub const MODAL_MIN_DIRECT_SECONDS: f64 = 2.0;
 /// Flops per second of faer's dense products as the modal step uses them (measured at 2744
 /// nodes, 20 keys: the capacitance matrix of 3920 held entries, 6.2e10 flops, in 2.0-2.2 CPU s;
 /// one solve's 4.0e9 flops in 0.13 CPU s on one thread; a lone 120 x 2744 x 2744 product runs
@@ -193,15 +191,16 @@ const MODAL_COPIES: f64 = 3.0;
 /// [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each) and, when
 /// `modal` is given, modal ([`ModalSize::predicted`]). Returns the fastest whose peak fits in
 /// `budget` (the iterative step when none does), and the (seconds, bytes) of the three (the
-/// modal ones 0 when not weighed).
+/// modal ones 0 without `modal`).
 pub fn choose(direct: &Cost, blocks: &Cost, modal: Option<&ModalSize>, parallel: bool, budget: u64) -> (Method, [(f64, f64); 3]) {
     let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
     let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY[parallel as usize];
     let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY[0];
     let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
-    // The modes only where the direct step is slow: below that, the direct step costs little
-    // anyway.
-    let modal_cost = modal.map(ModalSize::predicted).filter(|_| direct_seconds > MODAL_MIN_DIRECT_SECONDS);
+    // Weighed on every body: on small ones too the modes can win, their solves being two dense
+    // products that stay in cache where the factor's sweeps do not (the demo: 182 nodes,
+    // 1.0 ms a direct solve against 0.2 ms a modal one).
+    let modal_cost = modal.map(ModalSize::predicted);
     let candidates = [(Method::Direct, direct_seconds, direct_bytes), (Method::Modal, modal_cost.map_or(f64::INFINITY, |c| c.0), modal_cost.map_or(f64::INFINITY, |c| c.1)), (Method::Iterative, iterative_seconds, iterative_bytes)];
     let method = candidates.iter().filter(|c| c.2 <= budget as f64).min_by(|a, b| a.1.total_cmp(&b.1)).map_or(Method::Iterative, |c| c.0);
     let modal_cost = modal_cost.unwrap_or((0.0, 0.0));
@@ -702,14 +701,13 @@ impl GlobalStep {
         let size = modal_size(objective, &unknowns);
         // The key-separator order only where the direct step could use it: even cut by
         // KEY_SEPARATOR_MAX_GAIN and factorized at the parallel rate, would the node order's
-        // cost make the direct step the choice (or leave the modes unweighed)? When not, the
-        // choice below is the same with or without it.
+        // cost make the direct step the choice? When not, the choice below is the same with or
+        // without it.
         let could_be_direct = |node: &Cost| match forced {
             Some(m) => m == Method::Direct,
             None => {
                 let optimistic = Cost { flops: node.flops / KEY_SEPARATOR_MAX_GAIN, entries: node.entries / KEY_SEPARATOR_MAX_GAIN };
-                let (m, [(seconds, _), _, _]) = choose(&optimistic, &block_cost, Some(&size), true, budget);
-                m == Method::Direct || seconds <= MODAL_MIN_DIRECT_SECONDS
+                choose(&optimistic, &block_cost, Some(&size), true, budget).0 == Method::Direct
             }
         };
         let order = fill_reducing_order_of(&a, &unknowns, &node_orders, could_be_direct);
@@ -948,7 +946,7 @@ mod tests {
 
     /// The choice on problem sizes recorded from the project's bodies (the costs `build` weighs,
     /// with the measured outcome): the 2744-node cube with 20 keys and with 5 keys, the bottom
-    /// held at every key (`modal_setup_phases`), and a small body.
+    /// held at every key (`modal_setup_phases`), and the small bodies of the demo and the paper.
     #[test]
     fn the_cost_model_on_recorded_problem_sizes() {
         // 20 keys: the node order (the key separators are not weighed: even 4x fewer flops
@@ -982,10 +980,19 @@ mod tests {
         let modal = ModalSize { nodes: 2630, slots: 10, held: 0, held_nodes: 0 };
         let (method, [(ds, _), (ms, _), _]) = choose(&direct, &blocks, Some(&modal), true, u64::MAX);
         assert_eq!(method, Method::Direct, "direct {ds} s, modal {ms} s");
-        // A small body (1k nodes, 2 keys: a few M flops): direct, the modes are not weighed.
-        let small = Cost { flops: 3e8, entries: 1.5e6 };
-        let (method, [_, (ms, _), _]) = choose(&small, &Cost { flops: 1e8, entries: 5e5 }, Some(&ModalSize { nodes: 1000, slots: 4, held: 0, held_nodes: 0 }), false, u64::MAX);
-        assert_eq!((method, ms), (Method::Direct, 0.0));
+        // Small bodies, with the bakes' measured precompute plus solves (2026-12-03, load 5, so
+        // only the ratios count): the demo (182 nodes, 4 keys of a loop) 0.175 s direct against
+        // 0.072 s modal, the paper's TWIST 0.71 against 0.26; STRETCH 0.081 direct against 0.122
+        // modal, DINO 0.48 against 8.1 (3966 held entries: the capacitance matrix is large).
+        let small = |direct: [f64; 2], blocks: [f64; 2], modal: [usize; 4], parallel| {
+            let [nodes, slots, held, held_nodes] = modal;
+            let cost = |[flops, entries]: [f64; 2]| Cost { flops, entries };
+            choose(&cost(direct), &cost(blocks), Some(&ModalSize { nodes, slots, held, held_nodes }), parallel, u64::MAX).0
+        };
+        assert_eq!(small([1.6977e8, 4.5290e5], [1.1534e7, 1.2121e5], [182, 8, 64, 16], false), Method::Modal, "the demo");
+        assert_eq!(small([2.5544e9, 2.9960e6], [1.7333e8, 8.0396e5], [540, 8, 216, 54], true), Method::Modal, "TWIST");
+        assert_eq!(small([3.7608e8, 8.5047e5], [1.1602e8, 4.8696e5], [594, 4, 216, 108], false), Method::Direct, "STRETCH");
+        assert_eq!(small([3.6684e8, 1.2044e6], [2.5919e7, 4.2553e5], [439, 20, 3966, 439], false), Method::Direct, "DINO");
     }
 
     #[test]
@@ -1034,7 +1041,7 @@ mod tests {
         let s = settings();
         let obj = objective(&el, &k, &s);
         let unknowns = Unknowns::new(&k, el.node_count());
-        let direct = GlobalStep::within(&obj, unknowns.clone(), s.regularization, Some(u64::MAX)).unwrap();
+        let direct = GlobalStep::build(&obj, unknowns.clone(), s.regularization, Some(u64::MAX), Some(Method::Direct)).unwrap();
         let iterative = GlobalStep::within(&obj, unknowns.clone(), s.regularization, Some(1)).unwrap();
         assert_eq!((direct.stats.linear_solver, iterative.stats.linear_solver), ("direct", "iterative"));
         assert!(direct.stats.predicted_bytes > 1.0 && direct.stats.predicted_seconds > 0.0);
