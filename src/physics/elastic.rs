@@ -495,18 +495,6 @@ impl Elastic {
         }
     }
 
-    /// [`Elastic::apply_j_sequential_with`] with the targets computed [`BATCH`] tets at a time,
-    /// for vectorized kernels: `targets(first, batch)` fills the targets of tets `first..`
-    /// (entries past the last tet are ignored). The same sums in the same order.
-    pub fn apply_j_sequential_batched(&self, mut targets: impl FnMut(usize, &mut [Mat3; BATCH]), out: &mut [Point]) {
-        out.fill([0.0; 3]);
-        let mut batch = [[[0.0; 3]; 3]; BATCH];
-        for first in (0..self.tet_count()).step_by(BATCH) {
-            targets(first, &mut batch);
-            self.scatter_targets(first, &batch[..BATCH.min(self.tet_count() - first)], out);
-        }
-    }
-
     /// `∇E = L x - J p(x)`, the negated elastic force, with fresh projections.
     pub fn energy_gradient(&self, x: &[Point]) -> Vec<Point> {
         let mut targets = vec![[[0.0; 3]; 3]; self.tet_count()];
