@@ -240,15 +240,25 @@ fn transpose_lanes<const N: usize>(a: &M3<N>) -> M3<N> {
     [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]]
 }
 
-/// [`skew_solve`] on lanes (with [`inverse_pair_sum`]'s bound).
+/// [`inverse_pair_sum`] on lanes for the pairs (0,1), (0,2), (1,2): computed once for the two
+/// skew solves of a path (the same divisions, so the same bytes).
 #[inline(always)]
-fn skew_solve_lanes<const N: usize>(sigma: &V3<N>, b: &M3<N>) -> M3<N> {
-    let (zero, one, small) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(1e-12));
-    let mut w = [[zero; 3]; 3];
-    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+fn inverse_pair_sums_lanes<const N: usize>(sigma: &V3<N>) -> V3<N> {
+    let (one, small) = (Lanes::splat(1.0), Lanes::splat(1e-12));
+    let mut inverse = [one; 3];
+    for (k, (i, j)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
         let den = sigma[i] + sigma[j];
-        let den = Lanes::select(den.abs().lt(small), den.tiny_with_sign(), den);
-        let v = (b[i][j] - b[j][i]) * (one / den);
+        inverse[k] = one / Lanes::select(den.abs().lt(small), den.tiny_with_sign(), den);
+    }
+    inverse
+}
+
+/// [`skew_solve`] on lanes, from the [`inverse_pair_sums_lanes`].
+#[inline(always)]
+fn skew_solve_lanes<const N: usize>(inverse_pair_sums: &V3<N>, b: &M3<N>) -> M3<N> {
+    let mut w = [[Lanes::splat(0.0); 3]; 3];
+    for (k, (i, j)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
+        let v = (b[i][j] - b[j][i]) * inverse_pair_sums[k];
         w[i][j] = v;
         w[j][i] = -v;
     }
@@ -284,10 +294,18 @@ fn volume_stretch_derivatives_lanes<const N: usize>(sigma: &V3<N>, sp: &V3<N>, d
         d2[i][j] = v;
         d2[j][i] = v;
     }
+    // The terms (i, j) and (j, i) are equal to the bit (d1 symmetric, products commute): each
+    // division once, the sum in the order of the definition.
+    let mut terms = [[zero; 3]; 3];
+    for i in 0..3 {
+        for j in i..3 {
+            terms[i][j] = d1[i][j] * d1[i][j] / (sp[i] * sp[j]);
+        }
+    }
     let mut target = zero;
     for i in 0..3 {
         for j in 0..3 {
-            target = target + d1[i][j] * d1[i][j] / (sp[i] * sp[j]);
+            target = target + terms[i.min(j)][i.max(j)];
         }
     }
     let b = [rhs2[0][0], rhs2[1][1], rhs2[2][2]];
@@ -305,7 +323,8 @@ fn project_along_lanes<const N: usize>(f: &M3<N>, strain_share: f64, g: &M3<N>) 
     let (zero, one, two, half) = (Lanes::splat(0.0), Lanes::splat(1.0), Lanes::splat(2.0), Lanes::splat(0.5));
     let (u, s, v) = svd_lanes(f);
     let gt = mul_lanes(&mul_lanes(&transpose_lanes(&u), g), &v);
-    let w = skew_solve_lanes(&s, &gt);
+    let inverse_pair_sums = inverse_pair_sums_lanes(&s);
+    let w = skew_solve_lanes(&inverse_pair_sums, &gt);
     let ww = mul_lanes(&w, &w);
     let wg = mul_lanes(&w, &gt);
     let mut a = [[zero; 3]; 3];
@@ -314,7 +333,7 @@ fn project_along_lanes<const N: usize>(f: &M3<N>, strain_share: f64, g: &M3<N>) 
             a[i][j] = ww[i][j] * s[j] - two * wg[i][j];
         }
     }
-    let dw = skew_solve_lanes(&s, &a);
+    let dw = skew_solve_lanes(&inverse_pair_sums, &a);
     let (mut ds, mut dds) = ([[zero; 3]; 3], [[zero; 3]; 3]);
     for i in 0..3 {
         for j in 0..3 {
