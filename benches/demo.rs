@@ -140,7 +140,7 @@ fn main() {
     // Each phase in this process.
     let scene = SceneFile::load(&root.join(SCENE)).expect("the demo scene loads");
     let progress = Progress::hidden();
-    let mut rows: Vec<Row> = ["import", "TetGen alone", "tetrahedralize (TetGen + interior fit)", "solve", "  precompute (assembly, ordering, factor)", "  iterations", "embed", "blendshape clip", "export usda + glb", "export usda + usdc + glb", "report measures", "commit over the previous bake (fsyncs, swap, old files removed)"]
+    let mut rows: Vec<Row> = ["import", "TetGen alone", "tetrahedralize (TetGen + interior fit)", "solve", "  precompute (assembly, ordering, factor or modes)", "  iterations", "embed", "blendshape clip", "export usda + glb", "export usda + usdc + glb", "report measures", "commit over the previous bake (fsyncs, swap, old files removed)"]
         .iter()
         .map(|n| Row::new(n))
         .collect();
@@ -219,7 +219,7 @@ fn main() {
     let body = stages::Bake::new(&scene, &progress).body().expect("body");
     let (elastic, keys, settings) = solver_inputs(&body).expect("solver inputs");
     let objective = objective(&elastic, &keys, &settings);
-    let mut build = Row::new("global step built (assembly; ordering, symbolic analysis, factorization)");
+    let mut build = Row::new("global step built (assembly; the cost model's choice: ordering and factorization, or the modes)");
     let mut stages = (Vec::new(), Vec::new());
     for _ in 0..repeats {
         let (w, c, g) = timed(|| GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step"));
@@ -257,22 +257,26 @@ fn main() {
         parts[5].push((w, c));
     });
     println!();
+    let stats = &global.stats;
+    let inverse = match stats.linear_solver {
+        "direct" => format!("factor {} entries ({}), {:.1} MB", stats.factor_nnz, stats.ordering, 8e-6 * stats.factor_nnz as f64),
+        other => format!("global step {other} ({})", stats.ordering),
+    };
     println!(
-        "one iteration's parts ({} nodes, {} tets, {} samples, {} unknowns per coordinate, {} matrix entries, factor {} entries ({}), {:.1} MB), on a worker of the pool as the solve runs them, medians of {reps}:",
+        "one iteration's parts ({} nodes, {} tets, {} samples, {} unknowns per coordinate, {} matrix entries, {inverse}), on a worker of the pool as the solve runs them, medians of {reps}:",
         elastic.node_count(),
         elastic.tet_count(),
         objective.samples.len(),
         global.unknowns().count(),
-        global.stats.matrix_nnz,
-        global.stats.factor_nnz,
-        global.stats.ordering,
-        8e-6 * global.stats.factor_nnz as f64
+        stats.matrix_nnz,
     );
     println!();
     println!("| part | wall s | CPU s | |");
     println!("|---|---:|---:|---|");
-    // The two sweeps read every factor entry once each: the solve's rate through the factor.
-    parts[4].note = format!("{:.1} GB/s of factor read (two sweeps)", 2.0 * 8e-9 * global.stats.factor_nnz as f64 / median(parts[4].wall.clone()));
+    if stats.linear_solver == "direct" {
+        // The two sweeps read every factor entry once each: the solve's rate through the factor.
+        parts[4].note = format!("{:.1} GB/s of factor read (two sweeps)", 2.0 * 8e-9 * stats.factor_nnz as f64 / median(parts[4].wall.clone()));
+    }
     build.print();
     for row in &parts {
         row.print();
