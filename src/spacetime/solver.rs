@@ -434,12 +434,9 @@ const MAX_HOLDS: usize = 50;
 /// Rounds of [`Solver::make_feasible`]'s projection (each adds the checks still inside).
 const MAX_FEASIBILITY_ROUNDS: usize = 50;
 
-/// Curvature pairs kept by the quasi-Newton phase. More do not pay (measured 2026-12-03 at
-/// 91b6030): the 20-key 2.6k body reaches the W its 8-pair solve stops at (2.2157e3, iteration
-/// 202) at iteration 204 with 16 pairs and 202 with 32, then runs on to 240 and 233 iterations
-/// (0.4% lower W), 234 with 64; the small scenes of `benches/convergence.rs` stop 0 to 12
-/// iterations earlier at the same W. The two-loop recursion there costs about 1.2 ms of CPU
-/// per pair (7.6 ms at 8 pairs, 75 ms at 64, against a 0.31 s iteration) and 4.9 MB per pair.
+/// Curvature pairs kept by the quasi-Newton phase. More do not pay: 16 to 64 pairs reach the
+/// 20-key body's stopping W no sooner, and cost 1.2 ms and 4.9 MB a pair there (README,
+/// "Production-size surfaces").
 const LBFGS_MEMORY: usize = 8;
 
 /// How a phase of the iteration ended.
