@@ -107,7 +107,7 @@ pub struct GlobalStats {
     pub predicted_iterative_bytes: f64,
     /// See `predicted_iterative_bytes`.
     pub predicted_iterative_seconds: f64,
-    /// The modal step's predicted peak memory and time (see `choose`; 0 when not weighed).
+    /// The modal step's predicted peak memory and time (see `choose`; 0 when there are no unknowns).
     pub predicted_modal_bytes: f64,
     /// See `predicted_modal_bytes`.
     pub predicted_modal_seconds: f64,
