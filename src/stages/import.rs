@@ -146,11 +146,19 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         Shape::Surface(s) => &s.positions,
         Shape::Volume(v) => &v.positions,
     };
+    // One selection per key, usually the same one at every key: each distinct one is resolved
+    // (its file read) once.
     let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
+        let mut resolved: Vec<(&Selection, VertexSet)> = Vec::new();
         (0..meshes.poses.len())
             .map(|k| {
                 let sel = list.as_ref().map_or(&default, |l| &l[k]);
-                resolve_selection(sel, scene_file, rest_points).map(|m| VertexSet::from_mask(&m))
+                if let Some((_, set)) = resolved.iter().find(|(s, _)| *s == sel) {
+                    return Ok(set.clone());
+                }
+                let set = VertexSet::from_mask(&resolve_selection(sel, scene_file, rest_points)?);
+                resolved.push((sel, set.clone()));
+                Ok(set)
             })
             .collect()
     };
