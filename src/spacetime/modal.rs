@@ -278,19 +278,24 @@ impl ModalStep {
                     Some(c) => &c[i * rows..(i + 1) * rows],
                     None => col,
                 };
-                for s in 0..slots {
-                    let row = &inv[s * slots..(s + 1) * slots];
-                    let mut acc = [0.0; 3];
-                    for (t, &w) in row.iter().enumerate() {
-                        for d in 0..3 {
-                            acc[d] += w * from[3 * t + d];
-                        }
+                // Row t of B_i⁻¹ is its column t (exactly symmetric): the sums over t in order,
+                // as row by row, but each coordinate's slots contiguous, so they vectorize.
+                out.fill(0.0);
+                let (o0, rest) = out.split_at_mut(slots);
+                let (o1, o2) = rest.split_at_mut(slots);
+                for (row, f) in inv.chunks_exact(slots).zip(from.chunks_exact(3)) {
+                    for (((a, b), c), &w) in o0.iter_mut().zip(o1.iter_mut()).zip(o2.iter_mut()).zip(row) {
+                        *a += w * f[0];
+                        *b += w * f[1];
+                        *c += w * f[2];
                     }
-                    out[3 * s..3 * s + 3].copy_from_slice(&acc);
                 }
-                match add {
-                    Some(_) => col.iter_mut().zip(out.iter()).for_each(|(v, o)| *v += o),
-                    None => col.copy_from_slice(out),
+                for (s, v) in col.chunks_exact_mut(3).enumerate() {
+                    let value = [o0[s], o1[s], o2[s]];
+                    match add {
+                        Some(_) => v.iter_mut().zip(value).for_each(|(x, o)| *x += o),
+                        None => v.copy_from_slice(&value),
+                    }
                 }
             },
         );
