@@ -10,7 +10,8 @@
 //!
 //! The rows: the prism series at 5 keys without the cage (1k, 2.6k, 10k, 21k and 30k tet
 //! nodes; the three large ones stop after 20 iterations, [`SERIES_ITERATIONS`], enough
-//! to time an iteration, and say so), the 2.6k-node body at 20 keys, the CHEB-style 6.8k
+//! to time an iteration, and say so), the 2.6k-node body at 20 keys (converged, and stopped
+//! after 20 iterations as the table was measured), the CHEB-style 6.8k
 //! surface on its cage and in full (in-between volume within one percentage point), and the
 //! 25k and 100k surfaces on their cages (10 keys: under 60 s and 4 GB, embedded keys within 1%
 //! of the bbox diagonal). Held at every key: both end faces (the prisms and the 2.6k and 6.8k
@@ -192,6 +193,11 @@ fn main() {
         // The 2.6k-node body with 20 keys: the global step the cost model chooses; then (named
         // only) each forced, and the coarse-to-fine schedule (`[solver] coarse_samples`: README).
         twenty_keys("2.6k-20-keys", "", &[], false),
+        // The same body stopped after 20 iterations, beside the converged bake above: the
+        // issue's table was measured by a solver that stopped once an iteration changed W by
+        // less than 1% of the first W (8 to 10 iterations on these bodies), at a W the
+        // converged solve passes by its 13th iteration (README, "like for like").
+        twenty_keys("2.6k-20-keys-20-iterations", SERIES_ITERATIONS, &[], false),
         twenty_keys("2.6k-20-keys-direct", "global_step = \"direct\"", &[], true),
         twenty_keys("2.6k-20-keys-iterative-2G", "global_step = \"iterative\"", &["--max-memory", "2G"], true),
         twenty_keys("2.6k-20-keys-coarse", "coarse_samples = 5", &[], true),
