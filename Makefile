@@ -119,9 +119,9 @@ tables: test-deps
 		cli_errors::corpus_of_bad_inputs cli_errors::corpus_of_bad_stage_files \
 		cli_interrupt::sigint_at_every_phase cli_interrupt::sigterm_at_every_phase cli_interrupt::sigkill_at_every_phase
 
-# The readers' property tests (src/fuzz.rs) run 10,000 cases per property in `make test`;
+# The readers' property tests (src/pipeline/fuzz_readers.rs) run 10,000 cases per property in `make test`;
 # this runs many more (random bytes and mutations of valid files, with shrinking). The filter
-# also runs the vertex-cache readers' properties (src/cache/fuzz.rs, a fixed 3,000 cases).
+# also runs the vertex-cache readers' properties (src/formats/cache/fuzz.rs, a fixed 3,000 cases).
 FUZZ_CASES ?= 1000000
 ifndef FUZZ_SEED
 FUZZ_SEED := $(shell od -An -N4 -tu4 /dev/urandom | tr -d ' ')

@@ -29,16 +29,19 @@ use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use bar::{bar, BarCache, BarSettings};
-use blendsim::cache::deviation::cache_diagonal;
-use blendsim::cache::fit::{fit, FitSettings};
-use blendsim::cache::keyframes::{select, AutoKeys, AutoSettings};
-use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
-use blendsim::clip::{BlendShapeClip, Weights};
-use blendsim::mesh::obj;
-use blendsim::output::Staging;
-use blendsim::progress::Progress;
-use blendsim::scene::SceneFile;
-use blendsim::internals::{glb, usda, FullFrame, Placement, UsdSettings};
+use blendsim::algorithms::frames::deviation::cache_diagonal;
+use blendsim::algorithms::frames::fit::{fit, FitSettings};
+use blendsim::algorithms::frames::keyframes::{select, AutoKeys, AutoSettings};
+use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
+use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
+use blendsim::formats::mesh::obj;
+use blendsim::support::output::Staging;
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::SceneFile;
+use blendsim::algorithms::blendshape::fullframe::FullFrame;
+use blendsim::formats::export::glb::{self, Placement};
+use blendsim::formats::export::usda::{self, UsdSettings};
 
 const TOLERANCE: f64 = 0.005;
 
@@ -219,7 +222,7 @@ fn bake(dir: &Path, method: &str, weights: &str, basis: &str) -> (f64, usize, Op
     let t = Instant::now();
     let scene = SceneFile::load(&scene_path).unwrap_or_else(|e| panic!("{e}"));
     let mut staging = Staging::new(&out).unwrap();
-    let report = blendsim::stages::bake(&scene, None, &mut staging, &Progress::new(true)).unwrap_or_else(|e| panic!("{e}"));
+    let report = blendsim::pipeline::stages::bake(&scene, None, &mut staging, &Progress::new(true)).unwrap_or_else(|e| panic!("{e}"));
     staging.commit().unwrap();
     let seconds = t.elapsed().as_secs_f64();
     let bytes = |ext: &str| std::fs::metadata(out.join(format!("bar.{ext}"))).unwrap().len();
@@ -235,14 +238,14 @@ fn compare(name: &str, cache: &BarCache) {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("rest.obj"), obj::write(&cache.surface)).unwrap();
     let fps = cache.settings.fps;
-    blendsim::cache::write(&dir.join("bar.pc2"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    blendsim::cache::write(&dir.join("full.glb"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    blendsim::cache::write(&dir.join("full.usda"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::formats::cache::write(&dir.join("bar.pc2"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::formats::cache::write(&dir.join("full.glb"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::formats::cache::write(&dir.join("full.usda"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
     let frames = cache.frames.frame_count() as f64;
     let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
     let size = |p: &str| std::fs::metadata(dir.join(p)).unwrap().len();
     let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
-    blendsim::cache::write(&dir.join("full.usdc"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
+    blendsim::formats::cache::write(&dir.join("full.usdc"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
     let full_usdc = size("full.usdc");
     let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, usdc: Option<u64>, max: f64, ms: Option<f64>| {
         let smaller = |full: u64, x: Option<u64>| x.map_or("-".into(), |x| format!("{:.1}x", full as f64 / x as f64));

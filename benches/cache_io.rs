@@ -15,8 +15,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use blendsim::cache::{self, CacheOptions, FrameSource, VertexCache};
-use blendsim::mesh::{obj, Point, TriMesh};
+use blendsim::formats::cache::{self, CacheOptions, VertexCache};
+use blendsim::algorithms::frames::FrameSource;
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::{Point, TriMesh};
 
 const FPS: f64 = 30.0;
 

@@ -14,8 +14,9 @@
 
 use std::time::Instant;
 
-use blendsim::internals::{solve, solver_inputs, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
-use blendsim::stage::Body;
+use blendsim::algorithms::spacetime::solver::{solve, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::pipeline::stages::solve::solver_inputs;
+use blendsim::pipeline::stage_file::Body;
 
 mod common;
 use common::{cheb_size, load, scene_body, twenty_keys, twenty_keys_held};

@@ -10,12 +10,16 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use blendsim::internals::{initial_trajectory, objective, solver_inputs, tetgen, GlobalStep, TetgenOptions, Unknowns};
-use blendsim::output::Staging;
-use blendsim::progress::Progress;
-use blendsim::scene::{Format, SceneFile};
-use blendsim::stage::Shape;
-use blendsim::stages::{self, blendshape_clip, embed, export_with, import, solve, tetrahedralize};
+use blendsim::algorithms::spacetime::global_step::GlobalStep;
+use blendsim::algorithms::spacetime::solver::{initial_trajectory, objective};
+use blendsim::algorithms::spacetime::unknowns::Unknowns;
+use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
+use blendsim::pipeline::stages::solve::solver_inputs;
+use blendsim::support::output::Staging;
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::{Format, SceneFile};
+use blendsim::pipeline::stage_file::Shape;
+use blendsim::pipeline::stages::{self, blendshape_clip, embed, export_with, import, solve, tetrahedralize};
 
 mod common;
 use common::{load, median};
@@ -70,8 +74,10 @@ impl Row {
 /// The phases shown with a predicted duration, measured on prisms of growing size beside what
 /// their cost models predict (`cargo bench --bench demo -- models`).
 fn models() {
-    use blendsim::internals::{voxel_cage, Binding, CageFit, Elastic, ElasticMaterial};
-    use blendsim::procedural::prism;
+    use blendsim::algorithms::cage::{fit::CageFit, voxel_cage};
+    use blendsim::algorithms::embed::Binding;
+    use blendsim::algorithms::physics::elastic::{Elastic, Material as ElasticMaterial};
+    use blendsim::algorithms::procedural::prism;
     println!("cost models against measurement (one run each; load average {})", load());
     println!();
     println!("| surface vertices | triangles | phase | work | measured s | CPU s | predicted s |");
@@ -87,14 +93,14 @@ fn models() {
                 let k0 = cpu(libc::RUSAGE_CHILDREN);
                 let (w, c, mesh) = timed(|| tetgen(&surface, &options, Path::new("prism")).expect("TetGen"));
                 let c = c + cpu(libc::RUSAGE_CHILDREN) - k0;
-                let predicted = blendsim::internals::tetgen_seconds(&surface, &options);
+                let predicted = blendsim::formats::tetgen::predicted_seconds(&surface, &options);
                 println!("| {n} | {t} | TetGen -a{max_volume} | {} tets | {w:.3} | {c:.3} | {predicted:.3} |", mesh.tets.len());
                 let (w, c, _) = timed(|| Binding::compute(&mesh, &surface.positions));
                 println!("| {n} | {t} | embed in the TetGen body | {} tets | {w:.3} | {c:.3} | {:.3} |", mesh.tets.len(), Binding::predicted_seconds(mesh.tets.len(), n));
             }
         }
         let (w, c, cage) = timed(|| voxel_cage(&surface, &surface.positions, 1000).expect("cage"));
-        println!("| {n} | {t} | cage | {} nodes | {w:.3} | {c:.3} | {:.3} |", cage.mesh.positions.len(), blendsim::internals::cage_seconds(t, 1000));
+        println!("| {n} | {t} | cage | {} nodes | {w:.3} | {c:.3} | {:.3} |", cage.mesh.positions.len(), blendsim::algorithms::cage::predicted_seconds(t, 1000));
         let (w, c, binding) = timed(|| Binding::compute(&cage.mesh, &surface.positions));
         println!("| {n} | {t} | embed in the cage | {} tets | {w:.3} | {c:.3} | {:.3} |", cage.mesh.tets.len(), Binding::predicted_seconds(cage.mesh.tets.len(), n));
         let elastic = Elastic::new(&cage.mesh, &material).expect("elastic");
@@ -238,7 +244,7 @@ fn main() {
     let (p, pj) = (objective.local_step(&tr, false), objective.local_step(&tr, true));
     let e = objective.evaluate(&tr, &pj);
     let g = global.gather(e.exact_gradient.as_ref().expect("exact"));
-    let mut buffers = blendsim::internals::Projections { targets: Vec::new(), jacobians: None };
+    let mut buffers = blendsim::algorithms::spacetime::objective::Projections { targets: Vec::new(), jacobians: None };
     // On a worker of the thread pool, as `stages::solve` runs the solver (`rayon::scope`): the
     // parts' parallel loops start inside the pool, not handed over from this thread.
     rayon::scope(|_| for _ in 0..reps {

@@ -29,9 +29,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::time::Instant;
 
-use blendsim::internals::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
-use blendsim::internals::{tetgen, TetgenOptions};
-use blendsim::mesh::{Point, TetMesh, TriMesh};
+use blendsim::algorithms::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
+use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
+use blendsim::algorithms::geometry::{Point, TetMesh, TriMesh};
 
 
 struct Row {

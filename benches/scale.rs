@@ -35,8 +35,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use blendsim::mesh::{obj, Axis, Point, TriMesh};
-use blendsim::procedural::{prism, twist, Twist};
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::{Axis, Point, TriMesh};
+use blendsim::algorithms::procedural::{prism, twist, Twist};
 
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()

@@ -27,10 +27,14 @@
 
 use std::time::Instant;
 
-use blendsim::internals::{apply_step, initial_trajectory, objective, solve, solver_inputs, GlobalStep, Unknowns};
-use blendsim::internals::{Elastic, GlobalStats, KeyConstraints, ProjectionMode, Settings, Timing, TimingSettings};
-use blendsim::stage::Body;
-use blendsim::Trajectory;
+use blendsim::algorithms::physics::elastic::Elastic;
+use blendsim::algorithms::spacetime::global_step::{GlobalStats, GlobalStep};
+use blendsim::algorithms::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Settings};
+use blendsim::algorithms::spacetime::timing::{ProjectionMode, Timing, TimingSettings};
+use blendsim::algorithms::spacetime::unknowns::{KeyConstraints, Unknowns};
+use blendsim::pipeline::stages::solve::solver_inputs;
+use blendsim::pipeline::stage_file::Body;
+use blendsim::algorithms::spacetime::trajectory::Trajectory;
 
 mod common;
 use common::{armadillo_size, cheb_size, cpu_seconds, load, median, scene_body};

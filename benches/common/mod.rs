@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
-use blendsim::internals::{tetgen, TetgenOptions};
-use blendsim::mesh::{Axis, Point};
-use blendsim::procedural::{self, Twist};
-use blendsim::progress::Progress;
-use blendsim::scene::{Scene, SceneFile};
-use blendsim::stage::{Body, KeyPoses, VertexSet};
-use blendsim::stages::Bake;
+use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
+use blendsim::algorithms::geometry::{Axis, Point};
+use blendsim::algorithms::procedural::{self, Twist};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::{Scene, SceneFile};
+use blendsim::pipeline::stage_file::{Body, KeyPoses, VertexSet};
+use blendsim::pipeline::stages::Bake;
 
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -124,7 +124,7 @@ pub fn twenty_keys(divisions: [usize; 3], max_volume: f64, held_surface: bool) -
 /// the whole surface): `Some(&[0.0, 1.0])` is the scale benchmark's "2.6k-nodes-20-keys"
 /// (bottom and top held) on `[12, 36, 12]` and 0.003.
 pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[f64]>) -> Body {
-    use blendsim::mesh::obj;
+    use blendsim::formats::mesh::obj;
     let held_surface = faces.is_none();
     let keys = 20;
     let dir = std::env::temp_dir().join(format!("blendsim-twenty-keys-{}-{}-{held_surface}-{}", std::process::id(), divisions[0], faces.map_or(0, <[f64]>::len)));

@@ -1,10 +1,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use blendsim::output::{LockWait, Staging};
-use blendsim::progress::Progress;
-use blendsim::scene::SceneFile;
-use blendsim::{stages, Result};
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::SceneFile;
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 use super::MethodArg;
 
@@ -51,10 +52,10 @@ impl Args {
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     let start = Instant::now();
     if let Some(bytes) = args.max_memory {
-        blendsim::resources::set_max_memory(bytes);
+        blendsim::support::resources::set_max_memory(bytes);
     }
     if let Some(seconds) = args.max_time {
-        blendsim::resources::set_max_time(seconds);
+        blendsim::support::resources::set_max_time(seconds);
     }
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.

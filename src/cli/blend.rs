@@ -1,8 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::progress::Progress;
-use blendsim::stages::blend::{BlendJob, Weights};
-use blendsim::{stages, Result};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::stages::blend::{BlendJob, Weights};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 /// Blend target meshes with mass-spring blendshapes (Ma et al. 2012): the rest lengths of a
 /// spring network on the targets are blended with convex weights, and the network's
@@ -66,7 +67,7 @@ impl Args {
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     if let Some(seconds) = args.max_time {
-        blendsim::resources::set_max_time(seconds);
+        blendsim::support::resources::set_max_time(seconds);
     }
     let job = BlendJob {
         targets: args.targets,

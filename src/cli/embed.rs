@@ -1,8 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::progress::Progress;
-use blendsim::stage::{self, Solution};
-use blendsim::{stages, Result};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::stage_file::{self, Solution};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 /// Carry the exported surface on the solved tet trajectory and write the animation stage file.
 ///
@@ -24,6 +25,6 @@ impl Args {
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
-    let solution: Solution = stage::read(&args.solution)?;
-    stage::write(&args.output, &stages::embed(&solution)?)
+    let solution: Solution = stage_file::read(&args.solution)?;
+    stage_file::write(&args.output, &stages::embed(&solution)?)
 }

@@ -1,9 +1,10 @@
 use std::path::PathBuf;
 
-use blendsim::output::{LockWait, Staging};
-use blendsim::progress::Progress;
-use blendsim::stage::{self, Animation};
-use blendsim::{stages, Result};
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::stage_file::{self, Animation};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 /// Write the blendshape and full-frame animation files into --out.
 ///
@@ -37,12 +38,12 @@ impl Args {
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     if let Some(seconds) = args.max_time {
-        blendsim::resources::set_max_time(seconds);
+        blendsim::support::resources::set_max_time(seconds);
     }
-    let animation: Animation = stage::read(&args.animation)?;
+    let animation: Animation = stage_file::read(&args.animation)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None)?;
     let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
-    staging.write(&format!("{}.outputs.json", animation.scene.name), &stage::to_json(&outputs))?;
+    staging.write(&format!("{}.outputs.json", animation.scene.name), &stage_file::to_json(&outputs))?;
     staging.commit()
 }

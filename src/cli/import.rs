@@ -1,9 +1,10 @@
 use std::path::PathBuf;
 
 use blendsim::Error;
-use blendsim::progress::Progress;
-use blendsim::scene::SceneFile;
-use blendsim::{stage, stages, Result};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::SceneFile;
+use blendsim::pipeline::{stage_file, stages};
+use blendsim::Result;
 
 /// Read a scene's keyframe meshes (or vertex cache) and write the keyframes stage file; or
 /// convert the scene's cache to another cache format.
@@ -36,10 +37,10 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
         let Some(spec) = &scene.scene.cache else {
             return Err(Error::in_file(&args.scene, "--cache-out converts a [cache], but the scene has [keyframes]", "give a scene with a [cache] table"));
         };
-        stages::cache::convert(&scene, spec, out)?;
+        stages::import_cache::convert(&scene, spec, out)?;
     }
     match &args.output {
-        Some(o) => stage::write(o, &stages::import(&scene)?),
+        Some(o) => stage_file::write(o, &stages::import(&scene)?),
         None => Ok(()),
     }
 }

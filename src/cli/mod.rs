@@ -2,7 +2,7 @@
 //!
 //! Exit codes: 0 success; 1 bad input or a failed stage (the message names the file, the
 //! problem and the fix); 2 usage errors (from clap). SIGINT, SIGTERM and SIGHUP remove the
-//! unfinished outputs and end the process by the same signal (see `blendsim::interrupt`).
+//! unfinished outputs and end the process by the same signal (see `blendsim::support::interrupt`).
 
 mod bake;
 mod blend;
@@ -15,8 +15,8 @@ mod tetrahedralize;
 
 use std::process::ExitCode;
 
-use blendsim::progress::Progress;
-use blendsim::scene::Method;
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::Method;
 use clap::{Parser, Subcommand};
 
 /// Turn keyframe meshes into compact, physically plausible blendshape animation for USD and
@@ -115,7 +115,7 @@ pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
 
 pub fn main() -> ExitCode {
     // Before any thread starts, so every thread inherits the blocked signals.
-    blendsim::interrupt::install();
+    blendsim::support::interrupt::install();
     let cli = Cli::parse();
     let progress = Progress::new(cli.quiet);
     // An error that concerns no particular file is about the command's input.
@@ -141,7 +141,7 @@ pub fn main() -> ExitCode {
         Command::Blend(a) => blend::run(a, &progress, cli.quiet),
     };
     // Stopped by a signal: its cleanup ends the process, with the signal's status.
-    blendsim::interrupt::settle();
+    blendsim::support::interrupt::settle();
     match result.map_err(|e| e.with_path(input)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

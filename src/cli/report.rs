@@ -1,10 +1,11 @@
 use std::path::PathBuf;
 
-use blendsim::output::{LockWait, Staging};
-use blendsim::progress::Progress;
-use blendsim::report::batch;
-use blendsim::stage::{self, Animation, Outputs};
-use blendsim::{stages, Result};
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::report::batch;
+use blendsim::pipeline::stage_file::{self, Animation, Outputs};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 /// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
 /// many bakes.
@@ -44,7 +45,7 @@ impl Args {
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     if let Some(seconds) = args.max_time {
-        blendsim::resources::set_max_time(seconds);
+        blendsim::support::resources::set_max_time(seconds);
     }
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
@@ -56,8 +57,8 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
         return staging.commit();
     }
     let (Some(animation), Some(outputs)) = (&args.animation, &args.outputs) else { unreachable!("clap requires both without --batch") };
-    let animation: Animation = stage::read(animation)?;
-    let outputs: Outputs = stage::read(outputs)?;
+    let animation: Animation = stage_file::read(animation)?;
+    let outputs: Outputs = stage_file::read(outputs)?;
     let report = stages::report(&animation, &outputs)?;
     report.write(&mut staging)?;
     staging.commit()

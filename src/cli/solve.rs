@@ -1,8 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::progress::Progress;
-use blendsim::stage::{self, Body};
-use blendsim::{stages, Result};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::stage_file::{self, Body};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 use super::MethodArg;
 
@@ -41,11 +42,11 @@ impl Args {
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     if let Some(bytes) = args.max_memory {
-        blendsim::resources::set_max_memory(bytes);
+        blendsim::support::resources::set_max_memory(bytes);
     }
     if let Some(seconds) = args.max_time {
-        blendsim::resources::set_max_time(seconds);
+        blendsim::support::resources::set_max_time(seconds);
     }
-    let body: Body = stage::read(&args.body)?;
-    stage::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)
+    let body: Body = stage_file::read(&args.body)?;
+    stage_file::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)
 }

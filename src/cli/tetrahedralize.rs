@@ -1,8 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::progress::Progress;
-use blendsim::stage::{self, Keyframes};
-use blendsim::{stages, Result};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::stage_file::{self, Keyframes};
+use blendsim::pipeline::stages;
+use blendsim::Result;
 
 /// Turn keyframes into a simulation body (tet mesh and per-node keyframe poses).
 ///
@@ -24,6 +25,6 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
-    let keys: Keyframes = stage::read(&args.keyframes)?;
-    stage::write(&args.output, &stages::tetrahedralize(&keys, progress)?)
+    let keys: Keyframes = stage_file::read(&args.keyframes)?;
+    stage_file::write(&args.output, &stages::tetrahedralize(&keys, progress)?)
 }

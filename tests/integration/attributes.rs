@@ -9,7 +9,7 @@
 
 use std::fmt::Write as _;
 
-use blendsim::stage::OutputKind;
+use blendsim::pipeline::stage_file::OutputKind;
 use serde_json::Value;
 
 use crate::common::checkers::usd_probe;
@@ -124,7 +124,7 @@ pub(crate) fn corner_uv_sets(triangles: impl IntoIterator<Item = [(u64, f64, f64
 /// The OBJ's (vertex, u, v) at every corner of every triangle (fans of its quads), as
 /// [`corner_uv_sets`].
 pub(crate) fn obj_corner_uvs(text: &str) -> Vec<Vec<(u64, i64, i64)>> {
-    let mesh = blendsim::mesh::obj::parse(text).unwrap();
+    let mesh = blendsim::formats::mesh::obj::parse(text).unwrap();
     let a = mesh.attributes.unwrap();
     corner_uv_sets(mesh.triangles.iter().zip(&a.uv_corners).map(|(t, c)| std::array::from_fn(|k| (t[k] as u64, a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))))
 }

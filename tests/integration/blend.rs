@@ -6,11 +6,12 @@
 
 use std::path::Path;
 
-use blendsim::cache::{CacheOptions, VertexCache};
-use blendsim::mesh::surface::enclosed_volume;
-use blendsim::mesh::{norm, obj, sub, Point, TriMesh};
-use blendsim::procedural::prism;
-use blendsim::scene::Method;
+use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::algorithms::geometry::surface::enclosed_volume;
+use blendsim::algorithms::geometry::{norm, sub, Point, TriMesh};
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::procedural::prism;
+use blendsim::pipeline::scene::Method;
 
 use crate::common::cli::{read_json, run, tree, Run, TempDir};
 use crate::common::verify::{check_outputs, library_animation_with, max_distance, output_files};
@@ -261,7 +262,7 @@ fn sweep_direction() -> Point {
 
 /// Deepest penetration (positive inside) of the surface into the obstacle `inside` (signed
 /// distance, negative inside) over every frame of the trajectory.
-fn deepest(anim: &blendsim::stage::Animation, signed: impl Fn(Point) -> f64) -> f64 {
+fn deepest(anim: &blendsim::pipeline::stage_file::Animation, signed: impl Fn(Point) -> f64) -> f64 {
     let tr = &anim.trajectory;
     tr.frames(anim.scene.fps).iter().flat_map(|&(_, t)| tr.evaluate(t)).map(|p| -signed(p)).fold(f64::NEG_INFINITY, f64::max)
 }
@@ -289,9 +290,9 @@ fn interpolated_frames_deviate_from_the_per_frame_equilibria_by_a_measured_amoun
         // The log says which frames are equilibria.
         assert!(every.log.stop_reason.contains("every frame is an equilibrium"), "{}", every.log.stop_reason);
         assert!(coarse.log.stop_reason.contains("20 of 25 frames fall between in-betweens and are Hermite-interpolated"), "{}", coarse.log.stop_reason);
-        let size = blendsim::mesh::bbox_diagonal(&every.trajectory.positions[0]);
+        let size = blendsim::algorithms::geometry::bbox_diagonal(&every.trajectory.positions[0]);
         let deviation = coarse.trajectory.frames(24.0).iter().map(|&(_, t)| max_distance(&coarse.trajectory.evaluate(t), &every.trajectory.evaluate(t))).fold(0.0, f64::max) / size;
-        let depth = |a: &blendsim::stage::Animation| deepest(a, |p| norm(sub(p, centre)) - radius) / size;
+        let depth = |a: &blendsim::pipeline::stage_file::Animation| deepest(a, |p| norm(sub(p, centre)) - radius) / size;
         eprintln!("{name}: interpolated frames (3 in-betweens) vs an equilibrium per frame: max deviation {:.3e} of the size; deepest in the sphere: {:.3e} (3 in-betweens), {:.3e} (every frame)", deviation, depth(&coarse), depth(&every));
         measured.push((deviation, depth(&coarse), depth(&every)));
     }
@@ -323,7 +324,7 @@ fn mass_spring_scene_with_a_plane_or_a_sphere_keeps_every_frame_outside() {
     };
     let plane_signed = |p: Point| level - (p[0] * n[0] + p[1] * n[1] + p[2] * n[2]);
     let sphere_signed = |p: Point| norm(sub(p, centre)) - radius;
-    let size = blendsim::mesh::bbox_diagonal(&free.trajectory.positions[0]);
+    let size = blendsim::algorithms::geometry::bbox_diagonal(&free.trajectory.positions[0]);
     for (name, obstacle, signed) in [("plane", plane, &plane_signed as &dyn Fn(Point) -> f64), ("sphere", sphere, &sphere_signed)] {
         // Without the obstacle the bar would enter it between the keys; the keys are clear.
         let free_depth = deepest(&free, signed);

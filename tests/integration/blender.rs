@@ -22,11 +22,11 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use blendsim::clip::{BlendShapeClip, Weights};
-use blendsim::mesh::Point;
-use blendsim::output::Staging;
-use blendsim::scene::{Axis, Format, SceneFile};
-use blendsim::stage::{Animation, OutputFile, OutputKind};
+use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
+use blendsim::algorithms::geometry::Point;
+use blendsim::support::output::Staging;
+use blendsim::pipeline::scene::{Axis, Format, SceneFile};
+use blendsim::pipeline::stage_file::{Animation, OutputFile, OutputKind};
 use serde_json::Value;
 
 use crate::common;
@@ -207,7 +207,7 @@ fn dino_plays_in_blender_at_default_settings() {
 /// 1.1 above the ground, landing and recovering, ten OBJ keys over 1.8 s, squashed and
 /// stretched at constant volume, every key held, velocities solved under gravity.
 fn jump_scene(dir: &Path) -> PathBuf {
-    let rest = blendsim::procedural::prism([0.6, 1.8, 0.6], [3, 9, 3]);
+    let rest = blendsim::algorithms::procedural::prism([0.6, 1.8, 0.6], [3, 9, 3]);
     // (time, lift, vertical scale)
     let keys = [(0.0, 0.0, 1.0), (0.25, 0.0, 0.7), (0.4, 0.15, 1.25), (0.6, 0.8, 1.05), (0.8, 1.1, 1.0), (1.0, 0.8, 1.05), (1.2, 0.15, 1.2), (1.35, 0.0, 0.7), (1.6, 0.0, 1.1), (1.8, 0.0, 1.0)];
     let mut meshes = Vec::new();
@@ -217,7 +217,7 @@ fn jump_scene(dir: &Path) -> PathBuf {
         for p in &mut m.positions {
             *p = [0.3 + (p[0] - 0.3) * wide, p[1] * squash + lift, 0.3 + (p[2] - 0.3) * wide];
         }
-        std::fs::write(dir.join(format!("jump_{k}.obj")), blendsim::mesh::obj::write(&m)).unwrap();
+        std::fs::write(dir.join(format!("jump_{k}.obj")), blendsim::formats::mesh::obj::write(&m)).unwrap();
         meshes.push(format!("\"jump_{k}.obj\""));
     }
     let times: Vec<String> = keys.iter().map(|k| format!("{:?}", k.0)).collect();
@@ -242,7 +242,7 @@ fn jumping_body_plays_in_blender_at_default_settings() {
 
 /// A sideways sway with a lift, z up, in a scene's own units.
 fn swaying_column(name: &str, export: &str) -> Animation {
-    let mesh = blendsim::procedural::prism([1.0, 1.0, 3.0], [2, 2, 6]);
+    let mesh = blendsim::algorithms::procedural::prism([1.0, 1.0, 3.0], [2, 2, 6]);
     let motion = |p: Point, t: f64| {
         let (s, c) = ((3.0 * t).sin(), 3.0 * (3.0 * t).cos());
         let h = p[2] / 3.0;
@@ -263,7 +263,7 @@ fn up_axis_and_units_arrive_in_blender() {
     for (name, export) in cases {
         let anim = swaying_column(name, &format!("formats = [\"usda\", \"glb\"]\nfull_frame = false\ngltf_interpolation = \"linear\"\n{export}"));
         let mut staging = Staging::new(&dir.join(name)).unwrap();
-        blendsim::stages::export(&anim, &mut staging).unwrap();
+        blendsim::pipeline::stages::export(&anim, &mut staging).unwrap();
         staging.commit().unwrap();
         let expected = every_frame(&anim);
         for ext in ["usda", "glb"] {
@@ -296,7 +296,7 @@ fn uvs_and_material_slots_arrive_in_blender() {
     crate::texture::textured_prism(&dir.path, "gltf_interpolation = \"linear\"\nfull_frame = false");
     run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
     let anim = library_animation(&dir.join("scene.toml"));
-    let obj = blendsim::mesh::obj::parse(&std::fs::read_to_string(dir.join("rest.obj")).unwrap()).unwrap();
+    let obj = blendsim::formats::mesh::obj::parse(&std::fs::read_to_string(dir.join("rest.obj")).unwrap()).unwrap();
     let a = obj.attributes.as_ref().unwrap();
     let mut expected = every_frame(&anim);
     expected.corners = Some(obj.triangles.iter().zip(&a.uv_corners).map(|(t, c)| [0, 1, 2].map(|k| (t[k], a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))).collect());

@@ -5,9 +5,11 @@
 
 use std::path::Path;
 
-use blendsim::cache::deviation::cache_diagonal;
-use blendsim::cache::{CacheOptions, FrameSource, MemoryFrames, VertexCache};
-use blendsim::mesh::{norm, obj, sub, TriMesh};
+use blendsim::algorithms::frames::deviation::cache_diagonal;
+use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
+use blendsim::algorithms::geometry::{norm, sub, TriMesh};
+use blendsim::formats::mesh::obj;
 use serde_json::Value;
 
 use crate::common::bar::{bar, BarCache, BarSettings};
@@ -28,7 +30,7 @@ pub fn write_cache(dir: &Path, cache: &BarCache, path: &str) {
     if let Some(parent) = dir.join(path).parent() {
         std::fs::create_dir_all(parent).unwrap();
     }
-    blendsim::cache::write(&dir.join(path), &cache.surface, &mut cache.frames.clone(), cache.settings.fps).unwrap();
+    blendsim::formats::cache::write(&dir.join(path), &cache.surface, &mut cache.frames.clone(), cache.settings.fps).unwrap();
 }
 
 /// A scene baking the cache at `path` with `method` and `keys` (`"auto"` with a tolerance, or

@@ -3,11 +3,11 @@
 
 use std::time::Instant;
 
-use blendsim::cache::deviation::{cache_diagonal, deviation};
-use blendsim::cache::fit::{fit, FitSettings};
-use blendsim::cache::keyframes::{select, AutoSettings};
-use blendsim::cache::FrameSource;
-use blendsim::mesh::{bbox_diagonal, norm, sub};
+use blendsim::algorithms::frames::deviation::{cache_diagonal, deviation};
+use blendsim::algorithms::frames::fit::{fit, FitSettings};
+use blendsim::algorithms::frames::keyframes::{select, AutoSettings};
+use blendsim::algorithms::frames::FrameSource;
+use blendsim::algorithms::geometry::{bbox_diagonal, norm, sub};
 use crate::common::bar::{bar, BarSettings};
 
 #[test]

@@ -12,7 +12,7 @@
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use blendsim::mesh::Point;
+use blendsim::algorithms::geometry::Point;
 use serde_json::Value;
 
 use crate::common::cli::{read_json, run, TempDir};

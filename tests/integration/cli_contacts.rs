@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use blendsim::mesh::{norm, sub, Point};
-use blendsim::stage::Animation;
+use blendsim::algorithms::geometry::{norm, sub, Point};
+use blendsim::pipeline::stage_file::Animation;
 use serde_json::Value;
 
 use crate::cli_physics::cube_medit;
@@ -221,7 +221,8 @@ fn paper_spot_bounces_at_the_parabola_time() {
 #[test]
 #[ignore = "a measurement (minutes): prints the table README quotes"]
 fn contact_samples_table() {
-    use blendsim::internals::{objective, solver_inputs};
+    use blendsim::algorithms::spacetime::solver::objective;
+    use blendsim::pipeline::stages::solve::solver_inputs;
     println!("| scene | contact_samples | iterations | solve s | W (own sampling) | W at 80 samples | deepest below the floor between frames | contact time s |");
     println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for name in ["ball", "spot"] {
@@ -233,7 +234,7 @@ fn contact_samples_table() {
             run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
             run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
             run(&dir.path, &["solve", "body.json", "-o", "solution.json"]).success();
-            let solution: blendsim::stage::Solution = blendsim::stage::read(&dir.join("solution.json")).unwrap();
+            let solution: blendsim::pipeline::stage_file::Solution = blendsim::pipeline::stage_file::read(&dir.join("solution.json")).unwrap();
             let tr = &solution.trajectory;
             let (elastic, mut keys, mut settings) = solver_inputs(&solution.body).unwrap();
             keys.times = tr.times.clone();

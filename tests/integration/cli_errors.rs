@@ -5,7 +5,7 @@
 //! `blendsim`, and leave nothing behind: no output folder, no staging folder, no TetGen work
 //! folder (the child's TMPDIR is a folder of the test's own, which must stay empty). Usage
 //! errors exit 2. Each case builds its inputs in a fresh folder; meshes come from
-//! `blendsim::procedural` and `blendsim::mesh::obj::write`, or are written out by hand.
+//! `blendsim::algorithms::procedural` and `blendsim::formats::mesh::obj::write`, or are written out by hand.
 //! `corpus_of_bad_inputs` runs a table of bad inputs of every family twice, into a fresh
 //! place and over a good bake (which must stay byte-identical), and prints the table of
 //! messages with `--nocapture`.
@@ -13,8 +13,9 @@
 use std::ffi::OsStr;
 use std::path::Path;
 
-use blendsim::mesh::{obj, TriMesh};
-use blendsim::procedural::prism;
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::prism;
 
 use crate::common::cli::{run, run_env, tree, Run, TempDir};
 

@@ -17,8 +17,9 @@ use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use blendsim::mesh::{obj, TriMesh};
-use blendsim::procedural::prism;
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::prism;
 use crate::common::cli::{copy_tree, names, process_alive, run_env, snapshot, Spawned, TempDir};
 
 fn cube() -> TriMesh {

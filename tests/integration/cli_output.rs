@@ -9,8 +9,9 @@ use std::os::unix::fs::MetadataExt;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 
-use blendsim::mesh::{obj, TriMesh};
-use blendsim::procedural::prism;
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::prism;
 use crate::common::checkers::check_same_layer;
 use crate::common::cli::{names, read_json, run, run_env, snapshot, Spawned, TempDir};
 
@@ -304,7 +305,7 @@ fn usdc_needs_no_python_and_has_the_same_bytes_every_run() {
 /// on the solve's own W and force-scale history (report.json), whatever lines were printed.
 #[test]
 fn progress_estimates_every_phase() {
-    use blendsim::internals::{IterationEstimate, NEGLIGIBLE};
+    use blendsim::algorithms::spacetime::solver::{IterationEstimate, NEGLIGIBLE};
     let dir = TempDir::new("progress-estimates");
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
     let input = dir.join("in");

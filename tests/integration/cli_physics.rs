@@ -1,9 +1,9 @@
 //! The solver's analytic cases through the CLI, as a user runs it: tet-mesh keyframes written
 //! as MEDIT files, `import -> tetrahedralize -> solve`, and the solution stage file read back.
 
-use blendsim::mesh::Point;
-use blendsim::stage::{self, Solution};
-use blendsim::Trajectory;
+use blendsim::algorithms::geometry::Point;
+use blendsim::pipeline::stage_file::{self, Solution};
+use blendsim::algorithms::spacetime::trajectory::Trajectory;
 
 use crate::common::cli::{read_json, run, TempDir};
 
@@ -48,7 +48,7 @@ pub(crate) fn solve_scene(dir: &TempDir, meshes: &[(&str, String)], scene: &str)
     run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
     run(&dir.path, &["solve", "body.json", "-o", "solution.json"]).success();
-    stage::read(&dir.join("solution.json")).unwrap()
+    stage_file::read(&dir.join("solution.json")).unwrap()
 }
 
 #[test]

@@ -10,9 +10,10 @@
 //! (a different physical scene: a tiny box is hugely stiff for its mass, a huge one floppy)
 //! must still bake at every decade.
 
-use blendsim::mesh::{obj, TriMesh};
-use blendsim::procedural::prism;
-use blendsim::stage::{self, Solution};
+use blendsim::formats::mesh::obj;
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::prism;
+use blendsim::pipeline::stage_file::{self, Solution};
 
 use crate::common::cli::{read_json, run, TempDir};
 
@@ -50,7 +51,7 @@ fn bake_and_solve(dir: &TempDir) -> (serde_json::Value, Solution) {
     run(&dir.path, &["import", "-q", "scene.toml", "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "-q", "keys.json", "-o", "body.json"]).success();
     run(&dir.path, &["solve", "-q", "body.json", "-o", "solution.json"]).success();
-    (read_json(&dir.join("out/report.json")), stage::read(&dir.join("solution.json")).unwrap())
+    (read_json(&dir.join("out/report.json")), stage_file::read(&dir.join("solution.json")).unwrap())
 }
 
 #[test]

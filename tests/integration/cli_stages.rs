@@ -9,8 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
-use blendsim::scene::Method;
-use blendsim::stage::{OutputFile, OutputKind};
+use blendsim::pipeline::scene::Method;
+use blendsim::pipeline::stage_file::{OutputFile, OutputKind};
 use serde_json::Value;
 
 use crate::common::cli::{energies, names, read_json, run, without_timings, Run, TempDir};
@@ -240,8 +240,8 @@ fn hermite_method_through_the_chain_and_bake() {
 #[test]
 fn explicit_all_and_none_selections_survive_the_stage_files() {
     let dir = TempDir::new("stages-selections");
-    let cube = blendsim::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]);
-    std::fs::write(dir.join("k.obj"), blendsim::mesh::obj::write(&cube)).unwrap();
+    let cube = blendsim::algorithms::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]);
+    std::fs::write(dir.join("k.obj"), blendsim::formats::mesh::obj::write(&cube)).unwrap();
     std::fs::write(
         dir.join("scene.toml"),
         "name = \"t\"\n[keyframes]\nmeshes = [\"k.obj\", \"k.obj\"]\ntimes = [0.0, 1.0]\nfixed = [\"all\", \"all\"]\nfixed_velocity = [\"none\", \"none\"]\n",
@@ -263,7 +263,7 @@ fn a_moved_keyframes_file_names_the_rest_source_where_it_now_is() {
     let dir = TempDir::new("stages-rest-source-moved");
     let staged = dir.join("staged");
     std::fs::create_dir_all(&staged).unwrap();
-    std::fs::write(staged.join("box.obj"), blendsim::mesh::obj::write(&blendsim::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]))).unwrap();
+    std::fs::write(staged.join("box.obj"), blendsim::formats::mesh::obj::write(&blendsim::algorithms::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]))).unwrap();
     let scene = "name = \"b\"\n[keyframes]\nmeshes = [\"box.obj\", \"box.obj\"]\ntimes = [0.0, 1.0]\n[tet]\nquality = 0.0\nmax_volume = 1e-9\n[solver]\nsamples = 3\n";
     std::fs::write(staged.join("scene.toml"), scene).unwrap();
     let absolute = staged.canonicalize().unwrap();

@@ -2,9 +2,11 @@
 //! cyclic swing finds its natural period, and a ballistic jump with `keep_duration` finds the
 //! parabola's key times. The exported files carry the optimized times.
 
-use blendsim::internals::{loaded_equilibrium, natural_vibration, Elastic, ElasticMaterial, RestStiffness};
-use blendsim::mesh::{Point, TetMesh};
-use blendsim::stage::Solution;
+use blendsim::algorithms::physics::elastic::{Elastic, Material as ElasticMaterial};
+use blendsim::algorithms::physics::equilibrium::loaded_equilibrium;
+use blendsim::algorithms::physics::vibration::{natural_vibration, RestStiffness};
+use blendsim::algorithms::geometry::{Point, TetMesh};
+use blendsim::pipeline::stage_file::Solution;
 use serde_json::Value;
 
 use crate::common::bar::{bar_body, bar_released, BarSettings};

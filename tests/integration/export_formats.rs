@@ -6,13 +6,13 @@ use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
-use blendsim::clip::{BlendShapeClip, Weights};
-use blendsim::mesh::Point;
-use blendsim::output::Staging;
-use blendsim::procedural::prism as box_mesh;
-use blendsim::scene::Format;
-use blendsim::stage::{Animation, OutputKind, Outputs};
-use blendsim::stages::export;
+use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
+use blendsim::algorithms::geometry::Point;
+use blendsim::support::output::Staging;
+use blendsim::algorithms::procedural::prism as box_mesh;
+use blendsim::pipeline::scene::Format;
+use blendsim::pipeline::stage_file::{Animation, OutputKind, Outputs};
+use blendsim::pipeline::stages::export;
 
 use crate::common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
 use crate::common::{animation, sample_motion, scratch};
@@ -91,7 +91,7 @@ fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let dir = scratch(&anim.scene.name).join("out");
     let outputs = export_to(anim, &dir);
     let mut listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
-    listed.insert(blendsim::output::MANIFEST.to_string());
+    listed.insert(blendsim::support::output::MANIFEST.to_string());
     let on_disk: BTreeSet<String> =
         std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(listed, on_disk, "the folder holds exactly the listed files and the manifest");
@@ -257,10 +257,10 @@ fn checkers_reject_wrong_points_and_broken_files() {
 /// 0.5 s while the whole shape starts with a sideways velocity of 0.5 units/s; z up, 4 fps.
 fn tetra(export: &str) -> Animation {
     let positions = vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let mesh = blendsim::mesh::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], attributes: None };
+    let mesh = blendsim::algorithms::geometry::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], attributes: None };
     let mut risen = positions.clone();
     risen[3][2] += 0.5;
-    let tr = blendsim::Trajectory {
+    let tr = blendsim::algorithms::spacetime::trajectory::Trajectory {
         times: vec![0.0, 0.5],
         positions: vec![positions, risen],
         velocities: vec![vec![[0.5, 0.0, 0.0]; 4], vec![[0.0; 3]; 4]],

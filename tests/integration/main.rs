@@ -27,6 +27,7 @@ mod cli_threads;
 mod cli_timing;
 mod export_formats;
 mod fixtures;
+mod layers;
 mod normals;
 mod paper_scenes;
 mod render_demo;

@@ -20,12 +20,12 @@
 
 use std::path::Path;
 
-use blendsim::clip::BlendShapeClip;
-use blendsim::mesh::attributes::split_at_seams;
-use blendsim::mesh::{cross, norm, sub, Point};
-use blendsim::stage::Animation;
+use blendsim::algorithms::blendshape::clip::BlendShapeClip;
+use blendsim::algorithms::geometry::attributes::split_at_seams;
+use blendsim::algorithms::geometry::{cross, norm, sub, Point};
+use blendsim::pipeline::stage_file::Animation;
 
-use blendsim::stage::OutputKind;
+use blendsim::pipeline::stage_file::OutputKind;
 use serde_json::Value;
 
 use crate::attributes::Glb;
@@ -98,7 +98,7 @@ fn measure(name: &str, anim: &Animation) -> Row {
     let attributes = mesh.attributes.clone().unwrap_or_default();
     let identity: Vec<u32> = (0..n as u32).collect();
     // The truth's vertices: split where the OBJ's normals crease (not at UV seams).
-    let creases = blendsim::mesh::attributes::CornerAttributes { uvs: vec![], uv_corners: vec![], ..attributes.clone() };
+    let creases = blendsim::algorithms::geometry::attributes::CornerAttributes { uvs: vec![], uv_corners: vec![], ..attributes.clone() };
     let truth_split = if creases.normal_corners.is_empty() { None } else { Some(split_at_seams(&mesh.triangles, n, &creases)) };
     let (truth_tris, truth_sources) = truth_split.as_ref().map_or((&mesh.triangles, &identity), |s| (&s.triangles, &s.sources));
     // The glb's vertices: split at UV and normal seams.
@@ -256,8 +256,8 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
         let full_glb = Glb::parse(&std::fs::read(out.join(&full.path)).unwrap());
         assert!(full_glb.json["meshes"][0]["primitives"][0]["targets"][0].get("NORMAL").is_none(), "full-frame files are unchanged");
         let size = |morph_normals| {
-            let surface = blendsim::internals::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals };
-            blendsim::internals::glb::blendshapes(&clip, surface, "x", blendsim::internals::Placement { z_up: false, meters_per_unit: 1.0 }).len() as f64 / 1000.0
+            let surface = blendsim::formats::export::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals };
+            blendsim::formats::export::glb::blendshapes(&clip, surface, "x", blendsim::formats::export::glb::Placement { z_up: false, meters_per_unit: 1.0 }).len() as f64 / 1000.0
         };
         eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (texture not embedded)", size(true), size(false));
     }

@@ -12,8 +12,8 @@
 
 use std::path::Path;
 
-use blendsim::mesh::Point;
-use blendsim::stage::{Animation, OutputKind};
+use blendsim::algorithms::geometry::Point;
+use blendsim::pipeline::stage_file::{Animation, OutputKind};
 use serde_json::Value;
 
 use crate::common::assets::{paper_asset, paper_asset_in, paper_scene};
@@ -115,7 +115,7 @@ fn dino_walk() {
     assert!(report["keyframe_deviation"]["max"].as_f64().unwrap() > 1e-3, "the free tail moves: {}", report["keyframe_deviation"]);
 }
 
-// --- Volume, measured here, independently of src/report.rs. ---
+// --- Volume, measured here, independently of src/pipeline/report/measures.rs. ---
 
 fn enclosed_volume(points: &[Point], triangles: &[[u32; 3]]) -> f64 {
     triangles

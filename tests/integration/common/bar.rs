@@ -14,9 +14,9 @@
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
-use blendsim::cache::MemoryFrames;
-use blendsim::mesh::{Point, TetMesh, TriMesh};
-use blendsim::procedural;
+use blendsim::algorithms::frames::MemoryFrames;
+use blendsim::algorithms::geometry::{Point, TetMesh, TriMesh};
+use blendsim::algorithms::procedural;
 
 /// Bumped whenever the simulation code changes, so stale frames on disk are not reused.
 const SIMULATOR_VERSION: u32 = 1;

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use blendsim::mesh::Point;
+use blendsim::algorithms::geometry::Point;
 use serde::Serialize;
 use serde_json::Value;
 

@@ -11,10 +11,10 @@ pub mod verify;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use blendsim::mesh::{Point, TriMesh};
-use blendsim::scene::{Method, Scene};
-use blendsim::Trajectory;
-use blendsim::stage::{Animation, Counts, SolverLog};
+use blendsim::algorithms::geometry::{Point, TriMesh};
+use blendsim::pipeline::scene::{Method, Scene};
+use blendsim::algorithms::spacetime::trajectory::Trajectory;
+use blendsim::pipeline::stage_file::{Animation, Counts, SolverLog};
 
 /// A fresh, empty folder under Cargo's per-target scratch space, kept after the test so its
 /// files can be inspected.

@@ -4,12 +4,12 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use blendsim::clip::BlendShapeClip;
-use blendsim::mesh::{bbox_diagonal, norm, sub, Point};
-use blendsim::progress::Progress;
-use blendsim::scene::{Axis, Format, GltfInterpolation, Method, SceneFile};
-use blendsim::stage::{Animation, OutputFile, OutputKind};
-use blendsim::stages::Bake;
+use blendsim::algorithms::blendshape::clip::BlendShapeClip;
+use blendsim::algorithms::geometry::{bbox_diagonal, norm, sub, Point};
+use blendsim::support::progress::Progress;
+use blendsim::pipeline::scene::{Axis, Format, GltfInterpolation, Method, SceneFile};
+use blendsim::pipeline::stage_file::{Animation, OutputFile, OutputKind};
+use blendsim::pipeline::stages::Bake;
 use serde_json::Value;
 
 use super::checkers::{check_glb, check_same_layer, check_usd, Expected};
@@ -96,8 +96,8 @@ pub fn same_layer_as_usda(usdc: &Path, anim: &Animation) -> Value {
         let _ = std::fs::remove_dir_all(&scratch);
         let mut usda_only = anim.clone();
         usda_only.scene.export.formats = vec![Format::Usda];
-        let mut staging = blendsim::output::Staging::new(&scratch).unwrap();
-        blendsim::stages::export::export(&usda_only, &mut staging).unwrap();
+        let mut staging = blendsim::support::output::Staging::new(&scratch).unwrap();
+        blendsim::pipeline::stages::export::export(&usda_only, &mut staging).unwrap();
         staging.commit().unwrap();
         let summary = check_same_layer(&scratch.join(beside.file_name().unwrap()), usdc);
         std::fs::remove_dir_all(&scratch).unwrap();
@@ -116,7 +116,7 @@ pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile]
     let fps = anim.scene.fps;
     let export = &anim.scene.export;
     let clip = match rank {
-        Some(_) => blendsim::stages::export::blendshape_clip(anim, rank).unwrap().0,
+        Some(_) => blendsim::pipeline::stages::export::blendshape_clip(anim, rank).unwrap().0,
         None => BlendShapeClip::new(tr, export.weights),
     };
     // The trajectory the clip plays: the animation's, or its principal projection.

@@ -1,0 +1,50 @@
+//! The full-frame form of an animation: one pose per frame at the scene's fps.
+//!
+//! This is what a vertex cache holds, and the baseline the blendshape files are measured
+//! against (size and deviation).
+
+use crate::algorithms::spacetime::trajectory::Trajectory;
+
+/// An animation as a vertex cache: every vertex at every frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FullFrame {
+    /// Frame numbers (USD time codes at `fps`).
+    pub frames: Vec<i64>,
+    /// Frame times in seconds.
+    pub times: Vec<f64>,
+    /// `points[frame][vertex]`.
+    pub points: Vec<Vec<[f32; 3]>>,
+}
+
+impl FullFrame {
+    /// Sample `trajectory` at every frame of its key range (`Trajectory::frames`).
+    pub fn from_trajectory(trajectory: &Trajectory, fps: f64) -> FullFrame {
+        let frames = trajectory.frames(fps);
+        let mut buffer = vec![[0.0; 3]; trajectory.vertex_count()];
+        let points = frames
+            .iter()
+            .map(|&(_, t)| {
+                trajectory.evaluate_into(t, &mut buffer);
+                buffer.iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect()
+            })
+            .collect();
+        FullFrame { frames: frames.iter().map(|f| f.0).collect(), times: frames.iter().map(|f| f.1).collect(), points }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_pose_per_frame_of_the_key_range() {
+        let tr = Trajectory::with_zero_velocities(vec![0.5, 1.0], vec![vec![[0.0; 3]], vec![[1.0, 0.0, 0.0]]]);
+        let ff = FullFrame::from_trajectory(&tr, 10.0);
+        assert_eq!(ff.frames, (5..=10).collect::<Vec<_>>());
+        assert_eq!(ff.points.len(), 6);
+        assert_eq!(ff.points[0][0], [0.0; 3]);
+        assert_eq!(ff.points[5][0], [1.0, 0.0, 0.0]);
+        // Frame 7 is at 40% of the interval: smoothstep h01(0.4) = 0.352 with zero velocities.
+        assert!((ff.points[2][0][0] - 0.352).abs() < 1e-6, "{:?}", ff.points[2]);
+    }
+}

@@ -1,0 +1,110 @@
+//! `blendsim report --batch`: the `report.json` of many bakes in one table, `summary.csv` and
+//! `summary.md`, one row per bake.
+
+use std::path::{Path, PathBuf};
+
+use super::Report;
+use crate::support::error::{Error, Result};
+use crate::pipeline::scene::{Basis, Format};
+use crate::pipeline::stage_file::OutputKind;
+
+/// The `report.json` files of `dirs`: each folder's own, else those of its immediate
+/// subfolders (a folder of bakes), in name order.
+pub fn find_reports(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut found = Vec::new();
+    for dir in dirs {
+        let own = dir.join("report.json");
+        if own.is_file() {
+            found.push(own);
+            continue;
+        }
+        let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, &e, "list the bake folders"))?;
+        let mut inner: Vec<PathBuf> = entries.filter_map(|e| e.ok()).map(|e| e.path().join("report.json")).filter(|p| p.is_file()).collect();
+        if inner.is_empty() {
+            return Err(Error::in_file(dir, "holds no report.json, nor do its subfolders", "pass bake output folders (blendsim bake --out DIR), or a folder of them"));
+        }
+        inner.sort();
+        found.extend(inner);
+    }
+    Ok(found)
+}
+
+/// Read one `report.json`.
+pub fn read(path: &Path) -> Result<Report> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the report"))?;
+    serde_json::from_slice(&bytes).map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
+}
+
+const COLUMNS: [&str; 20] = [
+    "bake", "scene", "method", "vertices", "tets", "keys", "frames", "basis", "rank", "cache_format", "cache_bytes", "usda_bytes", "full_usda_bytes",
+    "glb_bytes", "full_glb_bytes", "usda_ratio", "glb_ratio", "error_max", "error_rms", "fit_error_max",
+];
+
+/// One row per report: `bake` is the folder holding it.
+fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
+    reports
+        .iter()
+        .map(|(path, r)| {
+            let bytes = |format: Format, kind: OutputKind| {
+                r.outputs.iter().find(|f| f.format == format && f.kind == kind).map_or(String::new(), |f| f.bytes.to_string())
+            };
+            let ratio = |format| r.ratios.get(&format).map_or(String::new(), |x| format!("{x:.2}"));
+            let (max, rms) = match &r.cache {
+                Some(c) => (c.error.max, c.error.rms),
+                None => (r.error.max, r.error.rms),
+            };
+            let cache = r.cache.as_ref();
+            vec![
+                path.parent().map_or(String::new(), |p| p.display().to_string()),
+                r.scene.clone(),
+                r.solver.method.to_string(),
+                r.vertices.to_string(),
+                r.tets.to_string(),
+                r.keyframes.to_string(),
+                r.frames.to_string(),
+                match r.basis {
+                    Basis::Keys => "keys".into(),
+                    Basis::Principal => "principal".into(),
+                },
+                r.rank.map_or(String::new(), |k| k.to_string()),
+                cache.map_or(String::new(), |c| c.format.clone()),
+                cache.map_or(String::new(), |c| c.bytes.to_string()),
+                bytes(Format::Usda, OutputKind::Blendshape),
+                bytes(Format::Usda, OutputKind::FullFrame),
+                bytes(Format::Glb, OutputKind::Blendshape),
+                bytes(Format::Glb, OutputKind::FullFrame),
+                ratio(Format::Usda),
+                ratio(Format::Glb),
+                format!("{max:.3e}"),
+                format!("{rms:.3e}"),
+                cache.and_then(|c| c.fit_error.as_ref()).map_or(String::new(), |f| format!("{:.3e}", f.max)),
+            ]
+        })
+        .collect()
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// `summary.csv` and `summary.md` of the reports (each with the path it was read from).
+/// `error_max`/`error_rms` are against the cache for a cache bake, else the storage error.
+pub fn summarize(reports: &[(PathBuf, Report)]) -> (String, String) {
+    let rows = rows(reports);
+    let mut csv = COLUMNS.join(",") + "\n";
+    let mut md = format!(
+        "# blendsim batch summary: {} bakes\n\nerror: against the cache for cache bakes (relative to its bounding-box diagonal), else blendshape vs full-frame.\n\n| {} |\n|{}\n",
+        rows.len(),
+        COLUMNS.join(" | "),
+        "---|".repeat(COLUMNS.len())
+    );
+    for row in &rows {
+        csv += &(row.iter().map(|f| csv_field(f)).collect::<Vec<_>>().join(",") + "\n");
+        md += &format!("| {} |\n", row.join(" | "));
+    }
+    (csv, md)
+}

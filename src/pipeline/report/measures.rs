@@ -1,0 +1,69 @@
+//! The report's measures: distances between animations, enclosed volume over frames, and
+//! file size ratios.
+
+use std::collections::BTreeMap;
+
+use super::{Deviation, VolumeRange};
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::geometry::{norm, sub, surface, Point};
+use crate::pipeline::scene::Format;
+use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::pipeline::stage_file::{OutputFile, OutputKind};
+
+/// Distances between the poses of `pairs`, relative to `diagonal` (the rest bounding-box
+/// diagonal; 1 when it is zero).
+pub fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal: f64) -> Deviation {
+    let (mut max, mut sum2, mut count, mut samples) = (0.0f64, 0.0f64, 0usize, 0usize);
+    for (a, b) in pairs {
+        for (p, q) in a.iter().zip(&b) {
+            let d = norm(sub(*p, *q));
+            max = max.max(d);
+            sum2 += d * d;
+            count += 1;
+        }
+        samples += 1;
+    }
+    let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
+    Deviation {
+        max: max / scale,
+        rms: if count > 0 { (sum2 / count as f64).sqrt() / scale } else { 0.0 },
+        relative_to: "bbox_diagonal".into(),
+        samples,
+    }
+}
+
+/// The blendshape `clip` of `tr` as the files store it (f32 shapes, f32 weights sampled at
+/// `frames`) against the trajectory itself at those frames.
+pub fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> Deviation {
+    // As USD stores it: f32 weights sampled at frames.
+    let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
+    deviation(frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))), diagonal)
+}
+
+/// Enclosed volume of the surface `triangles` moving on `tr`, over `frames`, relative to
+/// `rest` (see [`VolumeRange`]).
+pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64) -> VolumeRange {
+    let volumes: Vec<(f64, f64)> = frames.iter().map(|&(_, t)| (t, surface::enclosed_volume(&tr.evaluate(t), triangles))).collect();
+    let key_volumes: Vec<f64> = tr.positions.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
+    let blend = |t: f64| {
+        let (i, theta) = tr.locate(t);
+        (1.0 - theta) * key_volumes[i] + theta * key_volumes[i + 1]
+    };
+    VolumeRange {
+        min: volumes.iter().map(|v| v.1 / rest).fold(f64::INFINITY, f64::min),
+        max: volumes.iter().map(|v| v.1 / rest).fold(f64::NEG_INFINITY, f64::max),
+        in_between_loss: volumes.iter().map(|&(t, v)| 1.0 - v / blend(t)).fold(0.0, f64::max),
+    }
+}
+
+/// Per format: full-frame bytes / blendshape bytes, for the formats written both ways.
+pub fn size_ratios(outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
+    let mut ratios = BTreeMap::new();
+    for format in [Format::Usda, Format::Usdc, Format::Glb] {
+        let size = |kind| outputs.iter().find(|f| f.format == format && f.kind == kind).map(|f| f.bytes);
+        if let (Some(full), Some(blend)) = (size(OutputKind::FullFrame), size(OutputKind::Blendshape)) {
+            ratios.insert(format, full as f64 / blend as f64);
+        }
+    }
+    ratios
+}

@@ -1,0 +1,216 @@
+//! The `export` stage: the animation's blendshape and full-frame files.
+//!
+//! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights`
+//! names) and the `FullFrame` (one pose per frame) from the animation, and stage, for each
+//! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
+//! `NAME.full.EXT` (full-frame). `usda` and `usdc` hold the same USD layer (`export::usd`).
+//! Returns the list of staged files with their sizes. The files (and whatever the caller
+//! stages after them, e.g. `NAME.outputs.json`) are in the staging group `export:NAME`: a
+//! commit removes the files an earlier export of the same scene wrote that this one did not,
+//! (the USD files' textures, copied beside them, are in the group but not in `Outputs`),
+//! and keeps the report and other scenes' files. The layouts are specified in
+//! `formats/usd.md` and `formats/gltf.md`.
+
+use super::import_cache::error_against;
+use crate::support::error::{Error, Result};
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::blendshape::fullframe::FullFrame;
+use crate::algorithms::blendshape::principal::{smallest_rank, Components};
+use crate::formats::export::{glb, texture, usd, usda, usdc};
+use crate::algorithms::geometry::{bbox_diagonal, Axis};
+use crate::support::output::Staging;
+use crate::support::progress::Progress;
+use crate::pipeline::report::measures::deviation;
+use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
+use crate::pipeline::stage_file::{Animation, OutputFile, OutputKind, Outputs};
+
+/// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
+/// in the order usda, usdc, glb, whatever order the scene file gives.
+pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
+    let clip = blendshape_clip(animation, None)?;
+    export_with(animation, &clip, staging, &Progress::hidden())
+}
+
+/// [`export`] of `clip` (the animation's [`blendshape_clip`], chosen once by the caller, who
+/// may also measure it), showing a bar over the files on `progress`.
+pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), staging: &mut Staging, progress: &Progress) -> Result<Outputs> {
+    check(animation)?;
+    let scene = &animation.scene;
+    staging.set_group(&format!("export:{}", scene.name));
+    let trajectory = &animation.trajectory;
+    let triangles = &animation.mesh.triangles;
+    let attributes = animation.mesh.attributes.as_ref();
+    let mut formats = scene.export.formats.clone();
+    formats.sort();
+    formats.dedup();
+    let settings = usd::UsdSettings {
+        name: usd::prim_name(&scene.name),
+        fps: scene.fps,
+        up_axis: if scene.export.up_axis == Axis::Z { 'Z' } else { 'Y' },
+        meters_per_unit: scene.export.meters_per_unit,
+    };
+    let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
+
+    let (clip, rank) = (&clip.0, clip.1);
+    let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
+    // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
+    let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
+    let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
+    let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
+    if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {
+        let mut copied: Vec<&str> = Vec::new();
+        for t in textures.iter().flatten() {
+            if !copied.contains(&t.file_name.as_str()) {
+                staging.write(&t.file_name, &t.bytes)?;
+                copied.push(&t.file_name);
+            }
+        }
+    }
+    let mut forms = vec![(OutputKind::Blendshape, String::new())];
+    if full.is_some() {
+        forms.push((OutputKind::FullFrame, ".full".into()));
+    }
+
+    let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
+    let mut files = Vec::new();
+    for (kind, suffix) in forms {
+        let stem = format!("{}{suffix}", scene.name);
+        // The full-frame USD files are written from `full` itself, its points streamed
+        // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
+        // text: only the blendshape form builds its layer.
+        let streamed = kind == OutputKind::FullFrame;
+        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| usd::blendshapes(clip, triangles, attributes, &settings));
+        for &format in &formats {
+            let name = format!("{stem}.{}", format.extension());
+            bar.set_message(format!("export: {name}"));
+            match format {
+                Format::Usda => match &full {
+                    Some(full) if streamed => staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?,
+                    _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
+                },
+                Format::Usdc => {
+                    // The interruption tests stop here: in the export, before the usdc is staged.
+                    crate::support::interrupt::pause_point("usdc", "");
+                    let bytes = match &full {
+                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, &staging.final_path(&name))?,
+                        _ => usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?,
+                    };
+                    staging.write(&name, &bytes)?;
+                }
+                Format::Glb => {
+                    let bytes = match (&kind, &full) {
+                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
+                        _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
+                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
+                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
+                        }
+                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
+                    };
+                    staging.write(&name, &bytes)?;
+                }
+            }
+            files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    Ok(Outputs { files, rank })
+}
+
+/// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
+/// the trajectory to f32 precision, of the bounding-box diagonal.
+pub const PRINCIPAL_EXACT: f64 = 1e-6;
+
+/// The blendshape clip of `animation` in the scene's `[export] basis` and `weights`, and for a
+/// principal basis its rank: `rank` when given (the report rebuilding the exported clip), else
+/// `[export] rank`, else the smallest rank that meets
+/// - for a cache: the tolerance (`[cache] tolerance`, its default for listed keys) against
+///   every cache frame, or, when the unreduced animation is itself farther from the cache than
+///   that (spacetime), the tolerance against the unreduced animation at every frame;
+/// - for keyframes: [`PRINCIPAL_EXACT`] against the animation at every frame.
+pub fn blendshape_clip(animation: &Animation, rank: Option<usize>) -> Result<(BlendShapeClip, Option<usize>)> {
+    let export = &animation.scene.export;
+    let tr = &animation.trajectory;
+    if export.basis_for(animation.cache.is_some() && animation.log.method == Method::Fit) == Basis::Keys {
+        return Ok((BlendShapeClip::new(tr, export.weights), None));
+    }
+    let components = Components::new(tr);
+    let rank = match rank.or(export.rank) {
+        Some(r) => r.min(components.len().max(1)),
+        None => {
+            let frames = tr.frames(animation.scene.fps);
+            let diagonal = bbox_diagonal(&animation.mesh.positions);
+            let from_animation = |clip: &BlendShapeClip| deviation(frames.iter().map(|&(_, t)| (clip.points_at(t), tr.evaluate(t))), diagonal).max;
+            match &animation.cache {
+                Some(record) => {
+                    let tolerance = record.tolerance.unwrap_or(DEFAULT_TOLERANCE);
+                    if error_against(record, tr)?.max <= tolerance {
+                        smallest_rank(&components, export.weights, |clip| Ok(error_against(record, &clip.played(&tr.times))?.max <= tolerance))?
+                    } else {
+                        smallest_rank::<Error>(&components, export.weights, |clip| Ok(from_animation(clip) <= tolerance))?
+                    }
+                }
+                None => smallest_rank::<Error>(&components, export.weights, |clip| Ok(from_animation(clip) <= PRINCIPAL_EXACT))?,
+            }
+        }
+    };
+    Ok((components.clip(rank, export.weights), Some(rank)))
+}
+
+/// The invariants the writers rely on; an animation file that breaks them was not written by
+/// `blendsim embed` (or was edited).
+fn check(animation: &Animation) -> Result<()> {
+    const FIX: &str = "re-run `blendsim embed` to rewrite the animation file";
+    let bad = |problem: String| Err(Error::general(format!("cannot export: the animation {problem}"), FIX));
+    let tr = &animation.trajectory;
+    let n = animation.mesh.positions.len();
+    if tr.key_count() < 2 || tr.positions.len() != tr.key_count() || tr.velocities.len() != tr.key_count() {
+        return bad(format!(
+            "has {} key times, {} key poses and {} key velocities (need the same number, at least 2)",
+            tr.key_count(),
+            tr.positions.len(),
+            tr.velocities.len()
+        ));
+    }
+    // Non-decreasing; two equal times are a contact (one pose, two velocities), never at the
+    // first or last key, never two in a row.
+    let last = tr.key_count() - 1;
+    for k in 0..last {
+        let (a, b) = (tr.times[k], tr.times[k + 1]);
+        let contact = a == b && k > 0 && k + 1 < last && tr.times[k - 1] < a && b < tr.times[k + 2] && tr.positions[k] == tr.positions[k + 1];
+        if !(a < b || contact) {
+            return bad(format!("key times are not increasing at key {} (equal times are a contact only between other keys, with one pose)", k + 1));
+        }
+    }
+    for (what, keys) in [("positions", &tr.positions), ("velocities", &tr.velocities)] {
+        for (k, key) in keys.iter().enumerate() {
+            if key.len() != n {
+                return bad(format!("key {k} has {} {what} but the mesh has {n} vertices", key.len()));
+            }
+            if let Some(v) = key.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+                return bad(format!("has a non-finite {what} value at key {k}, vertex {v}"));
+            }
+        }
+    }
+    if tr.frames(animation.scene.fps).is_empty() {
+        return Err(Error::general(
+            format!(
+                "cannot export: the animation runs from {} s to {} s, between two frames at {} fps",
+                tr.start(),
+                tr.end(),
+                animation.scene.fps
+            ),
+            "give the keys a time range that contains a frame, or raise fps",
+        ));
+    }
+    if animation.mesh.triangles.is_empty() {
+        return bad("mesh has no triangles".into());
+    }
+    if let Some(t) = animation.mesh.triangles.iter().position(|t| t.iter().any(|&i| i as usize >= n)) {
+        return bad(format!("mesh triangle {t} uses a vertex index beyond its {n} vertices"));
+    }
+    if let Some(Err(problem)) = animation.mesh.attributes.as_ref().map(|a| a.check(animation.mesh.triangles.len())) {
+        return bad(format!("mesh {problem}"));
+    }
+    Ok(())
+}

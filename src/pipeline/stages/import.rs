@@ -1,0 +1,381 @@
+//! The `import` stage: read the scene's keyframe meshes, check they share one topology,
+//! apply procedural deformations, orient the rest shape, and resolve the per-key vertex
+//! selections (the scene's `fixed` and `fixed_velocity`) into sets. A contact key
+//! (`contact = [k]`) is duplicated here, so every later stage sees the contact as what it is:
+//! two keys at the same time.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::support::error::{Error, Result};
+use crate::algorithms::geometry::{self, surface, Point, TetMesh, TriMesh};
+use crate::formats::mesh::{self, MeshFile};
+use crate::pipeline::scene::{Rest, SceneFile, Selection};
+use crate::pipeline::stage_file::{Keyframes, Shape, VertexSet};
+
+/// Meshes read once per path (scenes often repeat the rest mesh).
+#[derive(Default)]
+struct MeshCache(HashMap<PathBuf, MeshFile>);
+
+impl MeshCache {
+    fn get(&mut self, path: &Path) -> Result<&MeshFile> {
+        if !self.0.contains_key(path) {
+            let m = mesh::read(path)?;
+            self.0.insert(path.to_path_buf(), m);
+        }
+        Ok(&self.0[path])
+    }
+
+    /// Read the files of `paths` not read yet, in parallel (each file parsed on its own, so the
+    /// same meshes). A file that fails is left out, for `get` to read again and report in key
+    /// order, as without the prefetch.
+    fn prefetch(&mut self, paths: &[PathBuf]) {
+        let mut todo: Vec<&PathBuf> = paths.iter().filter(|p| !self.0.contains_key(p.as_path())).collect();
+        todo.sort();
+        todo.dedup();
+        let read: Vec<(PathBuf, Result<MeshFile>)> = todo.into_par_iter().map(|p| (p.clone(), mesh::read(p))).collect();
+        self.0.extend(read.into_iter().filter_map(|(p, m)| Some((p, m.ok()?))));
+    }
+}
+
+/// Topology of a keyframe file, compared between keys. Tets are compared as vertex sets,
+/// since readers may reorder a tet's vertices to orient it.
+#[derive(PartialEq)]
+enum Topology {
+    Surface(Vec<[u32; 3]>),
+    Volume(Vec<[u32; 4]>),
+}
+
+impl Topology {
+    fn of(m: &MeshFile) -> Topology {
+        match m {
+            MeshFile::Surface(s) => Topology::Surface(s.triangles.clone()),
+            MeshFile::Volume(v) => Topology::Volume(
+                v.tets
+                    .iter()
+                    .map(|t| {
+                        let mut s = *t;
+                        s.sort_unstable();
+                        s
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    fn describe(&self) -> (&'static str, usize, &'static str) {
+        match self {
+            Topology::Surface(t) => ("surface", t.len(), "triangles"),
+            Topology::Volume(t) => ("tet mesh", t.len(), "tets"),
+        }
+    }
+}
+
+/// Check that `other` (from `other_path`) has the topology of `first` (from `first_path`).
+fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &MeshFile, &Topology)) -> Result<()> {
+    let (fp, fm, ft) = first;
+    let (op, om, ot) = other;
+    let fix = "every keyframe must be the same mesh with moved vertices: export it from the same object without remeshing";
+    let (f_kind, f_count, f_what) = ft.describe();
+    let (o_kind, o_count, o_what) = ot.describe();
+    if f_kind != o_kind {
+        return Err(Error::in_file(op, format!("is a {o_kind} but {} is a {f_kind}", fp.display()), "give every keyframe the same kind of file"));
+    }
+    if fm.positions().len() != om.positions().len() {
+        return Err(Error::in_file(
+            op,
+            format!("has {} vertices but {} has {}", om.positions().len(), fp.display(), fm.positions().len()),
+            fix,
+        ));
+    }
+    if f_count != o_count {
+        return Err(Error::in_file(op, format!("has {o_count} {o_what} but {} has {f_count} {f_what}", fp.display()), fix));
+    }
+    if ft != ot {
+        return Err(Error::in_file(op, format!("has the same counts as {} but its {o_what} connect different vertices", fp.display()), fix));
+    }
+    Ok(())
+}
+
+/// Vertices selected by `selection`, over `rest` positions.
+pub(super) fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: &[Point]) -> Result<Vec<bool>> {
+    let n = rest.len();
+    Ok(match selection {
+        Selection::All => vec![true; n],
+        Selection::None => vec![false; n],
+        Selection::File { file, invert } => {
+            let path = scene.resolve(file);
+            let mut mask = mesh::selection::read(&path, n)?;
+            if *invert {
+                mask.iter_mut().for_each(|m| *m = !*m);
+            }
+            mask
+        }
+        Selection::Slab { axis, min, max, invert } => rest
+            .iter()
+            .map(|p| {
+                let c = p[axis.index()];
+                let inside = min.is_none_or(|lo| c >= lo) && max.is_none_or(|hi| c <= hi);
+                inside != *invert
+            })
+            .collect(),
+        Selection::Union(items) => {
+            let mut mask = vec![false; n];
+            for item in items {
+                for (m, s) in mask.iter_mut().zip(resolve_selection(item, scene, rest)?) {
+                    *m |= s;
+                }
+            }
+            mask
+        }
+    })
+}
+
+/// Read and check the keyframes of a scene.
+pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
+    let scene = &scene_file.scene;
+    let keys = match (&scene.keyframes, &scene.cache) {
+        (Some(keys), _) => keys,
+        (None, Some(cache)) => return super::import_cache::import(scene_file, cache),
+        (None, None) => return Err(Error::general("the scene has neither [keyframes] nor [cache]", "add one of them (formats/scene.md)")),
+    };
+    let mut meshes = KeyMeshes::read(scene_file)?;
+    let (rest, rest_source) = meshes.rest_shape(scene_file)?;
+    let rest_points = match &rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    // One selection per key, usually the same one at every key: each distinct one is resolved
+    // (its file read) once.
+    let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
+        let mut resolved: Vec<(&Selection, VertexSet)> = Vec::new();
+        (0..meshes.poses.len())
+            .map(|k| {
+                let sel = list.as_ref().map_or(&default, |l| &l[k]);
+                if let Some((_, set)) = resolved.iter().find(|(s, _)| *s == sel) {
+                    return Ok(set.clone());
+                }
+                let set = VertexSet::from_mask(&resolve_selection(sel, scene_file, rest_points)?);
+                resolved.push((sel, set.clone()));
+                Ok(set)
+            })
+            .collect()
+    };
+    let fixed = masks(&keys.fixed, Selection::All)?;
+    let fixed_velocity = masks(&keys.fixed_velocity, Selection::None)?;
+    if keys.cyclic {
+        meshes.check_loop(rest_points)?;
+    }
+    check_key_volumes(&rest, &meshes.poses, &meshes.paths)?;
+    let display = match &scene.embed.surface {
+        Some(p) => {
+            let mut s = mesh::obj::read(&scene_file.resolve(p))?;
+            surface::orient_outward(&mut s);
+            Some(s)
+        }
+        None => None,
+    };
+    // Before TetGen: the exported vertices, and the fewest tets a tet mesh of the rest shape
+    // can have (each boundary triangle is a face of a tet, a tet has 4 faces).
+    let (vertices, tets) = match &rest {
+        Shape::Surface(s) => (s.positions.len(), s.triangles.len().div_ceil(4)),
+        Shape::Volume(v) => (v.positions.len(), v.tets.len()),
+    };
+    let vertices = display.as_ref().map_or(vertices, |d| d.positions.len());
+    super::check_resources(scene, &keys.times, vertices, tets)?;
+    // A contact key is duplicated at its own time: the two share the pose and the masks (the
+    // solver aliases their positions), not the velocities.
+    let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);
+    for &k in keys.contact.iter().rev() {
+        times.insert(k + 1, times[k]);
+        poses.insert(k + 1, poses[k].clone());
+        fixed.insert(k + 1, fixed[k].clone());
+        fixed_velocity.insert(k + 1, fixed_velocity[k].clone());
+    }
+    Ok(Keyframes {
+        scene: scene.clone(),
+        rest_source: rest_source.display().to_string(),
+        rest,
+        times,
+        poses,
+        fixed,
+        fixed_velocity,
+        cyclic: keys.cyclic,
+        display,
+        cache: None,
+    })
+}
+
+/// The keyframe meshes of a scene, read and checked against the first.
+struct KeyMeshes {
+    cache: MeshCache,
+    /// Resolved path of every key's mesh.
+    paths: Vec<PathBuf>,
+    first: MeshFile,
+    first_topology: Topology,
+    /// `poses[key][vertex]`, after any procedural deformation.
+    poses: Vec<Vec<Point>>,
+}
+
+impl KeyMeshes {
+    /// Read every key's mesh (each file once), check it has the first one's topology, and
+    /// deform it as the scene says.
+    fn read(scene_file: &SceneFile) -> Result<KeyMeshes> {
+        let keys = scene_file.scene.keyframes.as_ref().expect("a keyframe scene");
+        let mut cache = MeshCache::default();
+        let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
+        cache.prefetch(&paths);
+        let first = cache.get(&paths[0])?.clone();
+        let first_topology = Topology::of(&first);
+        let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
+        for (k, key) in keys.meshes.iter().enumerate() {
+            let m = cache.get(&paths[k])?;
+            if k > 0 {
+                check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
+            }
+            let mut positions = match key.twist() {
+                Some(t) => crate::algorithms::procedural::twist(m.positions(), t),
+                None => m.positions().to_vec(),
+            };
+            if let Some(offset) = key.offset() {
+                positions.iter_mut().for_each(|p| *p = std::array::from_fn(|c| p[c] + offset[c]));
+            }
+            poses.push(positions);
+        }
+        Ok(KeyMeshes { cache, paths, first, first_topology, poses })
+    }
+
+    /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came
+    /// from.
+    fn rest_shape(&mut self, scene_file: &SceneFile) -> Result<(Shape, PathBuf)> {
+        let (rest_positions, rest_source) = match &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
+            Rest::Key(r) => (self.poses[*r].clone(), self.paths[*r].clone()),
+            Rest::Mesh(p) => {
+                let path = scene_file.resolve(p);
+                let m = self.cache.get(&path)?;
+                check_same_topology((&self.paths[0], &self.first, &self.first_topology), (&path, m, &Topology::of(m)))?;
+                (m.positions().to_vec(), path)
+            }
+        };
+        debug_assert!(self.poses.iter().all(|p| p.len() == rest_positions.len()));
+        // UVs, normals and material groups come from the rest file alone (it has the keys'
+        // topology); other keyframes' `vt`/`vn`/`usemtl` are not read back (formats/scene.md).
+        let attributes = match self.cache.get(&rest_source)? {
+            MeshFile::Surface(s) => s.attributes.clone(),
+            MeshFile::Volume(_) => None,
+        };
+        let rest = match &self.first {
+            MeshFile::Surface(s) => {
+                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone(), attributes };
+                surface::orient_outward(&mut rest);
+                Shape::Surface(rest)
+            }
+            MeshFile::Volume(v) => {
+                let mut rest = TetMesh { positions: rest_positions, tets: v.tets.clone() };
+                check_rest_fold(&rest, &rest_source)?;
+                rest.orient_positive();
+                Shape::Volume(rest)
+            }
+        };
+        Ok((rest, rest_source))
+    }
+
+    /// A loop's last key must repeat the first (to 1e-9 of the rest size).
+    fn check_loop(&self, rest_points: &[Point]) -> Result<()> {
+        let (poses, paths) = (&self.poses, &self.paths);
+        let last = poses.len() - 1;
+        let gap = poses[0].iter().zip(&poses[last]).map(|(a, b)| geometry::norm(geometry::sub(*a, *b))).fold(0.0, f64::max);
+        if gap > 1e-9 * geometry::bbox_diagonal(rest_points).max(f64::MIN_POSITIVE) {
+            return Err(Error::in_file(
+                &paths[last],
+                format!("cyclic = true, but the last keyframe differs from the first ({}) by up to {gap:.4e}", paths[0].display()),
+                "repeat the first keyframe's mesh as the last key of a loop",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A tet key's tet at this fraction of its rest volume or below is flattened.
+pub const FLAT_TET_RATIO: f64 = 1e-3;
+
+/// Tet numbers and vertices as the MEDIT file writes them (1-based).
+fn tet_in_file(mesh: &TetMesh, t: usize) -> String {
+    let [a, b, c, d] = mesh.tets[t].map(|v| v + 1);
+    format!("tet {} (vertices {a}, {b}, {c}, {d}; 1-based, as in the file)", t + 1)
+}
+
+/// A rest tet mesh that overlaps itself (two tets sharing a face lie on the same side of it:
+/// a tet turned inside out against its neighbours) is folded. The files' vertex order says
+/// nothing (the paper's meshes mix both orders; tets are oriented on load), so the test is
+/// geometric, on the faces.
+fn check_rest_fold(rest: &TetMesh, path: &Path) -> Result<()> {
+    let Some((t, u, face)) = rest.first_fold() else { return Ok(()) };
+    let [a, b, c] = face.map(|v| v + 1);
+    Err(Error::in_file(
+        path,
+        format!("the rest mesh is folded: {} and {} overlap across their shared face (vertices {a}, {b}, {c})", tet_in_file(rest, t), tet_in_file(rest, u)),
+        "untangle the rest mesh in the modeling tool so that no tet is turned inside out",
+    ))
+}
+
+/// A key of a tet mesh that inverts or flattens a tet (a local fold, even when the key's total
+/// volume is fine) is an error naming the key file and the tet: the key is a hard constraint,
+/// so the solver would have to keep the fold.
+fn check_key_tets(rest: &TetMesh, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    for (k, pose) in poses.iter().enumerate() {
+        let collapsed = rest.collapsed_at(pose, FLAT_TET_RATIO);
+        let Some(&(t, ratio)) = collapsed.first() else { continue };
+        let what = if ratio < 0.0 { "inverted" } else { "flattened" };
+        let others = match collapsed.len() - 1 {
+            0 => String::new(),
+            n => format!(" (and {n} more tets)"),
+        };
+        return Err(Error::in_file(
+            &paths[k],
+            format!("key {k} folds the body: {} is {what}, at {:.1}% of its rest volume{others}", tet_in_file(rest, t), 100.0 * ratio),
+            "re-export the key so that no tet is turned inside out or squashed flat",
+        ));
+    }
+    Ok(())
+}
+
+/// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or
+/// almost zero (flattened or collapsed) against the rest shape's is an error naming the key:
+/// the solver would either fight the inversion or have nothing to keep, and the report would
+/// show volumes down to -100%. Both are fixed in the modeling tool, not by blendsim.
+fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    let volume = |p: &[Point]| match rest {
+        Shape::Surface(s) => surface::enclosed_volume(p, &s.triangles),
+        Shape::Volume(v) => v.volume_at(p),
+    };
+    let rest_points = match rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let rest_volume = volume(rest_points);
+    if rest_volume.is_nan() || rest_volume <= 0.0 {
+        return Ok(()); // the rest shape's own checks report it
+    }
+    for (k, pose) in poses.iter().enumerate() {
+        let ratio = volume(pose) / rest_volume;
+        let problem = if ratio < 0.0 {
+            "is inside out (mirrored)"
+        } else if ratio < 1e-3 {
+            "is flattened or collapsed"
+        } else {
+            continue;
+        };
+        return Err(Error::in_file(
+            &paths[k],
+            format!("key {k} {problem}: it encloses {:.1}% of the rest shape's volume", 100.0 * ratio),
+            "re-export the key from the same object without a zero or negative scale",
+        ));
+    }
+    match rest {
+        Shape::Volume(v) => check_key_tets(v, poses, paths),
+        Shape::Surface(_) => Ok(()),
+    }
+}

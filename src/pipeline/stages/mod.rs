@@ -1,0 +1,63 @@
+//! The chain, one stage per file: each stage is one function from the stage data before it to
+//! the stage data after it (the types of [`crate::pipeline::stage_file`], which the CLI writes between
+//! subcommands), and [`bake()`] runs them all in order.
+//!
+//! ```text
+//! SceneFile -> import -> Keyframes -> tetrahedralize -> Body -> solve -> Solution
+//!           -> embed -> Animation -> export -> (files, Outputs) -> report -> Report
+//! ```
+//!
+//! - [`import()`]: read the keyframe meshes, check one topology, resolve the vertex selections;
+//! - [`tetrahedralize()`]: TetGen for surface keyframes, interior nodes posed by a quasi-static fit;
+//! - [`solve()`]: the node trajectory (spacetime projective dynamics, or the hermite baseline);
+//! - [`embed()`]: the exported surface carried on it by a barycentric binding;
+//! - [`export()`]: the blendshape and full-frame files;
+//! - [`report()`]: sizes, fidelity, volume and the solver's history.
+//!
+//! Beside the chain, [`blend()`]: mass-spring blendshapes of target meshes (`blendsim blend`).
+//!
+//! This layer is the only one that reads the scene and the stage data: it translates them into
+//! the plain inputs of the algorithms (meshes, an elastic material, key constraints, solver
+//! settings) and their results back into stage data. No algorithm module knows the scene file
+//! or the stage files.
+
+pub mod bake;
+pub mod blend;
+pub mod import_cache;
+pub mod embed;
+pub mod export;
+pub mod import;
+pub mod report;
+pub mod solve;
+pub mod tetrahedralize;
+
+#[cfg(test)]
+mod fuzz;
+
+pub use bake::{bake, Bake};
+pub use blend::blend;
+pub use embed::embed;
+pub use export::{blendshape_clip, export, export_with};
+pub use import::import;
+pub use report::report;
+pub use solve::{solve, solve_within};
+pub use tetrahedralize::tetrahedralize;
+
+use crate::algorithms::physics::elastic;
+use crate::pipeline::scene;
+
+/// The memory the scene needs for the frames it exports (`vertices` exported vertices over the
+/// key times at the scene's fps) and the samples it solves (`tets`, or a lower bound before
+/// TetGen), checked against the budget before anything that size is allocated.
+pub(crate) fn check_resources(scene: &scene::Scene, times: &[f64], vertices: usize, tets: usize) -> crate::support::error::Result<()> {
+    if let (Some(start), Some(end)) = (times.first(), times.last()) {
+        crate::support::resources::check_frames(*start, *end, scene.fps, vertices)?;
+    }
+    // Both methods evaluate W over the samples (`hermite` once, for the report).
+    crate::support::resources::check_samples(scene.solver.samples, times.len().saturating_sub(1), tets)
+}
+
+/// The elastic constants of the scene's `[material]`.
+pub(crate) fn elastic_material(material: &scene::Material) -> elastic::Material {
+    elastic::Material { stiffness: material.stiffness, volume: material.volume, density: material.density }
+}

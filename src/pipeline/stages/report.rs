@@ -1,0 +1,114 @@
+//! The `report` stage: measure an animation and the files exported from it.
+
+use crate::support::error::Result;
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::geometry::{bbox_diagonal, surface};
+use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
+use crate::pipeline::scene::{Basis, Method};
+use crate::pipeline::stage_file::CacheRecord;
+use crate::pipeline::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
+use crate::pipeline::report::{Report, Volume};
+use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::pipeline::stage_file::{Animation, Outputs};
+
+/// The report of an animation and the files exported from it (for a cache, measured against
+/// the cache's frames, streamed again from it).
+pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
+    let clip = super::export::blendshape_clip(animation, outputs.rank)?;
+    Ok(with_outputs(measure(animation, &clip)?, outputs))
+}
+
+/// The report's measures of the animation alone, without the files (no outputs, no size
+/// ratios): what takes time, so a bake measures while the files are written. [`with_outputs`]
+/// completes it. `clip` is the blendshape clip the files hold and its rank
+/// ([`super::export::blendshape_clip`]).
+pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)) -> Result<Report> {
+    let scene = &animation.scene;
+    let tr = &animation.trajectory;
+    let frames = tr.frames(scene.fps);
+    let diagonal = bbox_diagonal(&animation.mesh.positions);
+    // The clip the blendshape files hold (a principal one at the rank export chose).
+    let (clip, rank) = (&clip.0, clip.1);
+    let error = blendshape_error(clip, tr, &frames, diagonal);
+    // The input keys: every key of the trajectory, or every `stride`-th when it also holds
+    // in-betweens (mass-spring: `inbetweens + 1`).
+    let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
+    let key_times: Vec<f64> = tr.times.iter().step_by(stride).copied().collect();
+    let keyframe_deviation = deviation(tr.positions.iter().step_by(stride).cloned().zip(animation.input_keys.iter().cloned()), diagonal);
+    let triangles = &animation.mesh.triangles;
+    let closed = !triangles.is_empty() && surface::open_edges(&animation.mesh).is_empty();
+    let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
+    let volume = (closed && rest_volume > 0.0).then(|| {
+        let hermite = Trajectory::with_zero_velocities(key_times, animation.input_keys.clone());
+        Volume {
+            rest: rest_volume,
+            animation: volume_range(tr, &frames, triangles, rest_volume),
+            hermite: volume_range(&hermite, &frames, triangles, rest_volume),
+        }
+    });
+    // A principal clip plays its own trajectory: that is what the files hold.
+    let played = rank.map(|_| clip.played(&tr.times));
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record)).transpose()?;
+    Ok(Report {
+        scene: scene.name.clone(),
+        vertices: animation.counts.vertices,
+        faces: animation.counts.faces,
+        tet_nodes: animation.counts.tet_nodes,
+        tets: animation.counts.tets,
+        keyframes: animation.counts.keyframes,
+        largest_tet_volume: animation.counts.largest_tet_volume,
+        max_volume: (scene.tet.max_volume > 0.0 && animation.counts.largest_tet_volume.is_some()).then_some(scene.tet.max_volume),
+        duration_s: tr.duration(),
+        fps: scene.fps,
+        frames: frames.len(),
+        solver: animation.log.clone(),
+        outputs: Vec::new(),
+        ratios: Default::default(),
+        error,
+        keyframe_deviation,
+        volume,
+        cache,
+        cage: animation.cage.clone(),
+        basis: if rank.is_some() { Basis::Principal } else { Basis::Keys },
+        rank,
+        warnings: animation.warnings.clone(),
+    })
+}
+
+/// `report` (from [`measure`]) with the files of `outputs` and the size ratios they give.
+pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
+    report.outputs = outputs.files.clone();
+    report.ratios = size_ratios(&outputs.files);
+    if let Some(cache) = &mut report.cache {
+        cache.ratios = cache_ratios(cache.bytes, &outputs.files);
+    }
+    report
+}
+
+/// The cache part of the report: the animation the blendshape files play (`played`: the
+/// trajectory of the exported surface, whose vertices are the cache's, or its principal clip)
+/// against every cache frame, and for the simulated methods
+/// the least-squares fit on the same keys and `fixed` constraints.
+fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord) -> Result<CacheReport> {
+    let error = super::import_cache::error_against(record, played)?;
+    let fit_error = match animation.log.method {
+        Method::Fit => None,
+        Method::Hermite | Method::Spacetime | Method::MassSpring => {
+            let fit = super::import_cache::fit_cache(record)?;
+            Some(super::import_cache::error_against(record, &fit)?.into())
+        }
+    };
+    Ok(CacheReport {
+        path: record.path.clone(),
+        format: record.format.clone(),
+        frames: record.frames,
+        fps: record.fps,
+        fps_source: record.fps_note.clone(),
+        bytes: record.bytes,
+        keys: record.keys.clone(),
+        tolerance: record.tolerance,
+        ratios: Default::default(),
+        error: error.into(),
+        fit_error,
+    })
+}

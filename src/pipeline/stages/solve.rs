@@ -1,0 +1,285 @@
+//! The `solve` stage: the node trajectory of the body, by the scene's method.
+//!
+//! - `hermite`: the keyframes joined with zero velocities (the geometric baseline); its W is
+//!   still evaluated, so reports compare methods on one scale.
+//! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
+//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval ([`stages::blend`](mod@super::blend)).
+//!
+//! The scene's `[solver]`, `[material]` and `[[obstacle]]` become the solver's [`Settings`] and
+//! the body's elastic material here; the body's keyframes become its [`KeyConstraints`].
+
+use std::time::Instant;
+
+use crate::support::error::{Error, Result};
+use crate::algorithms::physics::elastic::Elastic;
+use crate::support::progress::Progress;
+use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
+use crate::algorithms::spacetime::contact::Contacts;
+use crate::algorithms::spacetime::global_step::Method as GlobalMethod;
+use crate::algorithms::spacetime::obstacles::Obstacle;
+use crate::algorithms::spacetime::solver::{self, ModelHessian, Settings, Step};
+use crate::algorithms::spacetime::timing::TimingSettings;
+use crate::algorithms::spacetime::unknowns::KeyConstraints;
+use crate::pipeline::stage_file::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
+
+/// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
+/// the solution's scene records the method used.
+pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result<Solution> {
+    solve_within(body, method, None, progress)
+}
+
+/// [`solve`] with the global step's memory budget in bytes (the CLI's `--max-memory`; `None`:
+/// a fraction of the machine's available memory). Past it the global step is solved
+/// iteratively, to the same solution within the solver's tolerance.
+pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>, progress: &Progress) -> Result<Solution> {
+    let mut body = body.clone();
+    if let Some(m) = method {
+        body.scene.solver.method = m;
+    }
+    let scene = &body.scene;
+    let tets = match (&body.mesh, scene.solver.method) {
+        (None, Method::Fit) => return solve_fit(body),
+        (Some(tets), Method::Hermite | Method::Spacetime | Method::MassSpring) => tets,
+        (Some(_), Method::Fit) => {
+            return Err(Error::general(
+                "method fit was chosen after import: this body was tetrahedralized for a simulation",
+                "set [solver] method = \"fit\" in the [cache] scene (or bake with --method fit), so the chain skips TetGen",
+            ))
+        }
+        (None, m) => {
+            return Err(Error::general(
+                format!("method {m} needs a tet mesh, but this body was imported for method fit (nothing to simulate)"),
+                format!("set [solver] method = \"{m}\" in the scene (or bake with --method {m}) and re-run import and tetrahedralize"),
+            ))
+        }
+    };
+    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), tets.tets.len())?;
+    let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
+    let settings = Settings { max_memory, ..settings(scene) };
+    let keys = key_constraints(&body.keys);
+    let input_times = keys.times.clone();
+    let (trajectory, log) = match scene.solver.method {
+        Method::Hermite => {
+            let start = Instant::now();
+            let (trajectory, w) = solver::baseline(&elastic, &keys, &settings);
+            let log = SolverLog {
+                method: Method::Hermite,
+                iterations: 0,
+                energy: vec![w],
+                seconds: start.elapsed().as_secs_f64(),
+                precompute_seconds: 0.0,
+                iteration_seconds: 0.0,
+                unknowns: 0,
+                halvings: 0,
+                converged: true,
+                stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
+                linear_solver: String::new(),
+                last_decrease: 0.0,
+                predicted_remaining: None,
+                force_scale: None,
+                force_scales: Vec::new(),
+                times: input_times.clone(),
+                input_times,
+                timing_iterations: 0,
+                refactorizations: 0,
+                active_contacts: 0,
+                clearance: None,
+                conjugate_gradients: None,
+                iteration_split: None,
+                coarse_iterations: 0,
+                coarse_samples: 0,
+            };
+            (trajectory, log)
+        }
+        Method::Spacetime => {
+            // The total is the stopping rule's own prediction from the W so far
+            // (`solver::IterationEstimate`; not max_iterations, which a converging solve never
+            // reaches). The force scale S of every iterate is kept for the report (the floor is
+            // `negligible` S), so the estimate can be replayed as the solve made it.
+            let bar = progress.iterations("solve: spacetime");
+            let estimate = std::sync::Mutex::new((solver::IterationEstimate::default(), Vec::new()));
+            // On a worker of the thread pool: the solve's parallel loops (about ten an iteration,
+            // each a fraction of a millisecond on a small body) then start inside the pool,
+            // instead of each handing itself over from this thread and putting it to sleep (two
+            // context switches apiece; the same bytes).
+            let solved = rayon::scope(|_| solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
+                let mut guard = estimate.lock().unwrap_or_else(|e| e.into_inner());
+                let (running, scales) = &mut *guard;
+                scales.truncate(k);
+                scales.push(if settings.negligible > 0.0 { floor / settings.negligible } else { 0.0 });
+                let total = running.update(k, w, floor, settings.tolerance, settings.max_iterations);
+                drop(guard);
+                match total {
+                    Some(total) => bar.set_length(total as u64),
+                    None => bar.unset_length(),
+                }
+                bar.set_position(k as u64);
+                bar.set_message(format!("solve: spacetime W = {w:.4e}"));
+            }))?;
+            bar.finish_and_clear();
+            let l = solved.log;
+            let log = SolverLog {
+                method: Method::Spacetime,
+                iterations: l.iterations,
+                energy: l.energy,
+                seconds: l.seconds,
+                precompute_seconds: l.precompute_seconds,
+                iteration_seconds: l.iteration_seconds,
+                unknowns: l.unknowns,
+                halvings: l.halvings,
+                converged: l.converged,
+                stop_reason: l.stop_reason,
+                linear_solver: l.linear_solver,
+                last_decrease: l.last_decrease,
+                predicted_remaining: l.predicted_remaining,
+                force_scale: Some(l.force_scale),
+                force_scales: estimate.into_inner().unwrap_or_else(|e| e.into_inner()).1,
+                times: solved.trajectory.times.clone(),
+                input_times,
+                timing_iterations: l.timing_iterations,
+                refactorizations: l.refactorizations,
+                active_contacts: l.active_contacts,
+                clearance: l.clearance,
+                conjugate_gradients: l.conjugate_gradients.map(|c| CgSummary {
+                    solves: c.solves,
+                    iterations: c.iterations,
+                    capped: c.capped,
+                    max_iterations: c.max_iterations,
+                    tolerance: c.tolerance,
+                    worst_residual: c.worst_residual,
+                }),
+                coarse_iterations: l.coarse_iterations,
+                coarse_samples: l.coarse_samples,
+                iteration_split: Some(IterationSplit {
+                    evaluations: l.split.evaluations,
+                    exact_evaluations: l.split.exact_evaluations,
+                    evaluation_seconds: l.split.evaluation_seconds,
+                    solves: l.split.solves,
+                    solve_seconds: l.split.solve_seconds,
+                }),
+            };
+            if let Some(c) = log.conjugate_gradients.filter(|c| c.capped > 0) {
+                eprintln!(
+                    "blendsim: warning: {} of {} iterative global-step solves stopped at {} CG iterations with a relative residual up to {:.1e} (goal {:.0e}); the result may differ from the direct solve's. Fix: give the direct solver the memory (--max-memory), or use fewer keys or a coarser body",
+                    c.capped, c.solves, c.max_iterations, c.worst_residual, c.tolerance
+                );
+            }
+            (solved.trajectory, log)
+        }
+        Method::MassSpring => super::blend::inbetween(&body, progress)?,
+        Method::Fit => unreachable!("handled above"),
+    };
+    Ok(Solution { body, trajectory, log })
+}
+
+/// `fit`: the least-squares cubic Hermite fit of the body's cache on its keys, with the keys'
+/// `fixed` vertices held on the cache frames. No physics: W is not evaluated.
+fn solve_fit(body: Body) -> Result<Solution> {
+    let start = Instant::now();
+    let record = body.cache.as_ref().ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
+    let trajectory = super::import_cache::fit_cache(record)?;
+    let log = SolverLog {
+        method: Method::Fit,
+        iterations: 0,
+        energy: Vec::new(),
+        seconds: start.elapsed().as_secs_f64(),
+        precompute_seconds: 0.0,
+        iteration_seconds: 0.0,
+        unknowns: 2 * body.keys.times.len(),
+        halvings: 0,
+        converged: true,
+        stop_reason: "fit: linear least squares, solved exactly".into(),
+        linear_solver: String::new(),
+        last_decrease: 0.0,
+        predicted_remaining: None,
+        force_scale: None,
+        force_scales: Vec::new(),
+        input_times: body.keys.times.clone(),
+        times: body.keys.times.clone(),
+        timing_iterations: 0,
+        refactorizations: 0,
+        active_contacts: 0,
+        clearance: None,
+        conjugate_gradients: None,
+        iteration_split: None,
+        coarse_iterations: 0,
+        coarse_samples: 0,
+    };
+    Ok(Solution { body, trajectory, log })
+}
+
+/// The solver's inputs for a body, as [`solve`] builds them: the elastic body, its key
+/// constraints, and the settings of its scene (for benchmarks and tests that drive the
+/// solver's parts one by one).
+pub fn solver_inputs(body: &Body) -> Result<(Elastic, KeyConstraints, Settings)> {
+    let tets = body.mesh.as_ref().ok_or_else(|| Error::general("the body has no tet mesh (method fit)", "tetrahedralize for spacetime"))?;
+    let elastic = Elastic::new(tets, &super::elastic_material(&body.scene.material))?;
+    Ok((elastic, key_constraints(&body.keys), settings(&body.scene)))
+}
+
+/// The solver settings of a scene (`[solver]`, the damping and gravity of `[material]`, the
+/// obstacles checked at every frame of `fps`). `fixed_times` index the scene's keys; a contact
+/// key's duplicate is inserted after it, so later keys shift by the contacts before them.
+pub(crate) fn settings(scene: &Scene) -> Settings {
+    let s = &scene.solver;
+    // A cache scene has no contact keys.
+    let contacts: &[usize] = scene.keyframes.as_ref().map_or(&[], |k| &k.contact);
+    let body_key = |k: usize| k + contacts.iter().filter(|&&c| c < k).count();
+    Settings {
+        samples: s.samples,
+        contact_samples: s.contact_samples,
+        max_iterations: s.max_iterations,
+        tolerance: s.tolerance,
+        negligible: crate::algorithms::spacetime::solver::NEGLIGIBLE,
+        regularization: s.regularization,
+        damping: scene.material.damping,
+        gravity: scene.material.gravity,
+        max_memory: None,
+        model_hessian: match s.model_hessian.as_str() {
+            "projective" => ModelHessian::Projective,
+            "tangent" => ModelHessian::Tangent,
+            _ => ModelHessian::Auto,
+        },
+        global_step: match s.global_step.as_str() {
+            "direct" => Some(GlobalMethod::Direct),
+            "modal" => Some(GlobalMethod::Modal),
+            "iterative" => Some(GlobalMethod::Iterative),
+            _ => None,
+        },
+        coarse_samples: s.coarse_samples,
+        coarse_tolerance: crate::algorithms::spacetime::solver::DEFAULT_COARSE_TOLERANCE,
+        step: match s.step.as_str() {
+            "gauss-newton" => Step::GaussNewton,
+            "quasi-newton" => Step::QuasiNewton,
+            _ => Step::Auto,
+        },
+        timing: s.optimize_timing.then(|| TimingSettings {
+            min_interval: s.min_interval,
+            keep_duration: s.keep_duration,
+            fixed_times: s.fixed_times.iter().map(|&k| body_key(k)).collect(),
+            ..TimingSettings::default()
+        }),
+        contacts: (!scene.obstacles.is_empty()).then(|| Contacts {
+            obstacles: scene
+                .obstacles
+                .iter()
+                .map(|o| match *o {
+                    ObstacleSpec::Plane { point, normal } => Obstacle::plane(point, normal),
+                    ObstacleSpec::Sphere { center, radius } => Obstacle::Sphere { center, radius },
+                })
+                .collect(),
+            frame_rate: scene.fps,
+        }),
+    }
+}
+
+/// The solver's view of the body's keyframes.
+pub(crate) fn key_constraints(keys: &KeyPoses) -> KeyConstraints {
+    KeyConstraints {
+        times: keys.times.clone(),
+        positions: keys.positions.clone(),
+        fixed: keys.fixed.iter().map(|s| s.indices().to_vec()).collect(),
+        fixed_velocity: keys.fixed_velocity.iter().map(|s| s.indices().to_vec()).collect(),
+        cyclic: keys.cyclic,
+    }
+}

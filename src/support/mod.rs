@@ -1,0 +1,17 @@
+//! The bottom layer: what every other layer uses and that knows nothing of meshes or physics.
+//!
+//! - [`error`]: the one error type, whose message names the file, the problem and the fix;
+//! - [`output`]: the output folder, staged and committed whole (never half-written);
+//! - [`interrupt`]: clean interruption (signals, and the child processes to stop);
+//! - [`progress`]: the progress bar and its quiet modes;
+//! - [`resources`]: memory and time budgets, checked before the large allocations;
+//! - [`input`]: bounded reading of input files.
+
+pub mod error;
+pub mod input;
+pub mod interrupt;
+pub mod output;
+pub mod progress;
+pub mod resources;
+#[cfg(test)]
+pub(crate) mod testing;
