@@ -23,11 +23,12 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test lint deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
 	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
+	@echo "make lint     cargo fmt --check and cargo clippy -D warnings (part of make test)"
 	@echo "make tables   print the reliability tables: the bad-input corpus (input, exit 1, message) and the kill tests (signal x phase -> folder)"
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
@@ -99,11 +100,27 @@ demo: build deps-tetgen
 	@echo
 	@cat build/demo/report.md
 
+# Style and lints, as the suite runs them: rustfmt (rustfmt.toml) and clippy with the lint set
+# of Cargo.toml's [lints], warnings as errors.
+deps-rust-tools:
+	@if $(CARGO) fmt --version >/dev/null 2>&1 && $(CARGO) clippy --version >/dev/null 2>&1; then \
+		echo "==> rustfmt and clippy: already installed"; \
+	else \
+		echo "==> installing rustfmt and clippy (rustup component add)"; \
+		rustup component add rustfmt clippy; \
+	fi
+
+lint: deps-rust-tools
+	@echo "==> checking the formatting (cargo fmt --check)"
+	$(CARGO) fmt --check
+	@echo "==> linting (cargo clippy --all-targets, warnings are errors)"
+	$(CARGO) clippy --release --locked --all-targets -- -D warnings
+
 # The property tests draw their cases from a fixed seed here, so that a run of the suite is
 # repeatable and CI cannot turn red on a case no earlier run drew; `make fuzz` (and a plain
 # `cargo test`) draw a new seed every run. TEST_SEED=N runs the suite on another seed.
 TEST_SEED ?= 20261202
-test: test-deps
+test: test-deps lint
 	@echo "==> running the test suite (release build; property tests seeded with $(TEST_SEED))"
 	PROPTEST_RNG_SEED=$(TEST_SEED) $(CARGO) test --release --locked
 	@echo "==> checking the API documentation builds without warnings (cargo doc)"

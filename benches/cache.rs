@@ -29,19 +29,19 @@ use std::process::{Command, Stdio};
 use std::time::Instant;
 
 use bar::{bar, BarCache, BarSettings};
+use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
+use blendsim::algorithms::blendshape::fullframe::FullFrame;
 use blendsim::algorithms::frames::deviation::cache_diagonal;
 use blendsim::algorithms::frames::fit::{fit, FitSettings};
 use blendsim::algorithms::frames::keyframes::{select, AutoKeys, AutoSettings};
-use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
-use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
-use blendsim::formats::mesh::obj;
-use blendsim::support::output::Staging;
-use blendsim::support::progress::Progress;
-use blendsim::pipeline::scene::SceneFile;
-use blendsim::algorithms::blendshape::fullframe::FullFrame;
+use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::formats::export::glb::{self, Placement};
 use blendsim::formats::export::usda::{self, UsdSettings};
+use blendsim::formats::mesh::obj;
+use blendsim::pipeline::scene::SceneFile;
+use blendsim::support::output::Staging;
+use blendsim::support::progress::Progress;
 
 const TOLERANCE: f64 = 0.005;
 
@@ -84,7 +84,9 @@ fn pca_baseline(frames: &MemoryFrames, diagonal: f64) -> (usize, usize, f64) {
         let max = recon
             .iter()
             .zip(&frames.frames)
-            .flat_map(|(row, frame)| row.chunks_exact(3).zip(frame).map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()))
+            .flat_map(|(row, frame)| {
+                row.chunks_exact(3).zip(frame).map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
+            })
             .fold(0.0, f64::max)
             / diagonal;
         if max <= TOLERANCE {
@@ -176,24 +178,37 @@ fn gltfpack(full_glb: &Path, cache: &BarCache, diagonal: f64) -> Option<Vec<(&'s
     for (label, flags) in [("gltfpack -af 0 -cc", &["-af", "0"][..]), ("gltfpack -cc (30 Hz)", &[][..])] {
         let packed = |extra: &[&str], name: &str| {
             let out = dir.join(name);
-            let status = Command::new(&bin).arg("-i").arg(full_glb).arg("-o").arg(&out).args(flags).args(extra).stdout(Stdio::null()).stderr(Stdio::null()).status().expect("run gltfpack");
+            let status = Command::new(&bin)
+                .arg("-i")
+                .arg(full_glb)
+                .arg("-o")
+                .arg(&out)
+                .args(flags)
+                .args(extra)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status()
+                .expect("run gltfpack");
             assert!(status.success(), "gltfpack {flags:?} {extra:?} failed");
             out
         };
         let bytes = std::fs::metadata(packed(&["-cc"], "packed_cc.glb")).unwrap().len();
         let plain = packed(&[], "packed.glb");
-        let mut read = VertexCache::open(&plain, &CacheOptions { fps: Some(cache.settings.fps), ..CacheOptions::default() }).expect("read gltfpack's output");
+        let mut read =
+            VertexCache::open(&plain, &CacheOptions { fps: Some(cache.settings.fps), ..CacheOptions::default() }).expect("read gltfpack's output");
         let rest = &cache.frames.frames[0];
         let mut first = vec![[0.0; 3]; read.frames.vertex_count()];
         read.frames.read_frame(0, &mut first).unwrap();
         // Its vertex v is the cache's vertex map[v].
-        let map: Vec<usize> = first.iter().map(|p| (0..rest.len()).min_by(|&a, &b| dist(*p, rest[a]).total_cmp(&dist(*p, rest[b]))).unwrap()).collect();
+        let map: Vec<usize> =
+            first.iter().map(|p| (0..rest.len()).min_by(|&a, &b| dist(*p, rest[a]).total_cmp(&dist(*p, rest[b]))).unwrap()).collect();
         let mut got = vec![[0.0; 3]; first.len()];
         let mut max = 0.0f64;
         for (f, frame) in cache.frames.frames.iter().enumerate() {
             // Resampled output: evaluate at the cache's frame times.
             let t = cache.frames.times[f];
-            let g = (0..read.frames.frame_count()).min_by(|&a, &b| (read.frames.time(a) - t).abs().total_cmp(&(read.frames.time(b) - t).abs())).unwrap();
+            let g =
+                (0..read.frames.frame_count()).min_by(|&a, &b| (read.frames.time(a) - t).abs().total_cmp(&(read.frames.time(b) - t).abs())).unwrap();
             read.frames.read_frame(g, &mut got).unwrap();
             max = got.iter().zip(&map).map(|(p, &v)| dist(*p, frame[v])).fold(max, f64::max);
         }
@@ -262,7 +277,13 @@ fn compare(name: &str, cache: &BarCache) {
         )
     };
     row("full frame (the cache as glb / usda / usdc)", "-".into(), full_glb, Some(full_usda), Some(full_usdc), 0.0, None);
-    for (method, weights, basis) in [("fit", "bernstein", "principal"), ("fit", "signed", "principal"), ("fit", "bernstein", "keys"), ("fit", "signed", "keys"), ("spacetime", "bernstein", "keys")] {
+    for (method, weights, basis) in [
+        ("fit", "bernstein", "principal"),
+        ("fit", "signed", "principal"),
+        ("fit", "bernstein", "keys"),
+        ("fit", "signed", "keys"),
+        ("spacetime", "bernstein", "keys"),
+    ] {
         let (s, keys, rank, glb, usda, usdc, max) = bake(&dir, method, weights, basis);
         let form = match rank {
             Some(r) => format!("blendsim {method}, principal rank {r} ({weights} weights)"),
@@ -284,7 +305,11 @@ fn main() {
         ("soft bar 1 Hz", BarSettings { young_modulus: 2.5e6, ..BarSettings::default() }),
         ("bar 2 Hz, 6 s", BarSettings { duration: 6.0, ..BarSettings::default() }),
     ];
-    println!("machine: {} threads, load average {}; tolerance {TOLERANCE} of the cache's bbox diagonal; sizes in KB", rayon::current_num_threads(), load());
+    println!(
+        "machine: {} threads, load average {}; tolerance {TOLERANCE} of the cache's bbox diagonal; sizes in KB",
+        rayon::current_num_threads(),
+        load()
+    );
     println!();
     println!("| cache | tets | vertices | frames | keys | select s | fit s | passes | held frames | max error | rms error | blendshape f32 | blendshape glb | blendshape usda | full-frame f32 | full-frame glb | full-frame usda | glb smaller | usda smaller | PCA rank | PCA f32 | PCA max error | load |");
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
@@ -299,7 +324,8 @@ fn main() {
     println!();
     println!("| cache | form | keys | glb KB | usda KB | usdc KB | max error | glb smaller | usda smaller | usdc smaller | bake ms/frame |");
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for (name, settings) in cases.iter().take(2).filter(|(n, _)| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| n.contains(only.as_str()))) {
+    for (name, settings) in cases.iter().take(2).filter(|(n, _)| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| n.contains(only.as_str())))
+    {
         compare(name, &bar(settings));
     }
     println!();

@@ -15,10 +15,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use blendsim::formats::cache::{self, CacheOptions, VertexCache};
 use blendsim::algorithms::frames::FrameSource;
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::geometry::{Point, TriMesh};
+use blendsim::formats::cache::{self, CacheOptions, VertexCache};
+use blendsim::formats::mesh::obj;
 
 const FPS: f64 = 30.0;
 
@@ -154,9 +154,7 @@ fn main() {
         side * side,
         mib((side * side * frames * 12) as u64)
     );
-    println!(
-        "| format | frames | file MiB | write s | write peak MiB (own / tree) | read s | read ms/frame | read peak MiB (own / tree) |"
-    );
+    println!("| format | frames | file MiB | write s | write peak MiB (own / tree) | read s | read ms/frame | read peak MiB (own / tree) |");
     println!("|---|---|---|---|---|---|---|---|");
     let text_frames = frames.min(30);
     let cases = [

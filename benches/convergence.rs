@@ -15,8 +15,8 @@
 use std::time::Instant;
 
 use blendsim::algorithms::spacetime::solver::{solve, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
-use blendsim::pipeline::stages::solve::solver_inputs;
 use blendsim::pipeline::stage_file::Body;
+use blendsim::pipeline::stages::solve::solver_inputs;
 
 mod common;
 use common::{cheb_size, load, scene_body, twenty_keys, twenty_keys_held};
@@ -91,11 +91,18 @@ fn main() {
         ("KEY20-2.6k", Box::new(|| twenty_keys_held([12, 36, 12], 0.003, Some(&[0.0, 1.0])))),
     ];
     let only: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with('-')).collect();
-    let tolerances: Vec<f64> = std::env::var("TOLS").map(|v| v.split(',').filter(|x| !x.is_empty()).map(|x| x.parse().unwrap()).collect()).unwrap_or(vec![1e-2, 1e-4]);
+    let tolerances: Vec<f64> =
+        std::env::var("TOLS").map(|v| v.split(',').filter(|x| !x.is_empty()).map(|x| x.parse().unwrap()).collect()).unwrap_or(vec![1e-2, 1e-4]);
     let models = std::env::var("MODELS").is_ok();
-    println!("machine: {} threads, load average {}; default tolerance {DEFAULT_TOLERANCE}, negligible {NEGLIGIBLE}", rayon::current_num_threads(), load());
+    println!(
+        "machine: {} threads, load average {}; default tolerance {DEFAULT_TOLERANCE}, negligible {NEGLIGIBLE}",
+        rayon::current_num_threads(),
+        load()
+    );
     println!();
-    println!("| scene | rule | model | iterations | CPU s | wall s | W | above the 1e-8 W | W / S | predicted remaining | converged | key times | load |");
+    println!(
+        "| scene | rule | model | iterations | CPU s | wall s | W | above the 1e-8 W | W / S | predicted remaining | converged | key times | load |"
+    );
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---|---|");
     for (name, make) in cases.iter().filter(|c| if only.is_empty() { c.0 != "KEY20-2.6k" } else { only.iter().any(|o| o == c.0) }) {
         let body = make();
@@ -151,7 +158,10 @@ fn main() {
         if std::env::var("STEPS").is_ok() {
             // `STEPS=gauss-newton` (or `quasi-newton`): that row only.
             let only_step = std::env::var("STEPS").unwrap_or_default();
-            for (label, step) in [("quasi-newton", Step::QuasiNewton), ("gauss-newton", Step::GaussNewton)].into_iter().filter(|(l, _)| !only_step.contains('-') || only_step == *l) {
+            for (label, step) in [("quasi-newton", Step::QuasiNewton), ("gauss-newton", Step::GaussNewton)]
+                .into_iter()
+                .filter(|(l, _)| !only_step.contains('-') || only_step == *l)
+            {
                 row(name, &format!("default, step {label}"), &run(&body, |s| s.step = step), w_ref);
             }
         }
@@ -164,7 +174,8 @@ fn main() {
 }
 
 fn row(name: &str, rule: &str, r: &Run, w_ref: Option<f64>) {
-    let above = w_ref.map_or("-".to_string(), |w| if rule == "1e-8" { "(reference)".to_string() } else { format!("{:.2}%", 100.0 * (r.w / w - 1.0)) });
+    let above =
+        w_ref.map_or("-".to_string(), |w| if rule == "1e-8" { "(reference)".to_string() } else { format!("{:.2}%", 100.0 * (r.w / w - 1.0)) });
     let predicted = r.predicted.map_or("-".to_string(), |p| format!("{:.2}%", 100.0 * p));
     let times = if r.times.len() <= 4 { r.times.iter().map(|t| format!("{t:.5}")).collect::<Vec<_>>().join(", ") } else { "given".to_string() };
     println!(

@@ -14,12 +14,12 @@ use blendsim::algorithms::spacetime::global_step::GlobalStep;
 use blendsim::algorithms::spacetime::solver::{initial_trajectory, objective};
 use blendsim::algorithms::spacetime::unknowns::Unknowns;
 use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
-use blendsim::pipeline::stages::solve::solver_inputs;
-use blendsim::support::output::Staging;
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::scene::{Format, SceneFile};
 use blendsim::pipeline::stage_file::Shape;
+use blendsim::pipeline::stages::solve::solver_inputs;
 use blendsim::pipeline::stages::{self, blendshape_clip, embed, export_with, import, solve, tetrahedralize};
+use blendsim::support::output::Staging;
+use blendsim::support::progress::Progress;
 
 mod common;
 use common::{load, median};
@@ -83,7 +83,8 @@ fn models() {
     println!("| surface vertices | triangles | phase | work | measured s | CPU s | predicted s |");
     println!("|---:|---:|---|---:|---:|---:|---:|");
     let material = ElasticMaterial { stiffness: 70.0, volume: 70.0, density: 1.0 };
-    let sizes: Vec<usize> = std::env::var("SIZES").map(|v| v.split(',').map(|x| x.parse().expect("SIZES: numbers")).collect()).unwrap_or(vec![4, 8, 16, 32, 64, 100]);
+    let sizes: Vec<usize> =
+        std::env::var("SIZES").map(|v| v.split(',').map(|x| x.parse().expect("SIZES: numbers")).collect()).unwrap_or(vec![4, 8, 16, 32, 64, 100]);
     for d in sizes {
         let surface = prism([1.0, 2.5, 1.0], [d, (5 * d) / 2, d]);
         let (n, t) = (surface.positions.len(), surface.triangles.len());
@@ -96,23 +97,43 @@ fn models() {
                 let predicted = blendsim::formats::tetgen::predicted_seconds(&surface, &options);
                 println!("| {n} | {t} | TetGen -a{max_volume} | {} tets | {w:.3} | {c:.3} | {predicted:.3} |", mesh.tets.len());
                 let (w, c, _) = timed(|| Binding::compute(&mesh, &surface.positions));
-                println!("| {n} | {t} | embed in the TetGen body | {} tets | {w:.3} | {c:.3} | {:.3} |", mesh.tets.len(), Binding::predicted_seconds(mesh.tets.len(), n));
+                println!(
+                    "| {n} | {t} | embed in the TetGen body | {} tets | {w:.3} | {c:.3} | {:.3} |",
+                    mesh.tets.len(),
+                    Binding::predicted_seconds(mesh.tets.len(), n)
+                );
             }
         }
         let (w, c, cage) = timed(|| voxel_cage(&surface, &surface.positions, 1000).expect("cage"));
-        println!("| {n} | {t} | cage | {} nodes | {w:.3} | {c:.3} | {:.3} |", cage.mesh.positions.len(), blendsim::algorithms::cage::predicted_seconds(t, 1000));
+        println!(
+            "| {n} | {t} | cage | {} nodes | {w:.3} | {c:.3} | {:.3} |",
+            cage.mesh.positions.len(),
+            blendsim::algorithms::cage::predicted_seconds(t, 1000)
+        );
         let (w, c, binding) = timed(|| Binding::compute(&cage.mesh, &surface.positions));
-        println!("| {n} | {t} | embed in the cage | {} tets | {w:.3} | {c:.3} | {:.3} |", cage.mesh.tets.len(), Binding::predicted_seconds(cage.mesh.tets.len(), n));
+        println!(
+            "| {n} | {t} | embed in the cage | {} tets | {w:.3} | {c:.3} | {:.3} |",
+            cage.mesh.tets.len(),
+            Binding::predicted_seconds(cage.mesh.tets.len(), n)
+        );
         let elastic = Elastic::new(&cage.mesh, &material).expect("elastic");
-        let twisted: Vec<_> = surface.positions.iter().map(|p| {
-            let (s, c) = (0.3 * p[1]).sin_cos();
-            [c * (p[0] - 0.5) - s * (p[2] - 0.5) + 0.5, p[1], s * (p[0] - 0.5) + c * (p[2] - 0.5) + 0.5]
-        }).collect();
+        let twisted: Vec<_> = surface
+            .positions
+            .iter()
+            .map(|p| {
+                let (s, c) = (0.3 * p[1]).sin_cos();
+                [c * (p[0] - 0.5) - s * (p[2] - 0.5) + 0.5, p[1], s * (p[0] - 0.5) + c * (p[2] - 0.5) + 0.5]
+            })
+            .collect();
         let (w, c, _) = timed(|| {
             let fit = CageFit::new(&cage.mesh, &binding, &elastic);
             fit.pose(&surface.positions, &twisted)
         });
-        println!("| {n} | {t} | cage fit, one key | {} nodes | {w:.3} | {c:.3} | {:.3} |", cage.mesh.positions.len(), CageFit::predicted_seconds(cage.mesh.tets.len(), n, 1));
+        println!(
+            "| {n} | {t} | cage fit, one key | {} nodes | {w:.3} | {c:.3} | {:.3} |",
+            cage.mesh.positions.len(),
+            CageFit::predicted_seconds(cage.mesh.tets.len(), n, 1)
+        );
     }
 }
 
@@ -146,10 +167,23 @@ fn main() {
     // Each phase in this process.
     let scene = SceneFile::load(&root.join(SCENE)).expect("the demo scene loads");
     let progress = Progress::hidden();
-    let mut rows: Vec<Row> = ["import", "TetGen alone", "tetrahedralize (TetGen + interior fit)", "solve", "  precompute (assembly, ordering, factor or modes)", "  iterations", "embed", "blendshape clip", "export usda + glb", "export usda + usdc + glb", "report measures", "commit over the previous bake (fsyncs, swap, old files removed)"]
-        .iter()
-        .map(|n| Row::new(n))
-        .collect();
+    let mut rows: Vec<Row> = [
+        "import",
+        "TetGen alone",
+        "tetrahedralize (TetGen + interior fit)",
+        "solve",
+        "  precompute (assembly, ordering, factor or modes)",
+        "  iterations",
+        "embed",
+        "blendshape clip",
+        "export usda + glb",
+        "export usda + usdc + glb",
+        "report measures",
+        "commit over the previous bake (fsyncs, swap, old files removed)",
+    ]
+    .iter()
+    .map(|n| Row::new(n))
+    .collect();
     let mut iterations = Vec::new();
     let mut per_iteration = Vec::new();
     for r in 0..repeats {
@@ -228,7 +262,8 @@ fn main() {
     let mut build = Row::new("global step built (assembly; the cost model's choice: ordering and factorization, or the modes)");
     let mut stages = (Vec::new(), Vec::new());
     for _ in 0..repeats {
-        let (w, c, g) = timed(|| GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step"));
+        let (w, c, g) =
+            timed(|| GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step"));
         build.push((w, c));
         stages.0.push(g.stats.assemble_seconds);
         stages.1.push(g.stats.factor_seconds);
@@ -237,30 +272,39 @@ fn main() {
     let global = GlobalStep::new(&objective, Unknowns::new(&keys, elastic.node_count()), settings.regularization).expect("global step");
     let tr = initial_trajectory(&keys);
     let reps = 10 * repeats;
-    let mut parts: Vec<Row> = ["local step (projections)", "local step with Jacobians", "residuals + model gradient", "residuals + exact gradient", "global solve (3 coordinates)", "exact evaluation in one pass (the solver's: local step + residuals + gradients)"]
-        .iter()
-        .map(|n| Row::new(n))
-        .collect();
+    let mut parts: Vec<Row> = [
+        "local step (projections)",
+        "local step with Jacobians",
+        "residuals + model gradient",
+        "residuals + exact gradient",
+        "global solve (3 coordinates)",
+        "exact evaluation in one pass (the solver's: local step + residuals + gradients)",
+    ]
+    .iter()
+    .map(|n| Row::new(n))
+    .collect();
     let (p, pj) = (objective.local_step(&tr, false), objective.local_step(&tr, true));
     let e = objective.evaluate(&tr, &pj);
     let g = global.gather(e.exact_gradient.as_ref().expect("exact"));
     let mut buffers = blendsim::algorithms::spacetime::objective::Projections { targets: Vec::new(), jacobians: None };
     // On a worker of the thread pool, as `stages::solve` runs the solver (`rayon::scope`): the
     // parts' parallel loops start inside the pool, not handed over from this thread.
-    rayon::scope(|_| for _ in 0..reps {
-        let (w, c, _) = timed(|| objective.local_step(&tr, false));
-        parts[0].push((w, c));
-        let (w, c, _) = timed(|| objective.local_step(&tr, true));
-        parts[1].push((w, c));
-        let (w, c, _) = timed(|| objective.evaluate(&tr, &p));
-        parts[2].push((w, c));
-        let (w, c, _) = timed(|| objective.evaluate(&tr, &pj));
-        parts[3].push((w, c));
-        let mut x = g.clone();
-        let (w, c, _) = timed(|| global.apply_inverse(&mut x));
-        parts[4].push((w, c));
-        let (w, c, _) = timed(|| objective.evaluate_fresh(&tr, true, &mut buffers));
-        parts[5].push((w, c));
+    rayon::scope(|_| {
+        for _ in 0..reps {
+            let (w, c, _) = timed(|| objective.local_step(&tr, false));
+            parts[0].push((w, c));
+            let (w, c, _) = timed(|| objective.local_step(&tr, true));
+            parts[1].push((w, c));
+            let (w, c, _) = timed(|| objective.evaluate(&tr, &p));
+            parts[2].push((w, c));
+            let (w, c, _) = timed(|| objective.evaluate(&tr, &pj));
+            parts[3].push((w, c));
+            let mut x = g.clone();
+            let (w, c, _) = timed(|| global.apply_inverse(&mut x));
+            parts[4].push((w, c));
+            let (w, c, _) = timed(|| objective.evaluate_fresh(&tr, true, &mut buffers));
+            parts[5].push((w, c));
+        }
     });
     println!();
     let stats = &global.stats;

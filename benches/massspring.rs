@@ -29,10 +29,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::time::Instant;
 
+use blendsim::algorithms::geometry::{Point, TetMesh, TriMesh};
 use blendsim::algorithms::massspring::{Blend, Boundary, MassSpring, Settings, Targets};
 use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
-use blendsim::algorithms::geometry::{Point, TetMesh, TriMesh};
-
 
 struct Row {
     name: &'static str,
@@ -56,22 +55,128 @@ struct Row {
 }
 
 /// Standing figure (y up): two legs, torso, arms out, head; bends forward at the hips.
-const MAN: &[([i32; 3], [i32; 3])] = &[([1, 0, 0], [2, 5, 1]), ([3, 0, 0], [4, 5, 1]), ([1, 5, 0], [4, 9, 1]), ([-3, 8, 0], [1, 9, 1]), ([4, 8, 0], [8, 9, 1]), ([2, 9, 0], [3, 11, 1])];
+const MAN: &[([i32; 3], [i32; 3])] = &[
+    ([1, 0, 0], [2, 5, 1]),
+    ([3, 0, 0], [4, 5, 1]),
+    ([1, 5, 0], [4, 9, 1]),
+    ([-3, 8, 0], [1, 9, 1]),
+    ([4, 8, 0], [8, 9, 1]),
+    ([2, 9, 0], [3, 11, 1]),
+];
 /// A head-sized slab with a nose (towards -z); the upper part bends back.
 const FACE: &[([i32; 3], [i32; 3])] = &[([0, 0, 0], [8, 10, 4]), ([3, 4, -2], [5, 6, 0])];
 /// Body on four legs with a head and a tail (y forward, z up); the front half turns sideways.
-const CAT: &[([i32; 3], [i32; 3])] = &[([0, 0, 2], [3, 8, 5]), ([0, 0, 0], [1, 1, 2]), ([2, 0, 0], [3, 1, 2]), ([0, 7, 0], [1, 8, 2]), ([2, 7, 0], [3, 8, 2]), ([0, 8, 3], [3, 10, 6]), ([1, -4, 4], [2, 0, 5])];
+const CAT: &[([i32; 3], [i32; 3])] = &[
+    ([0, 0, 2], [3, 8, 5]),
+    ([0, 0, 0], [1, 1, 2]),
+    ([2, 0, 0], [3, 1, 2]),
+    ([0, 7, 0], [1, 8, 2]),
+    ([2, 7, 0], [3, 8, 2]),
+    ([0, 8, 3], [3, 10, 6]),
+    ([1, -4, 4], [2, 0, 5]),
+];
 /// Longer legs, a neck and a head.
-const HORSE: &[([i32; 3], [i32; 3])] = &[([0, 0, 4], [3, 9, 7]), ([0, 0, 0], [1, 1, 4]), ([2, 0, 0], [3, 1, 4]), ([0, 8, 0], [1, 9, 4]), ([2, 8, 0], [3, 9, 4]), ([1, 8, 7], [2, 9, 10]), ([1, 8, 10], [2, 11, 11]), ([1, -3, 6], [2, 0, 7])];
+const HORSE: &[([i32; 3], [i32; 3])] = &[
+    ([0, 0, 4], [3, 9, 7]),
+    ([0, 0, 0], [1, 1, 4]),
+    ([2, 0, 0], [3, 1, 4]),
+    ([0, 8, 0], [1, 9, 4]),
+    ([2, 8, 0], [3, 9, 4]),
+    ([1, 8, 7], [2, 9, 10]),
+    ([1, 8, 10], [2, 11, 11]),
+    ([1, -3, 6], [2, 0, 7]),
+];
 /// Palm, four fingers and a thumb (palm in the xy plane); the fingers curl over the palm.
-const HAND: &[([i32; 3], [i32; 3])] = &[([0, 0, 0], [11, 10, 3]), ([0, 10, 0], [2, 18, 2]), ([3, 10, 0], [5, 19, 2]), ([6, 10, 0], [8, 18, 2]), ([9, 10, 0], [11, 16, 2]), ([-4, 2, 0], [0, 4, 2])];
+const HAND: &[([i32; 3], [i32; 3])] = &[
+    ([0, 0, 0], [11, 10, 3]),
+    ([0, 10, 0], [2, 18, 2]),
+    ([3, 10, 0], [5, 19, 2]),
+    ([6, 10, 0], [8, 18, 2]),
+    ([9, 10, 0], [11, 16, 2]),
+    ([-4, 2, 0], [0, 4, 2]),
+];
 
 const ROWS: [Row; 5] = [
-    Row { name: "Man", verts: 2_200, springs: 21_600, cpu: 2.23, gpu: 3.62, boxes: MAN, cells: 4, quality: 1.414, max_volume: 1.2e-5, along: 1, towards: 2, start: 0.5, length: 0.2, line: 0.05 },
-    Row { name: "Face", verts: 8_100, springs: 65_100, cpu: 40.11, gpu: 3.67, boxes: FACE, cells: 3, quality: 1.414, max_volume: 1.5e-5, along: 1, towards: 2, start: 0.3, length: 0.7, line: 0.2 },
-    Row { name: "Cat", verts: 7_300, springs: 81_700, cpu: 67.58, gpu: 13.67, boxes: CAT, cells: 6, quality: 2.6, max_volume: 0.0, along: 1, towards: 0, start: 0.2, length: 0.5, line: 0.15 },
-    Row { name: "Horse", verts: 8_500, springs: 96_100, cpu: 81.36, gpu: 15.95, boxes: HORSE, cells: 6, quality: 2.7, max_volume: 0.0, along: 1, towards: 0, start: 0.2, length: 0.5, line: 0.15 },
-    Row { name: "Hand", verts: 18_600, springs: 150_400, cpu: 153.99, gpu: 26.28, boxes: HAND, cells: 3, quality: 1.414, max_volume: 8.3e-6, along: 1, towards: 2, start: 1.0, length: 0.4, line: 0.1 },
+    Row {
+        name: "Man",
+        verts: 2_200,
+        springs: 21_600,
+        cpu: 2.23,
+        gpu: 3.62,
+        boxes: MAN,
+        cells: 4,
+        quality: 1.414,
+        max_volume: 1.2e-5,
+        along: 1,
+        towards: 2,
+        start: 0.5,
+        length: 0.2,
+        line: 0.05,
+    },
+    Row {
+        name: "Face",
+        verts: 8_100,
+        springs: 65_100,
+        cpu: 40.11,
+        gpu: 3.67,
+        boxes: FACE,
+        cells: 3,
+        quality: 1.414,
+        max_volume: 1.5e-5,
+        along: 1,
+        towards: 2,
+        start: 0.3,
+        length: 0.7,
+        line: 0.2,
+    },
+    Row {
+        name: "Cat",
+        verts: 7_300,
+        springs: 81_700,
+        cpu: 67.58,
+        gpu: 13.67,
+        boxes: CAT,
+        cells: 6,
+        quality: 2.6,
+        max_volume: 0.0,
+        along: 1,
+        towards: 0,
+        start: 0.2,
+        length: 0.5,
+        line: 0.15,
+    },
+    Row {
+        name: "Horse",
+        verts: 8_500,
+        springs: 96_100,
+        cpu: 81.36,
+        gpu: 15.95,
+        boxes: HORSE,
+        cells: 6,
+        quality: 2.7,
+        max_volume: 0.0,
+        along: 1,
+        towards: 0,
+        start: 0.2,
+        length: 0.5,
+        line: 0.15,
+    },
+    Row {
+        name: "Hand",
+        verts: 18_600,
+        springs: 150_400,
+        cpu: 153.99,
+        gpu: 26.28,
+        boxes: HAND,
+        cells: 3,
+        quality: 1.414,
+        max_volume: 8.3e-6,
+        along: 1,
+        towards: 2,
+        start: 1.0,
+        length: 0.4,
+        line: 0.1,
+    },
 ];
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -152,7 +257,8 @@ fn figure(boxes: &[([i32; 3], [i32; 3])], m: i32, unit: f64) -> TriMesh {
         }
     }
     let mesh = TriMesh { positions, triangles, attributes: None };
-    let mut edges: Vec<[u32; 2]> = mesh.triangles.iter().flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])])).collect();
+    let mut edges: Vec<[u32; 2]> =
+        mesh.triangles.iter().flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])])).collect();
     edges.sort_unstable();
     assert!(edges.chunk_by(|a, b| a == b).all(|g| g.len() == 2), "a closed 2-manifold figure");
     mesh
@@ -237,7 +343,21 @@ fn main() {
                 cg += shape.report.work.cg_iterations;
                 if std::env::var_os("BLENDSIM_BENCH_DETAIL").is_some() {
                     let w = &shape.report.work;
-                    eprintln!("step {k}: newton {} fact {} cg {} factor {:.3} solve {:.3} total {:.3} wall {:.3} F/S {:.1}", shape.report.iterations, w.factorizations, w.cg_iterations, w.factor_seconds, w.solve_seconds, w.seconds, shape.report.seconds, if w.factorizations > 0 { (w.factor_seconds / w.factorizations as f64) / (w.solve_seconds / w.cg_iterations as f64) } else { 0.0 });
+                    eprintln!(
+                        "step {k}: newton {} fact {} cg {} factor {:.3} solve {:.3} total {:.3} wall {:.3} F/S {:.1}",
+                        shape.report.iterations,
+                        w.factorizations,
+                        w.cg_iterations,
+                        w.factor_seconds,
+                        w.solve_seconds,
+                        w.seconds,
+                        shape.report.seconds,
+                        if w.factorizations > 0 {
+                            (w.factor_seconds / w.factorizations as f64) / (w.solve_seconds / w.cg_iterations as f64)
+                        } else {
+                            0.0
+                        }
+                    );
                 }
             }
             shapes.push(shape);
@@ -254,7 +374,11 @@ fn main() {
         let same = if row.name == "Man" || row.name == "Cat" {
             let mut again = MassSpring::new(&t, &Boundary::Anchor(None), &settings).expect("model");
             let shapes2: Vec<Blend> = alphas.iter().map(|&a| again.blend(&[1.0 - a, a], &[]).expect("blend")).collect();
-            if checksum(&shapes) == checksum(&shapes2) { " (same bytes twice)" } else { " (BYTES DIFFER)" }
+            if checksum(&shapes) == checksum(&shapes2) {
+                " (same bytes twice)"
+            } else {
+                " (BYTES DIFFER)"
+            }
         } else {
             ""
         };

@@ -35,9 +35,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::geometry::{Axis, Point, TriMesh};
 use blendsim::algorithms::procedural::{prism, twist, Twist};
+use blendsim::formats::mesh::obj;
 
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
@@ -118,18 +118,20 @@ fn write_scene(case: &Case, dir: &Path, iterations: Option<usize>) -> PathBuf {
         meshes.push(format!("\"{name}\""));
     }
     let times: Vec<String> = (0..case.keys).map(|k| format!("{:.1}", 0.5 * k as f64)).collect();
-    let mut text = format!(
-        "name = \"{}\"\nfps = 30\n[keyframes]\nmeshes = [{}]\ntimes = [{}]\n",
-        case.name,
-        meshes.join(", "),
-        times.join(", ")
-    );
+    let mut text = format!("name = \"{}\"\nfps = 30\n[keyframes]\nmeshes = [{}]\ntimes = [{}]\n", case.name, meshes.join(", "), times.join(", "));
     if let Some(faces) = case.hold {
-        let held: String = rest.positions.iter().enumerate().filter(|(_, p)| faces.iter().any(|&f| (p[1] - f * case.size[1]).abs() <= 1e-9 * case.size[1])).map(|(i, _)| format!("{i}\n")).collect();
+        let held: String = rest
+            .positions
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| faces.iter().any(|&f| (p[1] - f * case.size[1]).abs() <= 1e-9 * case.size[1]))
+            .map(|(i, _)| format!("{i}\n"))
+            .collect();
         std::fs::write(dir.join("held.txt"), held).unwrap();
         text.push_str(&format!("fixed = [{}]\n", vec!["\"held.txt\""; case.keys].join(", ")));
     }
-    let mut solver: Vec<String> = case.solver.lines().filter(|l| iterations.is_none() || !l.starts_with("max_iterations")).map(String::from).collect();
+    let mut solver: Vec<String> =
+        case.solver.lines().filter(|l| iterations.is_none() || !l.starts_with("max_iterations")).map(String::from).collect();
     solver.extend(iterations.map(|n| format!("max_iterations = {n}")));
     if !solver.is_empty() {
         text.push_str(&format!("[solver]\n{}\n", solver.join("\n")));
@@ -173,7 +175,11 @@ fn global_step(solver: &serde_json::Value) -> String {
     match (cg["solves"].as_u64(), cg["iterations"].as_u64()) {
         (Some(solves), Some(iterations)) if solves > 0 => {
             let capped = cg["capped"].as_u64().unwrap_or(0);
-            format!("{name} ({solves} CG solves x {:.0}{})", iterations as f64 / solves as f64, if capped > 0 { format!(", {capped} capped") } else { String::new() })
+            format!(
+                "{name} ({solves} CG solves x {:.0}{})",
+                iterations as f64 / solves as f64,
+                if capped > 0 { format!(", {capped} capped") } else { String::new() }
+            )
         }
         _ => name,
     }
@@ -203,13 +209,34 @@ fn main() {
         twenty_keys("2.6k-20-keys-iterative-2G", "global_step = \"iterative\"", &["--max-memory", "2G"], true),
         twenty_keys("2.6k-20-keys-coarse", "coarse_samples = 5", &[], true),
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
-        Case { name: "6.8k-cage", size: SLIM, divisions: [22, 66, 22], keys: 5, tet: "max_nodes = 3000", solver: "", hold: ENDS, args: &[], extra: false },
-        Case { name: "6.8k-full", size: SLIM, divisions: [22, 66, 22], keys: 5, tet: "cage = false", solver: "", hold: ENDS, args: &[], extra: false },
+        Case {
+            name: "6.8k-cage",
+            size: SLIM,
+            divisions: [22, 66, 22],
+            keys: 5,
+            tet: "max_nodes = 3000",
+            solver: "",
+            hold: ENDS,
+            args: &[],
+            extra: false,
+        },
+        Case {
+            name: "6.8k-full",
+            size: SLIM,
+            divisions: [22, 66, 22],
+            keys: 5,
+            tet: "cage = false",
+            solver: "",
+            hold: ENDS,
+            args: &[],
+            extra: false,
+        },
         Case { name: "25k-cage", size: SLIM, divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
         Case { name: "100k-cage", size: SLIM, divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
     ];
     // A word picks the rows whose name contains it; an extra row only by its whole name.
-    let chosen = |c: &&Case| if filters.is_empty() { !c.extra } else { filters.iter().any(|f| c.name == f || (!c.extra && c.name.contains(f.as_str()))) };
+    let chosen =
+        |c: &&Case| if filters.is_empty() { !c.extra } else { filters.iter().any(|f| c.name == f || (!c.extra && c.name.contains(f.as_str()))) };
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
     let iterations: Vec<usize> = std::env::var("SCALE_ITERATIONS").unwrap_or_default().split(',').filter_map(|v| v.trim().parse().ok()).collect();
     if !iterations.is_empty() {
@@ -223,7 +250,11 @@ fn main() {
         }
         return;
     }
-    println!("machine: {} threads, load average {}; one `blendsim bake` process per row, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
+    println!(
+        "machine: {} threads, load average {}; one `blendsim bake` process per row, medians of {repeats}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        load()
+    );
     println!();
     println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | evaluate + solve s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
     println!("|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---|");
@@ -238,7 +269,16 @@ fn main() {
         let iteration = median(runs.iter().map(|r| r.2["solver"]["iteration_seconds"].as_f64().unwrap_or(f64::NAN)).collect());
         // The iteration taken apart: W's evaluations and the global step's solves, seconds per
         // iteration (the rest is the quasi-Newton bookkeeping).
-        let per = |field: &str| median(runs.iter().map(|r| r.2["solver"]["iteration_split"][field].as_f64().unwrap_or(f64::NAN) / r.2["solver"]["iterations"].as_f64().unwrap_or(f64::NAN)).collect());
+        let per = |field: &str| {
+            median(
+                runs.iter()
+                    .map(|r| {
+                        r.2["solver"]["iteration_split"][field].as_f64().unwrap_or(f64::NAN)
+                            / r.2["solver"]["iterations"].as_f64().unwrap_or(f64::NAN)
+                    })
+                    .collect(),
+            )
+        };
         let (evaluate, solve) = (per("evaluation_seconds"), per("solve_seconds"));
         let report = &runs[0].2;
         let solver = &report["solver"];
@@ -281,12 +321,20 @@ fn main() {
 /// same bytes, and there are some.
 fn same_outputs(a: &Path, b: &Path) -> bool {
     let files = |d: &Path| -> Vec<PathBuf> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(d).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "usda" || x == "usdc" || x == "glb")).collect();
+        let mut v: Vec<PathBuf> = std::fs::read_dir(d)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "usda" || x == "usdc" || x == "glb"))
+            .collect();
         v.sort();
         v
     };
     let (fa, fb) = (files(a), files(b));
-    !fa.is_empty() && fa.iter().map(|p| p.file_name()).eq(fb.iter().map(|p| p.file_name())) && fa.iter().zip(&fb).all(|(x, y)| std::fs::read(x).ok() == std::fs::read(y).ok())
+    !fa.is_empty()
+        && fa.iter().map(|p| p.file_name()).eq(fb.iter().map(|p| p.file_name()))
+        && fa.iter().zip(&fb).all(|(x, y)| std::fs::read(x).ok() == std::fs::read(y).ok())
 }
 
 /// `SCALE_ITERATIONS=FEW,MANY` (module documentation): per row, the CPU seconds of an iteration
@@ -295,7 +343,11 @@ fn same_outputs(a: &Path, b: &Path) -> bool {
 fn per_iteration<'c>(cases: impl Iterator<Item = &'c Case>, [few, many]: [usize; 2], other: Option<&Path>, repeats: usize, scratch: &Path) {
     let ours = PathBuf::from(env!("CARGO_BIN_EXE_blendsim"));
     let bins: Vec<&Path> = std::iter::once(ours.as_path()).chain(other).collect();
-    println!("machine: {} threads, load average {}; CPU s of an iteration from bakes of {few} and {many} iterations, medians of {repeats}", std::thread::available_parallelism().map_or(0, |n| n.get()), load());
+    println!(
+        "machine: {} threads, load average {}; CPU s of an iteration from bakes of {few} and {many} iterations, medians of {repeats}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        load()
+    );
     println!("this build: {}{}", ours.display(), other.map_or(String::new(), |o| format!("; other: {}", o.display())));
     println!();
     println!("| scene | iterations | CPU s per iteration | other's | ratio | evaluate + solve s (wall) | same bytes | load |");
@@ -324,7 +376,12 @@ fn per_iteration<'c>(cases: impl Iterator<Item = &'c Case>, [few, many]: [usize;
             for b in 0..bins.len() {
                 let extra = done[b][1] - done[b][0];
                 let per = |x: [f64; 2]| (x[1] - x[0]) / extra;
-                figures[b].push((per(cpu[b]), per([split[b][0][0], split[b][1][0]]), per([split[b][0][1], split[b][1][1]]), format!("{}..{}", done[b][0], done[b][1])));
+                figures[b].push((
+                    per(cpu[b]),
+                    per([split[b][0][0], split[b][1][0]]),
+                    per([split[b][0][1], split[b][1][1]]),
+                    format!("{}..{}", done[b][0], done[b][1]),
+                ));
             }
         }
         let med = |b: usize, f: fn(&(f64, f64, f64, String)) -> f64| median(figures[b].iter().map(f).collect());
@@ -339,7 +396,15 @@ fn per_iteration<'c>(cases: impl Iterator<Item = &'c Case>, [few, many]: [usize;
             ours_cpu / other_cpu,
             med(0, |f| f.1),
             med(0, |f| f.2),
-            if bins.len() > 1 { if same { "yes" } else { "NO" } } else { "-" },
+            if bins.len() > 1 {
+                if same {
+                    "yes"
+                } else {
+                    "NO"
+                }
+            } else {
+                "-"
+            },
             load()
         );
     }

@@ -31,10 +31,10 @@ use blendsim::algorithms::physics::elastic::Elastic;
 use blendsim::algorithms::spacetime::global_step::{GlobalStats, GlobalStep};
 use blendsim::algorithms::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Settings};
 use blendsim::algorithms::spacetime::timing::{ProjectionMode, Timing, TimingSettings};
-use blendsim::algorithms::spacetime::unknowns::{KeyConstraints, Unknowns};
-use blendsim::pipeline::stages::solve::solver_inputs;
-use blendsim::pipeline::stage_file::Body;
 use blendsim::algorithms::spacetime::trajectory::Trajectory;
+use blendsim::algorithms::spacetime::unknowns::{KeyConstraints, Unknowns};
+use blendsim::pipeline::stage_file::Body;
+use blendsim::pipeline::stages::solve::solver_inputs;
 
 mod common;
 use common::{armadillo_size, cheb_size, cpu_seconds, load, median, scene_body};
@@ -226,13 +226,41 @@ fn measure_timing(
 fn main() {
     type Case = (&'static str, Box<dyn Fn() -> Body>, Paper);
     let cases: Vec<Case> = vec![
-        ("STRETCH", Box::new(|| scene_body("fixtures/paper/stretch.toml")), Paper { timing: 0.023, verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 }),
-        ("TWIST", Box::new(|| scene_body("fixtures/paper/twist.toml")), Paper { timing: 0.016, verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 }),
-        ("DINO", Box::new(|| scene_body("fixtures/paper/dino.toml")), Paper { timing: 0.023, verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 }),
-        ("CHEB-size", Box::new(cheb_size), Paper { timing: 0.205, verts: 922, tets: 3125, keys: 10, samples: 90, precompute: 3.771, iteration: 0.080 }),
-        ("BALL", Box::new(|| scene_body("fixtures/paper/ball.toml")), Paper { timing: 0.009, verts: 316, tets: 1070, keys: 3, samples: 40, precompute: 0.412, iteration: 0.112 }),
-        ("SPOT", Box::new(|| scene_body("fixtures/paper/spot.toml")), Paper { timing: 0.012, verts: 823, tets: 2288, keys: 3, samples: 24, precompute: 1.043, iteration: 0.263 }),
-        ("ARMADILLO-size", Box::new(armadillo_size), Paper { timing: 0.246, verts: 2598, tets: 10024, keys: 5, samples: 40, precompute: 3.073, iteration: 0.100 }),
+        (
+            "STRETCH",
+            Box::new(|| scene_body("fixtures/paper/stretch.toml")),
+            Paper { timing: 0.023, verts: 594, tets: 2400, keys: 3, samples: 14, precompute: 0.18, iteration: 0.009 },
+        ),
+        (
+            "TWIST",
+            Box::new(|| scene_body("fixtures/paper/twist.toml")),
+            Paper { timing: 0.016, verts: 594, tets: 2400, keys: 5, samples: 40, precompute: 0.699, iteration: 0.035 },
+        ),
+        (
+            "DINO",
+            Box::new(|| scene_body("fixtures/paper/dino.toml")),
+            Paper { timing: 0.023, verts: 439, tets: 1192, keys: 10, samples: 90, precompute: 0.91, iteration: 0.030 },
+        ),
+        (
+            "CHEB-size",
+            Box::new(cheb_size),
+            Paper { timing: 0.205, verts: 922, tets: 3125, keys: 10, samples: 90, precompute: 3.771, iteration: 0.080 },
+        ),
+        (
+            "BALL",
+            Box::new(|| scene_body("fixtures/paper/ball.toml")),
+            Paper { timing: 0.009, verts: 316, tets: 1070, keys: 3, samples: 40, precompute: 0.412, iteration: 0.112 },
+        ),
+        (
+            "SPOT",
+            Box::new(|| scene_body("fixtures/paper/spot.toml")),
+            Paper { timing: 0.012, verts: 823, tets: 2288, keys: 3, samples: 24, precompute: 1.043, iteration: 0.263 },
+        ),
+        (
+            "ARMADILLO-size",
+            Box::new(armadillo_size),
+            Paper { timing: 0.246, verts: 2598, tets: 10024, keys: 5, samples: 40, precompute: 3.073, iteration: 0.100 },
+        ),
     ];
     println!("machine: {} threads, load average {}", rayon::current_num_threads(), load());
     println!();
@@ -257,7 +285,22 @@ fn main() {
         let t = &m.timing;
         timing_rows.push(format!(
             "| {name} | {:.4} ({:.3}) | {:.4} | {:.4} ({:.4}) | {:.4} ({:.4}) | {} | {:.4} ({:.4}) | {:.4} | {:.4} | {:.3} | {:.1}x | {} | {} |",
-            t.round, paper.timing, t.round_cpu, t.derivatives, t.derivatives_cpu, t.energy, t.energy_cpu, t.trials, t.time_gradient, t.time_gradient_cpu, t.retime, t.refactor, t.fresh_factor, t.fresh_factor / t.refactor, if t.reused_symbolic { "yes" } else { "no" }, load()
+            t.round,
+            paper.timing,
+            t.round_cpu,
+            t.derivatives,
+            t.derivatives_cpu,
+            t.energy,
+            t.energy_cpu,
+            t.trials,
+            t.time_gradient,
+            t.time_gradient_cpu,
+            t.retime,
+            t.refactor,
+            t.fresh_factor,
+            t.fresh_factor / t.refactor,
+            if t.reused_symbolic { "yes" } else { "no" },
+            load()
         ));
     }
     println!();

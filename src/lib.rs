@@ -44,10 +44,6 @@
 //! - [`algorithms`]: plain arrays and mesh types in and out, never a file or a scene;
 //! - [`support`]: errors ([`Error`]), the output folder, interruption, progress, budgets.
 
-#![warn(missing_docs)]
-// Numeric kernels index several arrays (and SIMD lanes) in lockstep on purpose.
-#![allow(clippy::needless_range_loop)]
-
 pub mod algorithms;
 pub mod formats;
 pub mod pipeline;

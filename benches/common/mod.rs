@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
-use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
 use blendsim::algorithms::geometry::{Axis, Point};
 use blendsim::algorithms::procedural::{self, Twist};
-use blendsim::support::progress::Progress;
+use blendsim::formats::tetgen::{run as tetgen, TetgenOptions};
 use blendsim::pipeline::scene::{Scene, SceneFile};
 use blendsim::pipeline::stage_file::{Body, KeyPoses, VertexSet};
 use blendsim::pipeline::stages::Bake;
+use blendsim::support::progress::Progress;
 
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -127,7 +127,12 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
     use blendsim::formats::mesh::obj;
     let held_surface = faces.is_none();
     let keys = 20;
-    let dir = std::env::temp_dir().join(format!("blendsim-twenty-keys-{}-{}-{held_surface}-{}", std::process::id(), divisions[0], faces.map_or(0, <[f64]>::len)));
+    let dir = std::env::temp_dir().join(format!(
+        "blendsim-twenty-keys-{}-{}-{held_surface}-{}",
+        std::process::id(),
+        divisions[0],
+        faces.map_or(0, <[f64]>::len)
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     let rest = procedural::prism([1.2, 3.6, 1.2], divisions);
     let height = rest.positions.iter().map(|p| p[1]).fold(0.0, f64::max);
@@ -149,11 +154,21 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
         names.push(format!("\"k{k}.obj\""));
     }
     let faces = faces.unwrap_or(&[]);
-    let bottom: String = rest.positions.iter().enumerate().filter(|(_, p)| faces.iter().any(|&f| (p[1] - f * height).abs() <= 1e-9 * height)).map(|(i, _)| format!("{i}\n")).collect();
+    let bottom: String = rest
+        .positions
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| faces.iter().any(|&f| (p[1] - f * height).abs() <= 1e-9 * height))
+        .map(|(i, _)| format!("{i}\n"))
+        .collect();
     std::fs::write(dir.join("bottom.txt"), bottom).unwrap();
     let times: Vec<String> = (0..keys).map(|k| format!("{:.1}", 0.5 * k as f64)).collect();
     let fixed = if held_surface { String::new() } else { format!("fixed = [{}]\n", vec!["\"bottom.txt\""; keys].join(", ")) };
-    let text = format!("name = \"twenty-keys\"\nfps = 30\n[keyframes]\nmeshes = [{}]\ntimes = [{}]\n{fixed}[tet]\nmax_volume = {max_volume}\n", names.join(", "), times.join(", "));
+    let text = format!(
+        "name = \"twenty-keys\"\nfps = 30\n[keyframes]\nmeshes = [{}]\ntimes = [{}]\n{fixed}[tet]\nmax_volume = {max_volume}\n",
+        names.join(", "),
+        times.join(", ")
+    );
     std::fs::write(dir.join("scene.toml"), text).unwrap();
     let scene = SceneFile::load(&dir.join("scene.toml")).expect("scene loads");
     let body = Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize");

@@ -214,9 +214,9 @@ pub fn twist(points: &[Point], twist: &Twist) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::algorithms::geometry::sub;
     use crate::algorithms::geometry::surface::{enclosed_volume, open_edges, orient_outward};
     use crate::formats::mesh::{medit, obj};
-use crate::algorithms::geometry::sub;
     use crate::support::testing::paper_asset;
 
     fn assert_closed_outward(mesh: &TriMesh) {
@@ -280,10 +280,7 @@ use crate::algorithms::geometry::sub;
             assert!(norm(sub(*p, q)) < 1e-12, "{p:?} vs {q:?}");
         }
         // About +z, a quarter turn takes +x to +y.
-        let about_z = twist(
-            &[[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 0.0]],
-            &Twist { axis: Axis::Z, degrees: 90.0, axial_scale: 1.0 },
-        );
+        let about_z = twist(&[[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 0.0]], &Twist { axis: Axis::Z, degrees: 90.0, axial_scale: 1.0 });
         assert!(norm(sub(about_z[1], [0.0, 1.0, 1.0])) < 1e-15, "{:?}", about_z[1]);
         assert!(twist(&[], &Twist { axis: Axis::X, degrees: 90.0, axial_scale: 1.0 }).is_empty());
         let flat = [[0.0, 1.0, 2.0], [0.0, 3.0, 4.0]];

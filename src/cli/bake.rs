@@ -1,10 +1,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use blendsim::support::output::{LockWait, Staging};
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::scene::SceneFile;
 use blendsim::pipeline::stages;
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 use super::MethodArg;

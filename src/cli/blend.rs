@@ -1,8 +1,8 @@
 use std::path::PathBuf;
 
-use blendsim::support::progress::Progress;
-use blendsim::pipeline::stages::blend::{BlendJob, Weights};
 use blendsim::pipeline::stages;
+use blendsim::pipeline::stages::blend::{BlendJob, Weights};
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 /// Blend target meshes with mass-spring blendshapes (Ma et al. 2012): the rest lengths of a

@@ -1,8 +1,8 @@
 use std::path::PathBuf;
 
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::stage_file::{self, Solution};
 use blendsim::pipeline::stages;
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 /// Carry the exported surface on the solved tet trajectory and write the animation stage file.

@@ -1,9 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::support::output::{LockWait, Staging};
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::stage_file::{self, Animation};
 use blendsim::pipeline::stages;
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 /// Write the blendshape and full-frame animation files into --out.
@@ -23,7 +23,8 @@ pub struct Args {
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
-    no_wait: bool,    /// Time the export may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, the rank
+    no_wait: bool,
+    /// Time the export may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, the rank
     /// search's error measure checks it at every cache frame it reads, and the export stops
     /// with an error (nothing written) once it is spent. Default: no limit.
     #[arg(long, value_parser = super::parse_seconds)]

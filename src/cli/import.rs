@@ -1,9 +1,9 @@
 use std::path::PathBuf;
 
-use blendsim::Error;
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::scene::SceneFile;
 use blendsim::pipeline::{stage_file, stages};
+use blendsim::support::progress::Progress;
+use blendsim::Error;
 use blendsim::Result;
 
 /// Read a scene's keyframe meshes (or vertex cache) and write the keyframes stage file; or
@@ -35,7 +35,11 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let scene = SceneFile::load(&args.scene)?;
     if let Some(out) = &args.cache_out {
         let Some(spec) = &scene.scene.cache else {
-            return Err(Error::in_file(&args.scene, "--cache-out converts a [cache], but the scene has [keyframes]", "give a scene with a [cache] table"));
+            return Err(Error::in_file(
+                &args.scene,
+                "--cache-out converts a [cache], but the scene has [keyframes]",
+                "give a scene with a [cache] table",
+            ));
         };
         stages::import_cache::convert(&scene, spec, out)?;
     }

@@ -15,8 +15,8 @@ mod tetrahedralize;
 
 use std::process::ExitCode;
 
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::scene::Method;
+use blendsim::support::progress::Progress;
 use clap::{Parser, Subcommand};
 
 /// Turn keyframe meshes into compact, physically plausible blendshape animation for USD and

@@ -1,10 +1,10 @@
 use std::path::PathBuf;
 
-use blendsim::support::output::{LockWait, Staging};
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::report::batch;
 use blendsim::pipeline::stage_file::{self, Animation, Outputs};
 use blendsim::pipeline::stages;
+use blendsim::support::output::{LockWait, Staging};
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 /// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
@@ -30,7 +30,8 @@ pub struct Args {
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
-    no_wait: bool,    /// Time the report may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, its error
+    no_wait: bool,
+    /// Time the report may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, its error
     /// measure and fit check it at every cache frame they read, and the report stops with an
     /// error (nothing written) once it is spent. Default: no limit.
     #[arg(long, value_parser = super::parse_seconds)]

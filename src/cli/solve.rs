@@ -1,8 +1,8 @@
 use std::path::PathBuf;
 
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::stage_file::{self, Body};
 use blendsim::pipeline::stages;
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 use super::MethodArg;

@@ -1,8 +1,8 @@
 use std::path::PathBuf;
 
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::stage_file::{self, Keyframes};
 use blendsim::pipeline::stages;
+use blendsim::support::progress::Progress;
 use blendsim::Result;
 
 /// Turn keyframes into a simulation body (tet mesh and per-node keyframe poses).

@@ -25,10 +25,10 @@ use std::process::{Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::surface::open_edges;
-use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
 use crate::algorithms::geometry::{bbox_diagonal, cross, norm, sub, Point, TetMesh, TriMesh};
+use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
+use crate::support::error::{Error, Result};
 
 /// TetGen's switches and time bound.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,12 +67,7 @@ pub fn run(surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<
 }
 
 /// [`run`] with an explicit TetGen binary (tests use it instead of the variable).
-pub(crate) fn run_with(
-    program: &OsStr,
-    surface: &TriMesh,
-    options: &TetgenOptions,
-    source: &Path,
-) -> Result<TetMesh> {
+pub(crate) fn run_with(program: &OsStr, surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<TetMesh> {
     check_surface(surface, source)?;
     let timeout = Duration::try_from_secs_f64(options.timeout).ok().filter(|t| !t.is_zero()).ok_or_else(|| {
         Error::in_file(
@@ -88,8 +83,7 @@ pub(crate) fn run_with(
     }
     let by_max_time = left.is_some_and(|l| l < timeout.as_secs_f64());
     let timeout = left.filter(|_| by_max_time).map_or(timeout, Duration::from_secs_f64);
-    let dir =
-        WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
+    let dir = WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
     let input = dir.path.join(INPUT);
     std::fs::write(&input, write_smesh(surface)).map_err(|e| Error::io(&input, &e, "write the TetGen input"))?;
     let run = run_process(program, &switches(options), &dir.path, timeout, by_max_time, source)?;
@@ -134,10 +128,7 @@ fn check_surface(surface: &TriMesh, source: &Path) -> Result<()> {
     }
     for (t, triangle) in surface.triangles.iter().enumerate() {
         if let Some(v) = triangle.iter().find(|&&v| v as usize >= positions.len()) {
-            return fail(
-                format!("triangle {t} refers to vertex {v}, but the surface has {} vertices", positions.len()),
-                "re-export the surface",
-            );
+            return fail(format!("triangle {t} refers to vertex {v}, but the surface has {} vertices", positions.len()), "re-export the surface");
         }
         let [a, b, c] = triangle.map(|v| positions[v as usize]);
         let longest = norm(sub(a, b)).max(norm(sub(b, c))).max(norm(sub(c, a)));
@@ -205,8 +196,7 @@ fn check_output(surface: &TriMesh, node_text: &str, ele_text: Option<&str>, sour
         ));
     }
     let tolerance = 1e-12 * bbox_diagonal(&surface.positions);
-    let lost = (0..surface.positions.len())
-        .find(|&i| positions.get(i).is_none_or(|p| norm(sub(*p, surface.positions[i])) > tolerance));
+    let lost = (0..surface.positions.len()).find(|&i| positions.get(i).is_none_or(|p| norm(sub(*p, surface.positions[i])) > tolerance));
     if let Some(v) = lost {
         let place = at(surface.positions[v]);
         return Err(if surface.triangles.iter().flatten().any(|&u| u as usize == v) {
@@ -237,14 +227,7 @@ fn check_output(surface: &TriMesh, node_text: &str, ele_text: Option<&str>, sour
 
 /// Why TetGen failed, as precisely as it can be told: self-intersections found by a
 /// `tetgen -d` rerun, else TetGen's own last words and what in the surface may cause them.
-fn diagnose_failure(
-    program: &OsStr,
-    surface: &TriMesh,
-    failed: &Finished,
-    dir: &Path,
-    timeout: Duration,
-    source: &Path,
-) -> Error {
+fn diagnose_failure(program: &OsStr, surface: &TriMesh, failed: &Finished, dir: &Path, timeout: Duration, source: &Path) -> Error {
     let pairs = run_process(program, "-dz", dir, timeout, false, source)
         .map(|check| intersecting_pairs(&check.stdout, surface.triangles.len()))
         .unwrap_or_default();
@@ -261,13 +244,8 @@ fn diagnose_failure(
             "separate or boolean-union the intersecting parts in your modeling tool, then re-export",
         );
     }
-    let last_words: Vec<&str> = failed
-        .stderr
-        .lines()
-        .chain(failed.stdout.lines())
-        .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with("Opening "))
-        .collect();
+    let last_words: Vec<&str> =
+        failed.stderr.lines().chain(failed.stdout.lines()).map(str::trim).filter(|l| !l.is_empty() && !l.starts_with("Opening ")).collect();
     let said = match last_words.len() {
         0 => "no message".to_string(),
         n => last_words[n.saturating_sub(3)..].join("; "),
@@ -327,15 +305,12 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, b
         Command::new(program).args([switches, INPUT]).current_dir(dir).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
     )
     .map_err(|e| {
-            Error::in_file(
-                source,
-                format!(
-                    "cannot tetrahedralize: `tetgen` is not installed (starting `{}` failed: {e})",
-                    program.to_string_lossy()
-                ),
-                "apt-get install tetgen, or set BLENDSIM_TETGEN to the path of a tetgen binary",
-            )
-        })?;
+        Error::in_file(
+            source,
+            format!("cannot tetrahedralize: `tetgen` is not installed (starting `{}` failed: {e})", program.to_string_lossy()),
+            "apt-get install tetgen, or set BLENDSIM_TETGEN to the path of a tetgen binary",
+        )
+    })?;
     // Drain both pipes while waiting, so a chatty TetGen never blocks on a full pipe.
     fn drain(pipe: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<String> {
         std::thread::spawn(move || {
@@ -378,7 +353,9 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, b
                     format!("lost track of the TetGen process: {e}"),
                     "retry; if it persists, check the system's process limits",
                 ),
-                _ if by_max_time => crate::support::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64())),
+                _ if by_max_time => {
+                    crate::support::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64()))
+                }
                 _ => Error::in_file(
                     source,
                     format!("TetGen did not finish within {} s and was stopped", timeout.as_secs_f64()),
@@ -476,11 +453,11 @@ impl Drop for WorkDir {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::support::testing::paper_asset;
+    use crate::algorithms::geometry::scale;
     use crate::algorithms::geometry::surface::{boundary, enclosed_volume};
-    use crate::formats::mesh::obj;
-use crate::algorithms::geometry::scale;
     use crate::algorithms::procedural::{icosphere, prism};
+    use crate::formats::mesh::obj;
+    use crate::support::testing::paper_asset;
 
     const TETGEN: &str = "tetgen";
 
@@ -489,8 +466,7 @@ use crate::algorithms::geometry::scale;
     }
 
     fn failure(surface: &TriMesh, options: &TetgenOptions, program: &str) -> String {
-        let e = run_with(program.as_ref(), surface, options, Path::new("keys/k0.obj"))
-            .expect_err("the run must fail");
+        let e = run_with(program.as_ref(), surface, options, Path::new("keys/k0.obj")).expect_err("the run must fail");
         let s = e.to_string();
         assert!(s.starts_with("keys/k0.obj: ") && s.contains(" (fix: ") && !s.contains('\n'), "{s}");
         s
@@ -557,8 +533,8 @@ use crate::algorithms::geometry::scale;
         let s = failure(&surface, &options(0.0, 0.0), "/nonexistent/tetgen");
         let rim = [[b, a], [c, b], [a, c]];
         assert!(
-            rim.iter().any(|[u, v]| s.contains(&format!("the surface has a hole: the edge from vertex {u} ("))
-                && s.contains(&format!(" to vertex {v} ("))),
+            rim.iter()
+                .any(|[u, v]| s.contains(&format!("the surface has a hole: the edge from vertex {u} (")) && s.contains(&format!(" to vertex {v} ("))),
             "{s}"
         );
         assert!(s.contains("(3 open edges in all)") && s.contains("fix: close the hole in your modeling tool"), "{s}");
@@ -604,10 +580,7 @@ use crate::algorithms::geometry::scale;
     #[test]
     fn missing_tetgen_says_how_to_install_it() {
         let s = failure(&cube_at([0.0; 3]), &options(0.0, 0.0), "/nonexistent/tetgen");
-        assert!(
-            s.contains("cannot tetrahedralize: `tetgen` is not installed (starting `/nonexistent/tetgen` failed"),
-            "{s}"
-        );
+        assert!(s.contains("cannot tetrahedralize: `tetgen` is not installed (starting `/nonexistent/tetgen` failed"), "{s}");
         assert!(s.contains("(fix: apt-get install tetgen, or set BLENDSIM_TETGEN"), "{s}");
         let s = failure(&cube_at([0.0; 3]), &options(0.0, 0.0), "true");
         assert!(s.contains("`true` finished but wrote no surface.1.node"), "{s}");
@@ -619,9 +592,7 @@ use crate::algorithms::geometry::scale;
         let sphere = icosphere(3);
         let started = Instant::now();
         let s = failure(&sphere, &TetgenOptions { quality: 1.414, max_volume: 1e-6, timeout: 0.3 }, TETGEN);
-        assert!(
-            s.contains("TetGen did not finish within 0.3 s and was stopped") && s.contains("fix: raise [tet] timeout")
-        );
+        assert!(s.contains("TetGen did not finish within 0.3 s and was stopped") && s.contains("fix: raise [tet] timeout"));
         // Stopped at the timeout, not at TetGen's own end (minutes): a bound far above 0.3 s,
         // so that a loaded machine's slow start and cleanup never reach it.
         assert!(started.elapsed() < Duration::from_secs(30), "{:?}", started.elapsed());
@@ -645,11 +616,9 @@ use crate::algorithms::geometry::scale;
         let ele = "1 4 0\n0 0 1 2 4\n";
         let s = check_output(&cube, &nodes(&moved), Some(ele), source).unwrap_err().to_string();
         assert!(s.contains("TetGen moved or dropped surface vertex 5 at (1, 0, 1)"), "{s}");
-        let s =
-            check_output(&cube, &nodes(&cube.positions), Some("1 4 0\n0 0 1 2 3\n"), source).unwrap_err().to_string();
+        let s = check_output(&cube, &nodes(&cube.positions), Some("1 4 0\n0 0 1 2 3\n"), source).unwrap_err().to_string();
         assert!(s.contains("TetGen made a flat tetrahedron 0"), "{s}");
-        let s =
-            check_output(&cube, &nodes(&cube.positions), Some("1 4 0\n0 0 1 2 8\n"), source).unwrap_err().to_string();
+        let s = check_output(&cube, &nodes(&cube.positions), Some("1 4 0\n0 0 1 2 8\n"), source).unwrap_err().to_string();
         assert!(s.contains("TetGen wrote an unreadable surface.1.ele: line 2: tetrahedron 0 refers to node 8"), "{s}");
         let mesh = check_output(&cube, &nodes(&cube.positions), Some(ele), source).unwrap();
         assert_eq!(mesh.tets.len(), 1);

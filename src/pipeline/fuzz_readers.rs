@@ -15,9 +15,9 @@ use std::time::Instant;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 
-use crate::support::error::{Error, Result};
 use crate::formats::mesh::{medit, obj, selection, tetgen_io};
 use crate::pipeline::scene::Scene;
+use crate::support::error::{Error, Result};
 use crate::support::testing::alloc;
 
 /// Cases per property unless `PROPTEST_CASES` says otherwise.
@@ -50,11 +50,7 @@ where
         0.0 => "no input of 1 KB or more".to_string(),
         w => format!("peak allocation up to {w:.1} bytes per input byte over inputs of 1 KB or more"),
     };
-    eprintln!(
-        "fuzz {name}: {} cases, {ok} of {all} parses accepted, {worst}, in {:.2} s",
-        cases(),
-        started.elapsed().as_secs_f64()
-    );
+    eprintln!("fuzz {name}: {} cases, {ok} of {all} parses accepted, {worst}, in {:.2} s", cases(), started.elapsed().as_secs_f64());
 }
 
 /// CPU seconds the calling thread has used (`CLOCK_THREAD_CPUTIME_ID`).
@@ -104,11 +100,66 @@ fn check_message(e: &Error) -> Result<(), TestCaseError> {
 
 /// Tokens that readers treat specially, to splice into valid files.
 const TOKENS: &[&str] = &[
-    "nan", "NaN", "inf", "-inf", "1e308", "1e400", "-1", "0", "1", "2", "4294967296", "18446744073709551616",
-    "99999999999999999999999", "0.5", "-0", "\u{feff}", "\n", "\r\n", "\r", "\t", " ", "#", "\u{0}", "\u{1b}[2J",
-    "v", "f", "o", "g", "vt", "f 1 2 3", "f -1 -2 -3", "v 0 0 0", "1/2/3", "//", "MeshVersionFormatted", "Dimension",
-    "Vertices", "Tetrahedra", "Triangles", "End", "1 3", "=", "[", "]", "{", "}", "\"", "name", "[keyframes]", "times",
-    "meshes", "fixed", "axis", "min", "max", "samples", "gravity", "[material]", "é", "\u{202e}",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e308",
+    "1e400",
+    "-1",
+    "0",
+    "1",
+    "2",
+    "4294967296",
+    "18446744073709551616",
+    "99999999999999999999999",
+    "0.5",
+    "-0",
+    "\u{feff}",
+    "\n",
+    "\r\n",
+    "\r",
+    "\t",
+    " ",
+    "#",
+    "\u{0}",
+    "\u{1b}[2J",
+    "v",
+    "f",
+    "o",
+    "g",
+    "vt",
+    "f 1 2 3",
+    "f -1 -2 -3",
+    "v 0 0 0",
+    "1/2/3",
+    "//",
+    "MeshVersionFormatted",
+    "Dimension",
+    "Vertices",
+    "Tetrahedra",
+    "Triangles",
+    "End",
+    "1 3",
+    "=",
+    "[",
+    "]",
+    "{",
+    "}",
+    "\"",
+    "name",
+    "[keyframes]",
+    "times",
+    "meshes",
+    "fixed",
+    "axis",
+    "min",
+    "max",
+    "samples",
+    "gravity",
+    "[material]",
+    "é",
+    "\u{202e}",
 ];
 
 /// A mutation of a text: (where, what, how many, a token, a byte).

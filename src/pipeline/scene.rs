@@ -10,10 +10,10 @@ use std::path::{Path, PathBuf};
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
-use crate::support::error::{Error, Result};
 pub use crate::algorithms::blendshape::clip::Weights;
 pub use crate::algorithms::geometry::Axis;
 pub use crate::algorithms::procedural::Twist;
+use crate::support::error::{Error, Result};
 
 mod cache_table;
 pub use cache_table::{CacheKeys, CacheSpec, DEFAULT_TOLERANCE};
@@ -533,8 +533,7 @@ impl Serialize for Selection {
 /// A vector of exactly three numbers (serde's own `[f64; 3]` would drop a fourth).
 fn three_components<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<[f64; 3], D::Error> {
     let v = Vec::<f64>::deserialize(d)?;
-    <[f64; 3]>::try_from(v.as_slice())
-        .map_err(|_| de::Error::custom(format!("expected 3 components (x, y, z), found {}", v.len())))
+    <[f64; 3]>::try_from(v.as_slice()).map_err(|_| de::Error::custom(format!("expected 3 components (x, y, z), found {}", v.len())))
 }
 
 /// A keyframe mesh's `offset`: three finite numbers.
@@ -623,13 +622,9 @@ impl<'de> Deserialize<'de> for Selection {
             fn visit_map<A: MapAccess<'de>>(self, map: A) -> std::result::Result<Selection, A::Error> {
                 let t = SelectionTable::deserialize(de::value::MapAccessDeserializer::new(map))?;
                 match (t.file, t.axis) {
-                    (Some(file), None) if t.min.is_none() && t.max.is_none() => {
-                        Ok(Selection::File { file, invert: t.invert })
-                    }
+                    (Some(file), None) if t.min.is_none() && t.max.is_none() => Ok(Selection::File { file, invert: t.invert }),
                     (None, Some(axis)) => Ok(Selection::Slab { axis, min: t.min, max: t.max, invert: t.invert }),
-                    _ => Err(de::Error::custom(
-                        "a selection table has either `file` or `axis` (with `min`/`max`), not both",
-                    )),
+                    _ => Err(de::Error::custom("a selection table has either `file` or `axis` (with `min`/`max`), not both")),
                 }
             }
         }
@@ -692,14 +687,23 @@ impl Scene {
             (Some(k), None) => k.validate()?,
             (None, Some(c)) => c.validate(self)?,
             (Some(_), Some(_)) => {
-                return invalid("the scene has both [keyframes] and [cache]".into(), "keep one: keyframe meshes, or a vertex cache to take keys from");
+                return invalid(
+                    "the scene has both [keyframes] and [cache]".into(),
+                    "keep one: keyframe meshes, or a vertex cache to take keys from",
+                );
             }
             (None, None) => {
-                return invalid("the scene has neither [keyframes] nor [cache]".into(), "add a [keyframes] table of meshes, or a [cache] table naming a vertex cache");
+                return invalid(
+                    "the scene has neither [keyframes] nor [cache]".into(),
+                    "add a [keyframes] table of meshes, or a [cache] table naming a vertex cache",
+                );
             }
         }
         if self.keyframes.is_some() && self.solver.method == Method::Fit {
-            return invalid("[solver] method = \"fit\" fits a vertex cache, but the scene has [keyframes]".into(), "use \"spacetime\" or \"hermite\", or give a [cache]");
+            return invalid(
+                "[solver] method = \"fit\" fits a vertex cache, but the scene has [keyframes]".into(),
+                "use \"spacetime\" or \"hermite\", or give a [cache]",
+            );
         }
         self.tet.validate()?;
         self.material.validate()?;
@@ -768,7 +772,10 @@ impl KeyframeSpec {
             // Non-finite values would also not survive the scene's trip through a stage file
             // (JSON has no infinity).
             if !twist.degrees.is_finite() {
-                return invalid(format!("[keyframes] meshes[{i}] has a twist of {} degrees", twist.degrees), "give the twist angle as a finite number of degrees, e.g. 90.0");
+                return invalid(
+                    format!("[keyframes] meshes[{i}] has a twist of {} degrees", twist.degrees),
+                    "give the twist angle as a finite number of degrees, e.g. 90.0",
+                );
             }
             if !(twist.axial_scale.is_finite() && twist.axial_scale > 0.0) {
                 return invalid(
@@ -794,12 +801,19 @@ impl KeyframeSpec {
         for (j, &k) in self.contact.iter().enumerate() {
             if k == 0 || k + 1 >= n {
                 return invalid(
-                    format!("[keyframes] contact = {:?} lists key {k}, but a contact needs a key before and after it (keys 1 to {})", self.contact, n.saturating_sub(2)),
+                    format!(
+                        "[keyframes] contact = {:?} lists key {k}, but a contact needs a key before and after it (keys 1 to {})",
+                        self.contact,
+                        n.saturating_sub(2)
+                    ),
                     "list the key at which the body hits the obstacle, not the first or last",
                 );
             }
             if j > 0 && k <= self.contact[j - 1] {
-                return invalid(format!("[keyframes] contact = {:?} is not increasing", self.contact), "list each contact key once, in increasing order");
+                return invalid(
+                    format!("[keyframes] contact = {:?} is not increasing", self.contact),
+                    "list each contact key once, in increasing order",
+                );
             }
         }
         for (what, list) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
@@ -880,25 +894,40 @@ impl Solver {
         }
         if !self.optimize_timing && (self.keep_duration || !self.fixed_times.is_empty()) {
             let key = if self.keep_duration { "keep_duration" } else { "fixed_times" };
-            return invalid(format!("[solver] {key} is set but optimize_timing is false, so the key times do not move anyway"), "set optimize_timing = true, or remove the key");
+            return invalid(
+                format!("[solver] {key} is set but optimize_timing is false, so the key times do not move anyway"),
+                "set optimize_timing = true, or remove the key",
+            );
         }
         if let Some((k, keys)) = keys.and_then(|keys| self.fixed_times.iter().find(|&&k| k >= keys).map(|&k| (k, keys))) {
-            return invalid(format!("[solver] fixed_times lists key {k}, but there are {keys} keys"), "list key indices from 0, as in [keyframes] times");
+            return invalid(
+                format!("[solver] fixed_times lists key {k}, but there are {keys} keys"),
+                "list key indices from 0, as in [keyframes] times",
+            );
         }
         if !["auto", "projective", "tangent"].contains(&self.model_hessian.as_str()) {
-            return invalid(format!("[solver] model_hessian = {:?} is not a model", self.model_hessian), "use \"auto\", \"projective\" or \"tangent\"");
+            return invalid(
+                format!("[solver] model_hessian = {:?} is not a model", self.model_hessian),
+                "use \"auto\", \"projective\" or \"tangent\"",
+            );
         }
         if !["auto", "quasi-newton", "gauss-newton"].contains(&self.step.as_str()) {
             return invalid(format!("[solver] step = {:?} is not a step", self.step), "use \"auto\", \"quasi-newton\" or \"gauss-newton\"");
         }
         if !["auto", "direct", "modal", "iterative"].contains(&self.global_step.as_str()) {
-            return invalid(format!("[solver] global_step = {:?} is not a way to solve the global step", self.global_step), "use \"auto\", \"direct\", \"modal\" or \"iterative\"");
+            return invalid(
+                format!("[solver] global_step = {:?} is not a way to solve the global step", self.global_step),
+                "use \"auto\", \"direct\", \"modal\" or \"iterative\"",
+            );
         }
         if !(self.min_interval.is_finite() && self.min_interval > 0.0) {
             return invalid(format!("[solver] min_interval = {} must be positive", self.min_interval), "use a small length in seconds, e.g. 0.001");
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return invalid(format!("[solver] tolerance = {} must be positive", self.tolerance), "use e.g. 0.001 (W decreasing by 0.1% over the last iterations)");
+            return invalid(
+                format!("[solver] tolerance = {} must be positive", self.tolerance),
+                "use e.g. 0.001 (W decreasing by 0.1% over the last iterations)",
+            );
         }
         if !(self.regularization.is_finite() && self.regularization >= 0.0) {
             return invalid(format!("[solver] regularization = {} must be >= 0", self.regularization), "use a time scale like 0.1, or 0 for none");
@@ -935,7 +964,10 @@ impl Export {
             return invalid("[export] up_axis = \"x\"".into(), "USD and glTF support \"y\" or \"z\" up");
         }
         if !(self.meters_per_unit.is_finite() && self.meters_per_unit > 0.0) {
-            return invalid(format!("[export] meters_per_unit = {} must be positive", self.meters_per_unit), "use 1.0 for meters, 0.01 for centimeters");
+            return invalid(
+                format!("[export] meters_per_unit = {} must be positive", self.meters_per_unit),
+                "use 1.0 for meters, 0.01 for centimeters",
+            );
         }
         if self.formats.is_empty() {
             return invalid("[export] formats is empty".into(), "list at least one of \"usda\", \"usdc\", \"glb\"");
@@ -943,7 +975,10 @@ impl Export {
         match (self.rank, self.basis) {
             (Some(0), _) => return invalid("[export] rank = 0".into(), "give at least 1 component, or remove rank to choose it by the tolerance"),
             (Some(r), Some(Basis::Keys)) => {
-                return invalid(format!("[export] rank = {r} is given, but basis = \"keys\" has no rank"), "remove rank, or set basis = \"principal\"");
+                return invalid(
+                    format!("[export] rank = {r} is given, but basis = \"keys\" has no rank"),
+                    "remove rank, or set basis = \"principal\"",
+                );
             }
             _ => {}
         }
@@ -983,13 +1018,22 @@ impl Default for MassSpring {
 impl MassSpring {
     fn validate(&self) -> Result<()> {
         if self.inbetweens > 1000 {
-            return invalid(format!("[mass_spring] inbetweens = {} is more than 1000 per interval", self.inbetweens), "use a few in-betweens per interval (3 is typical)");
+            return invalid(
+                format!("[mass_spring] inbetweens = {} is more than 1000 per interval", self.inbetweens),
+                "use a few in-betweens per interval (3 is typical)",
+            );
         }
         if !matches!(self.bending.as_str(), "two-ring" | "hinge") {
-            return invalid(format!("[mass_spring] bending = {:?} is not a bending kind", self.bending), "use \"two-ring\" (the paper's) or \"hinge\"");
+            return invalid(
+                format!("[mass_spring] bending = {:?} is not a bending kind", self.bending),
+                "use \"two-ring\" (the paper's) or \"hinge\"",
+            );
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
-            return invalid(format!("[mass_spring] tolerance = {} must be between 0 and 1", self.tolerance), "use e.g. 1e-7 (a fraction of the size)");
+            return invalid(
+                format!("[mass_spring] tolerance = {} must be between 0 and 1", self.tolerance),
+                "use e.g. 1e-7 (a fraction of the size)",
+            );
         }
         Ok(())
     }
@@ -1047,7 +1091,11 @@ times = [0.0, 0.5]
         assert_eq!(s.solver, Solver { samples: 10, coarse_samples: 5, ..Solver::default() });
         assert_eq!(crate::pipeline::stages::solve::settings(&s).coarse_phase(), Some(5), "the key reaches the solver");
         let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"gauss-newton\"\n")).unwrap();
-        assert_eq!(crate::pipeline::stages::solve::settings(&s).step, crate::algorithms::spacetime::solver::Step::GaussNewton, "the key reaches the solver");
+        assert_eq!(
+            crate::pipeline::stages::solve::settings(&s).step,
+            crate::algorithms::spacetime::solver::Step::GaussNewton,
+            "the key reaches the solver"
+        );
         let e = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"newton\"\n")).unwrap_err().to_string();
         assert!(e.contains("[solver] step = \"newton\" is not a step") && e.contains("(fix: "), "{e}");
     }
@@ -1082,10 +1130,7 @@ full_frame = true
         assert_eq!(s.solver.method, Method::Hermite);
         let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
         assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
-        assert_eq!(
-            s.keyframes.as_ref().unwrap().fixed,
-            Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }])
-        );
+        assert_eq!(s.keyframes.as_ref().unwrap().fixed, Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }]));
     }
 
     #[test]
@@ -1117,7 +1162,9 @@ rest = "rest.mesh"
             assert!(e.contains("expected 3 components") || e.contains("offset must be three finite numbers"), "{e}");
         }
         // A twist the solver could not use, or a stage file could not carry (found by the fuzzer).
-        for (bad, says) in [("degrees = inf", "twist of inf degrees"), ("degrees = nan", "twist of NaN degrees"), ("axial_scale = 0.0", "axial_scale = 0")] {
+        for (bad, says) in
+            [("degrees = inf", "twist of inf degrees"), ("degrees = nan", "twist of NaN degrees"), ("axial_scale = 0.0", "axial_scale = 0")]
+        {
             let twist = if bad.starts_with("degrees") { format!("{bad}, axial_scale = 0.8") } else { format!("degrees = 180.0, {bad}") };
             let e = Scene::parse(&text.replace("degrees = 180.0, axial_scale = 0.8", &twist)).unwrap_err().to_string();
             assert!(e.contains("meshes[1]") && e.contains(says) && e.contains("fix:"), "{e}");

@@ -15,10 +15,10 @@ use std::path::{Path, PathBuf};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
-use crate::pipeline::scene::{Format, Method, Scene};
 use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::pipeline::scene::{Format, Method, Scene};
+use crate::support::error::{Error, Result};
 
 mod cache_record;
 pub use cache_record::{CacheRecord, CacheRecordOptions};
@@ -590,7 +590,10 @@ impl Check {
     /// The embedded scene: the same rules as a scene file (name, fps > 0, every table).
     fn scene(&self, scene: &Scene) -> Result<()> {
         scene.validate().map_err(|e| {
-            Error::general(format!("its scene: {}", e.problem), format!("{}; edit the scene file, then re-run the chain from `blendsim import`", e.fix))
+            Error::general(
+                format!("its scene: {}", e.problem),
+                format!("{}; edit the scene file, then re-run the chain from `blendsim import`", e.fix),
+            )
         })
     }
 
@@ -632,7 +635,8 @@ impl Check {
             return self.fail(format!("{what} tet {t} uses node {}, but there are {n} nodes", m.tets[t].iter().max().unwrap()));
         }
         if let Some(t) = (0..m.tets.len()).find(|&t| m.signed_volume_at(&m.positions, t).partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)) {
-            return self.fail(format!("{what} tet {t} is inverted or flat in the rest pose (signed volume {:e})", m.signed_volume_at(&m.positions, t)));
+            return self
+                .fail(format!("{what} tet {t} is inverted or flat in the rest pose (signed volume {:e})", m.signed_volume_at(&m.positions, t)));
         }
         Ok(n)
     }
@@ -742,8 +746,7 @@ struct BodyIn<T> {
 
 /// Serialize a stage to JSON bytes (with its header).
 pub fn to_json<T: StageData>(value: &T) -> Vec<u8> {
-    let mut bytes = serde_json::to_vec(&HeaderOut { blendsim: FORMAT_VERSION, stage: T::STAGE, data: value })
-        .expect("stage data serializes");
+    let mut bytes = serde_json::to_vec(&HeaderOut { blendsim: FORMAT_VERSION, stage: T::STAGE, data: value }).expect("stage data serializes");
     bytes.push(b'\n');
     bytes
 }
@@ -841,9 +844,7 @@ fn relative_to(from: &Path, path: &Path) -> PathBuf {
 
 /// Parse and validate the bytes of a stage file; `path` is named in errors.
 pub fn from_json<T: StageData>(bytes: &[u8], path: &Path) -> Result<T> {
-    let wrong = |what: String| {
-        Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER))
-    };
+    let wrong = |what: String| Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER));
     let header: HeaderIn = serde_json::from_slice(bytes).map_err(|e| wrong(format!("is not a blendsim stage file ({e})")))?;
     match (header.blendsim, header.stage.as_deref()) {
         (Some(FORMAT_VERSION), Some(s)) if s == T::STAGE => {}

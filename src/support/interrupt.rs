@@ -368,10 +368,7 @@ mod tests {
         assert!(guard.child().try_wait().unwrap().is_none());
         drop(guard);
         assert!(!process_alive(pid), "the child died with its guard");
-        let out = spawn(Command::new("sh").args(["-c", "echo hi"]).stdout(std::process::Stdio::piped()))
-            .unwrap()
-            .wait_with_output()
-            .unwrap();
+        let out = spawn(Command::new("sh").args(["-c", "echo hi"]).stdout(std::process::Stdio::piped())).unwrap().wait_with_output().unwrap();
         assert_eq!(out.stdout, b"hi\n");
         assert!(process_alive(std::process::id()));
     }

@@ -187,7 +187,10 @@ impl FolderLock {
                         ));
                     }
                     if !announced {
-                        eprintln!("blendsim: waiting for {who} to finish writing {}", crate::support::error::printable(&target.display().to_string()));
+                        eprintln!(
+                            "blendsim: waiting for {who} to finish writing {}",
+                            crate::support::error::printable(&target.display().to_string())
+                        );
                         announced = true;
                     }
                     file.lock().map_err(|e| Error::io(&path, &e, "lock the output folder"))?;
@@ -257,7 +260,11 @@ impl Committed {
         let count = |n: usize, one: &str, many: &str| if n == 1 { format!("1 {one}") } else { format!("{n} {many}") };
         let mut lines = Vec::new();
         if !self.removed.is_empty() {
-            lines.push(format!("removed from {folder} {} of an earlier run that this {run} did not write again: {}", count(self.removed.len(), "file", "files"), names(&self.removed)));
+            lines.push(format!(
+                "removed from {folder} {} of an earlier run that this {run} did not write again: {}",
+                count(self.removed.len(), "file", "files"),
+                names(&self.removed)
+            ));
         }
         if !self.kept.is_empty() {
             lines.push(format!("kept in {folder} {} that blendsim did not write: {}", count(self.kept.len(), "entry", "entries"), names(&self.kept)));
@@ -350,8 +357,7 @@ impl Staging {
             }
         }
         builder.recursive(false);
-        std::fs::write(staging.dir.join(MARKER), b"")
-            .map_err(|e| Error::io(&staging.dir, &e, "create a staging folder beside the output folder"))?;
+        std::fs::write(staging.dir.join(MARKER), b"").map_err(|e| Error::io(&staging.dir, &e, "create a staging folder beside the output folder"))?;
         Ok(staging)
     }
 
@@ -523,7 +529,11 @@ impl Staging {
         let my_groups: BTreeSet<&str> = mine.values().copied().collect();
         let every_group = self.every_group;
         let replaced = |name: &str| mine.contains_key(name) || old_manifest.get(name).is_some_and(|g| every_group || my_groups.contains(g.as_str()));
-        let removed: Vec<String> = old_manifest.keys().filter(|n| replaced(n) && !mine.contains_key(n.as_str()) && self.folder.join(n).symlink_metadata().is_ok()).cloned().collect();
+        let removed: Vec<String> = old_manifest
+            .keys()
+            .filter(|n| replaced(n) && !mine.contains_key(n.as_str()) && self.folder.join(n).symlink_metadata().is_ok())
+            .cloned()
+            .collect();
         let mut manifest: BTreeMap<String, String> = old_manifest
             .iter()
             .filter(|(n, _)| !replaced(n) && self.folder.join(n).symlink_metadata().is_ok())
@@ -715,9 +725,7 @@ fn manifest_json(files: &BTreeMap<String, String>) -> Vec<u8> {
 
 /// Hard-link `from` to `to`; a folder is re-created and its contents linked.
 fn link_tree(from: &Path, to: &Path) -> Result<()> {
-    let fail = |e: std::io::Error| {
-        Error::io(from, &e, "keep this file (not blendsim's) in the output folder through the commit, by a hard link")
-    };
+    let fail = |e: std::io::Error| Error::io(from, &e, "keep this file (not blendsim's) in the output folder through the commit, by a hard link");
     let meta = std::fs::symlink_metadata(from).map_err(fail)?;
     if !meta.is_dir() {
         return std::fs::hard_link(from, to).map_err(fail);
@@ -774,7 +782,9 @@ fn concurrently<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Ve
     let mut out: Vec<Option<R>> = std::iter::repeat_with(|| None).take(items.len()).collect();
     std::thread::scope(|scope| {
         let f = &f;
-        let workers: Vec<_> = (0..threads).map(|t| scope.spawn(move || items.iter().enumerate().skip(t).step_by(threads).map(|(i, x)| (i, f(x))).collect::<Vec<_>>())).collect();
+        let workers: Vec<_> = (0..threads)
+            .map(|t| scope.spawn(move || items.iter().enumerate().skip(t).step_by(threads).map(|(i, x)| (i, f(x))).collect::<Vec<_>>()))
+            .collect();
         for worker in workers {
             for (i, r) in worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)) {
                 out[i] = Some(r);
@@ -789,7 +799,8 @@ const IO_THREADS: usize = 16;
 
 /// Remove `dir` and everything in it: its files unlinked [`concurrently`], then the rest.
 fn remove_folder(dir: &Path) -> std::io::Result<()> {
-    let files: Vec<PathBuf> = std::fs::read_dir(dir)?.filter_map(|e| e.ok()).filter(|e| e.file_type().is_ok_and(|t| !t.is_dir())).map(|e| e.path()).collect();
+    let files: Vec<PathBuf> =
+        std::fs::read_dir(dir)?.filter_map(|e| e.ok()).filter(|e| e.file_type().is_ok_and(|t| !t.is_dir())).map(|e| e.path()).collect();
     concurrently(&files, |p| {
         let _ = std::fs::remove_file(p);
     });
@@ -971,7 +982,10 @@ mod tests {
         s.set_group("report");
         s.write("report.md", b"r").unwrap();
         let summary = s.commit_with_summary().unwrap();
-        assert_eq!(summary, Committed { removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()], kept: vec!["notes.txt".into(), "renders".into()] });
+        assert_eq!(
+            summary,
+            Committed { removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()], kept: vec!["notes.txt".into(), "renders".into()] }
+        );
         assert_eq!(
             summary.messages(Path::new("build/x"), "bake"),
             [

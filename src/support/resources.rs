@@ -165,11 +165,7 @@ pub fn check_frames(start: f64, end: f64, fps: f64, vertices: usize) -> Result<(
 /// The spacetime samples the solver keeps: `samples per interval x intervals x tets`.
 pub fn check_samples(samples: usize, intervals: usize, tets: usize) -> Result<()> {
     let bytes = samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET;
-    check(
-        bytes,
-        &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"),
-        "lower [solver] samples (10 is typical)",
-    )
+    check(bytes, &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"), "lower [solver] samples (10 is typical)")
 }
 
 #[cfg(test)]

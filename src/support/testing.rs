@@ -40,11 +40,7 @@ pub fn paper_asset(rel: &str) -> Option<PathBuf> {
     if path.is_file() {
         return Some(path);
     }
-    assert!(
-        std::env::var("CI").as_deref() != Ok("true"),
-        "test asset {} is missing (required when CI=true)",
-        path.display()
-    );
+    assert!(std::env::var("CI").as_deref() != Ok("true"), "test asset {} is missing (required when CI=true)", path.display());
     eprintln!("skipped: test asset {} is missing", path.display());
     None
 }

@@ -126,7 +126,12 @@ pub(crate) fn corner_uv_sets(triangles: impl IntoIterator<Item = [(u64, f64, f64
 pub(crate) fn obj_corner_uvs(text: &str) -> Vec<Vec<(u64, i64, i64)>> {
     let mesh = blendsim::formats::mesh::obj::parse(text).unwrap();
     let a = mesh.attributes.unwrap();
-    corner_uv_sets(mesh.triangles.iter().zip(&a.uv_corners).map(|(t, c)| std::array::from_fn(|k| (t[k] as u64, a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))))
+    corner_uv_sets(
+        mesh.triangles
+            .iter()
+            .zip(&a.uv_corners)
+            .map(|(t, c)| std::array::from_fn(|k| (t[k] as u64, a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))),
+    )
 }
 
 #[test]
@@ -168,10 +173,15 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
         let glb = Glb::parse(&bytes);
         let mesh = &glb.json["meshes"][0];
         let primitives = mesh["primitives"].as_array().unwrap();
-        let materials: Vec<&str> = primitives.iter().map(|p| glb.json["materials"][p["material"].as_u64().unwrap() as usize]["name"].as_str().unwrap()).collect();
+        let materials: Vec<&str> =
+            primitives.iter().map(|p| glb.json["materials"][p["material"].as_u64().unwrap() as usize]["name"].as_str().unwrap()).collect();
         assert_eq!(materials, ["side", "cap"], "{}", file.path);
         let attributes = &primitives[0]["attributes"];
-        assert!(primitives.iter().all(|p| p["attributes"] == *attributes && p["targets"] == primitives[0]["targets"]), "{}: primitives share vertices and targets", file.path);
+        assert!(
+            primitives.iter().all(|p| p["attributes"] == *attributes && p["targets"] == primitives[0]["targets"]),
+            "{}: primitives share vertices and targets",
+            file.path
+        );
         let positions = glb.floats(attributes["POSITION"].as_u64().unwrap(), 3).len() / 3;
         let uvs = glb.floats(attributes["TEXCOORD_0"].as_u64().unwrap(), 2);
         let normals = glb.floats(attributes["NORMAL"].as_u64().unwrap(), 3);
@@ -181,7 +191,8 @@ fn uvs_seams_normals_and_material_groups_reach_usd_and_gltf() {
         let points = (RINGS + 1) * SIDES + 2;
         assert_eq!((uvs.len() / 2, normals.len() / 3), (positions, positions), "{}", file.path);
         assert_eq!(positions, points + (RINGS + 1) + 2 * (SIDES + 1), "{}", file.path);
-        let sources: Vec<u64> = mesh["extras"]["seamSources"].as_array().expect("seam copies need extras.seamSources").iter().map(|x| x.as_u64().unwrap()).collect();
+        let sources: Vec<u64> =
+            mesh["extras"]["seamSources"].as_array().expect("seam copies need extras.seamSources").iter().map(|x| x.as_u64().unwrap()).collect();
         let point_of = |j: usize| if j < points { j as u64 } else { sources[j - points] };
         // Corner UVs (v flipped back), through the file's own mapping, equal the OBJ's.
         let corner = |j: usize| (point_of(j), uvs[2 * j] as f64, 1.0 - uvs[2 * j + 1] as f64);
@@ -217,7 +228,10 @@ impl Glb {
     pub fn floats(&self, a: u64, width: usize) -> Vec<f32> {
         let (start, stride, count) = self.start(a);
         let stride = if stride == 0 { 4 * width } else { stride };
-        (0..count).flat_map(|i| (0..width).map(move |k| start + i * stride + 4 * k)).map(|o| f32::from_le_bytes(self.bin[o..o + 4].try_into().unwrap())).collect()
+        (0..count)
+            .flat_map(|i| (0..width).map(move |k| start + i * stride + 4 * k))
+            .map(|o| f32::from_le_bytes(self.bin[o..o + 4].try_into().unwrap()))
+            .collect()
     }
 
     pub fn indices(&self, a: u64) -> Vec<usize> {

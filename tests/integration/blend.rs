@@ -6,11 +6,11 @@
 
 use std::path::Path;
 
-use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::algorithms::geometry::surface::enclosed_volume;
 use blendsim::algorithms::geometry::{norm, sub, Point, TriMesh};
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::procedural::prism;
+use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::formats::mesh::obj;
 use blendsim::pipeline::scene::Method;
 
 use crate::common::cli::{read_json, run, tree, Run, TempDir};
@@ -139,7 +139,8 @@ fn bad_blend_input_is_one_line_and_writes_nothing() {
     let dir = TempDir::new("blend-bad");
     let rest = targets(&dir);
     let out = ["--out", "shape.obj"];
-    let blend = |extra: &[&str]| -> Vec<String> { ["blend", "--targets", "a.obj", "b.obj"].iter().chain(extra).chain(&out).map(|s| s.to_string()).collect() };
+    let blend =
+        |extra: &[&str]| -> Vec<String> { ["blend", "--targets", "a.obj", "b.obj"].iter().chain(extra).chain(&out).map(|s| s.to_string()).collect() };
     let args = |v: &Vec<String>| v.clone();
     let check = |extra: &[&str], says: &[&str]| {
         let v = args(&blend(extra));
@@ -173,14 +174,26 @@ fn bad_blend_input_is_one_line_and_writes_nothing() {
     let mut open = rest.clone();
     open.triangles.pop();
     std::fs::write(dir.join("open_a.obj"), obj::write(&open)).unwrap();
-    std::fs::write(dir.join("open_b.obj"), obj::write(&TriMesh { positions: bent(&open.positions, 90.0), triangles: open.triangles.clone(), attributes: None })).unwrap();
-    refused(&dir, &["blend", "--targets", "open_a.obj", "open_b.obj", "--weights", "0.5,0.5", "--out", "shape.obj"], &["open_a.obj", "not a closed surface", "--no-body"]);
+    std::fs::write(
+        dir.join("open_b.obj"),
+        obj::write(&TriMesh { positions: bent(&open.positions, 90.0), triangles: open.triangles.clone(), attributes: None }),
+    )
+    .unwrap();
+    refused(
+        &dir,
+        &["blend", "--targets", "open_a.obj", "open_b.obj", "--weights", "0.5,0.5", "--out", "shape.obj"],
+        &["open_a.obj", "not a closed surface", "--no-body"],
+    );
     run(&dir.path, &["blend", "-q", "--targets", "open_a.obj", "open_b.obj", "--weights", "0.5,0.5", "--out", "open.obj", "--no-body"]).success();
 
     // Obstacles: a degenerate one is refused; a sphere pushed into the blend leaves no
     // surface vertex inside.
     std::fs::write(dir.join("o.toml"), "[[obstacle]]\nkind = \"sphere\"\ncenter = [0, 1, 0]\nradius = -1\n").unwrap();
-    refused(&dir, &["blend", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--obstacles", "o.toml", "--out", "shape.obj"], &["o.toml", "positive radius"]);
+    refused(
+        &dir,
+        &["blend", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--obstacles", "o.toml", "--out", "shape.obj"],
+        &["o.toml", "positive radius"],
+    );
     let half = {
         run(&dir.path, &["blend", "-q", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--out", "free.obj"]).success();
         obj::read(&dir.join("free.obj")).unwrap().positions
@@ -231,7 +244,10 @@ fn mass_spring_scene_keeps_volume_and_its_files_pass_the_checkers() {
     assert!(deviation < 1e-9, "keys: {deviation}");
     let volume = &report["volume"];
     let (spring_min, hermite_min) = (volume["animation"]["min"].as_f64().unwrap(), volume["hermite"]["min"].as_f64().unwrap());
-    eprintln!("volume over the frames, fraction of rest: mass-spring min {spring_min:.4}, hermite min {hermite_min:.4}; W {}", report["solver"]["energy"]);
+    eprintln!(
+        "volume over the frames, fraction of rest: mass-spring min {spring_min:.4}, hermite min {hermite_min:.4}; W {}",
+        report["solver"]["energy"]
+    );
     assert!(hermite_min < 0.9, "the hermite in-betweens lose volume: {volume}");
     assert!(spring_min > 0.97, "mass-spring in-betweens keep it: {volume}");
 
@@ -289,9 +305,19 @@ fn interpolated_frames_deviate_from_the_per_frame_equilibria_by_a_measured_amoun
         assert_eq!(every.trajectory.key_count(), 25, "an equilibrium at every frame");
         // The log says which frames are equilibria.
         assert!(every.log.stop_reason.contains("every frame is an equilibrium"), "{}", every.log.stop_reason);
-        assert!(coarse.log.stop_reason.contains("20 of 25 frames fall between in-betweens and are Hermite-interpolated"), "{}", coarse.log.stop_reason);
+        assert!(
+            coarse.log.stop_reason.contains("20 of 25 frames fall between in-betweens and are Hermite-interpolated"),
+            "{}",
+            coarse.log.stop_reason
+        );
         let size = blendsim::algorithms::geometry::bbox_diagonal(&every.trajectory.positions[0]);
-        let deviation = coarse.trajectory.frames(24.0).iter().map(|&(_, t)| max_distance(&coarse.trajectory.evaluate(t), &every.trajectory.evaluate(t))).fold(0.0, f64::max) / size;
+        let deviation = coarse
+            .trajectory
+            .frames(24.0)
+            .iter()
+            .map(|&(_, t)| max_distance(&coarse.trajectory.evaluate(t), &every.trajectory.evaluate(t)))
+            .fold(0.0, f64::max)
+            / size;
         let depth = |a: &blendsim::pipeline::stage_file::Animation| deepest(a, |p| norm(sub(p, centre)) - radius) / size;
         eprintln!("{name}: interpolated frames (3 in-betweens) vs an equilibrium per frame: max deviation {:.3e} of the size; deepest in the sphere: {:.3e} (3 in-betweens), {:.3e} (every frame)", deviation, depth(&coarse), depth(&every));
         measured.push((deviation, depth(&coarse), depth(&every)));
@@ -344,7 +370,12 @@ fn mass_spring_scene_with_a_plane_or_a_sphere_keeps_every_frame_outside() {
         let depth = deepest(&anim, signed);
         eprintln!("{name}: deepest surface vertex over the frames {depth:.3e} (free bend: {free_depth:.3e}); {stop}");
         assert!(depth <= 1e-6 * size, "{name}: a surface vertex is {depth} inside at some frame");
-        let moved = anim.trajectory.frames(24.0).iter().map(|&(_, t)| max_distance(&anim.trajectory.evaluate(t), &free.trajectory.evaluate(t))).fold(0.0, f64::max);
+        let moved = anim
+            .trajectory
+            .frames(24.0)
+            .iter()
+            .map(|&(_, t)| max_distance(&anim.trajectory.evaluate(t), &free.trajectory.evaluate(t)))
+            .fold(0.0, f64::max);
         assert!(moved > 0.03, "{name}: the obstacle pushed the bar ({moved})");
         let deviation = report["keyframe_deviation"]["max"].as_f64().unwrap();
         assert!(deviation < 1e-9, "{name}: keys {deviation}");

@@ -24,9 +24,9 @@ use std::time::Instant;
 
 use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
 use blendsim::algorithms::geometry::Point;
-use blendsim::support::output::Staging;
 use blendsim::pipeline::scene::{Axis, Format, SceneFile};
 use blendsim::pipeline::stage_file::{Animation, OutputFile, OutputKind};
+use blendsim::support::output::Staging;
 use serde_json::Value;
 
 use crate::common;
@@ -53,7 +53,11 @@ pub(crate) fn scene_variant(scene: &Path, dir: &Path, name: &str, export: &str) 
             out.push_str(part);
         }
     }
-    let out = if out.contains("\n[export]\n") { out.replacen("\n[export]\n", &format!("\n[export]\n{export}\n"), 1) } else { format!("{out}\n[export]\n{export}\n") };
+    let out = if out.contains("\n[export]\n") {
+        out.replacen("\n[export]\n", &format!("\n[export]\n{export}\n"), 1)
+    } else {
+        format!("{out}\n[export]\n{export}\n")
+    };
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, out).unwrap();
     path
@@ -209,7 +213,18 @@ fn dino_plays_in_blender_at_default_settings() {
 fn jump_scene(dir: &Path) -> PathBuf {
     let rest = blendsim::algorithms::procedural::prism([0.6, 1.8, 0.6], [3, 9, 3]);
     // (time, lift, vertical scale)
-    let keys = [(0.0, 0.0, 1.0), (0.25, 0.0, 0.7), (0.4, 0.15, 1.25), (0.6, 0.8, 1.05), (0.8, 1.1, 1.0), (1.0, 0.8, 1.05), (1.2, 0.15, 1.2), (1.35, 0.0, 0.7), (1.6, 0.0, 1.1), (1.8, 0.0, 1.0)];
+    let keys = [
+        (0.0, 0.0, 1.0),
+        (0.25, 0.0, 0.7),
+        (0.4, 0.15, 1.25),
+        (0.6, 0.8, 1.05),
+        (0.8, 1.1, 1.0),
+        (1.0, 0.8, 1.05),
+        (1.2, 0.15, 1.2),
+        (1.35, 0.0, 0.7),
+        (1.6, 0.0, 1.1),
+        (1.8, 0.0, 1.0),
+    ];
     let mut meshes = Vec::new();
     for (k, &(_, lift, squash)) in keys.iter().enumerate() {
         let mut m = rest.clone();
@@ -299,7 +314,9 @@ fn uvs_and_material_slots_arrive_in_blender() {
     let obj = blendsim::formats::mesh::obj::parse(&std::fs::read_to_string(dir.join("rest.obj")).unwrap()).unwrap();
     let a = obj.attributes.as_ref().unwrap();
     let mut expected = every_frame(&anim);
-    expected.corners = Some(obj.triangles.iter().zip(&a.uv_corners).map(|(t, c)| [0, 1, 2].map(|k| (t[k], a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))).collect());
+    expected.corners = Some(
+        obj.triangles.iter().zip(&a.uv_corners).map(|(t, c)| [0, 1, 2].map(|k| (t[k], a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))).collect(),
+    );
     expected.triangle_materials = Some(a.triangle_groups.iter().map(|&g| a.groups[g as usize].clone()).collect());
     let mut seam_copies = expected.clone();
     seam_copies.map_vertices = Some(true);

@@ -6,9 +6,9 @@
 use std::path::Path;
 
 use blendsim::algorithms::frames::deviation::cache_diagonal;
-use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
 use blendsim::algorithms::geometry::{norm, sub, TriMesh};
+use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::formats::mesh::obj;
 use serde_json::Value;
 
@@ -61,7 +61,9 @@ fn report(out: &Path) -> Value {
 }
 
 fn bytes_of(report: &Value, file: &str) -> f64 {
-    report["outputs"].as_array().unwrap().iter().find(|f| f["path"] == file).unwrap_or_else(|| panic!("no {file} in {report}"))["bytes"].as_f64().unwrap()
+    report["outputs"].as_array().unwrap().iter().find(|f| f["path"] == file).unwrap_or_else(|| panic!("no {file} in {report}"))["bytes"]
+        .as_f64()
+        .unwrap()
 }
 
 /// Bake the bar in every format with `auto` keys at 0.005 (method `fit`): the report says the
@@ -257,7 +259,11 @@ fn bad_caches_are_one_line_errors_and_write_nothing() {
     // [cache] with [keyframes]; auto with a tolerance <= 0; a listed frame beyond the range.
     write_cache(&dir.path, &cache, "bar.pc2");
     let pc2 = "fps = 60\nrest = \"rest.obj\"\n";
-    bad(&dir, &(scene("bar.pc2", pc2, "fit", auto) + "[keyframes]\nmeshes = [\"rest.obj\", \"rest.obj\"]\ntimes = [0.0, 1.0]\n"), "both [keyframes] and [cache]");
+    bad(
+        &dir,
+        &(scene("bar.pc2", pc2, "fit", auto) + "[keyframes]\nmeshes = [\"rest.obj\", \"rest.obj\"]\ntimes = [0.0, 1.0]\n"),
+        "both [keyframes] and [cache]",
+    );
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = 0.0"), "tolerance = 0 must be positive");
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = \"auto\"\ntolerance = -0.1"), "must be positive");
     bad(&dir, &scene("bar.pc2", pc2, "fit", "keyframes = [0, 99]"), "frame 99");
@@ -373,7 +379,8 @@ fn a_cubicspline_morph_clip_is_a_cache_too() {
     let cache = bar(&BarSettings { duration: 1.0, ..BarSettings::default() });
     let dir = TempDir::new("cache-cubicspline");
     write_cache(&dir.path, &cache, "bar.pc2");
-    std::fs::write(dir.join("scene.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.002")).unwrap();
+    std::fs::write(dir.join("scene.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.002"))
+        .unwrap();
     run(&dir.path, &["bake", "scene.toml", "--out", "first", "--quiet"]).success();
     let glb: Value = {
         let bytes = std::fs::read(dir.join("first/bar.glb")).unwrap();
@@ -397,7 +404,8 @@ fn a_cubicspline_morph_clip_is_a_cache_too() {
 #[test]
 #[ignore = "run by `make batch`"]
 fn batch_of_the_generated_caches() {
-    let root = std::env::var_os("BLENDSIM_BATCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("batch"));
+    let root =
+        std::env::var_os("BLENDSIM_BATCH_DIR").map(std::path::PathBuf::from).unwrap_or_else(|| Path::new(env!("CARGO_TARGET_TMPDIR")).join("batch"));
     let _ = std::fs::remove_dir_all(&root);
     let bakes = root.join("bakes");
     for (freq, settings) in [("2hz", BarSettings::default()), ("1hz", BarSettings { young_modulus: 2.5e6, ..BarSettings::default() })] {
@@ -411,7 +419,8 @@ fn batch_of_the_generated_caches() {
                 methods.extend(["spacetime", "hermite"]);
             }
             for method in methods {
-                let text = scene(path, extra, method, "keyframes = \"auto\"\ntolerance = 0.005").replace("[material]", "") + if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n" };
+                let text = scene(path, extra, method, "keyframes = \"auto\"\ntolerance = 0.005").replace("[material]", "")
+                    + if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n" };
                 std::fs::write(dir.join(format!("{method}.toml")), text).unwrap();
                 let out = bakes.join(format!("bar-{freq}-{label}-{method}"));
                 run(&dir, &["bake", &format!("{method}.toml"), "--out", out.to_str().unwrap(), "--quiet"]).success();
@@ -439,7 +448,9 @@ fn a_staged_cache_folder_can_be_moved_and_resumed() {
     run(&dir.path, &["import", "staged/scene.toml", "-o", "staged/keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "staged/keys.json", "-o", "staged/stages/body.json"]).success();
     let canonical = staged.canonicalize().unwrap();
-    for (file, cache, rest) in [("keys.json", "\"path\":\"bar.pc2\"", "\"rest\":\"rest.obj\""), ("stages/body.json", "\"path\":\"../bar.pc2\"", "\"rest\":\"../rest.obj\"")] {
+    for (file, cache, rest) in
+        [("keys.json", "\"path\":\"bar.pc2\"", "\"rest\":\"rest.obj\""), ("stages/body.json", "\"path\":\"../bar.pc2\"", "\"rest\":\"../rest.obj\"")]
+    {
         let text = std::fs::read_to_string(staged.join(file)).unwrap();
         assert!(text.contains(cache) && text.contains(rest), "{file}: the cache and its rest mesh relative to it");
         assert!(!text.contains(canonical.to_str().unwrap()) && !text.contains("staged/bar.pc2"), "{file}: no path from elsewhere");

@@ -6,9 +6,9 @@
 use std::path::Path;
 use std::process::Command;
 
-use blendsim::formats::cache::{CacheOptions, VertexCache};
-use blendsim::formats::cache::gltf_fixtures::skinned_clip;
 use blendsim::algorithms::geometry::{bbox_diagonal, norm, sub, Point};
+use blendsim::formats::cache::gltf_fixtures::skinned_clip;
+use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::pipeline::stage_file::{OutputFile, OutputKind};
 use serde_json::{json, Value};
 
@@ -91,7 +91,12 @@ fn three_js_plays(file: &Path, times: &[f64], points: &[Vec<Point>], tolerance: 
     }
     let expected = file.with_extension("expected.json");
     std::fs::write(&expected, json!({ "animation": null, "times": times, "points": points, "tolerance": tolerance }).to_string()).unwrap();
-    let output = Command::new("node").arg(checkers.join("gltf_cache_check.mjs")).arg(file).arg(&expected).output().expect("run node: install Node.js 20, then `make test-deps`");
+    let output = Command::new("node")
+        .arg(checkers.join("gltf_cache_check.mjs"))
+        .arg(file)
+        .arg(&expected)
+        .output()
+        .expect("run node: install Node.js 20, then `make test-deps`");
     let (stdout, stderr) = (String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
     assert!(output.status.success(), "three.js on {}:\n{stdout}\n{stderr}", file.display());
     serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
@@ -165,7 +170,8 @@ fn window_bytes_bounds_the_selection_and_keeps_the_tolerance() {
     // 8 frames of 514 vertices (72 bytes each per frame) is the floor: 1 byte means that.
     let small = keys("small", "window_bytes = 1\n");
     println!("keys with the default window: {default}; with an 8-frame window: {small}");
-    std::fs::write(dir.join("zero.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\nwindow_bytes = 0\n", "fit", "keyframes = \"auto\"")).unwrap();
+    std::fs::write(dir.join("zero.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\nwindow_bytes = 0\n", "fit", "keyframes = \"auto\""))
+        .unwrap();
     let r = run(&dir.path, &["bake", "zero.toml", "--out", "zero", "--quiet"]);
     assert_eq!(r.code, Some(1), "{r}");
     assert!(r.stderr.contains("window_bytes = 0") && r.stderr.contains("fix:") && !dir.join("zero").exists(), "{r}");

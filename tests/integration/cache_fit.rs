@@ -3,19 +3,26 @@
 
 use std::time::Instant;
 
+use crate::common::bar::{bar, BarSettings};
 use blendsim::algorithms::frames::deviation::{cache_diagonal, deviation};
 use blendsim::algorithms::frames::fit::{fit, FitSettings};
 use blendsim::algorithms::frames::keyframes::{select, AutoSettings};
 use blendsim::algorithms::frames::FrameSource;
 use blendsim::algorithms::geometry::{bbox_diagonal, norm, sub};
-use crate::common::bar::{bar, BarSettings};
 
 #[test]
 fn the_simulated_bar_swings_like_a_cantilever() {
     let settings = BarSettings::default();
     let t = Instant::now();
     let cache = bar(&settings);
-    println!("bar: {} nodes, {} tets, {} surface vertices, {} frames ({:.1} s to simulate or load)", cache.body.positions.len(), cache.body.tets.len(), cache.surface.positions.len(), cache.frames.frame_count(), t.elapsed().as_secs_f64());
+    println!(
+        "bar: {} nodes, {} tets, {} surface vertices, {} frames ({:.1} s to simulate or load)",
+        cache.body.positions.len(),
+        cache.body.tets.len(),
+        cache.surface.positions.len(),
+        cache.frames.frame_count(),
+        t.elapsed().as_secs_f64()
+    );
     assert!((2500..=3500).contains(&cache.body.tets.len()));
     assert_eq!(cache.frames.frame_count(), 181);
     assert_eq!(cache.frames.vertex_count(), cache.surface.positions.len());
@@ -33,7 +40,11 @@ fn the_simulated_bar_swings_like_a_cantilever() {
     let y: Vec<f64> = cache.tip.iter().map(|p| p[1] - cache.tip[0][1]).collect();
     let lowest = y.iter().copied().fold(f64::INFINITY, f64::min);
     let turns: Vec<usize> = (1..y.len() - 1).filter(|&f| (y[f] - y[f - 1]) * (y[f + 1] - y[f]) < 0.0).collect();
-    println!("tip: lowest {lowest:.4} m, turning points at frames {turns:?} (y {:?}), Euler-Bernoulli {:.3} Hz", turns.iter().map(|&f| (y[f] * 1000.0).round() / 1000.0).collect::<Vec<_>>(), settings.euler_bernoulli_frequency());
+    println!(
+        "tip: lowest {lowest:.4} m, turning points at frames {turns:?} (y {:?}), Euler-Bernoulli {:.3} Hz",
+        turns.iter().map(|&f| (y[f] * 1000.0).round() / 1000.0).collect::<Vec<_>>(),
+        settings.euler_bernoulli_frequency()
+    );
     assert!(lowest < -0.05 && lowest > -0.6, "tip sag {lowest}");
     assert!(turns.len() >= 6, "the bar swings several times in 3 s: {turns:?}");
     let period = 2.0 * (turns[turns.len() - 1] - turns[0]) as f64 / (turns.len() - 1) as f64 / settings.fps;
@@ -102,7 +113,6 @@ fn clamped_vertices_pinned_at_every_key_stay_on_the_cache() {
         }
     }
 }
-
 
 #[test]
 fn auto_needs_no_more_keys_than_evenly_spaced_keys_on_the_bar() {

@@ -159,7 +159,12 @@ fn max_time_bounds_tetgen_by_what_is_left_of_it() {
     assert!(r.stderr.contains("TetGen did not finish within 1 s and was stopped") && r.stderr.contains("raise [tet] timeout"), "{r}");
     // A budget spent before TetGen starts (1 ns: spent by the time the scene is read, so every
     // phase below meets it at its first check).
-    out_of_time(&dir, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1e-9"], "twist.toml", "in the tetrahedralization, before TetGen started");
+    out_of_time(
+        &dir,
+        &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1e-9"],
+        "twist.toml",
+        "in the tetrahedralization, before TetGen started",
+    );
 }
 
 #[test]
@@ -194,8 +199,18 @@ fn max_time_stops_the_cache_fit_its_key_selection_and_its_error_measure() {
         run(&dir.path, args).success();
     }
     let before = crate::common::cli::snapshot(&dir.path);
-    out_of_time(&dir, &["export", "animation.json", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache error measure, after reading 0 cache frames");
-    out_of_time(&dir, &["report", "animation.json", "--outputs", "chained/bar.outputs.json", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache error measure, after reading 0 cache frames");
+    out_of_time(
+        &dir,
+        &["export", "animation.json", "--out", "never", "--max-time", "1e-9"],
+        "bar.pc2",
+        "in the cache error measure, after reading 0 cache frames",
+    );
+    out_of_time(
+        &dir,
+        &["report", "animation.json", "--outputs", "chained/bar.outputs.json", "--out", "never", "--max-time", "1e-9"],
+        "bar.pc2",
+        "in the cache error measure, after reading 0 cache frames",
+    );
     assert!(crate::common::cli::snapshot(&dir.path) == before, "the refused runs left the folder as it was");
     run(&dir.path, &["report", "animation.json", "--outputs", "chained/bar.outputs.json", "--out", "chained", "--max-time", "1h"]).success();
 }
@@ -211,11 +226,18 @@ fn max_time_stops_the_mass_spring_blend() {
     std::fs::write(dir.join("b.mesh"), sheared).unwrap();
     let scene = "name = \"shear\"\nfps = 24.0\n[keyframes]\nmeshes = [\"a.mesh\", \"b.mesh\"]\ntimes = [0.0, 1.0]\n[solver]\nmethod = \"mass-spring\"\n[mass_spring]\ninbetweens = 3\n[export]\nformats = [\"usda\"]\n";
     std::fs::write(dir.join("shear.toml"), scene).unwrap();
-    out_of_time(&dir, &["bake", "shear.toml", "--out", "never", "--max-time", "1e-9"], "shear.toml", "in the mass-spring blend, after 0 Newton iterations");
+    out_of_time(
+        &dir,
+        &["bake", "shear.toml", "--out", "never", "--max-time", "1e-9"],
+        "shear.toml",
+        "in the mass-spring blend, after 0 Newton iterations",
+    );
     run(&dir.path, &["bake", "-q", "shear.toml", "--out", "timed", "--max-time", "1h"]).success();
     // `blend` takes the budget too: its equilibria, and TetGen for the body.
     crate::blend::targets(&dir);
-    let blend = |out: &'static str, extra: &[&'static str]| -> Vec<&'static str> { [&["blend", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--out", out][..], extra].concat() };
+    let blend = |out: &'static str, extra: &[&'static str]| -> Vec<&'static str> {
+        [&["blend", "--targets", "a.obj", "b.obj", "--weights", "0.5,0.5", "--out", out][..], extra].concat()
+    };
     out_of_time(&dir, &blend("never.obj", &["--no-body", "--max-time", "1e-9"]), "a.obj", "in the mass-spring blend, after 0 ");
     out_of_time(&dir, &blend("never.obj", &["--max-time", "1e-9"]), "a.obj", "in the tetrahedralization, before TetGen started");
     run(&dir.path, &blend("shape.obj", &["-q", "--max-time", "1h"])).success();

@@ -64,10 +64,7 @@ fn ring(r: f64, y: f64, n: usize) -> Vec<Point> {
 fn tube_ring(c: Point, t: [f64; 2], r: f64, n: usize) -> Vec<Point> {
     let l = t[0].hypot(t[1]);
     let side = [-t[1] / l, t[0] / l];
-    (0..n)
-        .map(|k| 2.0 * PI * k as f64 / n as f64)
-        .map(|a| [c[0] + r * a.cos() * side[0], c[1] + r * a.cos() * side[1], c[2] + r * a.sin()])
-        .collect()
+    (0..n).map(|k| 2.0 * PI * k as f64 / n as f64).map(|a| [c[0] + r * a.cos() * side[0], c[1] + r * a.cos() * side[1], c[2] + r * a.sin()]).collect()
 }
 
 /// A teapot-like asset: a body open at the top, a lid (open at its rim, which crosses the

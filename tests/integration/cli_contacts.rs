@@ -82,7 +82,12 @@ fn a_key_held_inside_the_floor_is_a_one_line_error() {
     assert_eq!(r.code, Some(1), "{r}");
     let err = r.stderr.trim_end();
     assert_eq!(err.lines().count(), 1, "{err}");
-    for want in ["scene.toml", "the keyframe at t = 0.5000 s holds 16 node(s) inside obstacle 1 (a plane)", "by 2.0000e-1", "fix: move that keyframe's mesh out of the obstacle"] {
+    for want in [
+        "scene.toml",
+        "the keyframe at t = 0.5000 s holds 16 node(s) inside obstacle 1 (a plane)",
+        "by 2.0000e-1",
+        "fix: move that keyframe's mesh out of the obstacle",
+    ] {
         assert!(err.contains(want), "{want:?} not in: {err}");
     }
     assert!(!dir.join("out").exists(), "no partial output");
@@ -98,7 +103,10 @@ fn a_free_key_inside_the_floor_is_put_on_it_and_bakes() {
     let tolerance = 1e-4 * diagonal(&anim.trajectory.positions[0]);
     let floor = lowest(&anim, |p| p[1]);
     let key = anim.trajectory.positions[1].iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
-    println!("sunk cube: lowest vertex over the frames {floor:.3e}, at the contact key {key:.3e}; clearance {}; {}", report["solver"]["clearance"], report["solver"]["stop_reason"]);
+    println!(
+        "sunk cube: lowest vertex over the frames {floor:.3e}, at the contact key {key:.3e}; clearance {}; {}",
+        report["solver"]["clearance"], report["solver"]["stop_reason"]
+    );
     assert!(floor >= -tolerance, "a vertex at {floor}");
     assert!(key.abs() < 0.05, "the contact pose rests on the floor: lowest at {key}");
     assert_eq!(anim.trajectory.positions[1], anim.trajectory.positions[2], "one contact pose");
@@ -227,7 +235,8 @@ fn contact_samples_table() {
     println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for name in ["ball", "spot"] {
         let Some(scene) = paper_scene(name) else { return };
-        let text = std::fs::read_to_string(&scene).unwrap().replace("../../../shared/assets/paper", crate::common::assets::paper_dir().to_str().unwrap());
+        let text =
+            std::fs::read_to_string(&scene).unwrap().replace("../../../shared/assets/paper", crate::common::assets::paper_dir().to_str().unwrap());
         for cs in [5, 10, 20, 40] {
             let dir = TempDir::new(&format!("contact-samples-{name}-{cs}"));
             std::fs::write(dir.join("scene.toml"), text.replace("[solver]\n", &format!("[solver]\ncontact_samples = {cs}\n"))).unwrap();
@@ -244,7 +253,11 @@ fn contact_samples_table() {
             let w = dense.evaluate(tr, &dense.local_step(tr, false)).value;
             let (start, end) = (tr.times[0], *tr.times.last().unwrap());
             let steps = ((end - start) * 2400.0).round() as usize;
-            let deepest = (0..=steps).map(|s| start + (end - start) * s as f64 / steps as f64).flat_map(|t| tr.evaluate(t)).map(|p| p[1]).fold(f64::INFINITY, f64::min);
+            let deepest = (0..=steps)
+                .map(|s| start + (end - start) * s as f64 / steps as f64)
+                .flat_map(|t| tr.evaluate(t))
+                .map(|p| p[1])
+                .fold(f64::INFINITY, f64::min);
             let log = &solution.log;
             println!(
                 "| {} | {cs} | {} | {:.2} | {:.3e} | {:.3e} | {:.2e} | {:.5} |",

@@ -3,8 +3,8 @@
 //! tet with its vertices; a surface key whose interior fit folds tets, and a `max_volume` TetGen
 //! could not honour, are warning lines that the report keeps.
 
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::procedural::prism;
+use blendsim::formats::mesh::obj;
 
 use crate::cli_physics::cube_medit;
 use crate::common::cli::{read_json, run, TempDir};

@@ -13,9 +13,9 @@
 use std::ffi::OsStr;
 use std::path::Path;
 
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::geometry::TriMesh;
 use blendsim::algorithms::procedural::prism;
+use blendsim::formats::mesh::obj;
 
 use crate::common::cli::{run, run_env, tree, Run, TempDir};
 
@@ -129,11 +129,7 @@ fn same_counts_but_different_triangles() {
     flipped.triangles[1] = [q01, q11, q10];
     let (r, _dir) = bad_bake(Case {
         name: "triangles",
-        files: vec![
-            ("k0.obj", obj::write(&cube())),
-            ("k1.obj", obj::write(&flipped)),
-            ("scene.toml", scene(&["k0.obj", "k1.obj"], "", "")),
-        ],
+        files: vec![("k0.obj", obj::write(&cube())), ("k1.obj", obj::write(&flipped)), ("scene.toml", scene(&["k0.obj", "k1.obj"], "", ""))],
         args: vec![],
         env: vec![],
     });
@@ -270,12 +266,8 @@ fn a_malformed_obj() {
 fn an_unknown_scene_key() {
     let text = scene(&["k0.obj", "k0.obj"], "", "[material]\nstifness = 1");
     let line = text.lines().position(|l| l.starts_with("stifness")).unwrap() + 1;
-    let (r, _dir) = bad_bake(Case {
-        name: "unknown-key",
-        files: vec![("k0.obj", obj::write(&cube())), ("scene.toml", text)],
-        args: vec![],
-        env: vec![],
-    });
+    let (r, _dir) =
+        bad_bake(Case { name: "unknown-key", files: vec![("k0.obj", obj::write(&cube())), ("scene.toml", text)], args: vec![], env: vec![] });
     assert_names(&r, "in/scene.toml");
     assert_says(&r, &format!("line {line}: unknown field `stifness`"));
     assert_says(&r, "(fix: remove or rename the key");
@@ -413,11 +405,11 @@ fn help_of_every_subcommand() {
         ("tetrahedralize", &["<KEYFRAMES>", "keyframes stage file", "--output", "body stage file", "TetGen"]),
         ("solve", &["<BODY>", "body stage file", "--output", "solution stage file", "--method", "hermite", "spacetime"]),
         ("embed", &["<SOLUTION>", "solution stage file", "--output", "animation stage file"]),
+        ("export", &["<ANIMATION>", "animation stage file", "--out", "NAME.usda", "NAME.usdc", "NAME.glb", "NAME.full.EXT", "NAME.outputs.json"]),
         (
-            "export",
-            &["<ANIMATION>", "animation stage file", "--out", "NAME.usda", "NAME.usdc", "NAME.glb", "NAME.full.EXT", "NAME.outputs.json"],
+            "report",
+            &["[ANIMATION]", "animation stage file", "--outputs", "NAME.outputs.json", "--out", "report.json", "report.md", "--batch", "summary.csv"],
         ),
-        ("report", &["[ANIMATION]", "animation stage file", "--outputs", "NAME.outputs.json", "--out", "report.json", "report.md", "--batch", "summary.csv"]),
         ("bake", &["<SCENE>", "scene file", "--out", "NAME.usda", "NAME.glb", "NAME.full.EXT", "report.json", "report.md", "--method"]),
     ];
     for (sub, words) in cases {
@@ -502,7 +494,12 @@ fn corpus() -> Vec<Bad> {
         bad_scene("scene-syntax", "name = \"t\"\n[keyframes\nmeshes = []\n".into(), &["line 2: "]),
         bad_scene("scene-missing-table", "name = \"t\"\n".into(), &["neither [keyframes] nor [cache]", "(fix: add a [keyframes] table"]),
         bad_scene("scene-unknown-table", table("[solverr]\nsamples = 3"), &["unknown field `solverr`"]),
-        bad("scene-not-utf8", vec![("scene.toml".into(), Content::Bytes(b"name = \"caf\xe9\"\n".to_vec()))], "in/scene.toml", &["is not UTF-8 text (invalid byte at offset 11)"]),
+        bad(
+            "scene-not-utf8",
+            vec![("scene.toml".into(), Content::Bytes(b"name = \"caf\xe9\"\n".to_vec()))],
+            "in/scene.toml",
+            &["is not UTF-8 text (invalid byte at offset 11)"],
+        ),
         bad("scene-fifo", vec![("scene.toml".into(), Content::Fifo)], "in/scene.toml", &["is a named pipe (FIFO), not a regular file"]),
         bad("scene-folder", vec![("scene.toml".into(), Content::Folder)], "in/scene.toml", &["is a folder, not a regular file"]),
         bad_scene("name-newline", renamed("\"a\\nb\""), &["name `a\\nb` cannot be a file stem: it contains a control character"]),
@@ -518,14 +515,26 @@ fn corpus() -> Vec<Bad> {
         bad_scene("times-decrease", base.replace("times = [0.0, 1.0]", "times = [1.0, 0.0]"), &["times decrease at key 1"]),
         bad_scene("times-equal", base.replace("times = [0.0, 1.0]", "times = [0.5, 0.5]"), &["keys 0 and 1 share the time 0.5"]),
         bad_scene("times-inf", base.replace("times = [0.0, 1.0]", "times = [0.0, inf]"), &["times[1] is not a number"]),
-        bad_scene("twist-inf", base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = inf } }"), &["meshes[1] has a twist of inf degrees", "(fix: give the twist angle as a finite number"]),
-        bad_scene("twist-axial-scale", base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = 90.0, axial_scale = -1.0 } }"), &["meshes[1] has a twist with axial_scale = -1", "(fix: give a positive axial_scale"]),
+        bad_scene(
+            "twist-inf",
+            base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = inf } }"),
+            &["meshes[1] has a twist of inf degrees", "(fix: give the twist angle as a finite number"],
+        ),
+        bad_scene(
+            "twist-axial-scale",
+            base.replace("\"k1.obj\"", "{ mesh = \"k1.obj\", twist = { axis = \"y\", degrees = 90.0, axial_scale = -1.0 } }"),
+            &["meshes[1] has a twist with axial_scale = -1", "(fix: give a positive axial_scale"],
+        ),
         bad_scene("rest-range", with("rest = 5"), &["rest = 5 but there are 2 keys"]),
         bad_scene("rest-negative", with("rest = -1"), &["rest key index must be >= 0"]),
         bad_scene("cyclic-two-keys", with("cyclic = true"), &["cyclic = true needs at least 3 keys"]),
         bad_scene("fixed-count", with("fixed = [\"all\"]"), &["fixed has 1 entries for 2 keys"]),
         bad_scene("slab-nan", with("fixed = [\"all\", { axis = \"y\", min = nan }]"), &["fixed[1]: the y slab has min = nan"]),
-        bad_scene("slab-crossed", with("fixed_velocity = [\"none\", [{ axis = \"x\", min = 2.0, max = 1.0 }]]"), &["fixed_velocity[1]: the x slab has min = 2 > max = 1"]),
+        bad_scene(
+            "slab-crossed",
+            with("fixed_velocity = [\"none\", [{ axis = \"x\", min = 2.0, max = 1.0 }]]"),
+            &["fixed_velocity[1]: the x slab has min = 2 > max = 1"],
+        ),
         bad_scene("slab-and-file", with("fixed = [\"all\", { file = \"a.txt\", axis = \"y\" }]"), &["either `file` or `axis`"]),
         bad_scene("gravity-four", table("[material]\ngravity = [0.0, -9.8, 0.0, 1.0]"), &["expected 3 components (x, y, z), found 4"]),
         bad_scene("gravity-nan", table("[material]\ngravity = [0.0, nan, 0.0]"), &["gravity has a non-finite component"]),
@@ -544,54 +553,162 @@ fn corpus() -> Vec<Bad> {
         bad_scene("formats-empty", table("[export]\nformats = []"), &["formats is empty"]),
         bad_scene("formats-unknown", table("[export]\nformats = [\"fbx\"]"), &["unknown variant `fbx`"]),
         // OBJ keyframes.
-        bad("obj-nan", key1(cube_obj.replacen("v ", "v nan ", 1).replacen("nan 0", "nan", 1)), "in/k1.obj", &["line 1: vertex coordinate `nan` is not finite"]),
+        bad(
+            "obj-nan",
+            key1(cube_obj.replacen("v ", "v nan ", 1).replacen("nan 0", "nan", 1)),
+            "in/k1.obj",
+            &["line 1: vertex coordinate `nan` is not finite"],
+        ),
         bad("obj-index-zero", key1(format!("{cube_obj}f 0 1 2\n")), "in/k1.obj", &["face refers to vertex 0, but OBJ vertex numbers start at 1"]),
         bad("obj-index-range", key1(format!("{cube_obj}f 1 2 99\n")), "in/k1.obj", &["face refers to vertex 99, but only 26 vertices"]),
         bad("obj-no-faces", key1("v 0 0 0\nv 1 0 0\n".into()), "in/k1.obj", &["has no faces (2 vertices"]),
         bad("obj-huge-token", key1(format!("v 0 0 {huge}x\n")), "in/k1.obj", &["line 1: vertex coordinate `7777", "(1000001 bytes) is not a number"]),
-        bad("obj-fifo", vec![("k1.obj".into(), Content::Fifo), text("scene.toml", base.clone())], "in/k1.obj", &["is a named pipe (FIFO), not a regular file, so it cannot be read as the OBJ surface"]),
-        bad("obj-folder", vec![("k1.obj".into(), Content::Folder), text("scene.toml", base.clone())], "in/k1.obj", &["is a folder, not a regular file"]),
-        bad("obj-device", vec![("k1.obj".into(), Content::Link("/dev/zero")), text("scene.toml", base.clone())], "in/k1.obj", &["is a device, not a regular file"]),
-        bad("mesh-extension", vec![text("k1.stl", cube_obj.clone()), text("scene.toml", scene(&["k0.obj", "k1.stl"], "", ""))], "in/k1.stl", &["unknown mesh format"]),
-        bad("path-escape", vec![text("scene.toml", scene(&["k0.obj", "k\\u001b[2J.obj"], "", ""))], "in/k\\u{1b}[2J.obj", &["cannot read the OBJ surface"]),
+        bad(
+            "obj-fifo",
+            vec![("k1.obj".into(), Content::Fifo), text("scene.toml", base.clone())],
+            "in/k1.obj",
+            &["is a named pipe (FIFO), not a regular file, so it cannot be read as the OBJ surface"],
+        ),
+        bad(
+            "obj-folder",
+            vec![("k1.obj".into(), Content::Folder), text("scene.toml", base.clone())],
+            "in/k1.obj",
+            &["is a folder, not a regular file"],
+        ),
+        bad(
+            "obj-device",
+            vec![("k1.obj".into(), Content::Link("/dev/zero")), text("scene.toml", base.clone())],
+            "in/k1.obj",
+            &["is a device, not a regular file"],
+        ),
+        bad(
+            "mesh-extension",
+            vec![text("k1.stl", cube_obj.clone()), text("scene.toml", scene(&["k0.obj", "k1.stl"], "", ""))],
+            "in/k1.stl",
+            &["unknown mesh format"],
+        ),
+        bad(
+            "path-escape",
+            vec![text("scene.toml", scene(&["k0.obj", "k\\u001b[2J.obj"], "", ""))],
+            "in/k\\u{1b}[2J.obj",
+            &["cannot read the OBJ surface"],
+        ),
         bad("path-newline", vec![text("scene.toml", scene(&["k0.obj", "k\\n1.obj"], "", ""))], "in/k\\n1.obj", &["cannot read the OBJ surface"]),
         bad("obj-vertex-count", key1(obj::write(&prism([1.0, 1.0, 1.0], [3, 2, 2]))), "in/k1.obj", &["has 34 vertices but in/k0.obj has 26"]),
         // MEDIT and TetGen keyframes.
         bad("medit-nan-row", tets(moved("nan 0 1 1\n")), "in/k1.mesh", &["line 7: Vertices row 4: `nan` is not a finite number"]),
         bad("medit-inf-row", tets(moved("0 inf 1 1\n")), "in/k1.mesh", &["Vertices row 4: `inf` is not a finite number"]),
-        bad("medit-index", tets(TWO_TETS.replace("1 2 3 5 1", "1 2 3 6 1")), "in/k1.mesh", &["Tetrahedra row 2 refers to vertex 6, but vertices are numbered 1 to 5"]),
+        bad(
+            "medit-index",
+            tets(TWO_TETS.replace("1 2 3 5 1", "1 2 3 6 1")),
+            "in/k1.mesh",
+            &["Tetrahedra row 2 refers to vertex 6, but vertices are numbered 1 to 5"],
+        ),
         bad("medit-flat", tets(TWO_TETS.replace("1 2 3 5 1", "1 2 3 3 1")), "in/k1.mesh", &["Tetrahedra row 2 (vertices 1 2 3 3) is flat"]),
-        bad("medit-count", tets(TWO_TETS.replace("Vertices 5", "Vertices 6")), "in/k1.mesh", &["`Vertices` declares 6 rows but only 5 follow before `Tetrahedra`"]),
+        bad(
+            "medit-count",
+            tets(TWO_TETS.replace("Vertices 5", "Vertices 6")),
+            "in/k1.mesh",
+            &["`Vertices` declares 6 rows but only 5 follow before `Tetrahedra`"],
+        ),
         bad("medit-no-tets", tets(TWO_TETS.replace("Tetrahedra 2\n1 2 3 4 1\n1 2 3 5 1\n", "")), "in/k1.mesh", &["has no tetrahedra"]),
         bad("medit-dimension", tets(TWO_TETS.replace("Dimension 3", "Dimension 2")), "in/k1.mesh", &["the mesh has dimension 2, blendsim needs 3"]),
-        bad("medit-huge-keyword", tets(format!("{}{TWO_TETS}", "Q".repeat(100_000))), "in/k1.mesh", &["line 1: `QQQQ", "(100020 bytes) declares 1 rows but only 0 follow before `Dimension`"]),
-        bad("mixed-kinds", vec![text("k1.mesh", TWO_TETS), text("scene.toml", scene(&["k0.obj", "k1.mesh"], "", ""))], "in/k1.mesh", &["is a tet mesh but in/k0.obj is a surface"]),
-        bad("tetgen-no-ele", vec![text("k0.node", "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 0 0 -1\n"), text("scene.toml", scene(&["k0.node", "k0.node"], "", ""))], "in/k0.ele", &["cannot read the TetGen tetrahedra"]),
-        bad("tetgen-header", vec![text("k0.node", "x 3 0 0\n"), text("k0.ele", "0 4 0\n"), text("scene.toml", scene(&["k0.node", "k0.node"], "", ""))], "in/k0.node", &["line 1: the node count `x` is not a valid number"]),
+        bad(
+            "medit-huge-keyword",
+            tets(format!("{}{TWO_TETS}", "Q".repeat(100_000))),
+            "in/k1.mesh",
+            &["line 1: `QQQQ", "(100020 bytes) declares 1 rows but only 0 follow before `Dimension`"],
+        ),
+        bad(
+            "mixed-kinds",
+            vec![text("k1.mesh", TWO_TETS), text("scene.toml", scene(&["k0.obj", "k1.mesh"], "", ""))],
+            "in/k1.mesh",
+            &["is a tet mesh but in/k0.obj is a surface"],
+        ),
+        bad(
+            "tetgen-no-ele",
+            vec![
+                text("k0.node", "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 0 0 -1\n"),
+                text("scene.toml", scene(&["k0.node", "k0.node"], "", "")),
+            ],
+            "in/k0.ele",
+            &["cannot read the TetGen tetrahedra"],
+        ),
+        bad(
+            "tetgen-header",
+            vec![text("k0.node", "x 3 0 0\n"), text("k0.ele", "0 4 0\n"), text("scene.toml", scene(&["k0.node", "k0.node"], "", ""))],
+            "in/k0.node",
+            &["line 1: the node count `x` is not a valid number"],
+        ),
         // Selection files.
         bad("dmat-half", dmat("0.5"), "in/sel.dmat", &["line 27: value `0.5` is neither 0 nor 1"]),
         bad("dmat-two", dmat("2"), "in/sel.dmat", &["value `2` is neither 0 nor 1"]),
         bad("dmat-negative", dmat("-1"), "in/sel.dmat", &["value `-1` is neither 0 nor 1"]),
         bad("dmat-nan", dmat("nan"), "in/sel.dmat", &["value `nan` is neither 0 nor 1"]),
-        bad("dmat-header", vec![text("sel.dmat", "2 26\n"), text("scene.toml", with("fixed = [\"all\", \"sel.dmat\"]"))], "in/sel.dmat", &["is a 26x2 matrix"]),
+        bad(
+            "dmat-header",
+            vec![text("sel.dmat", "2 26\n"), text("scene.toml", with("fixed = [\"all\", \"sel.dmat\"]"))],
+            "in/sel.dmat",
+            &["is a 26x2 matrix"],
+        ),
         bad("index-word", index("0\nabc\n"), "in/ends.txt", &["line 2: `abc` is not a vertex index"]),
         bad("index-negative", index("-1\n"), "in/ends.txt", &["line 1: `-1` is not a vertex index"]),
         bad("index-missing", vec![text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["cannot read the vertex selection"]),
-        bad("index-fifo", vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))], "in/ends.txt", &["is a named pipe (FIFO)"]),
-        bad("embed-surface-missing", vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))], "in/fine.obj", &["cannot read the OBJ surface"]),
+        bad(
+            "index-fifo",
+            vec![("ends.txt".into(), Content::Fifo), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))],
+            "in/ends.txt",
+            &["is a named pipe (FIFO)"],
+        ),
+        bad(
+            "embed-surface-missing",
+            vec![text("scene.toml", table("[embed]\nsurface = \"fine.obj\""))],
+            "in/fine.obj",
+            &["cannot read the OBJ surface"],
+        ),
         // Degenerate keys: once baked with volumes down to -100%.
-        bad("key-mirrored", key1(obj::write(&scaled(cube(), [-1.0, 1.0, 1.0]))), "in/k1.obj", &["key 1 is inside out (mirrored): it encloses -100.0% of the rest shape's volume"]),
+        bad(
+            "key-mirrored",
+            key1(obj::write(&scaled(cube(), [-1.0, 1.0, 1.0]))),
+            "in/k1.obj",
+            &["key 1 is inside out (mirrored): it encloses -100.0% of the rest shape's volume"],
+        ),
         bad("key-flattened", key1(obj::write(&scaled(cube(), [1.0, 0.0, 1.0]))), "in/k1.obj", &["key 1 is flattened or collapsed: it encloses 0.0%"]),
         bad("key-collapsed", key1(obj::write(&scaled(cube(), [0.0, 0.0, 0.0]))), "in/k1.obj", &["key 1 is flattened or collapsed"]),
         // Beyond the machine's memory: once a capacity-overflow panic or an allocation abort.
-        bad_scene("samples-max", table("[solver]\nsamples = 9223372036854775807"), &["would need about", "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets", "more than the memory budget (60% of the available memory; --max-memory sets it) of ", "lower [solver] samples"]),
-        bad_scene("samples-1e9", table("[solver]\nsamples = 1000000000"), &["would need about 3456.0 GB of memory for 1000000000 samples per interval"]),
+        bad_scene(
+            "samples-max",
+            table("[solver]\nsamples = 9223372036854775807"),
+            &[
+                "would need about",
+                "GB of memory for 9223372036854775807 samples per interval x 1 intervals x 12 tets",
+                "more than the memory budget (60% of the available memory; --max-memory sets it) of ",
+                "lower [solver] samples",
+            ],
+        ),
+        bad_scene(
+            "samples-1e9",
+            table("[solver]\nsamples = 1000000000"),
+            &["would need about 3456.0 GB of memory for 1000000000 samples per interval"],
+        ),
         bad_scene("samples-float", table("[solver]\nsamples = 1e9"), &["invalid type: floating point `1000000000.0`, expected usize"]),
-        bad_scene("fps-1e9", base.replacen("[keyframes]", "fps = 1e9\n[keyframes]", 1), &["GB of memory for 1.000e9 frames (1 s at 1000000000 fps) of 26 vertices", "lower fps"]),
-        bad_scene("times-1e6", base.replace("times = [0.0, 1.0]", "times = [0.0, 1e6]"), &["GB of memory for 6.000e7 frames (1000000 s at 60 fps) of 26 vertices"]),
+        bad_scene(
+            "fps-1e9",
+            base.replacen("[keyframes]", "fps = 1e9\n[keyframes]", 1),
+            &["GB of memory for 1.000e9 frames (1 s at 1000000000 fps) of 26 vertices", "lower fps"],
+        ),
+        bad_scene(
+            "times-1e6",
+            base.replace("times = [0.0, 1.0]", "times = [0.0, 1e6]"),
+            &["GB of memory for 6.000e7 frames (1000000 s at 60 fps) of 26 vertices"],
+        ),
         // Found after TetGen and the solve: these once named no file, now the scene.
         bad_scene("singular", good_scene("fixed = [\"none\", \"none\"]", "[solver]\nregularization = 0.0"), &["the spacetime system is singular"]),
-        bad_scene("no-frame", base.replace("times = [0.0, 1.0]", "times = [0.010, 0.015]"), &["cannot export: the animation runs from 0.01 s to 0.015 s, between two frames at 60 fps"]),
+        bad_scene(
+            "no-frame",
+            base.replace("times = [0.0, 1.0]", "times = [0.010, 0.015]"),
+            &["cannot export: the animation runs from 0.01 s to 0.015 s, between two frames at 60 fps"],
+        ),
     ]
 }
 
@@ -639,7 +756,8 @@ fn corpus_of_bad_inputs() {
             }
             let before = tree(&dir.path);
             let tmp = dir.join("tmp");
-            let r = crate::common::cli::run_timeout(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked"], &[("TMPDIR", tmp.as_os_str())], 600.0);
+            let r =
+                crate::common::cli::run_timeout(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked"], &[("TMPDIR", tmp.as_os_str())], 600.0);
             assert_eq!(r.code, Some(1), "{}: bad input must exit 1:\n{r}", case.name);
             assert_one_line_error(&r);
             assert!(r.stdout.is_empty(), "{}:\n{r}", case.name);
@@ -739,39 +857,210 @@ fn stage_corpus() -> Vec<BadStage> {
     }
     vec![
         // Once panics (exit 101) in the solver.
-        BadStage { name: "body-tet-index", args: solve, file: "body.json", edit: |v| v["data"]["mesh"]["tets"][0][0] = json!(100000), says: "body stage: mesh tet 0 uses node 100000, but there are" },
-        BadStage { name: "body-pose-short", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["positions"][1]), says: "keys.positions[1] has 25 points but the mesh has 26" },
-        BadStage { name: "body-fixed-index", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["fixed"][0].as_array_mut().unwrap().push(json!(100000)), says: "keys.fixed[0] holds index 100000, but there are 26 vertices" },
-        BadStage { name: "body-times-extra", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["times"].as_array_mut().unwrap().push(json!(2.0)), says: "keys.positions has 2 poses for 3 key times" },
+        BadStage {
+            name: "body-tet-index",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["mesh"]["tets"][0][0] = json!(100000),
+            says: "body stage: mesh tet 0 uses node 100000, but there are",
+        },
+        BadStage {
+            name: "body-pose-short",
+            args: solve,
+            file: "body.json",
+            edit: |v| pop(&mut v["data"]["keys"]["positions"][1]),
+            says: "keys.positions[1] has 25 points but the mesh has 26",
+        },
+        BadStage {
+            name: "body-fixed-index",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["keys"]["fixed"][0].as_array_mut().unwrap().push(json!(100000)),
+            says: "keys.fixed[0] holds index 100000, but there are 26 vertices",
+        },
+        BadStage {
+            name: "body-times-extra",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["keys"]["times"].as_array_mut().unwrap().push(json!(2.0)),
+            says: "keys.positions has 2 poses for 3 key times",
+        },
         // Once accepted with garbage, or misdiagnosed.
-        BadStage { name: "body-times-short", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["times"]), says: "keys.times has 1 key times, at least 2 are needed" },
-        BadStage { name: "body-times-decrease", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["times"] = json!([1.0, 0.0]), says: "keys.times do not increase at key 1 (0 after 1)" },
-        BadStage { name: "body-samples-zero", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(0), says: "body stage: its scene: [solver] samples = 0" },
-        BadStage { name: "body-samples-max", args: solve, file: "body.json", edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(9223372036854775807u64), says: "body stage: the scene would need about" },
-        BadStage { name: "animation-fps-1e9", args: report, file: "animation.json", edit: |v| v["data"]["scene"]["fps"] = json!(1e9), says: "frames (1 s at 1000000000 fps) of 26 vertices" },
-        BadStage { name: "body-fixed-count", args: solve, file: "body.json", edit: |v| pop(&mut v["data"]["keys"]["fixed"]), says: "keys.fixed has 1 sets for 2 keys" },
-        BadStage { name: "body-fixed-unsorted", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["fixed"][0] = json!([3, 1]), says: "keys.fixed[0] is not sorted without repeats" },
-        BadStage { name: "body-inverted-tet", args: solve, file: "body.json", edit: |v| { let t = v["data"]["mesh"]["tets"][0].clone(); v["data"]["mesh"]["tets"][0] = json!([t[1], t[0], t[2], t[3]]); }, says: "mesh tet 0 is inverted or flat in the rest pose" },
-        BadStage { name: "body-cyclic-two-keys", args: solve, file: "body.json", edit: |v| v["data"]["keys"]["cyclic"] = json!(true), says: "cyclic is true with 2 keys" },
+        BadStage {
+            name: "body-times-short",
+            args: solve,
+            file: "body.json",
+            edit: |v| pop(&mut v["data"]["keys"]["times"]),
+            says: "keys.times has 1 key times, at least 2 are needed",
+        },
+        BadStage {
+            name: "body-times-decrease",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["keys"]["times"] = json!([1.0, 0.0]),
+            says: "keys.times do not increase at key 1 (0 after 1)",
+        },
+        BadStage {
+            name: "body-samples-zero",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(0),
+            says: "body stage: its scene: [solver] samples = 0",
+        },
+        BadStage {
+            name: "body-samples-max",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["scene"]["solver"]["samples"] = json!(9223372036854775807u64),
+            says: "body stage: the scene would need about",
+        },
+        BadStage {
+            name: "animation-fps-1e9",
+            args: report,
+            file: "animation.json",
+            edit: |v| v["data"]["scene"]["fps"] = json!(1e9),
+            says: "frames (1 s at 1000000000 fps) of 26 vertices",
+        },
+        BadStage {
+            name: "body-fixed-count",
+            args: solve,
+            file: "body.json",
+            edit: |v| pop(&mut v["data"]["keys"]["fixed"]),
+            says: "keys.fixed has 1 sets for 2 keys",
+        },
+        BadStage {
+            name: "body-fixed-unsorted",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["keys"]["fixed"][0] = json!([3, 1]),
+            says: "keys.fixed[0] is not sorted without repeats",
+        },
+        BadStage {
+            name: "body-inverted-tet",
+            args: solve,
+            file: "body.json",
+            edit: |v| {
+                let t = v["data"]["mesh"]["tets"][0].clone();
+                v["data"]["mesh"]["tets"][0] = json!([t[1], t[0], t[2], t[3]]);
+            },
+            says: "mesh tet 0 is inverted or flat in the rest pose",
+        },
+        BadStage {
+            name: "body-cyclic-two-keys",
+            args: solve,
+            file: "body.json",
+            edit: |v| v["data"]["keys"]["cyclic"] = json!(true),
+            says: "cyclic is true with 2 keys",
+        },
         BadStage { name: "body-no-tets", args: solve, file: "body.json", edit: |v| v["data"]["mesh"]["tets"] = json!([]), says: "mesh has no tets" },
         // tetrahedralize: once a copy_from_slice panic.
-        BadStage { name: "keys-pose-short", args: tetrahedralize, file: "keys.json", edit: |v| pop(&mut v["data"]["poses"][1]), says: "keyframes stage: poses[1] has 25 points but the mesh has 26" },
-        BadStage { name: "keys-triangle-index", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["rest"]["triangles"][2][1] = json!(26), says: "rest surface triangle 2 uses vertex 26, but there are 26 vertices" },
-        BadStage { name: "keys-velocity-index", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["fixed_velocity"][1] = json!([26]), says: "fixed_velocity[1] holds index 26" },
-        BadStage { name: "keys-name", args: tetrahedralize, file: "keys.json", edit: |v| v["data"]["scene"]["name"] = json!("../x"), says: "its scene: name `../x` cannot be a file stem: it contains a path separator" },
+        BadStage {
+            name: "keys-pose-short",
+            args: tetrahedralize,
+            file: "keys.json",
+            edit: |v| pop(&mut v["data"]["poses"][1]),
+            says: "keyframes stage: poses[1] has 25 points but the mesh has 26",
+        },
+        BadStage {
+            name: "keys-triangle-index",
+            args: tetrahedralize,
+            file: "keys.json",
+            edit: |v| v["data"]["rest"]["triangles"][2][1] = json!(26),
+            says: "rest surface triangle 2 uses vertex 26, but there are 26 vertices",
+        },
+        BadStage {
+            name: "keys-velocity-index",
+            args: tetrahedralize,
+            file: "keys.json",
+            edit: |v| v["data"]["fixed_velocity"][1] = json!([26]),
+            says: "fixed_velocity[1] holds index 26",
+        },
+        BadStage {
+            name: "keys-name",
+            args: tetrahedralize,
+            file: "keys.json",
+            edit: |v| v["data"]["scene"]["name"] = json!("../x"),
+            says: "its scene: name `../x` cannot be a file stem: it contains a path separator",
+        },
         // embed: once an assertion, and an out-of-range triangle accepted.
-        BadStage { name: "solution-trajectory-short", args: embed, file: "solution.json", edit: |v| pop(&mut v["data"]["trajectory"]["positions"][1]), says: "trajectory.positions[1] has" },
-        BadStage { name: "solution-velocities-missing", args: embed, file: "solution.json", edit: |v| pop(&mut v["data"]["trajectory"]["velocities"]), says: "trajectory.velocities has 1 keys for 2 key times" },
-        BadStage { name: "solution-surface-index", args: embed, file: "solution.json", edit: |v| v["data"]["body"]["surface"]["triangles"][0][0] = json!(100000), says: "body surface triangle 0 uses vertex 100000" },
+        BadStage {
+            name: "solution-trajectory-short",
+            args: embed,
+            file: "solution.json",
+            edit: |v| pop(&mut v["data"]["trajectory"]["positions"][1]),
+            says: "trajectory.positions[1] has",
+        },
+        BadStage {
+            name: "solution-velocities-missing",
+            args: embed,
+            file: "solution.json",
+            edit: |v| pop(&mut v["data"]["trajectory"]["velocities"]),
+            says: "trajectory.velocities has 1 keys for 2 key times",
+        },
+        BadStage {
+            name: "solution-surface-index",
+            args: embed,
+            file: "solution.json",
+            edit: |v| v["data"]["body"]["surface"]["triangles"][0][0] = json!(100000),
+            says: "body surface triangle 0 uses vertex 100000",
+        },
         // export: fps = 0 once reached usd-core; the name once escaped --out.
-        BadStage { name: "animation-fps-zero", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["fps"] = json!(0.0), says: "animation stage: its scene: fps = 0 must be positive" },
-        BadStage { name: "animation-name-escape", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["name"] = json!("../../x"), says: "name `../../x` cannot be a file stem" },
-        BadStage { name: "animation-name-newline", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["name"] = json!("a\nb"), says: "name `a\\nb` cannot be a file stem: it contains a control character" },
-        BadStage { name: "animation-input-keys", args: export, file: "animation.json", edit: |v| pop(&mut v["data"]["input_keys"]), says: "input_keys has 1 poses for 2 key times" },
-        BadStage { name: "animation-counts", args: export, file: "animation.json", edit: |v| v["data"]["counts"]["vertices"] = json!(7), says: "counts say 7 vertices" },
-        BadStage { name: "animation-meters", args: export, file: "animation.json", edit: |v| v["data"]["scene"]["export"]["meters_per_unit"] = json!(-1.0), says: "meters_per_unit = -1 must be positive" },
-        BadStage { name: "animation-times-report", args: report, file: "animation.json", edit: |v| v["data"]["trajectory"]["times"] = json!([0.0, 0.0]), says: "trajectory.times do not increase at key 1" },
-        BadStage { name: "outputs-path", args: report_outputs, file: "exported/t.outputs.json", edit: |v| v["data"]["files"][0]["path"] = json!("../x.glb"), says: "outputs stage: files[0] is `../x.glb`, not a plain file name" },
+        BadStage {
+            name: "animation-fps-zero",
+            args: export,
+            file: "animation.json",
+            edit: |v| v["data"]["scene"]["fps"] = json!(0.0),
+            says: "animation stage: its scene: fps = 0 must be positive",
+        },
+        BadStage {
+            name: "animation-name-escape",
+            args: export,
+            file: "animation.json",
+            edit: |v| v["data"]["scene"]["name"] = json!("../../x"),
+            says: "name `../../x` cannot be a file stem",
+        },
+        BadStage {
+            name: "animation-name-newline",
+            args: export,
+            file: "animation.json",
+            edit: |v| v["data"]["scene"]["name"] = json!("a\nb"),
+            says: "name `a\\nb` cannot be a file stem: it contains a control character",
+        },
+        BadStage {
+            name: "animation-input-keys",
+            args: export,
+            file: "animation.json",
+            edit: |v| pop(&mut v["data"]["input_keys"]),
+            says: "input_keys has 1 poses for 2 key times",
+        },
+        BadStage {
+            name: "animation-counts",
+            args: export,
+            file: "animation.json",
+            edit: |v| v["data"]["counts"]["vertices"] = json!(7),
+            says: "counts say 7 vertices",
+        },
+        BadStage {
+            name: "animation-meters",
+            args: export,
+            file: "animation.json",
+            edit: |v| v["data"]["scene"]["export"]["meters_per_unit"] = json!(-1.0),
+            says: "meters_per_unit = -1 must be positive",
+        },
+        BadStage {
+            name: "animation-times-report",
+            args: report,
+            file: "animation.json",
+            edit: |v| v["data"]["trajectory"]["times"] = json!([0.0, 0.0]),
+            says: "trajectory.times do not increase at key 1",
+        },
+        BadStage {
+            name: "outputs-path",
+            args: report_outputs,
+            file: "exported/t.outputs.json",
+            edit: |v| v["data"]["files"][0]["path"] = json!("../x.glb"),
+            says: "outputs stage: files[0] is `../x.glb`, not a plain file name",
+        },
     ]
 }
 

@@ -17,10 +17,10 @@ use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use blendsim::formats::mesh::obj;
+use crate::common::cli::{copy_tree, names, process_alive, run_env, snapshot, Spawned, TempDir};
 use blendsim::algorithms::geometry::TriMesh;
 use blendsim::algorithms::procedural::prism;
-use crate::common::cli::{copy_tree, names, process_alive, run_env, snapshot, Spawned, TempDir};
+use blendsim::formats::mesh::obj;
 
 fn cube() -> TriMesh {
     prism([1.0, 1.0, 1.0], [2, 2, 2])
@@ -66,7 +66,8 @@ fn fixture() -> &'static Fixture {
         std::fs::write(input.join("old.toml"), scene("[\"usda\", \"glb\"]", "")).unwrap();
         std::fs::write(input.join("new.toml"), scene("[\"usda\", \"usdc\", \"glb\"]", "")).unwrap();
         std::fs::write(input.join("fine.obj"), obj::write(&prism([1.0, 1.0, 1.0], [4, 4, 4]))).unwrap();
-        let slow = scene("[\"usda\", \"usdc\", \"glb\"]", "[tet]\nmax_volume = 1e-8").replace("\"k0.obj\", \"k1.obj\", \"k0.obj\"", "\"fine.obj\", \"fine.obj\", \"fine.obj\"");
+        let slow = scene("[\"usda\", \"usdc\", \"glb\"]", "[tet]\nmax_volume = 1e-8")
+            .replace("\"k0.obj\", \"k1.obj\", \"k0.obj\"", "\"fine.obj\", \"fine.obj\", \"fine.obj\"");
         assert!(slow.contains("fine.obj"));
         std::fs::write(input.join("slow.toml"), slow).unwrap();
         std::fs::write(input.join("bad.toml"), scene("[\"usda\"]", "").replace("k1.obj", "missing.obj")).unwrap();
@@ -228,7 +229,12 @@ fn interrupt(signal: i32, phase: &Phase) -> String {
         State::New => "new bake, complete",
         State::MovedAside => "no folder; old bake complete beside it (restored by the next run)",
     };
-    format!("| {} | {}{} | {state} | {child_note} | {leftover_note} |", signal_name(signal), phase.hook, if phase.fallback { " (fallback)" } else { "" })
+    format!(
+        "| {} | {}{} | {state} | {child_note} | {leftover_note} |",
+        signal_name(signal),
+        phase.hook,
+        if phase.fallback { " (fallback)" } else { "" }
+    )
 }
 
 fn every_phase(signal: i32) {
@@ -268,7 +274,13 @@ fn sigint_at_arbitrary_moments() {
         p.signal(libc::SIGINT);
         let status = p.wait_timeout(600.0).expect("the bake ends");
         let contents = normalized(&folder);
-        let state = if contents == f.old { "old" } else if contents == f.new { "new" } else { panic!("mixed folder after {delay_ms} ms") };
+        let state = if contents == f.old {
+            "old"
+        } else if contents == f.new {
+            "new"
+        } else {
+            panic!("mixed folder after {delay_ms} ms")
+        };
         eprintln!("SIGINT after {delay_ms} ms: {status:?}, {state} bake");
         assert!(status.signal() == Some(libc::SIGINT) || (status.success() && state == "new"), "{status:?}");
         assert_eq!(names(&case.join("out")), ["box".to_string()].into());

@@ -9,11 +9,11 @@ use std::os::unix::fs::MetadataExt;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 
-use blendsim::formats::mesh::obj;
-use blendsim::algorithms::geometry::TriMesh;
-use blendsim::algorithms::procedural::prism;
 use crate::common::checkers::check_same_layer;
 use crate::common::cli::{names, read_json, run, run_env, snapshot, Spawned, TempDir};
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::prism;
+use blendsim::formats::mesh::obj;
 
 fn cube() -> TriMesh {
     prism([1.0, 1.0, 1.0], [2, 2, 2])
@@ -131,16 +131,10 @@ fn export_and_report_share_a_folder_and_each_replaces_only_its_own_files() {
     animation["data"]["scene"]["export"]["formats"] = serde_json::json!(["glb"]);
     std::fs::write(dir.join("animation.json"), serde_json::to_vec(&animation).unwrap()).unwrap();
     run(d, &["export", "animation.json", "--out", "out"]).success();
-    assert_eq!(
-        names(&out),
-        set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "box.outputs.json", "report.json", "report.md"])
-    );
+    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "box.outputs.json", "report.json", "report.md"]));
     // A bake owns both groups: the export's list goes too.
     run(d, &["bake", "in/all.toml", "--out", "out", "-q"]).success();
-    assert_eq!(
-        names(&out),
-        set(&[".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.usda", "report.json", "report.md"])
-    );
+    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.usda", "report.json", "report.md"]));
 }
 
 /// The first bake holds the folder (paused by the test hook); the second waits and says so,
@@ -315,18 +309,25 @@ fn progress_estimates_every_phase() {
         std::fs::copy(&path, input.join(path.file_name().unwrap())).unwrap();
     }
     let text = std::fs::read_to_string(demo.join("twist.toml")).unwrap();
-    let slow = text.replace("samples = 6", "samples = 50").replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
+    let slow = text
+        .replace("samples = 6", "samples = 50")
+        .replace("formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true", "formats = [\"usda\"]\nfull_frame = false");
     assert_ne!(slow, text);
     assert!(slow.contains("tolerance = 0.001"), "the estimate below uses the demo's tolerance");
     std::fs::write(input.join("slow.toml"), &slow).unwrap();
-    std::fs::write(input.join("cage.toml"), slow.replace("samples = 50", "samples = 4").replace("[tet]\n", "[tet]\nmax_nodes = 60\ncage_nodes = 60\n")).unwrap();
+    std::fs::write(
+        input.join("cage.toml"),
+        slow.replace("samples = 50", "samples = 4").replace("[tet]\n", "[tet]\nmax_nodes = 60\ncage_nodes = 60\n"),
+    )
+    .unwrap();
     let env = [("BLENDSIM_PROGRESS", OsStr::new("lines")), ("RAYON_NUM_THREADS", OsStr::new("1"))];
 
     let shown = run_env(&dir.path, &["bake", "in/slow.toml", "--out", "out/slow"], &env).success();
     let report = read_json(&dir.join("out/slow/report.json"));
     let iterations = report["solver"]["iterations"].as_u64().expect("iterations");
     // A bar's first frame is always a line (drawn when the bar is made), whatever the timing.
-    let line = |prefix: &str| shown.stderr.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no {prefix} line:\n{shown}")).to_string();
+    let line =
+        |prefix: &str| shown.stderr.lines().find(|l| l.starts_with(prefix)).unwrap_or_else(|| panic!("no {prefix} line:\n{shown}")).to_string();
     for prefix in ["tetrahedralize: TetGen", "embed"] {
         let l = line(prefix);
         assert!(l.contains(" of ~") && l.contains(" eta "), "{prefix} has no predicted duration: {l}");
@@ -353,8 +354,10 @@ fn progress_estimates_every_phase() {
     let last = report["solver"]["force_scale"].as_f64().expect("solver.force_scale");
     assert!((scales[scales.len() - 1] / last - 1.0).abs() < 1e-12 && scales.iter().all(|&s| s > 0.0), "{scales:?} ends at {last}");
     let mut estimate = IterationEstimate::default();
-    let every: Vec<Option<usize>> = energy.iter().zip(&scales).enumerate().map(|(k, (&w, &s))| estimate.update(k, w, NEGLIGIBLE * s, 1e-3, 1000)).collect();
-    let late: Vec<(u64, u64)> = every.iter().enumerate().filter_map(|(k, n)| n.map(|n| (k as u64, n as u64))).filter(|&(k, _)| 4 * k >= 3 * iterations).collect();
+    let every: Vec<Option<usize>> =
+        energy.iter().zip(&scales).enumerate().map(|(k, (&w, &s))| estimate.update(k, w, NEGLIGIBLE * s, 1e-3, 1000)).collect();
+    let late: Vec<(u64, u64)> =
+        every.iter().enumerate().filter_map(|(k, n)| n.map(|n| (k as u64, n as u64))).filter(|&(k, _)| 4 * k >= 3 * iterations).collect();
     assert!(late.len() >= 10, "a total over the last quarter of the {iterations} iterations: {every:?}");
     for &(k, n) in &late {
         assert!(k <= n && n <= 1000 && close(k, n), "at iteration {k} the predicted total is {n}, the solve took {iterations}: {every:?}");

@@ -2,8 +2,8 @@
 //! as MEDIT files, `import -> tetrahedralize -> solve`, and the solution stage file read back.
 
 use blendsim::algorithms::geometry::Point;
-use blendsim::pipeline::stage_file::{self, Solution};
 use blendsim::algorithms::spacetime::trajectory::Trajectory;
+use blendsim::pipeline::stage_file::{self, Solution};
 
 use crate::common::cli::{read_json, run, TempDir};
 

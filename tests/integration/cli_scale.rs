@@ -10,9 +10,9 @@
 //! (a different physical scene: a tiny box is hugely stiff for its mass, a huge one floppy)
 //! must still bake at every decade.
 
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::geometry::TriMesh;
 use blendsim::algorithms::procedural::prism;
+use blendsim::formats::mesh::obj;
 use blendsim::pipeline::stage_file::{self, Solution};
 
 use crate::common::cli::{read_json, run, TempDir};

@@ -102,10 +102,7 @@ fn chained_stages_give_the_bytes_of_bake_and_bakes_are_deterministic() {
     assert!(loud.stdout.is_empty(), "{loud}");
     assert_eq!(loud.stderr.lines().count(), 1, "bake prints one summary line:\n{loud}");
     let summary = loud.stderr.trim_end();
-    assert!(
-        summary.starts_with("blendsim: baked twist in ") && summary.contains("(5 keys, ") && summary.contains(" spacetime "),
-        "{summary}"
-    );
+    assert!(summary.starts_with("blendsim: baked twist in ") && summary.contains("(5 keys, ") && summary.contains(" spacetime "), "{summary}");
     assert!(summary.ends_with(&format!("report in {}", Path::new("bake1").join("report.md").display())), "{summary}");
     let quiet = run(&dir.path, &["bake", "--quiet", scene.to_str().unwrap(), "--out", "bake2"]).success();
     assert!(quiet.stdout.is_empty() && quiet.stderr.is_empty(), "--quiet bake prints nothing:\n{quiet}");
@@ -169,11 +166,8 @@ fn stage_files_round_trip_exactly() {
     // Compared as text: a JSON parser in this test would round the same way blendsim does.
     let body = String::from_utf8(bytes(&c.join("body.json"))).unwrap();
     let solution = String::from_utf8(bytes(&c.join("solution.json"))).unwrap();
-    let data = body
-        .trim_end()
-        .strip_prefix("{\"blendsim\":1,\"stage\":\"body\",\"data\":")
-        .and_then(|d| d.strip_suffix('}'))
-        .expect("a body stage file");
+    let data =
+        body.trim_end().strip_prefix("{\"blendsim\":1,\"stage\":\"body\",\"data\":").and_then(|d| d.strip_suffix('}')).expect("a body stage file");
     assert!(
         solution.starts_with(&format!("{{\"blendsim\":1,\"stage\":\"solution\",\"data\":{{\"body\":{data},")),
         "the body inside solution.json is not body.json's: reading a stage file changed its numbers"
@@ -263,13 +257,17 @@ fn a_moved_keyframes_file_names_the_rest_source_where_it_now_is() {
     let dir = TempDir::new("stages-rest-source-moved");
     let staged = dir.join("staged");
     std::fs::create_dir_all(&staged).unwrap();
-    std::fs::write(staged.join("box.obj"), blendsim::formats::mesh::obj::write(&blendsim::algorithms::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2]))).unwrap();
+    std::fs::write(staged.join("box.obj"), blendsim::formats::mesh::obj::write(&blendsim::algorithms::procedural::prism([1.0, 1.0, 1.0], [2, 2, 2])))
+        .unwrap();
     let scene = "name = \"b\"\n[keyframes]\nmeshes = [\"box.obj\", \"box.obj\"]\ntimes = [0.0, 1.0]\n[tet]\nquality = 0.0\nmax_volume = 1e-9\n[solver]\nsamples = 3\n";
     std::fs::write(staged.join("scene.toml"), scene).unwrap();
     let absolute = staged.canonicalize().unwrap();
     silent(run(&dir.path, &["import", absolute.join("scene.toml").to_str().unwrap(), "-o", "staged/keys.json"]));
     let text = String::from_utf8(bytes(&staged.join("keys.json"))).unwrap();
-    assert!(text.contains("\"rest_source\":\"box.obj\"") && !text.contains(absolute.to_str().unwrap()), "the rest source relative to keys.json, no absolute path");
+    assert!(
+        text.contains("\"rest_source\":\"box.obj\"") && !text.contains(absolute.to_str().unwrap()),
+        "the rest source relative to keys.json, no absolute path"
+    );
     std::fs::rename(&staged, dir.join("moved")).unwrap();
     let r = run(&dir.path, &["tetrahedralize", "moved/keys.json", "-o", "moved/body.json"]).success();
     assert!(r.stderr.starts_with("blendsim: warning: moved/box.obj: TetGen could not honour [tet] max_volume = 1e-9"), "{r}");

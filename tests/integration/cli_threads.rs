@@ -26,7 +26,8 @@ fn same_bytes_on_1_2_3_threads(dir: &Path, scene: &str) {
     let md = |path: &Path| std::fs::read_to_string(path).unwrap().lines().filter(|l| !l.starts_with("| time |")).collect::<Vec<_>>().join("\n");
     for threads in [2, 3] {
         let other = bake(threads);
-        let mut other_names: Vec<String> = std::fs::read_dir(&other).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        let mut other_names: Vec<String> =
+            std::fs::read_dir(&other).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
         other_names.sort();
         assert_eq!(other_names, names, "{threads} threads: the same files");
         for name in &names {
@@ -34,7 +35,10 @@ fn same_bytes_on_1_2_3_threads(dir: &Path, scene: &str) {
             match name.as_str() {
                 "report.json" => assert_eq!(without_timings(read_json(&a)), without_timings(read_json(&b)), "{scene}, {threads} threads: {name}"),
                 "report.md" => assert_eq!(md(&a), md(&b), "{scene}, {threads} threads: {name}"),
-                _ => assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "{scene}, {threads} threads: {name} differs from the one-thread bake's"),
+                _ => assert!(
+                    std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+                    "{scene}, {threads} threads: {name} differs from the one-thread bake's"
+                ),
             }
         }
     }

@@ -2,16 +2,16 @@
 //! cyclic swing finds its natural period, and a ballistic jump with `keep_duration` finds the
 //! parabola's key times. The exported files carry the optimized times.
 
+use blendsim::algorithms::geometry::{Point, TetMesh};
 use blendsim::algorithms::physics::elastic::{Elastic, Material as ElasticMaterial};
 use blendsim::algorithms::physics::equilibrium::loaded_equilibrium;
 use blendsim::algorithms::physics::vibration::{natural_vibration, RestStiffness};
-use blendsim::algorithms::geometry::{Point, TetMesh};
 use blendsim::pipeline::stage_file::Solution;
 use serde_json::Value;
 
-use crate::common::bar::{bar_body, bar_released, BarSettings};
 use crate::cli_contacts::{bake_and_check, FALLING, FLOOR};
 use crate::cli_physics::solve_scene;
+use crate::common::bar::{bar_body, bar_released, BarSettings};
 use crate::common::cli::{energies, key_times, TempDir};
 use crate::common::verify::max_distance;
 
@@ -46,7 +46,8 @@ fn swing_period(tip: &[Point], fps: f64) -> f64 {
     let turns: Vec<usize> = (1..y.len() - 1).filter(|&f| y[f] < y[f - 1] && y[f] <= y[f + 1]).collect();
     let (a, b) = (turns[0], *turns.last().unwrap());
     let mean = y[a..b].iter().sum::<f64>() / (b - a) as f64;
-    let ups: Vec<f64> = (1..y.len()).filter(|&f| y[f - 1] < mean && y[f] >= mean).map(|f| (f - 1) as f64 + (mean - y[f - 1]) / (y[f] - y[f - 1])).collect();
+    let ups: Vec<f64> =
+        (1..y.len()).filter(|&f| y[f - 1] < mean && y[f] >= mean).map(|f| (f - 1) as f64 + (mean - y[f - 1]) / (y[f] - y[f - 1])).collect();
     assert!(ups.len() >= 3, "too few swings: {ups:?}");
     (ups[ups.len() - 1] - ups[0]) / (ups.len() - 1) as f64 / fps
 }
@@ -96,9 +97,23 @@ fn period_bar(amplitude: f64, divisions: [usize; 3]) -> PeriodBar {
     for _ in 0..2 {
         let load: Vec<Point> = shape.iter().zip(&elastic.mass).map(|(u, m)| u.map(|c| scale * lambda * m * c)).collect();
         let info = loaded_equilibrium(&elastic, &clamped, &load, &mut bent, 1e-9 * target, 200).unwrap();
-        let residual = elastic.energy_gradient(&bent).iter().zip(&load).zip(&clamped).filter(|(_, &c)| !c).map(|((g, f), _)| (0..3).map(|d| (g[d] - f[d]).powi(2)).sum::<f64>()).sum::<f64>().sqrt();
+        let residual = elastic
+            .energy_gradient(&bent)
+            .iter()
+            .zip(&load)
+            .zip(&clamped)
+            .filter(|(_, &c)| !c)
+            .map(|((g, f), _)| (0..3).map(|d| (g[d] - f[d]).powi(2)).sum::<f64>())
+            .sum::<f64>()
+            .sqrt();
         let force = load.iter().map(|f| f.iter().map(|c| c * c).sum::<f64>()).sum::<f64>().sqrt();
-        println!("bent key: {} Newton steps, last move {:.1e} m, |∇E - f| / |f| = {:.1e}, tip {:.6e} m", info.iterations, info.last_move, residual / force, tip_mean(&bent, 1) - settings.size[1] / 2.0);
+        println!(
+            "bent key: {} Newton steps, last move {:.1e} m, |∇E - f| / |f| = {:.1e}, tip {:.6e} m",
+            info.iterations,
+            info.last_move,
+            residual / force,
+            tip_mean(&bent, 1) - settings.size[1] / 2.0
+        );
         scale *= target / (tip_mean(&bent, 1) - tip_mean(&mesh.positions, 1));
     }
     let rest_tip = tip_mean(&mesh.positions, 1);
@@ -198,7 +213,14 @@ fn both_starts_find_the_period(bar: &PeriodBar, quarters: bool) {
             log.timing_iterations,
             log.seconds
         );
-        println!("times {:?}, W {:.4e} -> {:.4e}, {} refactorizations: {}", solution.trajectory.times, log.energy[0], log.energy.last().unwrap(), log.refactorizations, log.stop_reason);
+        println!(
+            "times {:?}, W {:.4e} -> {:.4e}, {} refactorizations: {}",
+            solution.trajectory.times,
+            log.energy[0],
+            log.energy.last().unwrap(),
+            log.refactorizations,
+            log.stop_reason
+        );
         assert!(log.converged, "{}", log.stop_reason);
         assert!(log.stop_reason.contains("tangent model Hessian"), "{}", log.stop_reason);
         assert!(log.energy.windows(2).all(|w| w[1] <= w[0]), "W never increases");
@@ -270,13 +292,25 @@ fn the_projective_model_hessian_stalls_on_the_bar() {
     let dir = TempDir::new("timing-bar-stall");
     let (default, solution) = cyclic_bar(&bar, &dir, start, "", false);
     let (log, w0) = (&solution.log, solution.log.energy[0]);
-    println!("default: {default:.4} s ({:+.2}% of the eigen period), W {:.3} of the first guess's, {} iterations: {}", 100.0 * (default / bar.eigen - 1.0), log.energy.last().unwrap() / w0, log.iterations, log.stop_reason);
+    println!(
+        "default: {default:.4} s ({:+.2}% of the eigen period), W {:.3} of the first guess's, {} iterations: {}",
+        100.0 * (default / bar.eigen - 1.0),
+        log.energy.last().unwrap() / w0,
+        log.iterations,
+        log.stop_reason
+    );
     assert!(log.stop_reason.contains("tangent model Hessian"), "{}", log.stop_reason);
     assert!((default / bar.eigen - 1.0).abs() < 0.01, "{default} vs the eigen period {}", bar.eigen);
     assert!(*log.energy.last().unwrap() < 0.1 * w0, "{:?}", log.energy);
     let (projective, solution) = cyclic_bar(&bar, &dir, start, r#"model_hessian = "projective""#, false);
     let log = &solution.log;
-    println!("projective: {projective:.4} s ({:+.2}%), W {:.3} of the first guess's, {} iterations: {}", 100.0 * (projective / bar.eigen - 1.0), log.energy.last().unwrap() / w0, log.iterations, log.stop_reason);
+    println!(
+        "projective: {projective:.4} s ({:+.2}%), W {:.3} of the first guess's, {} iterations: {}",
+        100.0 * (projective / bar.eigen - 1.0),
+        log.energy.last().unwrap() / w0,
+        log.iterations,
+        log.stop_reason
+    );
     assert!(log.converged && !log.stop_reason.contains("tangent"), "{}", log.stop_reason);
     assert_eq!(log.energy[0], w0, "the same first guess");
     // Stalled: far from the period, W far above the tangent model's.
@@ -352,7 +386,9 @@ fn gltf_sampler_input(glb: &[u8]) -> Vec<f32> {
     let accessor = &json["accessors"][json["animations"][0]["samplers"][0]["input"].as_u64().unwrap() as usize];
     let view = &json["bufferViews"][accessor["bufferView"].as_u64().unwrap() as usize];
     let offset = bin_start + view["byteOffset"].as_u64().unwrap_or(0) as usize + accessor["byteOffset"].as_u64().unwrap_or(0) as usize;
-    (0..accessor["count"].as_u64().unwrap() as usize).map(|i| f32::from_le_bytes(glb[offset + 4 * i..offset + 4 * i + 4].try_into().unwrap())).collect()
+    (0..accessor["count"].as_u64().unwrap() as usize)
+        .map(|i| f32::from_le_bytes(glb[offset + 4 * i..offset + 4 * i + 4].try_into().unwrap()))
+        .collect()
 }
 
 /// The paper's ball (`../shared/assets/paper/ball/unit_sphere.obj`, diameter 1) moved up by
@@ -407,14 +443,25 @@ formats = ["usda", "glb"]
     let solver = &report["solver"];
     let (times, energy) = (key_times(&report), energies(&report));
     let parabola = (2.0 / g).sqrt();
-    println!("ball: times {times:?} (parabola meets the plane at {parabola:.6}), W {:.3e} -> {:.3e}, clearance {}, {}", energy[0], energy.last().unwrap(), solver["clearance"], solver["stop_reason"]);
+    println!(
+        "ball: times {times:?} (parabola meets the plane at {parabola:.6}), W {:.3e} -> {:.3e}, clearance {}, {}",
+        energy[0],
+        energy.last().unwrap(),
+        solver["clearance"],
+        solver["stop_reason"]
+    );
     assert_eq!(times.len(), 4, "the contact key is duplicated");
     assert_eq!(times[1], times[2], "a contact is a zero-length interval");
     assert!((times[1] - parabola).abs() < 1e-3, "contact at {} vs {parabola}", times[1]);
     assert!(solver["clearance"].as_f64().unwrap() >= -1e-4);
     // No vertex below the plane at any frame of the full-frame output (1e-4 of the diameter).
     assert_eq!(anim.trajectory.times, times);
-    let lowest = anim.trajectory.frames(60.0).iter().map(|(_, t)| anim.trajectory.evaluate(*t).iter().map(|p| p[1]).fold(f64::INFINITY, f64::min)).fold(f64::INFINITY, f64::min);
+    let lowest = anim
+        .trajectory
+        .frames(60.0)
+        .iter()
+        .map(|(_, t)| anim.trajectory.evaluate(*t).iter().map(|p| p[1]).fold(f64::INFINITY, f64::min))
+        .fold(f64::INFINITY, f64::min);
     println!("lowest vertex over the frames: {lowest:.3e}");
     assert!(lowest >= -1e-4, "a vertex at {lowest}");
     let glb = std::fs::read(dir.join("out/ball.glb")).unwrap();

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
 use blendsim::algorithms::geometry::Point;
-use blendsim::support::output::Staging;
 use blendsim::algorithms::procedural::prism as box_mesh;
 use blendsim::pipeline::scene::Format;
 use blendsim::pipeline::stage_file::{Animation, OutputKind, Outputs};
 use blendsim::pipeline::stages::export;
+use blendsim::support::output::Staging;
 
 use crate::common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
 use crate::common::{animation, sample_motion, scratch};
@@ -20,13 +20,7 @@ use crate::common::{animation, sample_motion, scratch};
 /// A twist about the box's vertical (y) axis: the angle grows with height above `from` (a
 /// fraction of the height) and with `s(t)`; `ds` is `s'(t)`. Returns the position and its
 /// exact velocity.
-fn twist(
-    size: [f64; 3],
-    degrees: f64,
-    from: f64,
-    s: impl Fn(f64) -> f64,
-    ds: impl Fn(f64) -> f64,
-) -> impl Fn(Point, f64) -> (Point, Point) {
+fn twist(size: [f64; 3], degrees: f64, from: f64, s: impl Fn(f64) -> f64, ds: impl Fn(f64) -> f64) -> impl Fn(Point, f64) -> (Point, Point) {
     move |p, t| {
         let reach = ((p[1] / size[1] - from) / (1.0 - from)).max(0.0);
         let amount = degrees.to_radians() * reach;
@@ -92,8 +86,7 @@ fn export_and_check(anim: &Animation) -> (PathBuf, Outputs) {
     let outputs = export_to(anim, &dir);
     let mut listed: BTreeSet<String> = outputs.files.iter().map(|f| f.path.clone()).collect();
     listed.insert(blendsim::support::output::MANIFEST.to_string());
-    let on_disk: BTreeSet<String> =
-        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let on_disk: BTreeSet<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(listed, on_disk, "the folder holds exactly the listed files and the manifest");
     crate::common::verify::check_outputs(&dir, anim, &outputs.files);
     (dir, outputs)
@@ -235,11 +228,8 @@ fn checkers_reject_wrong_points_and_broken_files() {
     let right = Expected::at(&frames, 60.0, |t| clip.points_at(t));
     let usda = std::fs::read_to_string(dir.join("twist-box.usda")).unwrap();
     let skeleton = usda.find("def Skeleton").unwrap();
-    let broken = format!(
-        "{}{}",
-        &usda[..skeleton],
-        usda[skeleton..].replacen("(\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n", "", 1)
-    );
+    let broken =
+        format!("{}{}", &usda[..skeleton], usda[skeleton..].replacen("(\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n", "", 1));
     std::fs::write(dir.join("broken.usda"), broken).unwrap();
     let e = try_check_usd(&dir.join("broken.usda"), &right, false).unwrap_err();
     assert!(e.contains("MissingSkelBindingAPI"), "{e}");
@@ -257,7 +247,11 @@ fn checkers_reject_wrong_points_and_broken_files() {
 /// 0.5 s while the whole shape starts with a sideways velocity of 0.5 units/s; z up, 4 fps.
 fn tetra(export: &str) -> Animation {
     let positions = vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let mesh = blendsim::algorithms::geometry::TriMesh { positions: positions.clone(), triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], attributes: None };
+    let mesh = blendsim::algorithms::geometry::TriMesh {
+        positions: positions.clone(),
+        triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        attributes: None,
+    };
     let mut risen = positions.clone();
     risen[3][2] += 0.5;
     let tr = blendsim::algorithms::spacetime::trajectory::Trajectory {
@@ -299,7 +293,10 @@ fn format_documents_show_real_output() {
     for name in ["tetra.glb", "tetra.full.glb"] {
         let bytes = outputs.files.iter().find(|f| f.path == name).unwrap().bytes as usize;
         let stated = format!("`{name}` ({} bytes", fmt_thousands(bytes));
-        assert!(gltf_doc.contains(&stated) || gltf_doc.contains(&format!("`{name}` is {} bytes", fmt_thousands(bytes))), "formats/gltf.md must state the size of {name}: {bytes}");
+        assert!(
+            gltf_doc.contains(&stated) || gltf_doc.contains(&format!("`{name}` is {} bytes", fmt_thousands(bytes))),
+            "formats/gltf.md must state the size of {name}: {bytes}"
+        );
     }
 }
 

@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
-use blendsim::formats::mesh::obj;
 use blendsim::algorithms::geometry::Axis;
 use blendsim::algorithms::procedural::{prism, twist, Twist};
+use blendsim::formats::mesh::obj;
 
 /// (file name, contents) of every generated demo file.
 fn demo_files() -> Vec<(&'static str, String)> {

@@ -68,7 +68,9 @@ fn test_files(files: &[PathBuf]) -> BTreeSet<PathBuf> {
                 continue;
             }
             let item = w[1].trim();
-            let Some(name) = item.strip_prefix("mod ").or_else(|| item.strip_prefix("pub(crate) mod ")).and_then(|s| s.strip_suffix(';')) else { continue };
+            let Some(name) = item.strip_prefix("mod ").or_else(|| item.strip_prefix("pub(crate) mod ")).and_then(|s| s.strip_suffix(';')) else {
+                continue;
+            };
             // A module's children live beside `mod.rs`/`lib.rs`, else in the folder named after the file.
             let dir = match file.file_name().and_then(|n| n.to_str()) {
                 Some("mod.rs") | Some("lib.rs") | Some("main.rs") => file.parent().unwrap().to_path_buf(),

@@ -49,7 +49,11 @@ fn normals(points: &[Point], triangles: &[[u32; 3]], sources: &[u32]) -> Vec<Poi
 
 fn unit(x: Point) -> Point {
     let l = norm(x);
-    if l > 0.0 { x.map(|c| c / l) } else { x }
+    if l > 0.0 {
+        x.map(|c| c / l)
+    } else {
+        x
+    }
 }
 
 fn degrees(a: Point, b: Point) -> f64 {
@@ -102,7 +106,8 @@ fn measure(name: &str, anim: &Animation) -> Row {
     let truth_split = if creases.normal_corners.is_empty() { None } else { Some(split_at_seams(&mesh.triangles, n, &creases)) };
     let (truth_tris, truth_sources) = truth_split.as_ref().map_or((&mesh.triangles, &identity), |s| (&s.triangles, &s.sources));
     // The glb's vertices: split at UV and normal seams.
-    let file_split = (!attributes.uv_corners.is_empty() || !attributes.normal_corners.is_empty()).then(|| split_at_seams(&mesh.triangles, n, &attributes));
+    let file_split =
+        (!attributes.uv_corners.is_empty() || !attributes.normal_corners.is_empty()).then(|| split_at_seams(&mesh.triangles, n, &attributes));
     let (file_tris, file_sources) = file_split.as_ref().map_or((&mesh.triangles, &identity), |s| (&s.triangles, &s.sources));
     // Each file vertex's truth vertex: the truth split's copy with the same point and normal.
     let truth_of: Vec<usize> = {
@@ -159,7 +164,9 @@ fn animated_normals_error_table() {
     crate::texture::textured_prism(&dir.path, "");
     rows.push(measure("textured prism (seams, creases)", &library_animation(&dir.join("scene.toml"))));
     let f = |s: (f64, f64, f64)| format!("{:.2} / {:.2} / {:.3}", s.0, s.1, s.2);
-    eprintln!("| scene | (a) rest normals | (b) recomputed on the file's vertices | (c) morph NORMAL deltas | NORMAL deltas vs POSITION targets (bytes) |");
+    eprintln!(
+        "| scene | (a) rest normals | (b) recomputed on the file's vertices | (c) morph NORMAL deltas | NORMAL deltas vs POSITION targets (bytes) |"
+    );
     eprintln!("|---|---|---|---|---|");
     for r in &rows {
         eprintln!(
@@ -235,9 +242,17 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
         let glb = Glb::parse(&std::fs::read(out.join(&glb_file.path)).unwrap());
         let primitive = &glb.json["meshes"][0]["primitives"][0];
         let n = anim.mesh.positions.len() as u32;
-        let sources: Vec<u32> = (0..n).chain(glb.json["meshes"][0]["extras"]["seamSources"].as_array().map_or(vec![], |a| a.iter().map(|x| x.as_u64().unwrap() as u32).collect())).collect();
+        let sources: Vec<u32> = (0..n)
+            .chain(
+                glb.json["meshes"][0]["extras"]["seamSources"].as_array().map_or(vec![], |a| a.iter().map(|x| x.as_u64().unwrap() as u32).collect()),
+            )
+            .collect();
         let attributes = anim.mesh.attributes.clone().unwrap_or_default();
-        let triangles = if sources.len() as u32 == n { anim.mesh.triangles.clone() } else { split_at_seams(&anim.mesh.triangles, n as usize, &attributes).triangles };
+        let triangles = if sources.len() as u32 == n {
+            anim.mesh.triangles.clone()
+        } else {
+            split_at_seams(&anim.mesh.triangles, n as usize, &attributes).triangles
+        };
         let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
         let (_, deltas) = rest_and_deltas(&clip, &triangles, &sources);
         assert!(primitive["attributes"]["NORMAL"].is_u64(), "{scene}: the base has NORMALs");
@@ -256,8 +271,20 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
         let full_glb = Glb::parse(&std::fs::read(out.join(&full.path)).unwrap());
         assert!(full_glb.json["meshes"][0]["primitives"][0]["targets"][0].get("NORMAL").is_none(), "full-frame files are unchanged");
         let size = |morph_normals| {
-            let surface = blendsim::formats::export::glb::Surface { triangles: &anim.mesh.triangles, attributes: anim.mesh.attributes.as_ref(), textures: &[], morph_normals };
-            blendsim::formats::export::glb::blendshapes(&clip, surface, "x", blendsim::formats::export::glb::Placement { z_up: false, meters_per_unit: 1.0 }).len() as f64 / 1000.0
+            let surface = blendsim::formats::export::glb::Surface {
+                triangles: &anim.mesh.triangles,
+                attributes: anim.mesh.attributes.as_ref(),
+                textures: &[],
+                morph_normals,
+            };
+            blendsim::formats::export::glb::blendshapes(
+                &clip,
+                surface,
+                "x",
+                blendsim::formats::export::glb::Placement { z_up: false, meters_per_unit: 1.0 },
+            )
+            .len() as f64
+                / 1000.0
         };
         eprintln!("{scene}: blendshape glb {:.1} KB with NORMAL deltas, {:.1} KB without (texture not embedded)", size(true), size(false));
     }

@@ -167,10 +167,8 @@ fn twist_keeps_volume_five_times_better_than_hermite() {
     let rest = enclosed_volume(&anim.mesh.positions, tri);
     assert!((rest - 4.8).abs() < 1e-9, "the prism 1.6 x 3 x 1: {rest}");
     let fps = anim.scene.fps;
-    let hermite =
-        in_between_loss(times, &volumes(&anim.input_keys), fps, |t| enclosed_volume(&hermite_baseline(times, &anim.input_keys, t), tri));
-    let spacetime =
-        in_between_loss(times, &volumes(&anim.trajectory.positions), fps, |t| enclosed_volume(&anim.trajectory.evaluate(t), tri));
+    let hermite = in_between_loss(times, &volumes(&anim.input_keys), fps, |t| enclosed_volume(&hermite_baseline(times, &anim.input_keys, t), tri));
+    let spacetime = in_between_loss(times, &volumes(&anim.trajectory.positions), fps, |t| enclosed_volume(&anim.trajectory.evaluate(t), tri));
     eprintln!(
         "TWIST in-between volume loss: hermite baseline {:.4} ({:.2}%), spacetime {:.4} ({:.2}%), {:.2}x smaller",
         hermite,
@@ -182,11 +180,7 @@ fn twist_keeps_volume_five_times_better_than_hermite() {
     // The report says the same.
     let volume = &report["volume"];
     let reported = |which: &str| volume[which]["in_between_loss"].as_f64().unwrap();
-    eprintln!(
-        "report.json: volume.hermite.in_between_loss = {}, volume.animation.in_between_loss = {}",
-        reported("hermite"),
-        reported("animation")
-    );
+    eprintln!("report.json: volume.hermite.in_between_loss = {}, volume.animation.in_between_loss = {}", reported("hermite"), reported("animation"));
     assert!((reported("hermite") - hermite).abs() < 1e-9, "{volume}");
     assert!((reported("animation") - spacetime).abs() < 1e-9, "{volume}");
     assert!(hermite > 0.3, "the hermite baseline of a half-turn twist loses volume: {hermite}");

@@ -17,7 +17,6 @@
 
 use std::path::Path;
 
-
 use crate::attributes::{prism_obj, Glb, SCENE};
 use crate::common::checkers::{check_texture, usd_probe};
 use crate::common::cli::{read_json, run, TempDir};
@@ -162,7 +161,12 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
         let v = usd_probe(USD_PROBE, &out.join(&file.path));
         for group in ["side", "cap"] {
             let g = &v[group];
-            assert_eq!((g["surface"].as_str(), g["texture"].as_str(), g["output"].as_str()), (Some("UsdPreviewSurface"), Some("UsdUVTexture"), Some("rgb")), "{}: {v}", file.path);
+            assert_eq!(
+                (g["surface"].as_str(), g["texture"].as_str(), g["output"].as_str()),
+                (Some("UsdPreviewSurface"), Some("UsdUVTexture"), Some("rgb")),
+                "{}: {v}",
+                file.path
+            );
             assert_eq!((g["reader"].as_str(), g["varname"].as_str()), (Some("UsdPrimvarReader_float2"), Some("st")), "{}: {v}", file.path);
             let resolved = g["file"].as_str().unwrap();
             assert!(!resolved.is_empty() && std::fs::read(resolved).unwrap() == png, "{}: the texture resolves to the copy: {v}", file.path);
@@ -228,7 +232,11 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
 fn missing_or_unsupported_textures_are_one_line_errors() {
     let dir = TempDir::new("texture-errors");
     textured_prism(&dir.path, "formats = [\"glb\"]\nfull_frame = false");
-    std::fs::write(dir.join("scene.toml"), std::fs::read_to_string(dir.join("scene.toml")).unwrap().replace("formats = [\"usda\", \"usdc\", \"glb\"]\n", "")).unwrap();
+    std::fs::write(
+        dir.join("scene.toml"),
+        std::fs::read_to_string(dir.join("scene.toml")).unwrap().replace("formats = [\"usda\", \"usdc\", \"glb\"]\n", ""),
+    )
+    .unwrap();
     std::fs::write(dir.join("prism.mtl"), "newmtl side\nmap_Kd gone.png\n").unwrap();
     let r = run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]);
     assert_eq!(r.code, Some(1), "{r}");

@@ -115,7 +115,8 @@ mod tests {
         assert_eq!(clip.times, vec![0.0, 0.4, 1.5]);
         assert!(clip.targets.iter().all(|t| t.name != "key_2" && t.name != "key_1_out" && t.name != "key_2_in"));
         assert!(clip.curves.iter().flat_map(|c| c.in_tangents.iter().chain(&c.out_tangents)).all(|x| x.is_finite()));
-        let worst = times(&tr).map(|t| tr.evaluate(t).iter().zip(&clip.points_at(t)).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)).fold(0.0, f64::max);
+        let worst =
+            times(&tr).map(|t| tr.evaluate(t).iter().zip(&clip.points_at(t)).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)).fold(0.0, f64::max);
         assert!(worst < 1e-6, "{worst}");
     }
 
@@ -181,7 +182,8 @@ mod tests {
 
     #[test]
     fn zero_velocities_leave_only_pose_shapes() {
-        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
+        let tr =
+            Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
         let clip = BlendShapeClip::bernstein(&tr, true);
         assert_eq!(clip.targets.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["key_1"]);
         assert_eq!(clip, BlendShapeClip::signed(&tr, true), "without velocities both forms are the same file");

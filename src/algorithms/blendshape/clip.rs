@@ -196,12 +196,7 @@ impl BlendShapeClip {
         let w = hermite_weights(theta, self.times[i + 1] - self.times[i]).pos;
         self.curves
             .iter()
-            .map(|c| {
-                w[0] * c.values[i] as f64
-                    + w[1] * c.out_tangents[i] as f64
-                    + w[2] * c.values[i + 1] as f64
-                    + w[3] * c.in_tangents[i + 1] as f64
-            })
+            .map(|c| w[0] * c.values[i] as f64 + w[1] * c.out_tangents[i] as f64 + w[2] * c.values[i + 1] as f64 + w[3] * c.in_tangents[i + 1] as f64)
             .collect()
     }
 
@@ -296,7 +291,8 @@ mod tests {
 
     #[test]
     fn zero_targets_are_dropped_and_sparse_ones_are_sparse() {
-        let tr = Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
+        let tr =
+            Trajectory::with_zero_velocities(vec![0.0, 1.0, 2.0], vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[0.0; 3], [1.0; 3]]]);
         let clip = BlendShapeClip::new(&tr, Weights::Signed);
         // Key 2 aliases key 0 (cyclic), velocities are zero: only key_1 remains, moving vertex 1.
         assert_eq!(clip.targets.len(), 1);

@@ -72,11 +72,12 @@ impl Components {
         // only: a contact's zero-length interval carries no time).
         let h: Vec<f64> = (0..k)
             .map(|key| {
-                let sides: Vec<f64> = [key.checked_sub(1).map(|a| tr.times[key] - tr.times[a]), (key + 1 < k).then(|| tr.times[key + 1] - tr.times[key])]
-                    .into_iter()
-                    .flatten()
-                    .filter(|&l| l > 0.0)
-                    .collect();
+                let sides: Vec<f64> =
+                    [key.checked_sub(1).map(|a| tr.times[key] - tr.times[a]), (key + 1 < k).then(|| tr.times[key + 1] - tr.times[key])]
+                        .into_iter()
+                        .flatten()
+                        .filter(|&l| l > 0.0)
+                        .collect();
                 if sides.is_empty() {
                     1.0
                 } else {
@@ -95,7 +96,8 @@ impl Components {
         let svd = a.thin_svd().expect("the SVD of a finite matrix converges");
         let (u, s, vt) = (svd.U(), svd.S(), svd.V());
         let top = if s.dim() > 0 { s[0] } else { 0.0 };
-        let mut out = Components { mean, directions: Vec::new(), values: Vec::new(), slopes: Vec::new(), singular: Vec::new(), times: tr.times.clone() };
+        let mut out =
+            Components { mean, directions: Vec::new(), values: Vec::new(), slopes: Vec::new(), singular: Vec::new(), times: tr.times.clone() };
         for j in 0..s.dim() {
             // Numerically zero directions carry nothing but noise.
             if !(s[j] > top * 1e-13 && s[j] > 0.0) {
@@ -112,6 +114,11 @@ impl Components {
     /// The number of components (at most twice the key count).
     pub fn len(&self) -> usize {
         self.singular.len()
+    }
+
+    /// Whether there is no component (keys that never move).
+    pub fn is_empty(&self) -> bool {
+        self.singular.is_empty()
     }
 
     /// The first `rank` components (all of them when `rank` is larger) as a clip: `component_J`
@@ -144,7 +151,11 @@ impl Components {
             add(&mut base, &self.directions[j], shift);
             let curve = WeightCurve {
                 // In [MARGIN, 1 - MARGIN] exactly; the clamp only guards the f32 rounding.
-                values: value.iter().map(|&c| ((c - shift) / span) as f32).map(|w| if weights == Weights::Bernstein { w.clamp(0.0, 1.0) } else { w }).collect(),
+                values: value
+                    .iter()
+                    .map(|&c| ((c - shift) / span) as f32)
+                    .map(|w| if weights == Weights::Bernstein { w.clamp(0.0, 1.0) } else { w })
+                    .collect(),
                 in_tangents: in_slope.iter().map(|&m| (m / span) as f32).collect(),
                 out_tangents: out_slope.iter().map(|&m| (m / span) as f32).collect(),
             };
@@ -156,7 +167,8 @@ impl Components {
         for (j, span, curve) in shapes {
             let offsets: Vec<[f32; 3]> = self.directions[j].iter().map(|b| f32x3([b[0] * span, b[1] * span, b[2] * span])).collect();
             // Dense (a principal direction moves nearly every vertex); zero rows dropped.
-            let (indices, offsets): (Vec<u32>, Vec<[f32; 3]>) = offsets.into_iter().enumerate().filter(|(_, o)| *o != [0.0; 3]).map(|(i, o)| (i as u32, o)).unzip();
+            let (indices, offsets): (Vec<u32>, Vec<[f32; 3]>) =
+                offsets.into_iter().enumerate().filter(|(_, o)| *o != [0.0; 3]).map(|(i, o)| (i as u32, o)).unzip();
             clip.targets.push(Target { name: format!("component_{j}"), indices, offsets });
             clip.curves.push(curve);
         }
@@ -342,7 +354,11 @@ mod tests {
         // Signed weights are the same curves, unshifted, same points.
         let signed = c.clip(4, Weights::Signed);
         assert!(signed.curves.iter().flat_map(|w| &w.values).any(|&x| x < 0.0));
-        let d = (0..=100).map(|i| clip.points_at(0.015 * i as f64).iter().zip(&signed.points_at(0.015 * i as f64)).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)).fold(0.0, f64::max);
+        let d = (0..=100)
+            .map(|i| {
+                clip.points_at(0.015 * i as f64).iter().zip(&signed.points_at(0.015 * i as f64)).map(|(p, q)| norm(sub(*p, *q))).fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max);
         assert!(d < 1e-6, "{d}");
     }
 

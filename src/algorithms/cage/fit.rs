@@ -268,4 +268,3 @@ mod tests {
         assert!(!carry_mask(&cage, &binding, &vec![false; fine.len()]).iter().any(|&m| m));
     }
 }
-

@@ -54,11 +54,8 @@ impl Defects {
     /// The defects of `surface`; crossings are looked for when `crossings` (it costs a tree
     /// query per triangle).
     pub fn of(surface: &TriMesh, crossings: bool) -> Defects {
-        let mut edges: Vec<[u32; 2]> = surface
-            .triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])]))
-            .collect();
+        let mut edges: Vec<[u32; 2]> =
+            surface.triangles.iter().flat_map(|t| (0..3).map(move |k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])])).collect();
         edges.sort_unstable();
         let (mut open_edges, mut nonmanifold_edges) = (0, 0);
         for group in edges.chunk_by(|a, b| a == b) {

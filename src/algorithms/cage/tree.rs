@@ -50,9 +50,9 @@ pub struct TriangleTree {
 impl TriangleTree {
     /// The tree of `surface`'s triangles.
     pub fn new(surface: &TriMesh) -> TriangleTree {
-        let corners: Vec<[Point; 3]> =
-            surface.triangles.iter().map(|t| t.map(|v| surface.positions[v as usize])).collect();
-        let mut tree = TriangleTree { corners, order: (0..surface.triangles.len() as u32).collect(), ids: surface.triangles.clone(), nodes: Vec::new() };
+        let corners: Vec<[Point; 3]> = surface.triangles.iter().map(|t| t.map(|v| surface.positions[v as usize])).collect();
+        let mut tree =
+            TriangleTree { corners, order: (0..surface.triangles.len() as u32).collect(), ids: surface.triangles.clone(), nodes: Vec::new() };
         if !tree.order.is_empty() {
             let n = tree.order.len();
             tree.build(0, n);
@@ -81,11 +81,7 @@ impl TriangleTree {
             total += w;
         }
         let center = if total > 0.0 { scale(weighted, 1.0 / total) } else { bounds.center() };
-        let radius = self.order[first..end]
-            .iter()
-            .flat_map(|&t| self.corners[t as usize])
-            .map(|p| norm(sub(p, center)))
-            .fold(0.0, f64::max);
+        let radius = self.order[first..end].iter().flat_map(|&t| self.corners[t as usize]).map(|p| norm(sub(p, center))).fold(0.0, f64::max);
         let index = self.nodes.len() as u32;
         self.nodes.push(Node { bounds, center, radius, area, first: first as u32, end: end as u32, left: 0, right: 0 });
         if end - first > LEAF {

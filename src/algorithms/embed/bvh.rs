@@ -127,12 +127,7 @@ impl Bvh {
     /// radius and returns the new radius (initially infinite; it must never grow). The search
     /// ends when the nearest unexpanded box is farther than the radius, so every item whose
     /// box distance is at most the final radius has been visited.
-    pub fn nearest_search(
-        &self,
-        p: Point,
-        scratch: &mut Scratch,
-        mut visit: impl FnMut(u32) -> f64,
-    ) {
+    pub fn nearest_search(&self, p: Point, scratch: &mut Scratch, mut visit: impl FnMut(u32) -> f64) {
         let queue = &mut scratch.queue;
         queue.clear();
         let Some(root) = self.root() else { return };
@@ -169,13 +164,7 @@ impl Bvh {
 
 /// Build the subtree over `items` (which occupy `offset..` in the final item order), push its
 /// nodes (children first) and return the index of its root.
-fn build_node(
-    boxes: &[Bounds],
-    centers: &[Point],
-    items: &mut [u32],
-    offset: usize,
-    nodes: &mut Vec<Node>,
-) -> u32 {
+fn build_node(boxes: &[Bounds], centers: &[Point], items: &mut [u32], offset: usize, nodes: &mut Vec<Node>) -> u32 {
     let bounds = items.iter().map(|&i| boxes[i as usize]).reduce(Bounds::union).expect("no items");
     let kind = if items.len() <= LEAF_SIZE {
         Kind::Leaf { first: offset as u32, end: (offset + items.len()) as u32 }
@@ -192,9 +181,7 @@ fn build_node(
         // Longest axis, the first one on ties.
         let axis = (1..3).fold(0, |best, d| if extent[d] > extent[best] { d } else { best });
         let mid = items.len() / 2;
-        items.select_nth_unstable_by(mid, |&a, &b| {
-            centers[a as usize][axis].total_cmp(&centers[b as usize][axis]).then(a.cmp(&b))
-        });
+        items.select_nth_unstable_by(mid, |&a, &b| centers[a as usize][axis].total_cmp(&centers[b as usize][axis]).then(a.cmp(&b)));
         let (low, high) = items.split_at_mut(mid);
         let left = build_node(boxes, centers, low, offset, nodes);
         let right = build_node(boxes, centers, high, offset + mid, nodes);
@@ -212,19 +199,14 @@ mod tests {
     fn boxes(count: usize) -> Vec<Bounds> {
         let mut state = 0x9e37_79b9_7f4a_7c15_u64;
         let mut next = move || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
         (0..count)
             .map(|_| {
                 let c: Point = [next() * 10.0, next() * 10.0, next() * 3.0];
                 let h: Point = [next(), next(), next()];
-                Bounds {
-                    lo: std::array::from_fn(|d| c[d] - h[d]),
-                    hi: std::array::from_fn(|d| c[d] + h[d]),
-                }
+                Bounds { lo: std::array::from_fn(|d| c[d] - h[d]), hi: std::array::from_fn(|d| c[d] + h[d]) }
             })
             .collect()
     }
@@ -288,14 +270,12 @@ mod tests {
         let mut scratch = Scratch::default();
         for k in 0..400 {
             let t = k as f64;
-            let p: Point =
-                [(t * 0.37) % 12.0 - 1.0, (t * 0.71) % 12.0 - 1.0, (t * 0.13) % 5.0 - 1.0];
+            let p: Point = [(t * 0.37) % 12.0 - 1.0, (t * 0.71) % 12.0 - 1.0, (t * 0.13) % 5.0 - 1.0];
 
             let mut found = Vec::new();
             bvh.for_each_containing(p, &mut scratch, |i| found.push(i));
             found.sort_unstable();
-            let expected: Vec<u32> =
-                (0..boxes.len() as u32).filter(|&i| boxes[i as usize].contains(p)).collect();
+            let expected: Vec<u32> = (0..boxes.len() as u32).filter(|&i| boxes[i as usize].contains(p)).collect();
             assert_eq!(found, expected);
 
             // Nearest box by branch and bound, radius = best distance so far.
@@ -307,9 +287,8 @@ mod tests {
                 }
                 best.0
             });
-            let brute = (0..boxes.len() as u32)
-                .map(|i| (boxes[i as usize].distance(p), i))
-                .fold((f64::INFINITY, u32::MAX), |a, b| if b < a { b } else { a });
+            let brute =
+                (0..boxes.len() as u32).map(|i| (boxes[i as usize].distance(p), i)).fold((f64::INFINITY, u32::MAX), |a, b| if b < a { b } else { a });
             assert_eq!(best, brute);
         }
     }

@@ -94,11 +94,7 @@ impl Binding {
         if points.is_empty() {
             return Binding { tets: Vec::new(), weights: Vec::new(), distances: Vec::new() };
         }
-        assert!(
-            !mesh.tets.is_empty(),
-            "cannot bind {} points to a mesh without tets",
-            points.len()
-        );
+        assert!(!mesh.tets.is_empty(), "cannot bind {} points to a mesh without tets", points.len());
         let locator = Locator::new(mesh);
         let located: Vec<Located> = points
             .par_iter()
@@ -120,11 +116,7 @@ impl Binding {
     /// Linear in `nodes`: it applies equally to velocities, or to any per-node vector field.
     pub fn apply(&self, mesh: &TetMesh, nodes: &[Point]) -> Vec<Point> {
         assert_eq!(nodes.len(), mesh.positions.len(), "one node value per mesh vertex");
-        self.tets
-            .iter()
-            .zip(&self.weights)
-            .map(|(&t, &w)| combine(mesh.tets[t as usize].map(|v| nodes[v as usize]), w))
-            .collect()
+        self.tets.iter().zip(&self.weights).map(|(&t, &w)| combine(mesh.tets[t as usize].map(|v| nodes[v as usize]), w)).collect()
     }
 }
 
@@ -233,8 +225,7 @@ fn is_contained(weights: [f64; 4]) -> bool {
 fn barycentric(p: Point, ids: [u32; 4], corners: [Point; 4]) -> [f64; 4] {
     let mut volumes = [0.0; 4];
     for (volume, [a, b, c]) in volumes.iter_mut().zip(FACES) {
-        *volume =
-            face_orientation(p, [(ids[a], corners[a]), (ids[b], corners[b]), (ids[c], corners[c])]);
+        *volume = face_orientation(p, [(ids[a], corners[a]), (ids[b], corners[b]), (ids[c], corners[c])]);
     }
     let total: f64 = volumes.iter().sum();
     volumes.map(|v| v / total)
@@ -400,9 +391,7 @@ mod tests {
             for j in 0..=ny {
                 for i in 0..=nx {
                     let x = [i, j, k].map(|c| c as f64 * h);
-                    positions.push(std::array::from_fn(|d| {
-                        origin[d] + x[d] + jitter * h * rng.range(-1.0, 1.0)
-                    }));
+                    positions.push(std::array::from_fn(|d| origin[d] + x[d] + jitter * h * rng.range(-1.0, 1.0)));
                 }
             }
         }
@@ -426,10 +415,7 @@ mod tests {
         let mut mesh = TetMesh { positions, tets };
         mesh.orient_positive();
         for t in 0..mesh.tets.len() {
-            assert!(
-                mesh.signed_volume_at(&mesh.positions, t) > 0.0,
-                "test mesh tet {t} is degenerate"
-            );
+            assert!(mesh.signed_volume_at(&mesh.positions, t) > 0.0, "test mesh tet {t} is degenerate");
         }
         mesh
     }
@@ -582,8 +568,7 @@ mod tests {
             let p = rng.point([-3.0; 3], [3.0; 3]);
             let w = closest_on_triangle(p, tri);
             assert_weights_valid(&w, true);
-            let q: Point =
-                std::array::from_fn(|d| w[0] * tri[0][d] + w[1] * tri[1][d] + w[2] * tri[2][d]);
+            let q: Point = std::array::from_fn(|d| w[0] * tri[0][d] + w[1] * tri[1][d] + w[2] * tri[2][d]);
             assert_projection(p, q, &tri, 1e-12);
         }
     }
@@ -629,20 +614,12 @@ mod tests {
         // both.
         let mut rng = Rng(3);
         let ids = [17, 3, 42];
-        let perms = [
-            ([0, 1, 2], 1.0),
-            ([1, 2, 0], 1.0),
-            ([2, 0, 1], 1.0),
-            ([1, 0, 2], -1.0),
-            ([0, 2, 1], -1.0),
-            ([2, 1, 0], -1.0),
-        ];
+        let perms = [([0, 1, 2], 1.0), ([1, 2, 0], 1.0), ([2, 0, 1], 1.0), ([1, 0, 2], -1.0), ([0, 2, 1], -1.0), ([2, 1, 0], -1.0)];
         for _ in 0..1000 {
             let x: [Point; 3] = std::array::from_fn(|_| rng.point([-1.0; 3], [1.0; 3]));
             let w: [f64; 3] = rng.weights();
             // On the face, up to rounding.
-            let p: Point =
-                std::array::from_fn(|d| w[0] * x[0][d] + w[1] * x[1][d] + w[2] * x[2][d]);
+            let p: Point = std::array::from_fn(|d| w[0] * x[0][d] + w[1] * x[1][d] + w[2] * x[2][d]);
             let reference = face_orientation(p, [0, 1, 2].map(|k| (ids[k], x[k])));
             for (perm, sign) in perms {
                 assert_eq!(face_orientation(p, perm.map(|k| (ids[k], x[k]))), sign * reference);
@@ -668,17 +645,12 @@ mod tests {
     #[test]
     fn centroids_get_quarter_weights() {
         let mesh = jittered_grid([3, 3, 3], 2);
-        let centroids: Vec<Point> =
-            (0..mesh.tets.len()).map(|t| combine(corners(&mesh, t as u32), [0.25; 4])).collect();
+        let centroids: Vec<Point> = (0..mesh.tets.len()).map(|t| combine(corners(&mesh, t as u32), [0.25; 4])).collect();
         let binding = Binding::compute(&mesh, &centroids);
         for t in 0..mesh.tets.len() {
             assert_eq!(binding.tets[t] as usize, t);
             assert_eq!(binding.distances[t], 0.0);
-            assert!(
-                binding.weights[t].iter().all(|w| (w - 0.25).abs() <= 1e-12),
-                "{:?}",
-                binding.weights[t]
-            );
+            assert!(binding.weights[t].iter().all(|w| (w - 0.25).abs() <= 1e-12), "{:?}", binding.weights[t]);
         }
     }
 
@@ -686,9 +658,7 @@ mod tests {
     fn inside_points_are_reproduced() {
         let mesh = jittered_grid([4, 3, 5], 3);
         let mut rng = Rng(4);
-        let points: Vec<Point> = (0..5000)
-            .map(|_| combine(corners(&mesh, rng.index(mesh.tets.len()) as u32), rng.weights()))
-            .collect();
+        let points: Vec<Point> = (0..5000).map(|_| combine(corners(&mesh, rng.index(mesh.tets.len()) as u32), rng.weights())).collect();
         let binding = Binding::compute(&mesh, &points);
         let carried = binding.apply(&mesh, &mesh.positions);
         let tol = 1e-12 * length_scale(&mesh);
@@ -707,11 +677,10 @@ mod tests {
         let hi: Point = std::array::from_fn(|d| lo[d] + h * cells[d] as f64);
         let mesh = grid(cells, lo, h, 0.0, &mut Rng(0));
         let mut rng = Rng(5);
-        let points: Vec<Point> =
-            std::iter::repeat_with(|| rng.point(lo.map(|c| c - 1.0), hi.map(|c| c + 1.0)))
-                .filter(|p| !Bounds { lo, hi }.contains(*p))
-                .take(5000)
-                .collect();
+        let points: Vec<Point> = std::iter::repeat_with(|| rng.point(lo.map(|c| c - 1.0), hi.map(|c| c + 1.0)))
+            .filter(|p| !Bounds { lo, hi }.contains(*p))
+            .take(5000)
+            .collect();
         let binding = Binding::compute(&mesh, &points);
         let carried = binding.apply(&mesh, &mesh.positions);
         let tol = 1e-12 * length_scale(&mesh);
@@ -749,10 +718,7 @@ mod tests {
                 if push < EPS * h {
                     assert_eq!(binding.distances[i], 0.0, "point {i} at {p:?}");
                 } else {
-                    assert!(
-                        (binding.distances[i] - push).abs() <= 1e-3 * push,
-                        "point {i} at {p:?}"
-                    );
+                    assert!((binding.distances[i] - push).abs() <= 1e-3 * push, "point {i} at {p:?}");
                 }
             }
         }
@@ -770,8 +736,7 @@ mod tests {
         let moved: Vec<Point> = mesh.positions.iter().map(|&x| map(x)).collect();
         let carried = binding.apply(&mesh, &moved);
         let at_rest = binding.apply(&mesh, &mesh.positions);
-        let tol =
-            1e-12 * length_scale(&TetMesh { positions: moved.clone(), tets: mesh.tets.clone() });
+        let tol = 1e-12 * length_scale(&TetMesh { positions: moved.clone(), tets: mesh.tets.clone() });
         for (i, &p) in points.iter().enumerate() {
             // Inside, the carried point is the mapped point; everywhere (weights sum to 1) it is
             // the mapped carried rest point.
@@ -790,11 +755,7 @@ mod tests {
         assert_eq!(first, Binding::compute(&mesh, &points));
         for threads in [1, 3] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            assert_eq!(
-                first,
-                pool.install(|| Binding::compute(&mesh, &points)),
-                "{threads} threads"
-            );
+            assert_eq!(first, pool.install(|| Binding::compute(&mesh, &points)), "{threads} threads");
         }
     }
 
@@ -817,10 +778,7 @@ mod tests {
     fn point_on_shared_face_goes_to_lowest_index() {
         // Two tets on either side of the face (a, b, c), tilted so that points on it are only
         // on it up to rounding.
-        let positions: Vec<Point> =
-            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.2, 0.3, 1.0], [0.3, 0.2, -1.0]]
-                .map(rotate)
-                .to_vec();
+        let positions: Vec<Point> = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.2, 0.3, 1.0], [0.3, 0.2, -1.0]].map(rotate).to_vec();
         let above = [0, 1, 2, 3];
         let below = [0, 2, 1, 4];
         let mut rng = Rng(13);
@@ -860,24 +818,13 @@ mod tests {
         let mut rng = Rng(16);
         for tet in &mut mesh.tets {
             let [a, b, c, d] = *tet;
-            *tet = [
-                [a, b, c, d],
-                [b, c, a, d],
-                [c, a, b, d],
-                [b, a, d, c],
-                [d, c, b, a],
-                [a, d, b, c],
-            ][rng.index(6)];
+            *tet = [[a, b, c, d], [b, c, a, d], [c, a, b, d], [b, a, d, c], [d, c, b, a], [a, d, b, c]][rng.index(6)];
         }
         for segment in 0..4u32 {
             let ends = [segment, segment + 1]; // grid vertices (segment, 0, 0) and (segment + 1, 0, 0)
-            let around: Vec<u32> = (0..mesh.tets.len() as u32)
-                .filter(|&t| ends.iter().all(|v| mesh.tets[t as usize].contains(v)))
-                .collect();
+            let around: Vec<u32> = (0..mesh.tets.len() as u32).filter(|&t| ends.iter().all(|v| mesh.tets[t as usize].contains(v))).collect();
             assert_eq!(around.len(), 2);
-            assert!(
-                (0..2).all(|t| mesh.signed_volume_at(&mesh.positions, around[t] as usize) > 0.0)
-            );
+            assert!((0..2).all(|t| mesh.signed_volume_at(&mesh.positions, around[t] as usize) > 0.0));
             let points: Vec<Point> = (0..100)
                 .map(|_| {
                     let x = 0.5 * (segment as f64 + rng.range(0.01, 0.99));
@@ -913,15 +860,10 @@ mod tests {
         let carried = binding.apply(&mesh, &mesh.positions);
         let scale = length_scale(&mesh);
         let tol = 1e-12 * scale;
-        let reference: Vec<(Located, usize)> =
-            points.par_iter().map(|&p| brute_force(&mesh, p)).collect();
+        let reference: Vec<(Located, usize)> = points.par_iter().map(|&p| brute_force(&mesh, p)).collect();
         let (mut outside, mut outside_ties) = (0, 0);
         for (i, &p) in points.iter().enumerate() {
-            let found = Located {
-                tet: binding.tets[i],
-                weights: binding.weights[i],
-                distance: binding.distances[i],
-            };
+            let found = Located { tet: binding.tets[i], weights: binding.weights[i], distance: binding.distances[i] };
             let (expected, ties) = reference[i];
             assert_eq!(found, expected, "point {i} at {p:?}");
             let w = &binding.weights[i];

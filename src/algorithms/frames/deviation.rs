@@ -3,9 +3,9 @@
 //! the frames, holding two frames at a time.
 
 use super::FrameSource;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{norm, sub, Point};
 use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::support::error::{Error, Result};
 
 /// Distances of a trajectory from every frame of a cache, relative to `diagonal`.
 ///

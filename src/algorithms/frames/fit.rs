@@ -29,9 +29,9 @@ use std::collections::BTreeMap;
 
 use super::band::{axpy, Band, NotPositiveDefinite};
 use super::FrameSource;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::spacetime::trajectory::{hermite_weights, Trajectory};
+use crate::support::error::{Error, Result};
 
 /// Settings of the least-squares fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,10 +136,7 @@ pub(crate) fn check_keys<S: FrameSource + ?Sized>(source: &S, keys: &[usize]) ->
 
 fn check_pins(pins: &[Vec<bool>], keys: usize, vertices: usize) -> Result<()> {
     if !pins.is_empty() && pins.len() != keys {
-        return Err(Error::general(
-            format!("{} pin masks for {keys} keys", pins.len()),
-            "give one vertex mask per key, or none",
-        ));
+        return Err(Error::general(format!("{} pin masks for {keys} keys", pins.len()), "give one vertex mask per key, or none"));
     }
     if let Some((k, m)) = pins.iter().enumerate().find(|(_, m)| !m.is_empty() && m.len() != vertices) {
         return Err(Error::general(

@@ -39,9 +39,9 @@ use std::collections::{BTreeSet, VecDeque};
 use super::deviation::{cache_diagonal, deviation, frame_distance, CacheDeviation};
 use super::fit::{fit, FitSettings, NormalEquations};
 use super::FrameSource;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::spacetime::trajectory::{hermite_weights, Trajectory};
+use crate::support::error::{Error, Result};
 
 /// Settings of the automatic key selection.
 #[derive(Debug, Clone, PartialEq)]
@@ -119,10 +119,7 @@ pub struct AutoKeys {
 pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) -> Result<AutoKeys> {
     let frames = source.frame_count();
     if frames < 2 {
-        return Err(Error::general(
-            format!("a cache of {frames} frame(s) has no motion to key"),
-            "use a cache with at least two frames",
-        ));
+        return Err(Error::general(format!("a cache of {frames} frame(s) has no motion to key"), "use a cache with at least two frames"));
     }
     if !(settings.tolerance > 0.0 && settings.tolerance.is_finite()) {
         return Err(Error::general(

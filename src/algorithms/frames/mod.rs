@@ -115,4 +115,3 @@ pub(crate) fn rate_of(times: &[f64]) -> Option<f64> {
         rate
     })
 }
-

@@ -3,8 +3,8 @@
 //! scene's `[cache]` table (`start = 0`, `end = -1` is the whole cache).
 
 use super::FrameSource;
-use crate::support::error::Result;
 use crate::algorithms::geometry::Point;
+use crate::support::error::Result;
 
 /// A range of frames, 0-based with `end` inclusive; negative values count from the end
 /// (`-1` is the last frame), as in the scene's `[cache] start` / `end`.

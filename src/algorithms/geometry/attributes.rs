@@ -143,12 +143,8 @@ pub struct SplitSurface {
 pub fn split_at_seams(triangles: &[[u32; 3]], vertices: usize, attributes: &CornerAttributes) -> SplitSurface {
     let has_uv = !attributes.uv_corners.is_empty();
     let has_normal = !attributes.normal_corners.is_empty();
-    let key = |t: usize, k: usize| {
-        (
-            if has_uv { attributes.uv_corners[t][k] } else { 0 },
-            if has_normal { attributes.normal_corners[t][k] } else { 0 },
-        )
-    };
+    let key =
+        |t: usize, k: usize| (if has_uv { attributes.uv_corners[t][k] } else { 0 }, if has_normal { attributes.normal_corners[t][k] } else { 0 });
     // Per vertex, its (key, split index) list; a handful of entries at most.
     let mut seen: Vec<Vec<((u32, u32), u32)>> = vec![Vec::new(); vertices];
     let mut sources: Vec<u32> = (0..vertices as u32).collect();

@@ -39,10 +39,7 @@ impl Bounds {
 
     /// The smallest box holding both.
     pub fn union(self, other: Bounds) -> Bounds {
-        Bounds {
-            lo: std::array::from_fn(|d| self.lo[d].min(other.lo[d])),
-            hi: std::array::from_fn(|d| self.hi[d].max(other.hi[d])),
-        }
+        Bounds { lo: std::array::from_fn(|d| self.lo[d].min(other.lo[d])), hi: std::array::from_fn(|d| self.hi[d].max(other.hi[d])) }
     }
 
     /// The box grown by `pad` on every side.

@@ -13,8 +13,6 @@ pub mod attributes;
 pub mod bounds;
 pub mod surface;
 
-
-
 pub use bounds::Bounds;
 
 /// A point or vector in 3D.

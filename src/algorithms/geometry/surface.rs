@@ -123,10 +123,8 @@ pub fn compact(mesh: &TriMesh) -> (TriMesh, Vec<u32>) {
 ///
 /// Each edge is given in the direction its triangle traverses it, ordered by triangle.
 pub fn open_edges(mesh: &TriMesh) -> Vec<[u32; 2]> {
-    let mut open: Vec<usize> = edge_uses(&mesh.triangles)
-        .chunk_by(|x, y| x.0 == y.0)
-        .filter_map(|group| if let [(_, id)] = group { Some(*id) } else { None })
-        .collect();
+    let mut open: Vec<usize> =
+        edge_uses(&mesh.triangles).chunk_by(|x, y| x.0 == y.0).filter_map(|group| if let [(_, id)] = group { Some(*id) } else { None }).collect();
     open.sort_unstable();
     open.into_iter().map(|id| directed_edge(mesh.triangles[id / 3], id % 3)).collect()
 }
@@ -178,9 +176,9 @@ fn same_winding(s: [u32; 3], t: [u32; 3]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::support::testing::paper_asset;
-    use crate::formats::mesh::{medit, obj};
     use crate::algorithms::procedural;
+    use crate::formats::mesh::{medit, obj};
+    use crate::support::testing::paper_asset;
 
     /// Every edge of a closed, consistently wound surface is traversed once in each direction.
     fn assert_closed_and_consistent(triangles: &[[u32; 3]]) {
@@ -202,10 +200,7 @@ mod tests {
     }
 
     fn unit_tet() -> TetMesh {
-        TetMesh {
-            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            tets: vec![[0, 1, 2, 3]],
-        }
+        TetMesh { positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], tets: vec![[0, 1, 2, 3]] }
     }
 
     #[test]
@@ -281,11 +276,8 @@ mod tests {
 
     #[test]
     fn compact_keeps_order_and_maps_back() {
-        let mesh = TriMesh {
-            positions: vec![[9.0; 3], [0.0; 3], [1.0, 0.0, 0.0], [8.0; 3], [0.0, 1.0, 0.0]],
-            triangles: vec![[4, 1, 2]],
-            attributes: None,
-        };
+        let mesh =
+            TriMesh { positions: vec![[9.0; 3], [0.0; 3], [1.0, 0.0, 0.0], [8.0; 3], [0.0, 1.0, 0.0]], triangles: vec![[4, 1, 2]], attributes: None };
         let (compacted, kept) = compact(&mesh);
         assert_eq!(kept, vec![1, 2, 4]);
         assert_eq!(compacted.positions, vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);

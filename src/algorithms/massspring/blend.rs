@@ -47,8 +47,8 @@ use super::obstacle::Obstacle;
 use super::refine::median_edge;
 use super::rigid::Rigid;
 use super::springs::{Bending, SpringKind, Springs};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{bbox_diagonal, norm, sub, Point, TetMesh};
+use crate::support::error::{Error, Result};
 
 /// Relative residual of the linear solves in a blend (its tangent and its Newton steps): the
 /// Newton error shrinks by at least this factor per iteration on top of the quadratic rate.
@@ -274,7 +274,10 @@ impl MassSpring {
                 let points: Vec<Point> = (0..body_count).filter(|&v| fixed[v]).map(|v| positions0[v]).collect();
                 if !spans_a_plane(&points) {
                     return Err(Error::general(
-                        format!("the {} fixed vertices lie on one line (or there are fewer than 3), so the body can still turn about it", points.len()),
+                        format!(
+                            "the {} fixed vertices lie on one line (or there are fewer than 3), so the body can still turn about it",
+                            points.len()
+                        ),
                         "fix at least three vertices that are not on one line, or use an anchor instead",
                     ));
                 }
@@ -290,7 +293,10 @@ impl MassSpring {
                 };
                 if points.iter().any(|p| !p.iter().all(|c| c.is_finite())) || !spans_a_plane(&points) {
                     return Err(Error::general(
-                        format!("the {} anchor points lie on one line (or there are fewer than 3), so the anchor's rotation is undetermined", points.len()),
+                        format!(
+                            "the {} anchor points lie on one line (or there are fewer than 3), so the anchor's rotation is undetermined",
+                            points.len()
+                        ),
                         "give at least three anchor points that are not on one line (or use the default anchor)",
                     ));
                 }
@@ -575,7 +581,14 @@ impl MassSpring {
     /// `g_i = Σ_q s_q (l_q / r̄_q - 1) u_q` (with `k_q = s_q / r̄_q`),
     /// `∂g_i/∂r̄_q = -s_q d_q / r̄_q²`. One linear solve, preconditioned by the factorization made
     /// at the previous blend's start.
-    fn tangent(&mut self, previous_weights: &[f64], previous: &[Point], weights: &[f64], rest: &[f64], report: &mut NewtonReport) -> Result<Vec<Point>> {
+    fn tangent(
+        &mut self,
+        previous_weights: &[f64],
+        previous: &[Point],
+        weights: &[f64],
+        rest: &[f64],
+        report: &mut NewtonReport,
+    ) -> Result<Vec<Point>> {
         let n = self.springs.vertex_count;
         let old_rest: Vec<f64> = (0..self.springs.len()).map(|q| blend_scalar(previous_weights, |j| self.rest[j][q])).collect();
         let old_stiffness: Vec<f64> = old_rest.iter().zip(&self.stiffness_scale).map(|(r, s)| s / r).collect();
@@ -666,7 +679,11 @@ pub fn check_weights(weights: &[f64], targets: usize, tolerance: f64) -> Result<
     }
     if let Some(j) = weights.iter().position(|w| !w.is_finite() || *w < 0.0) {
         return Err(Error::general(
-            format!("weight {} is {}: mass-spring blending takes convex weights only, so negative weights (extrapolation) are refused", j + 1, weights[j]),
+            format!(
+                "weight {} is {}: mass-spring blending takes convex weights only, so negative weights (extrapolation) are refused",
+                j + 1,
+                weights[j]
+            ),
             fix,
         ));
     }
@@ -689,7 +706,9 @@ fn check_settings(s: &Settings) -> Result<()> {
             return Err(Error::general(format!("mass-spring setting {name} = {value} is not a positive number"), format!("set {name} > 0")));
         }
     }
-    for (name, value) in [("max_iterations", s.max_iterations), ("anchor_neighbours", s.anchor_neighbours), ("max_collision_rounds", s.max_collision_rounds)] {
+    for (name, value) in
+        [("max_iterations", s.max_iterations), ("anchor_neighbours", s.anchor_neighbours), ("max_collision_rounds", s.max_collision_rounds)]
+    {
         if value == 0 {
             return Err(Error::general(format!("mass-spring setting {name} is 0"), format!("set {name} to at least 1")));
         }
@@ -745,7 +764,10 @@ fn check_targets(t: &Targets) -> Result<usize> {
             for (j, pose) in poses.iter().enumerate() {
                 if pose.len() != body.positions.len() || (0..n).any(|v| pose[v] != t.surface[j][v]) {
                     return fail(
-                        format!("body pose {j} does not have the body's {} nodes with the surface vertices of target {j} first", body.positions.len()),
+                        format!(
+                            "body pose {j} does not have the body's {} nodes with the surface vertices of target {j} first",
+                            body.positions.len()
+                        ),
                         "give body poses whose first nodes are the targets' surface vertices",
                     );
                 }

@@ -45,10 +45,10 @@ use faer::{Conj, Mat, Par, Side};
 
 use super::energy::{spring_hessian, Definiteness, SpringSystem};
 use super::springs::Springs;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{norm, Point};
-use crate::algorithms::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
 use crate::algorithms::physics::cholesky::PARALLEL_FACTOR_FLOPS;
+use crate::algorithms::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
+use crate::support::error::{Error, Result};
 
 /// When to stop and when to trust the exact Hessian.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -312,7 +312,9 @@ impl Newton {
         let mut previous_step = f64::INFINITY;
         for _ in 0..settings.max_iterations {
             // `--max-time` (when the CLI set one): an equilibrium may take many iterations.
-            crate::support::resources::check_time("mass-spring blend", || format!("after {} Newton iterations of an equilibrium", report.iterations))?;
+            crate::support::resources::check_time("mass-spring blend", || {
+                format!("after {} Newton iterations of an equilibrium", report.iterations)
+            })?;
             let mut gradient = std::mem::take(&mut self.gradient);
             system.gradient(x, &mut gradient);
             for v in 0..n {
@@ -420,7 +422,15 @@ impl Newton {
 
     /// `dx = H⁻¹ rhs` on the free unknowns, `H` exact when `exact` and positive definite, else
     /// clamped. Returns the matrix used.
-    fn direction(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], exact: bool, tolerance: f64, report: &mut NewtonReport) -> Result<Definiteness> {
+    fn direction(
+        &mut self,
+        system: &SpringSystem,
+        x: &[Point],
+        fixed: &[bool],
+        exact: bool,
+        tolerance: f64,
+        report: &mut NewtonReport,
+    ) -> Result<Definiteness> {
         let mut used = if exact { Definiteness::Exact } else { Definiteness::Clamped };
         self.assemble(system, x, fixed, used);
         if !self.factored || self.stale {
@@ -697,13 +707,17 @@ impl Factor {
 }
 
 /// One numeric LLᵀ factorization into `values`; false when not positive definite.
-fn numeric<T: faer::traits::ComplexField>(symbolic: &SymbolicCholesky<usize>, values: &mut [T], a: SparseColMatRef<'_, usize, T>, par: Par, memory: &mut MemBuffer) -> bool
+fn numeric<T: faer::traits::ComplexField>(
+    symbolic: &SymbolicCholesky<usize>,
+    values: &mut [T],
+    a: SparseColMatRef<'_, usize, T>,
+    par: Par,
+    memory: &mut MemBuffer,
+) -> bool
 where
     T::Real: Default,
 {
-    symbolic
-        .factorize_numeric_llt(values, a, Side::Lower, LltRegularization::default(), par, MemStack::new(memory), Default::default())
-        .is_ok()
+    symbolic.factorize_numeric_llt(values, a, Side::Lower, LltRegularization::default(), par, MemStack::new(memory), Default::default()).is_ok()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -731,10 +745,10 @@ fn symmetric_product(a: &SparseColMat<usize, f64>, x: &[f64], y: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::algorithms::geometry::sub;
     use crate::algorithms::massspring::energy::Definiteness;
     use crate::algorithms::massspring::springs::{Bending, Springs};
     use crate::algorithms::massspring::testing::{hessian_columns, Rng};
-    use crate::algorithms::geometry::sub;
     use crate::algorithms::procedural::icosphere;
 
     #[test]
@@ -764,7 +778,15 @@ mod tests {
             hessian_columns(&sys, &x, definiteness, |v, c, hv| {
                 for w in 0..n {
                     for r in 0..3 {
-                        let expected = if fixed[v] || fixed[w] { if (v, c) == (w, r) { 1.0 } else { 0.0 } } else { hv[w][r] };
+                        let expected = if fixed[v] || fixed[w] {
+                            if (v, c) == (w, r) {
+                                1.0
+                            } else {
+                                0.0
+                            }
+                        } else {
+                            hv[w][r]
+                        };
                         assert!((dense[3 * w + r][3 * v + c] - expected).abs() < 1e-12, "({w},{r}),({v},{c})");
                     }
                 }

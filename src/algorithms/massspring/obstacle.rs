@@ -2,8 +2,8 @@
 //! spheres, the scene file's `[[obstacle]]` kinds. The free side of a plane is the side its
 //! normal points to; a sphere is solid.
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{add, dot, norm, scale, sub, Point};
+use crate::support::error::{Error, Result};
 
 /// A rigid obstacle in world coordinates (the targets' units), as a scene's `[[obstacle]]`
 /// table gives it.
@@ -123,10 +123,7 @@ mod tests {
         let file: File = toml::from_str(text).unwrap();
         assert_eq!(
             file.obstacle,
-            vec![
-                Obstacle::Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0] },
-                Obstacle::Sphere { center: [0.0, 2.0, 0.0], radius: 0.5 }
-            ]
+            vec![Obstacle::Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0] }, Obstacle::Sphere { center: [0.0, 2.0, 0.0], radius: 0.5 }]
         );
     }
 }

@@ -124,12 +124,8 @@ impl Quaternion {
     /// with two it is their slerp (exactly: it is computed as one).
     pub fn weighted_mean(qs: &[Quaternion], weights: &[f64]) -> Quaternion {
         let reference = qs[0];
-        let used: Vec<(Quaternion, f64)> = qs
-            .iter()
-            .zip(weights)
-            .filter(|(_, &w)| w != 0.0)
-            .map(|(q, &w)| (if q.dot(&reference) < 0.0 { q.scaled(-1.0) } else { *q }, w))
-            .collect();
+        let used: Vec<(Quaternion, f64)> =
+            qs.iter().zip(weights).filter(|(_, &w)| w != 0.0).map(|(q, &w)| (if q.dot(&reference) < 0.0 { q.scaled(-1.0) } else { *q }, w)).collect();
         match used.as_slice() {
             [] => Quaternion::IDENTITY,
             [(q, _)] => *q,
@@ -256,8 +252,8 @@ fn mat_vec(m: &Mat3, v: Point) -> Point {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::algorithms::massspring::testing::Rng;
     use crate::algorithms::geometry::norm;
+    use crate::algorithms::massspring::testing::Rng;
 
     fn rotation_about(axis: Point, angle: f64) -> Quaternion {
         let n = norm(axis);

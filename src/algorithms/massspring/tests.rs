@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use super::testing::bend;
 use super::springs::SpringKind;
+use super::testing::bend;
 use super::*;
 use crate::algorithms::geometry::surface::enclosed_volume;
 use crate::algorithms::geometry::{norm, sub, Point, TetMesh, TriMesh};
@@ -138,7 +138,8 @@ fn a_sphere_pushed_into_the_blend_holds_only_surface_vertices_and_none_stays_ins
     let mut model = MassSpring::new(&t, &Boundary::Fixed(root(&surface)), &Settings::default()).unwrap();
     let free = model.blend(&[0.5, 0.5], &[]).unwrap();
     // A sphere centred just outside the bar's outer side at mid-length, reaching well into it.
-    let mid = (0..surface.positions.len()).filter(|&v| (surface.positions[v][1] - 1.0).abs() < 1e-9 && surface.positions[v][0] == 0.0).collect::<Vec<_>>();
+    let mid =
+        (0..surface.positions.len()).filter(|&v| (surface.positions[v][1] - 1.0).abs() < 1e-9 && surface.positions[v][0] == 0.0).collect::<Vec<_>>();
     let (p, q) = (free.positions[mid[0]], free.positions[mid[mid.len() - 1]]);
     let outward = {
         let c = free.surface().iter().fold([0.0; 3], |a, p| crate::algorithms::geometry::add(a, *p));
@@ -153,7 +154,10 @@ fn a_sphere_pushed_into_the_blend_holds_only_surface_vertices_and_none_stays_ins
     let sphere = Obstacle::Sphere { center, radius };
     let inside_before = free.surface().iter().filter(|x| sphere.signed_distance(**x) < 0.0).count();
     let interior_before = free.positions[surface.positions.len()..].iter().filter(|x| sphere.signed_distance(**x) < 0.0).count();
-    assert!(inside_before > 3 && interior_before > 0, "the sphere starts inside the shape: {inside_before} surface, {interior_before} interior vertices");
+    assert!(
+        inside_before > 3 && interior_before > 0,
+        "the sphere starts inside the shape: {inside_before} surface, {interior_before} interior vertices"
+    );
     model.reset_warm_start();
     let shape = model.blend(&[0.5, 0.5], &[sphere]).unwrap();
     let tolerance = Settings::default().tolerance * size(&targets[0]);

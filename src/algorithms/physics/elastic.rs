@@ -16,14 +16,17 @@
 use rayon::prelude::*;
 
 use super::csr::Csr;
+use super::lanes::{Lanes, BATCH, M3};
 use super::mat3::{self, Mat3};
 #[cfg(doc)]
 use super::projection::project;
-use super::projection::{project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, project_with_jacobian_lanes_into, volume_preserving, JacobianBatch, ProjectionJacobian};
-use super::lanes::{Lanes, M3, BATCH};
+use super::projection::{
+    project_batch, project_forces, project_with_jacobian_batch, project_with_jacobian_extend, project_with_jacobian_lanes_into, volume_preserving,
+    JacobianBatch, ProjectionJacobian,
+};
 use super::svd3::svd3;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{Point, TetMesh};
+use crate::support::error::{Error, Result};
 
 /// The elastic constants of a body, per unit rest volume.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,10 +100,7 @@ impl Elastic {
             }
         }
         if let Some(a) = mass.iter().position(|&m| m <= 0.0) {
-            return Err(Error::general(
-                format!("node {a} belongs to no tet, so it has no mass"),
-                "remove unreferenced nodes from the tet mesh",
-            ));
+            return Err(Error::general(format!("node {a} belongs to no tet, so it has no mass"), "remove unreferenced nodes from the tet mesh"));
         }
         let mut triplets = Vec::with_capacity(16 * mesh.tets.len());
         for ((tet, g), w) in mesh.tets.iter().zip(&grads).zip(&weights) {
@@ -178,7 +178,11 @@ impl Elastic {
     /// The corner gradients and weights of the batch of [`BATCH`] tets from `first`: the body's
     /// arrays in place for a whole batch; the last, partial one copied into `pad`, whose entries
     /// past the last tet stay as they are (zeros as the callers make it).
-    pub(crate) fn batch_grads_weights<'a>(&'a self, first: usize, pad: &'a mut ([[[f64; 3]; 4]; BATCH], [f64; BATCH])) -> (&'a [[[f64; 3]; 4]; BATCH], &'a [f64; BATCH]) {
+    pub(crate) fn batch_grads_weights<'a>(
+        &'a self,
+        first: usize,
+        pad: &'a mut ([[[f64; 3]; 4]; BATCH], [f64; BATCH]),
+    ) -> (&'a [[[f64; 3]; 4]; BATCH], &'a [f64; BATCH]) {
         match (self.grads[first..].first_chunk::<BATCH>(), self.weights[first..].first_chunk::<BATCH>()) {
             (Some(g), Some(w)) => (g, w),
             _ => {
@@ -350,7 +354,13 @@ impl Elastic {
 
     /// [`Elastic::local_step_with_jacobian_batches_sequential_into`], with `jp = J p` of its
     /// targets scattered batch by batch when `jp` is given.
-    fn local_step_with_jacobian_batches_scattered(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>, mut jp: Option<&mut [Point]>) {
+    fn local_step_with_jacobian_batches_scattered(
+        &self,
+        x: &[Point],
+        targets: &mut Vec<Mat3>,
+        jacobians: &mut Vec<JacobianBatch>,
+        mut jp: Option<&mut [Point]>,
+    ) {
         let (share, count) = (self.strain_share(), self.tet_count());
         targets.resize(count, [[0.0; 3]; 3]);
         jacobians.resize_with(count.div_ceil(BATCH), JacobianBatch::default);
@@ -393,7 +403,13 @@ impl Elastic {
     /// `jp` right after their projection, while they and the batch's gradients are in cache,
     /// instead of in a second pass over every tet. The bytes of the two (every node sums its
     /// tets in increasing order from zero).
-    pub fn local_step_with_jacobian_batches_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<JacobianBatch>, jp: &mut [Point]) {
+    pub fn local_step_with_jacobian_batches_and_forces_sequential_into(
+        &self,
+        x: &[Point],
+        targets: &mut Vec<Mat3>,
+        jacobians: &mut Vec<JacobianBatch>,
+        jp: &mut [Point],
+    ) {
         self.local_step_with_jacobian_batches_scattered(x, targets, jacobians, Some(jp));
     }
 
@@ -424,12 +440,7 @@ impl Elastic {
     /// `out = ∇²E(x) u = L u - J DP[dF(u)]`, the exact Hessian of the elastic energy applied to
     /// `u`, from the projection Jacobians at `x`.
     pub fn hessian_apply(&self, jacobians: &[ProjectionJacobian], u: &[Point], out: &mut [Point]) {
-        let dp: Vec<Mat3> = jacobians
-            .par_iter()
-            .enumerate()
-            .with_min_len(64)
-            .map(|(e, j)| j.apply(&self.deformation_gradient(e, u)))
-            .collect();
+        let dp: Vec<Mat3> = jacobians.par_iter().enumerate().with_min_len(64).map(|(e, j)| j.apply(&self.deformation_gradient(e, u))).collect();
         let mut jdp = vec![[0.0; 3]; u.len()];
         self.apply_j(&dp, &mut jdp);
         self.stiffness.mul_points(u, out);
@@ -552,7 +563,11 @@ mod tests {
         let x: Vec<Point> = mesh.positions.iter().map(|&p| crate::algorithms::geometry::add(rotate(p, 1.1), [0.3, -2.0, 5.0])).collect();
         assert!(el.energy(&x) < 1e-20);
         let g = el.energy_gradient(&x);
-        assert!(g.iter().all(|v| crate::algorithms::geometry::norm(*v) < 1e-12), "{:?}", g.iter().map(|v| crate::algorithms::geometry::norm(*v)).fold(0.0, f64::max));
+        assert!(
+            g.iter().all(|v| crate::algorithms::geometry::norm(*v) < 1e-12),
+            "{:?}",
+            g.iter().map(|v| crate::algorithms::geometry::norm(*v)).fold(0.0, f64::max)
+        );
     }
 
     #[test]
@@ -574,11 +589,8 @@ mod tests {
         // ∇E = Lx - Jp(x) is exact (envelope theorem): check it against central differences.
         let mesh = cube_mesh(2);
         let el = Elastic::new(&mesh, &material()).unwrap();
-        let x: Vec<Point> = mesh
-            .positions
-            .iter()
-            .map(|p| [p[0] * 1.2 + 0.1 * p[1], p[1] * 0.8 + 0.05 * p[2] * p[0], p[2] + 0.2 * p[0] * p[1]])
-            .collect();
+        let x: Vec<Point> =
+            mesh.positions.iter().map(|p| [p[0] * 1.2 + 0.1 * p[1], p[1] * 0.8 + 0.05 * p[2] * p[0], p[2] + 0.2 * p[0] * p[1]]).collect();
         let g = el.energy_gradient(&x);
         let h = 1e-6;
         let mut worst: f64 = 0.0;
@@ -601,7 +613,8 @@ mod tests {
         let mesh = cube_mesh(3);
         let el = Elastic::new(&mesh, &material()).unwrap();
         assert_ne!(el.tet_count() % BATCH, 0);
-        let x: Vec<Point> = mesh.positions.iter().map(|p| [p[0] * 1.3 - 0.4 * p[2] * p[1], -p[1] + 0.2 * p[0], p[2] * 0.6 + 0.5 * p[0] * p[0]]).collect();
+        let x: Vec<Point> =
+            mesh.positions.iter().map(|p| [p[0] * 1.3 - 0.4 * p[2] * p[1], -p[1] + 0.2 * p[0], p[2] * 0.6 + 0.5 * p[0] * p[0]]).collect();
         let (mut targets, mut jac) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![ProjectionJacobian::default(); el.tet_count()]);
         el.local_step(&x, &mut targets);
         let mut with_jacobians = vec![[[0.0; 3]; 3]; el.tet_count()];
@@ -672,12 +685,17 @@ mod tests {
         let el = Elastic::new(&mesh, &material()).unwrap();
         let x: Vec<Point> = mesh.positions.iter().map(|p| [p[0] * 1.3 + 0.2 * p[1] * p[2], p[1] * 0.7, p[2] + 0.3 * p[0] * p[0]]).collect();
         let u: Vec<Point> = (0..x.len()).map(|a| [(a as f64 * 0.37).sin(), (a as f64 * 0.91).cos(), 0.5 - (a % 3) as f64 * 0.4]).collect();
-        let (mut targets, mut jac) = (vec![[[0.0; 3]; 3]; el.tet_count()], vec![project_with_jacobian(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], 0.5).1; el.tet_count()]);
+        let (mut targets, mut jac) = (
+            vec![[[0.0; 3]; 3]; el.tet_count()],
+            vec![project_with_jacobian(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], 0.5).1; el.tet_count()],
+        );
         el.local_step_with_jacobians(&x, &mut targets, &mut jac);
         let mut hu = vec![[0.0; 3]; x.len()];
         el.hessian_apply(&jac, &u, &mut hu);
         let h = 1e-6;
-        let shifted = |s: f64| x.iter().zip(&u).map(|(p, d)| crate::algorithms::geometry::add(*p, crate::algorithms::geometry::scale(*d, s))).collect::<Vec<_>>();
+        let shifted = |s: f64| {
+            x.iter().zip(&u).map(|(p, d)| crate::algorithms::geometry::add(*p, crate::algorithms::geometry::scale(*d, s))).collect::<Vec<_>>()
+        };
         let (gp, gm) = (el.energy_gradient(&shifted(h)), el.energy_gradient(&shifted(-h)));
         let scale = hu.iter().map(|v| crate::algorithms::geometry::norm(*v)).fold(0.0, f64::max);
         for a in 0..x.len() {

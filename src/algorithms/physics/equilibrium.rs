@@ -17,12 +17,12 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Mat, Par};
 
 use super::cholesky::Cholesky;
-use super::ordering::FillOrdering;
 use super::elastic::Elastic;
 use super::mat3::Mat3;
+use super::ordering::FillOrdering;
 use super::vibration::{rest_stiffness, RestStiffness};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
+use crate::support::error::{Error, Result};
 
 /// Quasi-static equilibria with one set of pinned nodes: the free-free block of `L`,
 /// factorized once and reused for every pose.
@@ -171,9 +171,8 @@ pub fn loaded_equilibrium(
     // Rows of the lower part must be sorted within each column: free nodes keep the order of
     // the nodes, so they are.
     let lower = SparseColMat::new(SymbolicSparseColMat::new_checked(n, n, col_ptr, None, rows), vals);
-    let chol = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq).map_err(|_| {
-        Error::general("the held nodes leave the body free to move", "hold nodes that fix every rigid motion of each piece")
-    })?;
+    let chol = Cholesky::factor(&lower, &FillOrdering::Amd, Par::Seq)
+        .map_err(|_| Error::general("the held nodes leave the body free to move", "hold nodes that fix every rigid motion of each piece"))?;
     // The force imbalance r = ∇E - f on the free coordinates, the Newton step K⁻¹ r and the
     // merit rᵀ K⁻¹ r (the imbalance in the stiffness' inverse norm: bending a bar leaves axial
     // forces quadratic in the bend, far larger than the bending forces but cheap to relax, so
@@ -203,7 +202,10 @@ pub fn loaded_equilibrium(
             }
             scale *= 0.5;
         }
-        let moved = free_nodes.iter().map(|&a| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(trial[a], positions[a]))).fold(0.0, f64::max);
+        let moved = free_nodes
+            .iter()
+            .map(|&a| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(trial[a], positions[a])))
+            .fold(0.0, f64::max);
         positions.copy_from_slice(&trial);
         info = EquilibriumInfo { iterations: iteration, last_move: moved };
         if moved <= tolerance {
@@ -285,7 +287,10 @@ mod tests {
     /// The largest node force imbalance `|∇E - f|` over the free nodes.
     fn imbalance(el: &Elastic, held: &[bool], x: &[Point], load: &[Point]) -> f64 {
         let g = el.energy_gradient(x);
-        (0..x.len()).filter(|&a| !held[a]).map(|a| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(g[a], load[a]))).fold(0.0, f64::max)
+        (0..x.len())
+            .filter(|&a| !held[a])
+            .map(|a| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(g[a], load[a])))
+            .fold(0.0, f64::max)
     }
 
     #[test]
@@ -305,7 +310,13 @@ mod tests {
             let info = loaded_equilibrium(&el, &held, &load, &mut x, 1e-12, 1000).unwrap();
             let force = load.iter().map(|f| crate::algorithms::geometry::norm(*f)).fold(0.0, f64::max);
             let residual = imbalance(&el, &held, &x, &load);
-            println!("tip load for {tip_move}: {} steps, last move {:.1e}, imbalance {:.1e} of the load, tip {}", info.iterations, info.last_move, residual / force, tip_y(&x));
+            println!(
+                "tip load for {tip_move}: {} steps, last move {:.1e}, imbalance {:.1e} of the load, tip {}",
+                info.iterations,
+                info.last_move,
+                residual / force,
+                tip_y(&x)
+            );
             // At the small load the imbalance is the projections' round-off (about 1e-12 of
             // the elastic forces of the rest shape's coordinates, 1e-6 of this load).
             assert!(info.last_move <= 1e-12 && residual < if tip_move < 1e-3 { 1e-4 } else { 1e-9 } * force, "{info:?}, imbalance {residual}");
@@ -313,7 +324,14 @@ mod tests {
                 assert_eq!(x[a], el.rest[a]);
             }
             if tip_move < 1e-3 {
-                let linear = (0..el.node_count()).map(|a| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(crate::algorithms::geometry::sub(x[a], el.rest[a]), phi[a].map(|c| s * c)))).fold(0.0, f64::max);
+                let linear = (0..el.node_count())
+                    .map(|a| {
+                        crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(
+                            crate::algorithms::geometry::sub(x[a], el.rest[a]),
+                            phi[a].map(|c| s * c),
+                        ))
+                    })
+                    .fold(0.0, f64::max);
                 assert!(linear < 1e-4 * tip_move, "off the mode by {linear}");
             } else {
                 // The centroid line of the cross-sections stretches far less than along φ
@@ -324,7 +342,10 @@ mod tests {
                         let nodes: Vec<usize> = (0..el.node_count()).filter(|&a| el.rest[a][0] == s).collect();
                         std::array::from_fn(|d| nodes.iter().map(|&a| x[a][d]).sum::<f64>() / nodes.len() as f64)
                     };
-                    stations.windows(2).map(|w| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(centroid(w[1]), centroid(w[0])))).sum()
+                    stations
+                        .windows(2)
+                        .map(|w| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(centroid(w[1]), centroid(w[0]))))
+                        .sum()
                 };
                 let scaled: Vec<Point> = el.rest.iter().zip(&phi).map(|(p, u)| std::array::from_fn(|d| p[d] + tip_y(&x) * unit * u[d])).collect();
                 let (bent, stretched) = (length(&x) - 4.0, length(&scaled) - 4.0);

@@ -38,7 +38,12 @@ pub fn self_adjoint_eigen(a: MatRef<'_, f64>) -> Option<(Vec<f64>, Mat<f64>)> {
     let (params, par) = (Default::default(), par());
     let mut u = Mat::<f64>::zeros(n, n);
     let mut lambda = vec![0.0; n];
-    let mut buffer = faer::dyn_stack::MemBuffer::new(faer::linalg::evd::self_adjoint_evd_scratch::<f64>(n, faer::linalg::evd::ComputeEigenvectors::Yes, par, params));
+    let mut buffer = faer::dyn_stack::MemBuffer::new(faer::linalg::evd::self_adjoint_evd_scratch::<f64>(
+        n,
+        faer::linalg::evd::ComputeEigenvectors::Yes,
+        par,
+        params,
+    ));
     let diag = faer::diag::DiagMut::from_slice_mut(&mut lambda);
     faer::linalg::evd::self_adjoint_evd(a, diag, Some(u.as_mut()), par, faer::dyn_stack::MemStack::new(&mut buffer), params).ok()?;
     Some((lambda, u))
@@ -54,7 +59,9 @@ pub fn thin_q(mut a: Mat<f64>) -> Mat<f64> {
     let mut buffer = faer::dyn_stack::MemBuffer::new(qr::qr_in_place_scratch::<f64>(m, n, block, par, Default::default()));
     qr::qr_in_place(a.as_mut(), coeff.as_mut(), par, faer::dyn_stack::MemStack::new(&mut buffer), Default::default());
     let mut q = Mat::<f64>::identity(m, n.min(m));
-    let mut buffer = faer::dyn_stack::MemBuffer::new(faer::linalg::householder::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(m, block, n.min(m)));
+    let mut buffer = faer::dyn_stack::MemBuffer::new(
+        faer::linalg::householder::apply_block_householder_sequence_on_the_left_in_place_scratch::<f64>(m, block, n.min(m)),
+    );
     // The Householder basis is `a`'s strictly lower part (the reflectors' unit diagonal is implicit).
     faer::linalg::householder::apply_block_householder_sequence_on_the_left_in_place_with_conj(
         a.as_ref().subcols(0, n.min(m)),

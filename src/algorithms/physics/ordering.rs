@@ -21,9 +21,9 @@
 //! order of the unknowns, the [`FillOrdering`] the Cholesky factorization is given.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
 use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering};
-use faer::perm::PermRef;
 use faer::sparse::SymbolicSparseColMat;
 use faer::Side;
 
@@ -145,15 +145,8 @@ struct Split {
 pub fn nested_dissection(graph: &Graph, coords: &[Point]) -> Vec<u32> {
     let n = graph.node_count();
     assert_eq!(coords.len(), n, "one coordinate per node");
-    let mut work = Work {
-        graph,
-        coords,
-        member: vec![u32::MAX; n],
-        stamp: 0,
-        side: vec![0; n],
-        local: vec![u32::MAX; n],
-        order: Vec::with_capacity(n),
-    };
+    let mut work =
+        Work { graph, coords, member: vec![u32::MAX; n], stamp: 0, side: vec![0; n], local: vec![u32::MAX; n], order: Vec::with_capacity(n) };
     let nodes: Vec<u32> = (0..n as u32).collect();
     dissect(&mut work, nodes);
     debug_assert_eq!(work.order.len(), n);

@@ -8,10 +8,10 @@
 //! `P = r R + (1 - r) D`, `r = k_strain / (k_strain + k_volume)`; that is what the global
 //! step sees.
 
-use super::mat3::Mat3;
+use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, Mask, BATCH, M3};
 #[cfg(doc)]
 use super::mat3::scaled_product;
-use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, Mask, M3, BATCH};
+use super::mat3::Mat3;
 use super::svd3::svd_lanes;
 
 /// The point `σ'` of `{σ'1 σ'2 σ'3 = 1, σ' > 0}` closest to `sigma` (sorted as from [`svd3`](super::svd3::svd3):
@@ -374,7 +374,13 @@ pub fn project_with_jacobian_batch(f: &[Mat3; BATCH], strain_share: f64) -> [(Ma
 
 /// [`project_with_jacobian_batch`] of the first `count` lanes appended to `targets` and
 /// `jacobians` (each read straight out of the lanes into the vectors: no batch-sized copy).
-pub fn project_with_jacobian_extend(f: &[Mat3; BATCH], strain_share: f64, count: usize, targets: &mut Vec<Mat3>, jacobians: &mut Vec<ProjectionJacobian>) {
+pub fn project_with_jacobian_extend(
+    f: &[Mat3; BATCH],
+    strain_share: f64,
+    count: usize,
+    targets: &mut Vec<Mat3>,
+    jacobians: &mut Vec<ProjectionJacobian>,
+) {
     let (p, j) = dispatch_project_with_jacobian(&to_lanes(f), strain_share);
     let count = count.min(BATCH);
     targets.extend((0..count).map(|l| lane(&p, l)));
@@ -412,13 +418,7 @@ struct JacobianLanes<const N: usize> {
 }
 
 fn jacobian_lane<const N: usize>(j: &JacobianLanes<N>, l: usize) -> ProjectionJacobian {
-    ProjectionJacobian {
-        u: lane(&j.u, l),
-        v: lane(&j.v, l),
-        diag: lane(&j.diag, l),
-        sym: j.sym.map(|x| x.0[l]),
-        anti: j.anti.map(|x| x.0[l]),
-    }
+    ProjectionJacobian { u: lane(&j.u, l), v: lane(&j.v, l), diag: lane(&j.diag, l), sym: j.sym.map(|x| x.0[l]), anti: j.anti.map(|x| x.0[l]) }
 }
 
 #[inline(always)]
@@ -571,7 +571,12 @@ mod tests {
                 f
             })
             .collect();
-        cases.extend([[[0.0; 3]; 3], IDENTITY, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]], [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]]]);
+        cases.extend([
+            [[0.0; 3]; 3],
+            IDENTITY,
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]],
+            [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]],
+        ]);
         cases.resize(cases.len().div_ceil(BATCH) * BATCH, IDENTITY);
         for share in [0.0, 0.4, 1.0] {
             for chunk in cases.chunks_exact(BATCH) {

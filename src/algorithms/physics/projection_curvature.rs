@@ -27,12 +27,12 @@
 //! singular only where `σ_i + σ_j = 0` (an inverted element with `|σ3| = σ2`), where the
 //! rotation itself is not differentiable; the same bounded factor is used there.
 
-use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, M3, V3, BATCH};
+use super::lanes::{lane, mul_lanes, to_lanes, with_widest_simd, Lanes, BATCH, M3, V3};
 use super::mat3::{mul, transpose, Mat3};
 use super::projection::{volume_preserving, volume_with_fallback};
-use super::svd3::svd_lanes;
 #[cfg(test)]
 use super::svd3::svd3;
+use super::svd3::svd_lanes;
 use super::svd3::Svd3;
 
 /// `P(F)`, `dP/dτ` and `d²P/dτ²` of `τ ↦ P(F + τG)` at `τ = 0`.
@@ -196,7 +196,14 @@ pub(crate) type PathForces = [[[Lanes<BATCH>; 3]; 4]; 3];
 /// that adding them per node in tet order gives its bytes. Written into `out[l][m][k]` (the
 /// kernel itself writes lanes, [`project_along_forces_lanes`]).
 #[cfg_attr(not(test), allow(dead_code))]
-pub fn project_along_forces(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BATCH], grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut [[[[f64; 3]; 4]; 3]; BATCH]) {
+pub fn project_along_forces(
+    f: &[Mat3; BATCH],
+    strain_share: f64,
+    g: &[Mat3; BATCH],
+    grads: &[[[f64; 3]; 4]; BATCH],
+    weights: &[f64; BATCH],
+    out: &mut [[[[f64; 3]; 4]; 3]; BATCH],
+) {
     let mut lanes = [[[Lanes::splat(0.0); 3]; 4]; 3];
     dispatch_project_along_forces(&to_lanes(f), strain_share, &to_lanes(g), grads, weights, &mut lanes);
     for (l, o) in out.iter_mut().enumerate() {
@@ -212,7 +219,14 @@ pub fn project_along_forces(f: &[Mat3; BATCH], strain_share: f64, g: &[Mat3; BAT
 
 /// [`project_along_forces`] of matrices already on lanes, the forces written on lanes
 /// (`out[m][k][i].0[l]`): vector stores, no transposition inside the kernel.
-pub(crate) fn project_along_forces_lanes(f: &M3<BATCH>, strain_share: f64, g: &M3<BATCH>, grads: &[[[f64; 3]; 4]; BATCH], weights: &[f64; BATCH], out: &mut PathForces) {
+pub(crate) fn project_along_forces_lanes(
+    f: &M3<BATCH>,
+    strain_share: f64,
+    g: &M3<BATCH>,
+    grads: &[[[f64; 3]; 4]; BATCH],
+    weights: &[f64; BATCH],
+    out: &mut PathForces,
+) {
     dispatch_project_along_forces(f, strain_share, g, grads, weights, out);
 }
 
@@ -432,11 +446,7 @@ mod tests {
                 for i in 0..3 {
                     for j in 0..3 {
                         assert!((path.value[i][j] - p[i][j]).abs() < 1e-12 * scale, "{f:?}");
-                        assert!(
-                            (path.first[i][j] - dp[i][j]).abs() < 1e-9 * (1.0 + max_abs(&dp)),
-                            "{f:?} share {share}: {:?} vs {dp:?}",
-                            path.first
-                        );
+                        assert!((path.first[i][j] - dp[i][j]).abs() < 1e-9 * (1.0 + max_abs(&dp)), "{f:?} share {share}: {:?} vs {dp:?}", path.first);
                     }
                 }
             }

@@ -259,7 +259,13 @@ mod tests {
             w2.map(|x| x / s2)
         } else {
             let a = u1.map(f64::abs);
-            let axis = if a[0] <= a[1] && a[0] <= a[2] { [1.0, 0.0, 0.0] } else if a[1] <= a[2] { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
+            let axis = if a[0] <= a[1] && a[0] <= a[2] {
+                [1.0, 0.0, 0.0]
+            } else if a[1] <= a[2] {
+                [0.0, 1.0, 0.0]
+            } else {
+                [0.0, 0.0, 1.0]
+            };
             let c = [u1[1] * axis[2] - u1[2] * axis[1], u1[2] * axis[0] - u1[0] * axis[2], u1[0] * axis[1] - u1[1] * axis[0]];
             let n = dot(c, c).sqrt();
             c.map(|x| x / n)
@@ -382,15 +388,17 @@ mod tests {
     #[test]
     fn batches_give_the_bytes_of_single_decompositions() {
         let mut rng = Rng(99);
-        let mut cases: Vec<Mat3> = (0..40 * BATCH).map(|k| {
-            let m = rng.mat();
-            // Near rotations (the common case), general, and rank-deficient matrices.
-            match k % 3 {
-                0 => std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 } + 1e-3 * m[i][j])),
-                1 => m,
-                _ => [m[0], m[0], m[2]],
-            }
-        }).collect();
+        let mut cases: Vec<Mat3> = (0..40 * BATCH)
+            .map(|k| {
+                let m = rng.mat();
+                // Near rotations (the common case), general, and rank-deficient matrices.
+                match k % 3 {
+                    0 => std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 } + 1e-3 * m[i][j])),
+                    1 => m,
+                    _ => [m[0], m[0], m[2]],
+                }
+            })
+            .collect();
         cases.extend([[[0.0; 3]; 3], IDENTITY, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]]);
         cases.resize(cases.len().div_ceil(BATCH) * BATCH, IDENTITY);
         for chunk in cases.chunks_exact(BATCH) {

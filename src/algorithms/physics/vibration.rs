@@ -26,8 +26,8 @@ use super::elastic::Elastic;
 use super::fixed_par;
 use super::ordering::FillOrdering;
 use super::projection::project_with_jacobian;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
+use crate::support::error::{Error, Result};
 
 /// The stiffness a body vibrates with (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,13 +70,7 @@ pub fn natural_vibration(elastic: &Elastic, held: &[bool], stiffness: RestStiffn
 }
 
 /// [`natural_vibration`], solving densely up to `dense_limit` free coordinates.
-pub fn natural_vibration_with(
-    elastic: &Elastic,
-    held: &[bool],
-    stiffness: RestStiffness,
-    count: usize,
-    dense_limit: usize,
-) -> Result<Vibration> {
+pub fn natural_vibration_with(elastic: &Elastic, held: &[bool], stiffness: RestStiffness, count: usize, dense_limit: usize) -> Result<Vibration> {
     let (k, free) = scaled_stiffness(elastic, held, stiffness);
     let dim = k.n;
     if dim == 0 || count == 0 {
@@ -225,10 +219,7 @@ fn subspace_eigen(k: &Csr, wanted: usize, scale: f64) -> Result<(Vec<f64>, Mat<f
         }
         previous = theta;
     }
-    Err(Error::general(
-        "the vibration eigensolver did not converge in 2000 subspace iterations",
-        "ask for fewer modes, or use a coarser mesh",
-    ))
+    Err(Error::general("the vibration eigensolver did not converge in 2000 subspace iterations", "ask for fewer modes, or use a coarser mesh"))
 }
 
 #[cfg(test)]

@@ -66,7 +66,8 @@ impl Contacts {
     /// The instants of `tr`: every key that owns its pose, and every frame that is not at a
     /// key's time (there the key is checked).
     pub fn instants(&self, tr: &Trajectory, slots: &TimeSlots) -> Vec<(At, f64)> {
-        let mut out: Vec<(At, f64)> = (0..tr.key_count()).filter(|&k| slots.keys_of(slots.position(k)).next() == Some(k)).map(|k| (At::Key(k), tr.times[k])).collect();
+        let mut out: Vec<(At, f64)> =
+            (0..tr.key_count()).filter(|&k| slots.keys_of(slots.position(k)).next() == Some(k)).map(|k| (At::Key(k), tr.times[k])).collect();
         let at_key = |t: f64| tr.times.iter().any(|&k| (k - t).abs() <= 1e-9);
         out.extend(frames_between(tr.start(), tr.end(), self.frame_rate).into_iter().filter(|&(_, t)| !at_key(t)).map(|(f, t)| (At::Frame(f), t)));
         out

@@ -185,7 +185,13 @@ pub struct TruncatedCg {
 /// `precondition(r)` applies `P⁻¹` in place (positive definite); stop when
 /// `|r|_{P⁻¹} <= forcing |g|_{P⁻¹}`, after `max_iterations` products, or when a search
 /// direction has non-positive curvature. Every iterate satisfies `gᵀd < 0` (for `g ≠ 0`).
-pub fn truncated_cg(h: impl Fn(&[f64]) -> Vec<f64>, precondition: impl Fn(&mut [f64]), g: &[f64], forcing: f64, max_iterations: usize) -> TruncatedCg {
+pub fn truncated_cg(
+    h: impl Fn(&[f64]) -> Vec<f64>,
+    precondition: impl Fn(&mut [f64]),
+    g: &[f64],
+    forcing: f64,
+    max_iterations: usize,
+) -> TruncatedCg {
     let mut d = vec![0.0; g.len()];
     let mut r: Vec<f64> = g.iter().map(|v| -v).collect();
     let mut z = r.clone();
@@ -237,7 +243,9 @@ mod tests {
         // A = B Bᵀ + I on 12 unknowns, a Jacobi preconditioner.
         let n = 12;
         let b: Vec<f64> = (0..n * n).map(|k| ((k * 37 % 17) as f64 - 8.0) / 8.0).collect();
-        let a: Vec<f64> = (0..n * n).map(|k| (0..n).map(|m| b[(k / n) * n + m] * b[(k % n) * n + m]).sum::<f64>() + if k / n == k % n { 1.0 } else { 0.0 }).collect();
+        let a: Vec<f64> = (0..n * n)
+            .map(|k| (0..n).map(|m| b[(k / n) * n + m] * b[(k % n) * n + m]).sum::<f64>() + if k / n == k % n { 1.0 } else { 0.0 })
+            .collect();
         let h = |v: &[f64]| -> Vec<f64> { (0..n).map(|i| (0..n).map(|j| a[i * n + j] * v[j]).sum()).collect() };
         let jacobi = |r: &mut [f64]| r.iter_mut().enumerate().for_each(|(i, x)| *x /= a[i * n + i]);
         let g: Vec<f64> = (0..n).map(|i| (i as f64).sin() + 0.5).collect();
@@ -303,7 +311,9 @@ mod tests {
         let (mut lx, mut jp) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
         el.stiffness.mul_points_sequential(&x, &mut lx);
         el.projected_forces_sequential(&x, &mut jp);
-        (0..n).map(|a| if obj.supports[a] { [0.0; 3] } else { [0, 1, 2].map(|d| el.mass[a] * (acc[a][d] - obj.gravity[d]) + lx[a][d] - jp[a][d]) }).collect()
+        (0..n)
+            .map(|a| if obj.supports[a] { [0.0; 3] } else { [0, 1, 2].map(|d| el.mass[a] * (acc[a][d] - obj.gravity[d]) + lx[a][d] - jp[a][d]) })
+            .collect()
     }
 
     fn random_direction(rng: &mut Rng, slots: usize, n: usize) -> Vec<Vec<Point>> {
@@ -447,16 +457,24 @@ mod tests {
         let n = mesh.positions.len();
         let g = [0.0, -9.81, 0.0];
         let (angle, v0) = (0.7f64, [0.5, 2.0, -1.0]);
-        let rotated: Vec<Point> = mesh.positions.iter().map(|p| {
-            let (s, c) = angle.sin_cos();
-            [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]]
-        }).collect();
+        let rotated: Vec<Point> = mesh
+            .positions
+            .iter()
+            .map(|p| {
+                let (s, c) = angle.sin_cos();
+                [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]]
+            })
+            .collect();
         let times = vec![0.0, 0.4, 0.7, 1.2];
         let at = |t: f64| -> (Vec<Point>, Vec<Point>) {
             let x = rotated.iter().map(|p| [0, 1, 2].map(|d| p[d] + v0[d] * t + 0.5 * g[d] * t * t)).collect();
             (x, vec![[0, 1, 2].map(|d| v0[d] + g[d] * t); n])
         };
-        let tr = Trajectory { times: times.clone(), positions: times.iter().map(|&t| at(t).0).collect(), velocities: times.iter().map(|&t| at(t).1).collect() };
+        let tr = Trajectory {
+            times: times.clone(),
+            positions: times.iter().map(|&t| at(t).0).collect(),
+            velocities: times.iter().map(|&t| at(t).1).collect(),
+        };
         let k = keys(times, tr.positions.clone(), vec![Nodes::default(); 4], false);
         let s = Settings { damping: 0.0, gravity: g, samples: 3, ..settings() };
         let obj = objective(&el, &k, &s);

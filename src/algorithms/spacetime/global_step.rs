@@ -41,12 +41,12 @@ use rayon::prelude::*;
 use super::modal::{ModalStep, Modes};
 use super::objective::Objective;
 use super::unknowns::Unknowns;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::cholesky::{Cholesky, PARALLEL_FACTOR_FLOPS};
-use crate::algorithms::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 use crate::algorithms::physics::csr::Csr;
+use crate::algorithms::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Cost, FillOrdering, Graph};
 use crate::algorithms::physics::pcg::{pcg, BlockJacobi, SymmetricOperator};
+use crate::support::error::{Error, Result};
 
 /// Dense coefficient matrices over time slots (row-major, `slots × slots`).
 #[derive(Debug, Clone, PartialEq)]
@@ -169,7 +169,9 @@ impl ModalSize {
     pub fn predicted(&self) -> (f64, f64) {
         let (n, s, c, h) = (self.nodes as f64, self.slots as f64, self.held as f64, self.held_nodes as f64);
         let setup = EIGEN_SECONDS_PER_NODE3 * n * n * n + (c * c * n + c * c * c / 3.0) / DENSE_FLOPS_PER_SECOND;
-        let solve = MODAL_SOLVE_OVERHEAD * (2.0 * 2.0 * n * n * 3.0 * s + 2.0 * 2.0 * h * n * 3.0 * s + 2.0 * 3.0 * c * c + 2.0 * 2.0 * 3.0 * n * s * s) / DENSE_FLOPS_PER_SECOND;
+        let solve = MODAL_SOLVE_OVERHEAD
+            * (2.0 * 2.0 * n * n * 3.0 * s + 2.0 * 2.0 * h * n * 3.0 * s + 2.0 * 3.0 * c * c + 2.0 * 2.0 * 3.0 * n * s * s)
+            / DENSE_FLOPS_PER_SECOND;
         let seconds = setup + ASSUMED_SOLVES * solve;
         let bytes = 8.0 * (MODAL_COPIES * n * n + n * s * s + 2.0 * c * c + h * n + 2.0 * 3.0 * s * n);
         (seconds, bytes)
@@ -203,13 +205,18 @@ const MODAL_COPIES: f64 = 3.0;
 pub fn choose(direct: &Cost, blocks: &Cost, modal: Option<&ModalSize>, parallel: bool, budget: u64) -> (Method, [(f64, f64); 3]) {
     let rate = FACTOR_FLOPS_PER_SECOND[parallel as usize];
     let direct_seconds = direct.flops / rate + ASSUMED_SOLVES * direct.entries * SWEEP_SECONDS_PER_ENTRY[parallel as usize];
-    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0] + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY[0];
+    let iterative_seconds = blocks.flops / FACTOR_FLOPS_PER_SECOND[0]
+        + ASSUMED_SOLVES * ASSUMED_CG_ITERATIONS * CG_ITERATION_PER_SWEEP * blocks.entries * SWEEP_SECONDS_PER_ENTRY[0];
     let (direct_bytes, iterative_bytes) = (predicted_peak_bytes(direct), predicted_peak_bytes(blocks));
     // Weighed on every body: on small ones too the modes can win, their solves being two dense
     // products that stay in cache where the factor's sweeps do not (the demo: 182 nodes,
     // 1.0 ms a direct solve against 0.2 ms a modal one).
     let modal_cost = modal.map(ModalSize::predicted);
-    let candidates = [(Method::Direct, direct_seconds, direct_bytes), (Method::Modal, modal_cost.map_or(f64::INFINITY, |c| c.0), modal_cost.map_or(f64::INFINITY, |c| c.1)), (Method::Iterative, iterative_seconds, iterative_bytes)];
+    let candidates = [
+        (Method::Direct, direct_seconds, direct_bytes),
+        (Method::Modal, modal_cost.map_or(f64::INFINITY, |c| c.0), modal_cost.map_or(f64::INFINITY, |c| c.1)),
+        (Method::Iterative, iterative_seconds, iterative_bytes),
+    ];
     let method = candidates.iter().filter(|c| c.2 <= budget as f64).min_by(|a, b| a.1.total_cmp(&b.1)).map_or(Method::Iterative, |c| c.0);
     let modal_cost = modal_cost.unwrap_or((0.0, 0.0));
     (method, [(direct_seconds, direct_bytes), modal_cost, (iterative_seconds, iterative_bytes)])
@@ -313,7 +320,10 @@ pub fn proximal_weight(objective: &Objective, regularization: f64) -> f64 {
         return 0.0;
     }
     let elastic = objective.elastic;
-    let rate = (0..elastic.node_count()).filter(|&i| elastic.mass[i] > 0.0).map(|i| (elastic.stiffness.get(i, i) / elastic.mass[i]).powi(2)).fold(0.0f64, f64::max);
+    let rate = (0..elastic.node_count())
+        .filter(|&i| elastic.mass[i] > 0.0)
+        .map(|i| (elastic.stiffness.get(i, i) / elastic.mass[i]).powi(2))
+        .fold(0.0f64, f64::max);
     (1.0 / regularization.powi(4)).max(PROXIMAL_FLOOR * rate)
 }
 
@@ -492,11 +502,7 @@ pub fn assemble(objective: &Objective, unknowns: &Unknowns, coefficients: &TimeC
         .into_par_iter()
         .map(|b| {
             let (mut lens, mut rows, mut vals) = (Vec::new(), Vec::new(), Vec::new());
-            let neighbours: Vec<(usize, f64, f64)> = k
-                .row(b)
-                .filter(|&(a, _)| a >= b)
-                .map(|(a, kab)| (a, l.get(a, b), kab))
-                .collect();
+            let neighbours: Vec<(usize, f64, f64)> = k.row(b).filter(|&(a, _)| a >= b).map(|(a, kab)| (a, l.get(a, b), kab)).collect();
             for s2 in 0..s_count {
                 if unknowns.get(b, s2).is_none() {
                     continue;
@@ -551,7 +557,12 @@ pub struct FillReducingOrder {
 
 /// [`fill_reducing_order_of`] with the node graph's orders computed here.
 #[cfg(test)]
-pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, rest: &[Point], weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+pub fn fill_reducing_order(
+    lower: &SparseColMat<usize, f64>,
+    unknowns: &Unknowns,
+    rest: &[Point],
+    weigh_keys: impl FnOnce(&Cost) -> bool,
+) -> FillReducingOrder {
     fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
 }
 
@@ -576,7 +587,12 @@ pub fn fill_reducing_order(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns
 /// direct step could use it.
 ///
 /// `orders` are the node graph's orders ([`NodeOrders`]), shared with the iterative step's key blocks.
-pub fn fill_reducing_order_of(lower: &SparseColMat<usize, f64>, unknowns: &Unknowns, orders: &NodeOrders, weigh_keys: impl FnOnce(&Cost) -> bool) -> FillReducingOrder {
+pub fn fill_reducing_order_of(
+    lower: &SparseColMat<usize, f64>,
+    unknowns: &Unknowns,
+    orders: &NodeOrders,
+    weigh_keys: impl FnOnce(&Cost) -> bool,
+) -> FillReducingOrder {
     let nodes = unknowns.nodes;
     let slots = unknowns.slots.count();
     let mut block_start = vec![0usize; nodes + 1];
@@ -674,7 +690,13 @@ impl GlobalStep {
     }
 
     /// [`GlobalStep::within`], inverted by `method` when given (whatever the cost model says).
-    pub fn build(objective: &Objective, unknowns: Unknowns, regularization: f64, max_memory: Option<u64>, method: Option<Method>) -> Result<GlobalStep> {
+    pub fn build(
+        objective: &Objective,
+        unknowns: Unknowns,
+        regularization: f64,
+        max_memory: Option<u64>,
+        method: Option<Method>,
+    ) -> Result<GlobalStep> {
         let forced = method;
         let budget = max_memory.unwrap_or_else(default_memory_budget);
         let proximal = proximal_weight(objective, regularization);
@@ -729,7 +751,10 @@ impl GlobalStep {
         // Two threads pay off only for large factorizations.
         let parallel = order.cost.flops > PARALLEL_FACTOR_FLOPS;
         let par = if parallel { Par::rayon(0) } else { Par::Seq };
-        let (mut method, [(predicted_seconds, predicted_bytes), (predicted_modal_seconds, predicted_modal_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)]) = choose(&order.cost, &block_cost, Some(&size), parallel, budget);
+        let (
+            mut method,
+            [(predicted_seconds, predicted_bytes), (predicted_modal_seconds, predicted_modal_bytes), (predicted_iterative_seconds, predicted_iterative_bytes)],
+        ) = choose(&order.cost, &block_cost, Some(&size), parallel, budget);
         if let Some(forced) = forced {
             method = forced;
         }
@@ -754,12 +779,17 @@ impl GlobalStep {
             // next best way.
             // faer's kernels split by a fixed count, not the pool's: the same bytes on any thread count.
             let par = crate::algorithms::physics::fixed_par::par();
-            modal = Modes::new(objective.elastic, &objective.supports, par).and_then(|modes| ModalStep::new(modes, &coefficients, &unknowns, par)).ok();
+            modal =
+                Modes::new(objective.elastic, &objective.supports, par).and_then(|modes| ModalStep::new(modes, &coefficients, &unknowns, par)).ok();
             if modal.is_none() {
                 if forced.is_some() {
                     return Err(singular());
                 }
-                method = if predicted_bytes <= budget as f64 && predicted_seconds <= predicted_iterative_seconds { Method::Direct } else { Method::Iterative };
+                method = if predicted_bytes <= budget as f64 && predicted_seconds <= predicted_iterative_seconds {
+                    Method::Direct
+                } else {
+                    Method::Iterative
+                };
             }
         }
         let (inverse, factor_nnz, ordering, linear_solver) = match method {
@@ -806,7 +836,10 @@ impl GlobalStep {
         if let Some(Inverse::Modal(modal)) = self.cholesky.as_mut() {
             // The modes do not depend on the times: only the per-mode systems change.
             modal.retime(&coefficients).map_err(|_| {
-                Error::general("the spacetime system became singular at the new key times", "keep [solver] regularization > 0, or raise the minimum interval length")
+                Error::general(
+                    "the spacetime system became singular at the new key times",
+                    "keep [solver] regularization > 0, or raise the minimum interval length",
+                )
             })?;
             return Ok(Retimed { assemble_seconds: 0.0, factor_seconds: t0.elapsed().as_secs_f64(), reused_symbolic: true });
         }
@@ -871,7 +904,11 @@ impl GlobalStep {
 
 impl Iterative {
     /// The full rows of `a` and its per-key block preconditioner.
-    fn new(a: &SparseColMat<usize, f64>, operator: KroneckerSum, order: &[u32]) -> std::result::Result<Iterative, crate::algorithms::physics::cholesky::NotPositiveDefinite> {
+    fn new(
+        a: &SparseColMat<usize, f64>,
+        operator: KroneckerSum,
+        order: &[u32],
+    ) -> std::result::Result<Iterative, crate::algorithms::physics::cholesky::NotPositiveDefinite> {
         let unknowns = &operator.unknowns;
         // Every key's block is ordered by the node graph (as the direct factor is): its
         // unknowns by their node's place in `order` ([`key_block_order`]): 70M factor entries
@@ -892,7 +929,12 @@ impl Iterative {
             }
         }
         let preconditioner = BlockJacobi::new(a, &key_of, slots / 2, Some(&rank))?;
-        Ok(Iterative { operator, preconditioner, previous: std::sync::Mutex::new(None), log: std::sync::Mutex::new(CgLog { max_iterations: CG_MAX_ITERATIONS, tolerance: CG_TOLERANCE, ..CgLog::default() }) })
+        Ok(Iterative {
+            operator,
+            preconditioner,
+            previous: std::sync::Mutex::new(None),
+            log: std::sync::Mutex::new(CgLog { max_iterations: CG_MAX_ITERATIONS, tolerance: CG_TOLERANCE, ..CgLog::default() }),
+        })
     }
 
     /// `x <- A⁻¹ x` by PCG from the previous solution.
@@ -1100,7 +1142,10 @@ mod tests {
             let close = |a: &[Vec<Point>], b: &[Vec<Point>]| {
                 let scale = a.iter().flatten().map(|p| crate::algorithms::geometry::norm(*p)).fold(0.0, f64::max);
                 for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
-                    assert!(crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y)) <= 1e-9 * scale, "variant {variant}: {x:?} vs {y:?}");
+                    assert!(
+                        crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y)) <= 1e-9 * scale,
+                        "variant {variant}: {x:?} vs {y:?}"
+                    );
                 }
             };
             let step = modal.step(&g);
@@ -1157,7 +1202,6 @@ mod tests {
         }
     }
 
-
     #[test]
     fn keys_as_separators_is_a_valid_order_that_solves_the_system() {
         let (el, k) = problem();
@@ -1181,7 +1225,9 @@ mod tests {
         let mut ax = vec![[0.0; 3]; x.len()];
         rows.apply(&x, &mut ax);
         for (p, q) in ax.iter().zip(&b) {
-            assert!(crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q)) < 1e-8 * (1.0 + crate::algorithms::geometry::norm(*q)));
+            assert!(
+                crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q)) < 1e-8 * (1.0 + crate::algorithms::geometry::norm(*q))
+            );
         }
     }
 }
@@ -1205,7 +1251,12 @@ mod experiment {
         let mesh = if prism > 0 {
             let max_volume: f64 = std::env::var("MAX_VOLUME").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0005);
             let surface = crate::algorithms::procedural::prism([1.2, 3.6, 1.2], [prism, 3 * prism, prism]);
-            crate::formats::tetgen::run(&surface, &crate::formats::tetgen::TetgenOptions { quality: 1.414, max_volume, timeout: 600.0 }, std::path::Path::new("prism")).unwrap()
+            crate::formats::tetgen::run(
+                &surface,
+                &crate::formats::tetgen::TetgenOptions { quality: 1.414, max_volume, timeout: 600.0 },
+                std::path::Path::new("prism"),
+            )
+            .unwrap()
         } else {
             let mut mesh = cube_mesh(n);
             for p in &mut mesh.positions {
@@ -1235,7 +1286,14 @@ mod experiment {
         // The predicted seconds at the cost model's two-thread factorization rate (`choose`'s,
         // past PARALLEL_FACTOR_FLOPS as here); they include the solves' sweeps, so this bounds the factorization's flops from above.
         let flops = it.stats.predicted_seconds * FACTOR_FLOPS_PER_SECOND[1];
-        println!("{} nodes, {kc} keys, {} unknowns: iterative setup {:.2} s, predicted direct {flops:.3e} flops {:.1} GB {:.1} s", el.node_count(), it.stats.unknowns, t.elapsed().as_secs_f64(), it.stats.predicted_bytes / 1e9, it.stats.predicted_seconds);
+        println!(
+            "{} nodes, {kc} keys, {} unknowns: iterative setup {:.2} s, predicted direct {flops:.3e} flops {:.1} GB {:.1} s",
+            el.node_count(),
+            it.stats.unknowns,
+            t.elapsed().as_secs_f64(),
+            it.stats.predicted_bytes / 1e9,
+            it.stats.predicted_seconds
+        );
         if let Some(Inverse::Iterative(itr)) = &it.cholesky {
             let x: Vec<Point> = (0..it.stats.unknowns).map(|i| [i as f64, 1.0, 2.0]).collect();
             let mut y = x.clone();
@@ -1248,19 +1306,36 @@ mod experiment {
             for _ in 0..5 {
                 itr.preconditioner.apply(&x, &mut y);
             }
-            println!("matrix nnz {} factor nnz {}: matvec {:.4} s, preconditioner {:.4} s", it.stats.matrix_nnz, it.stats.factor_nnz, mv, t.elapsed().as_secs_f64() / 5.0);
+            println!(
+                "matrix nnz {} factor nnz {}: matvec {:.4} s, preconditioner {:.4} s",
+                it.stats.matrix_nnz,
+                it.stats.factor_nnz,
+                mv,
+                t.elapsed().as_secs_f64() / 5.0
+            );
         }
         let mut rng = Rng(7);
-        let g: Vec<Vec<Point>> = (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect();
+        let g: Vec<Vec<Point>> =
+            (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect();
         let t = std::time::Instant::now();
         let modal = GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap();
-        println!("modal setup {:.2} s (predicted {:.1} s, {:.0} MB)", t.elapsed().as_secs_f64(), modal.stats.predicted_modal_seconds, modal.stats.predicted_modal_bytes / 1e6);
+        println!(
+            "modal setup {:.2} s (predicted {:.1} s, {:.0} MB)",
+            t.elapsed().as_secs_f64(),
+            modal.stats.predicted_modal_seconds,
+            modal.stats.predicted_modal_bytes / 1e6
+        );
         let t = std::time::Instant::now();
         let by_modes = modal.step(&g);
         println!("modal solve {:.3} s", t.elapsed().as_secs_f64());
         let by_cg = it.step(&g);
         let scale = by_cg.iter().flatten().map(|p| crate::algorithms::geometry::norm(*p)).fold(0.0, f64::max);
-        let diff = by_cg.iter().flatten().zip(by_modes.iter().flatten()).map(|(a, b)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*a, *b))).fold(0.0, f64::max);
+        let diff = by_cg
+            .iter()
+            .flatten()
+            .zip(by_modes.iter().flatten())
+            .map(|(a, b)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*a, *b)))
+            .fold(0.0, f64::max);
         println!("modal vs CG: max difference {:.2e} of the largest entry", diff / scale);
         for round in 0..3 {
             let t = std::time::Instant::now();
@@ -1316,7 +1391,14 @@ mod modal_phases {
     fn factor_on_two_cores() {
         let (kc, unknowns, a, order) = many_keys_matrix();
         let repeat: usize = std::env::var("REPEAT").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
-        println!("{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}", unknowns.nodes, unknowns.count(), order.name, order.cost.flops, std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
+        println!(
+            "{} nodes, {kc} keys, {} unknowns, {} ordering, {:.3e} flops predicted, load {}",
+            unknowns.nodes,
+            unknowns.count(),
+            order.name,
+            order.cost.flops,
+            std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+        );
         let mut chol = Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), Par::rayon(0)).unwrap();
         println!("factor entries {}\n{}", chol.factor_nnz(), chol.shape_report());
         let median = |mut v: Vec<(f64, f64)>| {
@@ -1328,12 +1410,20 @@ mod modal_phases {
                 .map(|_| {
                     let (w, c0) = (std::time::Instant::now(), cpu());
                     chol.par = par;
-                    if ours { chol.refactor(&a).unwrap() } else { chol.refactor_by_faer(&a).unwrap() }
+                    if ours {
+                        chol.refactor(&a).unwrap()
+                    } else {
+                        chol.refactor_by_faer(&a).unwrap()
+                    }
                     (w.elapsed().as_secs_f64(), cpu() - c0)
                 })
                 .collect();
             let (w, c) = median(times);
-            println!("{name:<36} wall {w:8.3} s  cpu {c:8.3} s  {:.3e} predicted flops per wall s, {:.3e} per CPU s", order.cost.flops / w, order.cost.flops / c);
+            println!(
+                "{name:<36} wall {w:8.3} s  cpu {c:8.3} s  {:.3e} predicted flops per wall s, {:.3e} per CPU s",
+                order.cost.flops / w,
+                order.cost.flops / c
+            );
             (w, chol.values_for_tests().to_vec())
         };
         // Our phases' thread CPU seconds on one thread: the two-core time they predict.
@@ -1343,7 +1433,11 @@ mod modal_phases {
         let p = crate::algorithms::physics::cholesky::phases::CPU.lock().unwrap().map(|v| v / repeat as f64);
         let (total, path) = (p[0] + p[1] + p[2] + p[3] + p[4], p[0].max(p[1]) + p[5] + p[4]);
         println!("phases (thread CPU s): groups {:.3} + {:.3}, top halves {:.3} + {:.3} (longer {:.3}), top dense {:.3}; two-core critical path with the dense blocks on one core {:.3} s: {:.2}x", p[0], p[1], p[2], p[3], p[5], p[4], path, total / path);
-        println!("one thread: {:.3e} predicted flops per CPU s of the phases; two cores by the critical path: {:.3e}", order.cost.flops / total, order.cost.flops / path);
+        println!(
+            "one thread: {:.3e} predicted flops per CPU s of the phases; two cores by the critical path: {:.3e}",
+            order.cost.flops / total,
+            order.cost.flops / path
+        );
         let (faer_seq, reference) = run("faer Par::Seq", Par::Seq, false);
         let (faer_par, _) = run("faer Par::rayon", Par::rayon(0), false);
         let (ours_seq, one) = run("ours Par::Seq", Par::Seq, true);
@@ -1375,7 +1469,11 @@ mod modal_phases {
         let before = status_bytes("VmRSS:");
         std::fs::write("/proc/self/clear_refs", "5").expect("reset the peak resident set");
         let (w, c0) = (std::time::Instant::now(), cpu());
-        if faer { chol.refactor_by_faer(&a).unwrap() } else { chol.refactor(&a).unwrap() }
+        if faer {
+            chol.refactor_by_faer(&a).unwrap()
+        } else {
+            chol.refactor(&a).unwrap()
+        }
         let (wall, cpu_s) = (w.elapsed().as_secs_f64(), cpu() - c0);
         let peak = status_bytes("VmHWM:");
         let entries = chol.factor_nnz() as f64;
@@ -1411,7 +1509,12 @@ mod modal_phases {
         let s = settings();
         let obj = objective(&el, &k, &s);
         let unknowns = Unknowns::new(&k, el.node_count());
-        println!("{} nodes, {kc} keys, {} unknowns, load {}", el.node_count(), unknowns.count(), std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim());
+        println!(
+            "{} nodes, {kc} keys, {} unknowns, load {}",
+            el.node_count(),
+            unknowns.count(),
+            std::fs::read_to_string("/proc/loadavg").unwrap_or_default().trim()
+        );
         let c = timed("time coefficients", || TimeCoefficients::new(&obj, proximal_weight(&obj, s.regularization)));
         let a = timed("assemble", || assemble(&obj, &unknowns, &c));
         let order = timed("fill_reducing_order", || fill_reducing_order(&a, &unknowns, &el.rest, |_| true));
@@ -1422,7 +1525,8 @@ mod modal_phases {
         let _ = timed("fill_reducing_order without keys", || fill_reducing_order(&a, &unknowns, &el.rest, |_| false));
         if std::env::var("DIRECT").is_ok() {
             for par in [Par::Seq, Par::rayon(0)] {
-                let chol = timed(&format!("Cholesky::factor {par:?}"), || Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), par).unwrap());
+                let chol =
+                    timed(&format!("Cholesky::factor {par:?}"), || Cholesky::factor(&a, &FillOrdering::Custom(order.perm.clone()), par).unwrap());
                 println!("  factor entries {}", chol.factor_nnz());
                 let mut x: Vec<Point> = (0..unknowns.count()).map(|i| [i as f64, 1.0, 2.0]).collect();
                 timed("  solve_rows3", || chol.solve_rows3(&mut x));
@@ -1433,10 +1537,13 @@ mod modal_phases {
             let _ = timed("Modes::new (seq)", || Modes::new(&el, &obj.supports, Par::Seq).unwrap());
         }
         let step = timed("ModalStep::new (rayon)", || ModalStep::new(modes, &c, &unknowns, Par::rayon(0)).unwrap());
-        let whole = timed("GlobalStep::build (modal, whole set-up)", || GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap());
+        let whole = timed("GlobalStep::build (modal, whole set-up)", || {
+            GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, Some(Method::Modal)).unwrap()
+        });
         println!("  {:?}", whole.stats);
         drop(whole);
-        let chosen = timed("GlobalStep::build (the cost model's choice)", || GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, None).unwrap());
+        let chosen =
+            timed("GlobalStep::build (the cost model's choice)", || GlobalStep::build(&obj, unknowns.clone(), s.regularization, None, None).unwrap());
         println!("  {:?}", chosen.stats);
         drop(chosen);
         let mut rng = Rng(7);
@@ -1450,8 +1557,12 @@ mod modal_phases {
         let r = faer::Mat::<f64>::from_fn(3 * c.slots, nn, |i, j| ((i * 7 + j) % 13) as f64);
         let mut y = faer::Mat::<f64>::zeros(3 * c.slots, nn);
         for par in [Par::rayon(0), Par::Seq] {
-            timed(&format!("GEMM {}x{nn}x{nn} {par:?}", 3 * c.slots), || faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.as_ref(), 1.0, par));
-            timed(&format!("GEMM^T {}x{nn}x{nn} {par:?}", 3 * c.slots), || faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.transpose(), 1.0, par));
+            timed(&format!("GEMM {}x{nn}x{nn} {par:?}", 3 * c.slots), || {
+                faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.as_ref(), 1.0, par)
+            });
+            timed(&format!("GEMM^T {}x{nn}x{nn} {par:?}", 3 * c.slots), || {
+                faer::linalg::matmul::matmul(y.as_mut(), faer::Accum::Replace, r.as_ref(), phi.transpose(), 1.0, par)
+            });
         }
     }
 }

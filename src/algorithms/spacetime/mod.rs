@@ -24,11 +24,11 @@
 
 pub mod active_set;
 pub mod contact;
+pub mod gauss_newton;
 pub mod global_step;
 pub mod modal;
 pub mod objective;
 pub mod obstacles;
-pub mod gauss_newton;
 pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;
@@ -38,6 +38,6 @@ pub mod trajectory;
 pub mod unknowns;
 
 #[cfg(test)]
-mod tests;
-#[cfg(test)]
 mod cantilever_tests;
+#[cfg(test)]
+mod tests;

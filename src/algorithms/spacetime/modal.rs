@@ -80,9 +80,11 @@ impl Modes {
         let mut lambda = vec![0.0; n];
         {
             let params = Default::default();
-            let mut buffer = MemBuffer::new(faer::linalg::evd::self_adjoint_evd_scratch::<f64>(n, faer::linalg::evd::ComputeEigenvectors::Yes, par, params));
+            let mut buffer =
+                MemBuffer::new(faer::linalg::evd::self_adjoint_evd_scratch::<f64>(n, faer::linalg::evd::ComputeEigenvectors::Yes, par, params));
             let diag = faer::diag::DiagMut::from_slice_mut(&mut lambda);
-            faer::linalg::evd::self_adjoint_evd(s.as_ref(), diag, Some(u.as_mut()), par, MemStack::new(&mut buffer), params).map_err(|_| ModalFailure::Eigen)?;
+            faer::linalg::evd::self_adjoint_evd(s.as_ref(), diag, Some(u.as_mut()), par, MemStack::new(&mut buffer), params)
+                .map_err(|_| ModalFailure::Eigen)?;
         }
         drop(s);
         for j in 0..n {
@@ -178,7 +180,16 @@ impl ModalStep {
     /// The step for the time coefficients `c` and the free unknowns `unknowns` on `modes`.
     pub fn new(modes: Modes, c: &TimeCoefficients, unknowns: &Unknowns, par: Par) -> Result<ModalStep, ModalFailure> {
         let slots = c.slots;
-        let mut step = ModalStep { modes, slots, inverse: Vec::new(), held: Vec::new(), phi_held: Mat::zeros(0, 0), held_nodes: Vec::new(), capacitance: None, par };
+        let mut step = ModalStep {
+            modes,
+            slots,
+            inverse: Vec::new(),
+            held: Vec::new(),
+            phi_held: Mat::zeros(0, 0),
+            held_nodes: Vec::new(),
+            capacitance: None,
+            par,
+        };
         let mut held_place = vec![u32::MAX; unknowns.nodes];
         for s in 0..slots {
             for &a in &step.modes.nodes {
@@ -231,7 +242,8 @@ impl ModalStep {
         }
         let phi_rows = |list: &[(usize, usize)]| Mat::from_fn(list.len(), n, |k, i| self.phi_held[(list[k].1, i)]);
         let per_slot: Vec<Mat<f64>> = by_slot.iter().map(|l| phi_rows(l)).collect();
-        let pairs: Vec<(usize, usize)> = (0..slots).flat_map(|s| (0..=s).map(move |t| (s, t))).filter(|&(s, t)| !by_slot[s].is_empty() && !by_slot[t].is_empty()).collect();
+        let pairs: Vec<(usize, usize)> =
+            (0..slots).flat_map(|s| (0..=s).map(move |t| (s, t))).filter(|&(s, t)| !by_slot[s].is_empty() && !by_slot[t].is_empty()).collect();
         let ss = slots * slots;
         let blocks: Vec<Mat<f64>> = pairs
             .par_iter()
@@ -257,8 +269,14 @@ impl ModalStep {
         }
         drop(blocks);
         let mut buffer = MemBuffer::new(faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(count, self.par, Default::default()));
-        faer::linalg::cholesky::llt::factor::cholesky_in_place(g.as_mut(), LltRegularization::default(), self.par, MemStack::new(&mut buffer), Default::default())
-            .map_err(|_| ModalFailure::NotPositiveDefinite)?;
+        faer::linalg::cholesky::llt::factor::cholesky_in_place(
+            g.as_mut(),
+            LltRegularization::default(),
+            self.par,
+            MemStack::new(&mut buffer),
+            Default::default(),
+        )
+        .map_err(|_| ModalFailure::NotPositiveDefinite)?;
         self.capacitance = Some(g);
         Ok(())
     }
@@ -323,7 +341,13 @@ impl ModalStep {
                     lambda[(p, d)] = -at_held[(3 * s + d, h)];
                 }
             }
-            faer::linalg::cholesky::llt::solve::solve_in_place_with_conj(g.as_ref(), Conj::No, lambda.as_mut(), self.par, MemStack::new(&mut MemBuffer::new(faer::dyn_stack::StackReq::EMPTY)));
+            faer::linalg::cholesky::llt::solve::solve_in_place_with_conj(
+                g.as_ref(),
+                Conj::No,
+                lambda.as_mut(),
+                self.par,
+                MemStack::new(&mut MemBuffer::new(faer::dyn_stack::StackReq::EMPTY)),
+            );
             // Add B⁻¹ Φᵀ E_Cᵀ λ.
             let mut spread = Mat::<f64>::zeros(rows, held_rows);
             for (p, &(s, h)) in self.held.iter().enumerate() {
@@ -332,12 +356,26 @@ impl ModalStep {
                 }
             }
             let mut correction = vec![0.0; rows * n];
-            matmul(MatMut::from_column_major_slice_mut(&mut correction, rows, n), Accum::Replace, spread.as_ref(), self.phi_held.as_ref(), 1.0, self.par);
+            matmul(
+                MatMut::from_column_major_slice_mut(&mut correction, rows, n),
+                Accum::Replace,
+                spread.as_ref(),
+                self.phi_held.as_ref(),
+                1.0,
+                self.par,
+            );
             self.per_mode(&mut y, Some(&correction));
         }
         // Xᵀ = Yᵀ Φᵀ.
         let mut out = vec![0.0; rows * n];
-        matmul(MatMut::from_column_major_slice_mut(&mut out, rows, n), Accum::Replace, MatRef::from_column_major_slice(&y, rows, n), self.modes.phi.transpose(), 1.0, self.par);
+        matmul(
+            MatMut::from_column_major_slice_mut(&mut out, rows, n),
+            Accum::Replace,
+            MatRef::from_column_major_slice(&y, rows, n),
+            self.modes.phi.transpose(),
+            1.0,
+            self.par,
+        );
         for (&a, col) in self.modes.nodes.iter().zip(out.chunks_exact(rows)) {
             for s in 0..slots {
                 if let Some(u) = unknowns.get(a as usize, s) {

@@ -34,8 +34,8 @@ use super::sampling::{Sample, TimeSlots};
 use super::trajectory::{length_derivative, Trajectory};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;
-use crate::algorithms::physics::mat3::Mat3;
 use crate::algorithms::physics::lanes::BATCH;
+use crate::algorithms::physics::mat3::Mat3;
 use crate::algorithms::physics::projection::JacobianBatch;
 
 /// The local step: element projections of every sample (`[sample][tet]`), and optionally
@@ -171,7 +171,9 @@ impl<'a> Objective<'a> {
         let split_tets = self.split_tets();
         let project = |s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<JacobianBatch>>| self.project_sample(tr, s, p, j, split_tets);
         match out.jacobians.as_mut() {
-            Some(jacobians) => self.samples.par_iter().zip(out.targets.par_iter_mut()).zip(jacobians.par_iter_mut()).for_each(|((s, p), j)| project(s, p, Some(j))),
+            Some(jacobians) => {
+                self.samples.par_iter().zip(out.targets.par_iter_mut()).zip(jacobians.par_iter_mut()).for_each(|((s, p), j)| project(s, p, Some(j)))
+            }
             None => self.samples.par_iter().zip(out.targets.par_iter_mut()).for_each(|(s, p)| project(s, p, None)),
         }
     }
@@ -327,7 +329,11 @@ impl<'a> Objective<'a> {
 
     /// The residual of every sample, with the projections held at `p`.
     fn residuals(&self, tr: &Trajectory, p: &Projections) -> Vec<Residual> {
-        self.samples.par_iter().enumerate().map(|(k, s)| self.sample_residual(tr, s, &p.targets[k], p.jacobians.as_ref().map(|j| j[k].as_slice()))).collect()
+        self.samples
+            .par_iter()
+            .enumerate()
+            .map(|(k, s)| self.sample_residual(tr, s, &p.targets[k], p.jacobians.as_ref().map(|j| j[k].as_slice())))
+            .collect()
     }
 
     /// One sample's residual with its projections held at `targets` (and their Jacobians `jac`).
@@ -368,7 +374,14 @@ impl<'a> Objective<'a> {
             }
             0.5 * s.weight / t_len * w + s.weight * ftf
         });
-        Residual { force: f, w: 0.5 * s.weight * w, w_elastic: 0.5 * s.weight * w_el, w_forces: 0.5 * s.weight * w_forces, correction, time_derivative }
+        Residual {
+            force: f,
+            w: 0.5 * s.weight * w,
+            w_elastic: 0.5 * s.weight * w_el,
+            w_forces: 0.5 * s.weight * w_forces,
+            correction,
+            time_derivative,
+        }
     }
 
     /// The gradient of the global step's model per slot: `F^c + L M⁻¹ F^l`, each slot's sums

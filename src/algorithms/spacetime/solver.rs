@@ -110,9 +110,9 @@ use super::tangent_step::TangentStep;
 use super::timing::{safe_curvature, Blocks, ProjectionMode, Timing, TimingSettings};
 use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;
+use crate::support::error::{Error, Result};
 
 /// Solver settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -224,7 +224,13 @@ impl ModelHessian {
             return self;
         }
         let size = crate::algorithms::geometry::bbox_diagonal(&elastic.rest);
-        let far = keys.positions.iter().flatten().zip(elastic.rest.iter().cycle()).map(|(p, r)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *r))).fold(0.0, f64::max);
+        let far = keys
+            .positions
+            .iter()
+            .flatten()
+            .zip(elastic.rest.iter().cycle())
+            .map(|(p, r)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *r)))
+            .fold(0.0, f64::max);
         if far <= LINEAR_REGIME * size {
             ModelHessian::Tangent
         } else {
@@ -258,7 +264,8 @@ impl Settings {
 
     /// The samples of the coarse phase, when one runs (module documentation, "Coarse to fine").
     pub fn coarse_phase(&self) -> Option<usize> {
-        (self.coarse_samples > 0 && self.coarse_samples < self.samples && self.contacts.is_none() && self.timing.is_none()).then_some(self.coarse_samples)
+        (self.coarse_samples > 0 && self.coarse_samples < self.samples && self.contacts.is_none() && self.timing.is_none())
+            .then_some(self.coarse_samples)
     }
 }
 
@@ -548,7 +555,13 @@ struct Factors {
 /// One solve at `settings.samples`, from the first guess, or from `warm` when W is lower there
 /// (then straight to the quasi-Newton phase, on the warm start's matrices); whether it started
 /// from `warm`, and the matrices, for a next solve to reuse.
-fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, warm: Option<Warm>, on_iteration: &dyn Fn(usize, f64, f64)) -> Result<(Solved, bool, Factors)> {
+fn solve_from(
+    elastic: &Elastic,
+    keys: &KeyConstraints,
+    settings: &Settings,
+    warm: Option<Warm>,
+    on_iteration: &dyn Fn(usize, f64, f64),
+) -> Result<(Solved, bool, Factors)> {
     let start = Instant::now();
     let blocks = settings.timing.as_ref().map(|t| Blocks::new(&keys.times, t)).transpose()?;
     let objective = objective(elastic, keys, settings);
@@ -585,7 +598,8 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
             }
         }
     }
-    let lower: Vec<f64> = intervals.iter().map(|&i| settings.timing.as_ref().map_or(0.0, |t| t.min_interval.min(keys.times[i + 1] - keys.times[i]))).collect();
+    let lower: Vec<f64> =
+        intervals.iter().map(|&i| settings.timing.as_ref().map_or(0.0, |t| t.min_interval.min(keys.times[i + 1] - keys.times[i]))).collect();
     let size = crate::algorithms::geometry::bbox_diagonal(&elastic.rest);
     let mut solver = Solver {
         timing,
@@ -617,7 +631,18 @@ fn solve_from(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, war
     on_iteration(0, eval.value, settings.negligible * eval.force_scale);
     let at_minimum = vec![false; solver.intervals.len()];
     let times = if solver.blocks.is_some() { vec![tr.times.clone()] } else { Vec::new() };
-    let mut it = Iterate { tr, energy: vec![eval.value], eval, halvings: 0, active, at_minimum, timing_iterations: 0, refactorizations: 0, times, gauss_newton: (0, 0, 0) };
+    let mut it = Iterate {
+        tr,
+        energy: vec![eval.value],
+        eval,
+        halvings: 0,
+        active,
+        at_minimum,
+        timing_iterations: 0,
+        refactorizations: 0,
+        times,
+        gauss_newton: (0, 0, 0),
+    };
     let mut label = String::new();
     if let Some((tr, eval, words)) = warm {
         on_iteration(1, eval.value, settings.negligible * eval.force_scale);
@@ -864,7 +889,9 @@ impl<'a> Solver<'a> {
 
     /// Whether another iteration fits in `max_iterations`; an error once `--max-time` is spent.
     fn budget_left(&self, it: &Iterate) -> Result<bool> {
-        crate::support::resources::check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
+        crate::support::resources::check_time("solve", || {
+            format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN))
+        })?;
         Ok(it.energy.len() <= self.settings.max_iterations)
     }
 
@@ -989,7 +1016,11 @@ impl<'a> Solver<'a> {
             }
         }
         if let Some(&(k, depth, node, o, count)) = held.first() {
-            let others = if held.len() > 1 { format!(" (and the keys at {} s)", held[1..].iter().map(|h| format!("{:.4}", tr.times[h.0])).collect::<Vec<_>>().join(", ")) } else { String::new() };
+            let others = if held.len() > 1 {
+                format!(" (and the keys at {} s)", held[1..].iter().map(|h| format!("{:.4}", tr.times[h.0])).collect::<Vec<_>>().join(", "))
+            } else {
+                String::new()
+            };
             return Err(Error::general(
                 format!(
                     "the keyframe at t = {:.4} s holds {count} node(s) inside obstacle {} (a {}), node {node} deepest, by {depth:.4e}{others}; held positions cannot be moved out",
@@ -1033,10 +1064,14 @@ impl<'a> Solver<'a> {
             let solve = |x: &mut [Point]| self.global_solve(x);
             let h0 = self.preconditioner(&solve, false);
             let projection = Projection::new(rows, &h0);
-            let kept: Vec<f64> = projection.rows.iter().map(|r| match r.kind {
-                RowKind::Contact(index) => targets[index],
-                _ => 0.0,
-            }).collect();
+            let kept: Vec<f64> = projection
+                .rows
+                .iter()
+                .map(|r| match r.kind {
+                    RowKind::Contact(index) => targets[index],
+                    _ => 0.0,
+                })
+                .collect();
             let step = projection.correction(&kept, 3 * self.unknown_count());
             let (u, _) = split(&step, self.unknown_count());
             let points: Vec<Point> = u.as_chunks::<3>().0.to_vec();
@@ -1070,12 +1105,18 @@ impl<'a> Solver<'a> {
             // mostly measures how bad the first guess is.
             phase2 = self.quasi_newton(it, true)?;
         }
-        let mut phases = format!("{label}{local_global_iterations} local/global + {} quasi-Newton iterations", it.energy.len() - 1 - warm - local_global_iterations);
+        let mut phases = format!(
+            "{label}{local_global_iterations} local/global + {} quasi-Newton iterations",
+            it.energy.len() - 1 - warm - local_global_iterations
+        );
         if self.tangent.is_some() {
             phases += ", preconditioned by the tangent model Hessian";
         }
         if it.gauss_newton.0 > 0 {
-            phases += &format!(", {} of them Gauss-Newton steps ({} CG products, {} solves capped at {GAUSS_NEWTON_CG})", it.gauss_newton.0, it.gauss_newton.1, it.gauss_newton.2);
+            phases += &format!(
+                ", {} of them Gauss-Newton steps ({} CG products, {} solves capped at {GAUSS_NEWTON_CG})",
+                it.gauss_newton.0, it.gauss_newton.1, it.gauss_newton.2
+            );
         }
         if self.blocks.is_some() {
             phases += &format!(", {} moving the key times, {} refactorizations", it.timing_iterations, it.refactorizations);
@@ -1084,7 +1125,11 @@ impl<'a> Solver<'a> {
         Ok(match phase2 {
             PhaseEnd::Settled(change) => {
                 let (w, scale) = (*it.energy.last().expect("W"), it.eval.force_scale);
-                let of = if self.settings.negligible > 0.0 && scale > 0.0 { format!("of W + {:e} S (W = {:.2e} S, S the force scale)", self.settings.negligible, w / scale) } else { "of itself".to_string() };
+                let of = if self.settings.negligible > 0.0 && scale > 0.0 {
+                    format!("of W + {:e} S (W = {:.2e} S, S the force scale)", self.settings.negligible, w / scale)
+                } else {
+                    "of itself".to_string()
+                };
                 (true, format!("W decreased by {change:.3e} {of} over the last {WINDOW} iterations, below the tolerance {tolerance} ({phases})"))
             }
             PhaseEnd::Stalled => (true, format!("W is stationary: no step along its quasi-Newton direction decreases it ({phases})")),
@@ -1328,7 +1373,11 @@ impl<'a> Solver<'a> {
         let contacts = self.settings.contacts.as_ref();
         if let Some(contacts) = contacts {
             let snap = contacts.snapshot(&it.tr, &self.timing.slots);
-            let mut direction = Trajectory { times: it.tr.times.clone(), positions: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()], velocities: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()] };
+            let mut direction = Trajectory {
+                times: it.tr.times.clone(),
+                positions: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()],
+                velocities: vec![vec![[0.0; 3]; it.tr.vertex_count()]; it.tr.key_count()],
+            };
             apply_step(&mut direction, &self.timing.slots, &du_slots, 1.0);
             let motion = contacts.motion(&snap, &it.tr, &direction, &dt);
             let active = |c: Check| it.active.contains(&c);
@@ -1429,4 +1478,3 @@ struct Accepted {
     /// Whether the step moved the key times.
     moved_times: bool,
 }
-

@@ -26,12 +26,12 @@ use faer::Par;
 use super::global_step::TimeCoefficients;
 use super::objective::Objective;
 use super::unknowns::Unknowns;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::cholesky::Cholesky;
 use crate::algorithms::physics::csr::Csr;
 use crate::algorithms::physics::ordering::FillOrdering;
 use crate::algorithms::physics::vibration::{rest_stiffness, RestStiffness};
+use crate::support::error::{Error, Result};
 
 /// The factorized tangent model Hessian of the free unknowns.
 pub struct TangentStep {
@@ -113,7 +113,14 @@ impl TangentStep {
 /// The lower triangle of the tangent model Hessian over the free unknowns' coordinates. The
 /// pattern depends only on `coupled` (every structurally present entry is stored, zero or not),
 /// so a refactorization can reuse the symbolic analysis.
-fn assemble(k: &Csr, kmk: &Csr, coupled: &[bool], el: &crate::algorithms::physics::elastic::Elastic, unknowns: &Unknowns, c: &TimeCoefficients) -> SparseColMat<usize, f64> {
+fn assemble(
+    k: &Csr,
+    kmk: &Csr,
+    coupled: &[bool],
+    el: &crate::algorithms::physics::elastic::Elastic,
+    unknowns: &Unknowns,
+    c: &TimeCoefficients,
+) -> SparseColMat<usize, f64> {
     let n = c.slots;
     let dim = 3 * unknowns.count();
     let mut col_ptr = Vec::with_capacity(dim + 1);
@@ -214,7 +221,12 @@ mod tests {
                 let (gp, gm) = (gradient(&obj, &unknowns, &plus), gradient(&obj, &unknowns, &minus));
                 let hv = step.apply(&v);
                 let scale = hv.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-                let worst = gp.iter().zip(&gm).zip(&hv).flat_map(|((p, m), h_v)| (0..3).map(move |d| ((p[d] - m[d]) / (2.0 * h) - h_v[d]).abs())).fold(0.0, f64::max);
+                let worst = gp
+                    .iter()
+                    .zip(&gm)
+                    .zip(&hv)
+                    .flat_map(|((p, m), h_v)| (0..3).map(move |d| ((p[d] - m[d]) / (2.0 * h) - h_v[d]).abs()))
+                    .fold(0.0, f64::max);
                 assert!(worst < 1e-6 * scale, "cyclic={cyclic}, supports={supports}: {worst:e} of {scale:e}");
                 // And the factor inverts it.
                 let mut back = hv.clone();
@@ -231,7 +243,13 @@ mod tests {
         let el = Elastic::new(&mesh, &Material { stiffness: 70.0, volume: 40.0, density: 1.0 }).unwrap();
         let n = el.node_count();
         let bottom: Vec<u32> = (0..n as u32).filter(|&a| mesh.positions[a as usize][1] == 0.0).collect();
-        let keys = |times: Vec<f64>| KeyConstraints { times, positions: vec![el.rest.clone(); 3], fixed: vec![bottom.clone(); 3], fixed_velocity: vec![Vec::new(); 3], cyclic: false };
+        let keys = |times: Vec<f64>| KeyConstraints {
+            times,
+            positions: vec![el.rest.clone(); 3],
+            fixed: vec![bottom.clone(); 3],
+            fixed_velocity: vec![Vec::new(); 3],
+            cyclic: false,
+        };
         let settings = Settings::new(6, 0.2, [0.0; 3]);
         let (a, b) = (keys(vec![0.0, 0.4, 1.0]), keys(vec![0.0, 0.7, 1.3]));
         let unknowns = Unknowns::new(&a, n);

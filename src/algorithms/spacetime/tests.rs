@@ -398,7 +398,11 @@ fn force_scale_bounds_w_and_measures_the_forces() {
     // |M g|² at every sample, so S = Σ dτ ½ 2 m g² = m g² T (the quadrature weights sum to T).
     let t = 0.8;
     let fallen: Vec<Point> = mesh.positions.iter().map(|&p| add(p, [0.0, -0.5 * 9.81 * t * t, 0.0])).collect();
-    let tr = Trajectory { times: vec![0.0, t], positions: vec![mesh.positions.clone(), fallen], velocities: vec![vec![[0.0; 3]; mesh.positions.len()], vec![[0.0, -9.81 * t, 0.0]; mesh.positions.len()]] };
+    let tr = Trajectory {
+        times: vec![0.0, t],
+        positions: vec![mesh.positions.clone(), fallen],
+        velocities: vec![vec![[0.0; 3]; mesh.positions.len()], vec![[0.0, -9.81 * t, 0.0]; mesh.positions.len()]],
+    };
     let k = keys(tr.times.clone(), tr.positions.clone(), vec![Nodes::default(); 2], false);
     let obj = objective(&el, &k, &Settings { gravity: g, ..settings() });
     let e = obj.evaluate(&tr, &obj.local_step(&tr, false));
@@ -422,7 +426,11 @@ fn force_scale_bounds_w_and_measures_the_forces() {
     let r = ratio(1.0, &tr);
     assert!(r > 1e-3, "W / S = {r}");
     assert!((ratio(1e3, &tr) / r - 1.0).abs() < 1e-10);
-    let moved = Trajectory { times: tr.times.clone(), positions: tr.positions.iter().map(|p| p.iter().map(|&x| add(x, [5.0, 1.0, -2.0])).collect()).collect(), velocities: tr.velocities.clone() };
+    let moved = Trajectory {
+        times: tr.times.clone(),
+        positions: tr.positions.iter().map(|p| p.iter().map(|&x| add(x, [5.0, 1.0, -2.0])).collect()).collect(),
+        velocities: tr.velocities.clone(),
+    };
     assert!((ratio(1.0, &moved) / r - 1.0).abs() < 1e-10);
 }
 
@@ -461,7 +469,11 @@ fn predicted_iterations_match_the_stopping_rule_on_linear_convergence() {
             let end = stops(&energy, tol, floor);
             for k in (2 * WINDOW..=end).step_by(7) {
                 let left = predicted_iterations(&energy[..=k], tol, floor).expect("a prediction after two windows");
-                assert!((k + left).abs_diff(end) <= 1, "a {a} r {r} c {c} floor {floor}: at {k} predicted {} stop, the rule stops at {end}", k + left);
+                assert!(
+                    (k + left).abs_diff(end) <= 1,
+                    "a {a} r {r} c {c} floor {floor}: at {k} predicted {} stop, the rule stops at {end}",
+                    k + left
+                );
             }
             assert_eq!(predicted_iterations(&energy[..=end], tol, floor), Some(0));
             assert_eq!(predicted_iterations(&energy[..2 * WINDOW], tol, floor), None, "no prediction before two windows");
@@ -492,27 +504,149 @@ fn predicted_iterations_match_the_stopping_rule_on_linear_convergence() {
 fn the_iteration_estimate_waits_out_a_stall() {
     use super::solver::IterationEstimate;
     let energy = [
-        31330.090912, 10972.756209, 5624.286155, 3408.095635, 2290.963831, 1659.461957, 1273.323416,
-        1022.882895, 852.638189, 732.325561, 644.470564, 578.511042, 527.818805, 488.100847,
-        456.499568, 431.066414, 410.443968, 393.668722, 380.045832, 369.067934, 360.361561,
-        353.651206, 348.734938, 345.467719, 329.621571, 310.179243, 300.127006, 286.115316,
-        278.847233, 272.873597, 268.577018, 264.625037, 261.145805, 257.792870, 254.920241,
-        252.688604, 250.899847, 249.178212, 247.424165, 245.784208, 244.358724, 243.099210,
-        241.931218, 240.822894, 239.769581, 238.774396, 237.826085, 236.897004, 235.962773,
-        235.023436, 234.096059, 233.194048, 232.328402, 231.513989, 230.758858, 230.051263,
-        229.368253, 228.695126, 228.027576, 227.357976, 226.670860, 225.950092, 225.183745,
-        224.363591, 223.486808, 222.564660, 221.628554, 220.721759, 219.883765, 219.140676,
-        218.503573, 217.970267, 217.530075, 217.171043, 216.882924, 216.654964, 216.474116,
-        216.327586, 216.206572, 216.106965, 216.026901, 215.963992, 215.914583, 215.874816,
-        215.841726, 215.813496, 215.789051, 215.767484, 215.747760, 215.728862, 215.710072,
-        215.690928, 215.670797, 215.648527, 215.622473, 215.590768, 215.551306, 215.500989,
-        215.434205, 215.340745, 215.203417, 214.997981, 214.702401, 214.279375, 213.661834,
-        212.939591, 212.155415, 211.777611, 211.035666, 210.530325, 209.404195, 209.001577,
-        208.454276, 208.079236, 207.657127, 207.297220, 206.932494, 206.608919, 206.338495,
-        206.099661, 205.878624, 205.675659, 205.504735, 205.366664, 205.250707, 205.146192,
-        205.053684, 204.976046, 204.912440, 204.858756, 204.811564, 204.769567, 204.732468,
-        204.700245, 204.672567, 204.648642, 204.627484, 204.608419, 204.591180, 204.575572,
-        204.561263, 204.547899, 204.535361
+        31330.090912,
+        10972.756209,
+        5624.286155,
+        3408.095635,
+        2290.963831,
+        1659.461957,
+        1273.323416,
+        1022.882895,
+        852.638189,
+        732.325561,
+        644.470564,
+        578.511042,
+        527.818805,
+        488.100847,
+        456.499568,
+        431.066414,
+        410.443968,
+        393.668722,
+        380.045832,
+        369.067934,
+        360.361561,
+        353.651206,
+        348.734938,
+        345.467719,
+        329.621571,
+        310.179243,
+        300.127006,
+        286.115316,
+        278.847233,
+        272.873597,
+        268.577018,
+        264.625037,
+        261.145805,
+        257.792870,
+        254.920241,
+        252.688604,
+        250.899847,
+        249.178212,
+        247.424165,
+        245.784208,
+        244.358724,
+        243.099210,
+        241.931218,
+        240.822894,
+        239.769581,
+        238.774396,
+        237.826085,
+        236.897004,
+        235.962773,
+        235.023436,
+        234.096059,
+        233.194048,
+        232.328402,
+        231.513989,
+        230.758858,
+        230.051263,
+        229.368253,
+        228.695126,
+        228.027576,
+        227.357976,
+        226.670860,
+        225.950092,
+        225.183745,
+        224.363591,
+        223.486808,
+        222.564660,
+        221.628554,
+        220.721759,
+        219.883765,
+        219.140676,
+        218.503573,
+        217.970267,
+        217.530075,
+        217.171043,
+        216.882924,
+        216.654964,
+        216.474116,
+        216.327586,
+        216.206572,
+        216.106965,
+        216.026901,
+        215.963992,
+        215.914583,
+        215.874816,
+        215.841726,
+        215.813496,
+        215.789051,
+        215.767484,
+        215.747760,
+        215.728862,
+        215.710072,
+        215.690928,
+        215.670797,
+        215.648527,
+        215.622473,
+        215.590768,
+        215.551306,
+        215.500989,
+        215.434205,
+        215.340745,
+        215.203417,
+        214.997981,
+        214.702401,
+        214.279375,
+        213.661834,
+        212.939591,
+        212.155415,
+        211.777611,
+        211.035666,
+        210.530325,
+        209.404195,
+        209.001577,
+        208.454276,
+        208.079236,
+        207.657127,
+        207.297220,
+        206.932494,
+        206.608919,
+        206.338495,
+        206.099661,
+        205.878624,
+        205.675659,
+        205.504735,
+        205.366664,
+        205.250707,
+        205.146192,
+        205.053684,
+        204.976046,
+        204.912440,
+        204.858756,
+        204.811564,
+        204.769567,
+        204.732468,
+        204.700245,
+        204.672567,
+        204.648642,
+        204.627484,
+        204.608419,
+        204.591180,
+        204.575572,
+        204.561263,
+        204.547899,
+        204.535361,
     ];
     let (floor, n) = (1e-3 * 626.893, energy.len() - 1);
     let mut estimate = IterationEstimate::default();
@@ -580,7 +714,8 @@ fn twisting_scene() -> (Elastic, KeyConstraints) {
 fn coarse_to_fine_stops_near_the_converged_w_and_never_raises_it() {
     use super::solver::{baseline, NEGLIGIBLE};
     let (el, k) = twisting_scene();
-    let fine = Settings { tolerance: 1e-3, negligible: NEGLIGIBLE, max_iterations: 1000, coarse_samples: 0, ..Settings::new(8, 0.1, [0.0, -9.81, 0.0]) };
+    let fine =
+        Settings { tolerance: 1e-3, negligible: NEGLIGIBLE, max_iterations: 1000, coarse_samples: 0, ..Settings::new(8, 0.1, [0.0, -9.81, 0.0]) };
     let coarse = Settings { coarse_samples: 3, ..fine.clone() };
     let a = solve(&el, &k, &coarse, &|_, _, _| {}).unwrap();
     let log = &a.log;
@@ -599,7 +734,10 @@ fn coarse_to_fine_stops_near_the_converged_w_and_never_raises_it() {
     println!("reference {} iterations, W {w_ref:e}; the coarse-to-fine stop is {:.3}% above", reference.log.iterations, 100.0 * (stop / w_ref - 1.0));
     assert!(w_ref > 1e-3 * w[0] && stop <= 1.02 * w_ref, "{stop:e} against {w_ref:e}");
     let b = solve(&el, &k, &coarse, &|_, _, _| {}).unwrap();
-    assert_eq!((&a.trajectory.positions, &a.trajectory.velocities, &a.log.energy), (&b.trajectory.positions, &b.trajectory.velocities, &b.log.energy));
+    assert_eq!(
+        (&a.trajectory.positions, &a.trajectory.velocities, &a.log.energy),
+        (&b.trajectory.positions, &b.trajectory.velocities, &b.log.energy)
+    );
 }
 
 /// The coarse phase runs only where it is defined: below the configured samples, without
@@ -611,6 +749,9 @@ fn the_coarse_phase_is_left_out_where_it_does_not_apply() {
     assert_eq!(Settings { coarse_samples: 0, ..s.clone() }.coarse_phase(), None);
     assert_eq!(Settings { coarse_samples: 8, ..s.clone() }.coarse_phase(), None);
     assert_eq!(Settings { timing: Some(Default::default()), ..s.clone() }.coarse_phase(), None);
-    let contacts = super::contact::Contacts { obstacles: vec![super::obstacles::Obstacle::Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0] }], frame_rate: 30.0 };
+    let contacts = super::contact::Contacts {
+        obstacles: vec![super::obstacles::Obstacle::Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0] }],
+        frame_rate: 30.0,
+    };
     assert_eq!(Settings { contacts: Some(contacts), ..s }.coarse_phase(), None);
 }

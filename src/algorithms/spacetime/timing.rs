@@ -90,11 +90,11 @@ use super::sampling::{sample_counts, samples, Sample, TimeSlots};
 use super::solver::Settings;
 use super::trajectory::{length_derivative, Trajectory};
 use super::unknowns::KeyConstraints;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::lanes::{Lanes, BATCH};
 use crate::algorithms::physics::projection_curvature::project_along_forces_lanes;
+use crate::support::error::{Error, Result};
 
 /// The spacetime objective as a function of the key times.
 #[derive(Clone)]

@@ -49,11 +49,7 @@ pub fn hermite_weights(theta: f64, t_len: f64) -> SlotWeights {
     let e01 = -12.0 * s + 6.0;
     let e11 = 6.0 * s - 2.0;
     let t = t_len;
-    SlotWeights {
-        pos: [h00, t * h10, h01, t * h11],
-        vel: [d00 / t, d10, d01 / t, d11],
-        acc: [e00 / (t * t), e10 / t, e01 / (t * t), e11 / t],
-    }
+    SlotWeights { pos: [h00, t * h10, h01, t * h11], vel: [d00 / t, d10, d01 / t, d11], acc: [e00 / (t * t), e10 / t, e01 / (t * t), e11 / t] }
 }
 
 /// Powers of `T` in the weights of `(x_i, v_i, x_{i+1}, v_{i+1})` (see [`hermite_weights`]):

@@ -8,8 +8,8 @@ use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
+use crate::support::error::{Error, Result};
 
 /// Refuse anything but a regular file (following symlinks), before opening it: opening a FIFO
 /// for reading blocks until a writer appears.

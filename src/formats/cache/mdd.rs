@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 use super::binary::{decode_points, open_regular, read_exact_at, word, Endian};
 use super::pc2::{size_mismatch, write_frames};
 use super::{check_writable, rate_of, FrameSource};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
+use crate::support::error::{Error, Result};
 
 const FIX_DAMAGED: &str = "the file is truncated or its header does not match its data; re-export the cache";
 const BE: Endian = Endian::Big;
@@ -85,20 +85,13 @@ impl<R: Read + Seek> MddFrames<R> {
         } else if len as u128 == expected + frame_bytes as u128 {
             times_end + frame_bytes
         } else {
-            return bad(size_mismatch(
-                len,
-                expected,
-                times_end,
-                frame_bytes,
-                &format!("{frames} frames (byte 0) x {points} points (byte 4)"),
-            ));
+            return bad(size_mismatch(len, expected, times_end, frame_bytes, &format!("{frames} frames (byte 0) x {points} points (byte 4)")));
         };
         // Bounded by the file size, checked above.
         let mut raw = vec![0u8; 4 * frames as usize];
         read_exact_at(&mut reader, 8, &mut raw, path)?;
         let file_times: Vec<f64> = raw.chunks_exact(4).map(|c| BE.f32(word(c, 0)) as f64).collect();
-        let unusable =
-            file_times.iter().position(|t| !t.is_finite()).or_else(|| file_times.windows(2).position(|w| w[1] <= w[0]).map(|i| i + 1));
+        let unusable = file_times.iter().position(|t| !t.is_finite()).or_else(|| file_times.windows(2).position(|w| w[1] <= w[0]).map(|i| i + 1));
         let (times, rate) = match (unusable, fps) {
             (None, _) if file_times.len() >= 2 => {
                 let fps = rate_of(&file_times).expect("increasing times have a rate");
@@ -121,11 +114,7 @@ impl<R: Read + Seek> MddFrames<R> {
                 ))
             }
             (None, None) => {
-                return Err(Error::in_file(
-                    path,
-                    "holds a single frame, so its frame rate is unknown",
-                    "give the cache's fps (frames per second)",
-                ));
+                return Err(Error::in_file(path, "holds a single frame, so its frame rate is unknown", "give the cache's fps (frames per second)"));
             }
         };
         Ok(MddFrames { path: path.to_path_buf(), reader, points: points as usize, data_start, times, rate, bytes: Vec::new() })
@@ -211,9 +200,7 @@ mod tests {
         assert_eq!((mdd.rate(), mdd.time(2)), (MddTimes::Caller { fps: 50.0 }, 0.04));
         let s = open_bytes(zeros, None).unwrap_err().to_string();
         assert!(
-            s.starts_with(
-                "anim.mdd: frame time 1 (byte 12) is 0, after 0: the frame times are not finite and increasing (fix: give the cache's fps"
-            ),
+            s.starts_with("anim.mdd: frame time 1 (byte 12) is 0, after 0: the frame times are not finite and increasing (fix: give the cache's fps"),
             "{s}"
         );
     }

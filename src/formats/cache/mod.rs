@@ -37,9 +37,8 @@ pub const MAX_FRAMES: usize = 2_160_000;
 /// vertex, counts that fit the formats' 32-bit fields, increasing times. Returns
 /// (vertices, frames).
 pub(crate) fn check_writable(path: &Path, frames: &dyn FrameSource, fps: f64) -> Result<(usize, usize)> {
-    let fail = |problem: String| {
-        Err(Error::general(format!("cannot write {}: {problem}", path.display()), "pass a cache with frames and a positive fps"))
-    };
+    let fail =
+        |problem: String| Err(Error::general(format!("cannot write {}: {problem}", path.display()), "pass a cache with frames and a positive fps"));
     if !(fps.is_finite() && fps > 0.0) {
         return fail(format!("fps {fps} is not positive"));
     }
@@ -93,9 +92,7 @@ pub(crate) mod tests {
             frames: (0..frames)
                 .map(|f| {
                     let t = f as f64 / fps;
-                    (0..vertices)
-                        .map(|v| [(v % n) as f64 + 0.1 * t, (v / n) as f64, (0.7 * (v % n) as f64 - 3.0 * t).sin() / 3.0])
-                        .collect()
+                    (0..vertices).map(|v| [(v % n) as f64 + 0.1 * t, (v / n) as f64, (0.7 * (v % n) as f64 - 3.0 * t).sin() / 3.0]).collect()
                 })
                 .collect(),
         }

@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 
 use super::binary::{decode_points, encode_points, open_regular, read_exact_at, word, Endian};
 use super::{check_writable, FrameSource};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::Point;
+use crate::support::error::{Error, Result};
 
 pub const MAGIC: &[u8; 12] = b"POINTCACHE2\0";
 pub const HEADER_BYTES: u64 = 32;
@@ -59,8 +59,7 @@ impl Pc2Header {
         if version != 1 {
             return Err(Error::in_file(path, format!("PC2 version {version} at byte 12 (only version 1 exists)"), FIX_DAMAGED));
         }
-        let (points, start, rate, samples) =
-            (le.i32(word(header, 16)), le.f32(word(header, 20)), le.f32(word(header, 24)), le.i32(word(header, 28)));
+        let (points, start, rate, samples) = (le.i32(word(header, 16)), le.f32(word(header, 20)), le.f32(word(header, 24)), le.i32(word(header, 28)));
         if points <= 0 {
             return bad(format!("point count {points} at byte 16 (must be positive)"));
         }
@@ -98,7 +97,10 @@ pub(crate) fn size_mismatch(file_len: u64, expected: u128, data_start: u64, fram
         let at = data_start + frame * frame_bytes;
         format!("the header says {counts} = {expected} bytes, but the file ends at byte {file_len}, inside frame {frame} (which starts at byte {at}): truncated")
     } else {
-        format!("the header says {counts} = {expected} bytes, but the file has {} more bytes after byte {expected}: the counts do not match the data", file_len as u128 - expected)
+        format!(
+            "the header says {counts} = {expected} bytes, but the file has {} more bytes after byte {expected}: the counts do not match the data",
+            file_len as u128 - expected
+        )
     }
 }
 
@@ -128,7 +130,6 @@ impl<R: Read + Seek> Pc2Frames<R> {
         let header = Pc2Header::parse(&header[..available], len, path)?;
         Ok(Pc2Frames { path: path.to_path_buf(), reader, header, fps, bytes: Vec::new() })
     }
-
 
     /// Samples per second: the frame rate divided by the frames between samples.
     pub fn sample_fps(&self) -> f64 {

@@ -17,11 +17,11 @@
 use std::path::{Path, PathBuf};
 
 use super::binary::require_regular;
-use crate::algorithms::frames::FrameRange;
 use super::{check_writable, FrameSource, MAX_FRAMES};
-use crate::support::error::{Error, Result};
-use crate::formats::mesh::obj;
+use crate::algorithms::frames::FrameRange;
 use crate::algorithms::geometry::{Point, TriMesh};
+use crate::formats::mesh::obj;
+use crate::support::error::{Error, Result};
 use crate::support::output::Staging;
 
 /// A parsed sequence pattern: `dir/prefix<number>suffix`.
@@ -83,12 +83,9 @@ impl SequencePattern {
 
     /// Parse a pattern; the problem on failure (the caller names the file).
     pub fn parse(path: &Path) -> std::result::Result<SequencePattern, String> {
-        let name = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .ok_or_else(|| "has no file name in UTF-8 to hold the frame-number placeholder".to_string())?;
-        let (start, end, width) =
-            placeholder(name)?.ok_or_else(|| "has no frame-number placeholder (#### or %04d) in its file name".to_string())?;
+        let name =
+            path.file_name().and_then(|n| n.to_str()).ok_or_else(|| "has no file name in UTF-8 to hold the frame-number placeholder".to_string())?;
+        let (start, end, width) = placeholder(name)?.ok_or_else(|| "has no frame-number placeholder (#### or %04d) in its file name".to_string())?;
         if width > 18 {
             return Err(format!("pads frame numbers to {width} digits; at most 18 are supported"));
         }
@@ -186,11 +183,7 @@ pub struct OpenedSequence {
 pub fn open(pattern: &Path, fps: f64, range: FrameRange) -> Result<OpenedSequence> {
     let parsed = SequencePattern::parse(pattern).map_err(|p| Error::in_file(pattern, p, "name the frames like frames/frame_####.obj"))?;
     if !parsed.suffix.to_ascii_lowercase().ends_with(".obj") {
-        return Err(Error::in_file(
-            pattern,
-            "is a frame sequence of another format than OBJ",
-            "export the sequence as OBJ files (frame_####.obj)",
-        ));
+        return Err(Error::in_file(pattern, "is a frame sequence of another format than OBJ", "export the sequence as OBJ files (frame_####.obj)"));
     }
     let numbers = parsed.scan(pattern)?;
     let (lowest, highest) = (numbers[0], numbers[numbers.len() - 1]);
@@ -209,11 +202,7 @@ pub fn open(pattern: &Path, fps: f64, range: FrameRange) -> Result<OpenedSequenc
         let missing = first + j as u64;
         return Err(Error::in_file(
             parsed.path(missing),
-            format!(
-                "frame {missing} of the OBJ sequence is missing (the folder has {} to {})",
-                parsed.file_name(lowest),
-                parsed.file_name(highest)
-            ),
+            format!("frame {missing} of the OBJ sequence is missing (the folder has {} to {})", parsed.file_name(lowest), parsed.file_name(highest)),
             "re-export the missing frame, or choose a frame range (start, end) that avoids it",
         ));
     }
@@ -264,11 +253,7 @@ impl FrameSource for ObjSequence {
         if mesh.triangles.len() != self.triangles.len() {
             return Err(Error::in_file(
                 &path,
-                format!(
-                    "has {} triangles (after fan triangulation), but the first frame {first} has {}",
-                    mesh.triangles.len(),
-                    self.triangles.len()
-                ),
+                format!("has {} triangles (after fan triangulation), but the first frame {first} has {}", mesh.triangles.len(), self.triangles.len()),
                 fix,
             ));
         }
@@ -423,10 +408,7 @@ mod tests {
         text = text.replacen("f 1 2 5", "f 1 5 2", 1);
         std::fs::write(dir.join("f_0004.obj"), text).unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();
-        assert!(
-            e.contains("triangle 0 (after fan triangulation) joins vertices 1 5 2, but in the first frame f_0003.obj it joins 1 2 5"),
-            "{e}"
-        );
+        assert!(e.contains("triangle 0 (after fan triangulation) joins vertices 1 5 2, but in the first frame f_0003.obj it joins 1 2 5"), "{e}");
         std::fs::write(dir.join("f_0004.obj"), "v 0 0 0\n").unwrap();
         let e = seq.read_frame(1, &mut out).unwrap_err().to_string();
         assert!(e.contains("f_0004.obj: has no faces"), "{e}");
@@ -435,15 +417,9 @@ mod tests {
         assert!(e.contains("f_0004.obj: cannot read the OBJ frame"), "{e}");
 
         let e = open(&dir.join("g_####.obj"), 30.0, FrameRange::ALL).unwrap_err().to_string();
-        assert!(
-            e.contains("no file in") && e.contains("matches the pattern g_####.obj (#### = the frame number zero-padded to 4 digits)"),
-            "{e}"
-        );
+        assert!(e.contains("no file in") && e.contains("matches the pattern g_####.obj (#### = the frame number zero-padded to 4 digits)"), "{e}");
         let e = write(&pat, &mesh, &mut wave(9, 2, 30.0), 30.0).unwrap_err().to_string();
-        assert!(
-            e.contains("f_0003.obj: is a frame of the same pattern outside the 2 frames being written (f_0000.obj to f_0001.obj)"),
-            "{e}"
-        );
+        assert!(e.contains("f_0003.obj: is a frame of the same pattern outside the 2 frames being written (f_0000.obj to f_0001.obj)"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -25,12 +25,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::binary::require_regular;
 use super::pc2::{self, Pc2Frames};
-use crate::algorithms::frames::FrameRange;
 use super::{check_writable, FrameSource};
-use crate::support::error::{Error, Result};
+use crate::algorithms::frames::FrameRange;
+use crate::algorithms::geometry::{Point, TriMesh};
 use crate::formats::export::layer::Value;
 use crate::formats::export::usda::{extent, header, prim_name, push_topology, push_vec3s, UsdSettings};
-use crate::algorithms::geometry::{Point, TriMesh};
+use crate::support::error::{Error, Result};
 
 const SCRIPT: &str = include_str!("usd_cache.py");
 const NO_PXR: i32 = 3;
@@ -134,19 +134,13 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
     let bytes = require_regular(path, "USD file")?;
     let temp = TempDir::new("usd-read")?;
     let (start, end) = (range.start.to_string(), range.end.to_string());
-    let args = [
-        std::ffi::OsStr::new("read"),
-        path.as_os_str(),
-        std::ffi::OsStr::new(prim.unwrap_or("-")),
-        start.as_ref(),
-        end.as_ref(),
-        temp.0.as_os_str(),
-    ];
+    let args =
+        [std::ffi::OsStr::new("read"), path.as_os_str(), std::ffi::OsStr::new(prim.unwrap_or("-")), start.as_ref(), end.as_ref(), temp.0.as_os_str()];
     run_script(path, &args)?;
     let info_path = temp.0.join("info.json");
     let text = std::fs::read(&info_path).map_err(|e| Error::io(&info_path, &e, "read what usd-core found"))?;
-    let info: ReadInfo = serde_json::from_slice(&text)
-        .map_err(|e| Error::in_file(path, format!("usd-core's summary does not parse: {e}"), "report this as a bug"))?;
+    let info: ReadInfo =
+        serde_json::from_slice(&text).map_err(|e| Error::in_file(path, format!("usd-core's summary does not parse: {e}"), "report this as a bug"))?;
     let where_ = &info.prim;
     let bad = |problem: String| Error::in_file(path, problem, "re-export the mesh from your tool; check it with usd-core");
     if !(info.time_codes_per_second.is_finite() && info.time_codes_per_second > 0.0) {
@@ -269,7 +263,11 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         out.extend(points.iter().map(|p| p.map(|x| x as f32)));
         Ok(())
     };
-    let streamed = crate::formats::export::usdc::StreamedSamples { attribute: crate::formats::export::usd::points_path(&settings), times: &codes, read: &mut read };
+    let streamed = crate::formats::export::usdc::StreamedSamples {
+        attribute: crate::formats::export::usd::points_path(&settings),
+        times: &codes,
+        read: &mut read,
+    };
     let bytes = crate::formats::export::usdc::bytes_streamed(&layer, path, streamed)?;
     drop(layer);
     crate::support::output::write_atomic(path, &bytes)
@@ -392,7 +390,13 @@ mod tests {
         let static_mesh = dir.join("static.usda");
         std::fs::write(&static_mesh, "#usda 1.0\ndef Mesh \"M\"\n{\n    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0, 1, 2]\n    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]\n}\n").unwrap();
         let s = open(&static_mesh, None, FrameRange::ALL).unwrap_err().to_string();
-        assert!(s.starts_with(&format!("{}: the points of /M have no time samples (a static mesh, not a point cache) (fix: export the animation as points time samples", static_mesh.display())), "{s}");
+        assert!(
+            s.starts_with(&format!(
+                "{}: the points of /M have no time samples (a static mesh, not a point cache) (fix: export the animation as points time samples",
+                static_mesh.display()
+            )),
+            "{s}"
+        );
         assert!(!s.contains('\n'));
 
         let broken = dir.join("broken.usda");

@@ -2,12 +2,12 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::algorithms::frames::{FrameRange, Subrange};
 use super::sequence::SequencePattern;
 use super::{gltf_clip, mdd, pc2, sequence, usd, FrameSource};
-use crate::support::error::{Error, Result};
-use crate::formats::mesh::obj;
+use crate::algorithms::frames::{FrameRange, Subrange};
 use crate::algorithms::geometry::TriMesh;
+use crate::formats::mesh::obj;
+use crate::support::error::{Error, Result};
 
 /// The file formats of vertex caches.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -182,11 +182,7 @@ impl VertexCache {
         })?;
         if let Some(fps) = options.fps {
             if !(fps.is_finite() && fps > 0.0) {
-                return Err(Error::in_file(
-                    path,
-                    format!("fps {fps} is not a positive number"),
-                    "give the cache's frames per second, e.g. fps = 60",
-                ));
+                return Err(Error::in_file(path, format!("fps {fps} is not a positive number"), "give the cache's frames per second, e.g. fps = 60"));
             }
         }
         let uses_rest = matches!(format, CacheFormat::Pc2 | CacheFormat::Mdd);
@@ -201,11 +197,7 @@ impl VertexCache {
         }
         let need_fps = |why: &str| {
             options.fps.ok_or_else(|| {
-                Error::in_file(
-                    path,
-                    format!("{} needs a frame rate: {why}", format.described()),
-                    "give the cache's fps (frames per second)",
-                )
+                Error::in_file(path, format!("{} needs a frame rate: {why}", format.described()), "give the cache's fps (frames per second)")
             })
         };
         let path_buf = path.to_path_buf();
@@ -251,14 +243,10 @@ impl VertexCache {
             }
             CacheFormat::Gltf => {
                 let opened = gltf_clip::open(path, options.animation.as_deref(), options.fps)?;
-                let fps_source = if opened.fps_from_keys {
-                    FpsSource::File("the spacing of the glTF animation's keys".into())
-                } else {
-                    FpsSource::Caller
-                };
+                let fps_source =
+                    if opened.fps_from_keys { FpsSource::File("the spacing of the glTF animation's keys".into()) } else { FpsSource::Caller };
                 let frames = subrange(path, opened.frames, options.range)?;
-                let mut cache =
-                    VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
+                let mut cache = VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
                 if options.range != FrameRange::ALL {
                     // The mesh is the first frame of the range.
                     cache.frames.read_frame(0, &mut cache.mesh.positions)?;
@@ -303,12 +291,7 @@ impl VertexCache {
 pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64) -> Result<()> {
     if mesh.positions.len() != frames.vertex_count() {
         return Err(Error::general(
-            format!(
-                "cannot write {}: the mesh has {} vertices, the frames {}",
-                path.display(),
-                mesh.positions.len(),
-                frames.vertex_count()
-            ),
+            format!("cannot write {}: the mesh has {} vertices, the frames {}", path.display(), mesh.positions.len(), frames.vertex_count()),
             "pass the mesh the frames belong to",
         ));
     }
@@ -411,16 +394,13 @@ mod tests {
         };
         assert!(err(&pc2, options(Some(30.0), None))
             .contains("a PC2 cache holds positions only, so its triangles must come from the mesh it animates (fix: give rest = "));
-        assert!(err(&pc2, options(None, Some(&small)))
-            .contains("a PC2 cache needs a frame rate: PC2 numbers its samples in frames, not seconds"));
+        assert!(err(&pc2, options(None, Some(&small))).contains("a PC2 cache needs a frame rate: PC2 numbers its samples in frames, not seconds"));
         let s = err(&pc2, options(Some(30.0), Some(&small)));
         assert!(s.starts_with(&format!("{}: has 4 vertices, but {} has 9 points per frame", small.display(), pc2.display())), "{s}");
         assert!(err(&glb, options(None, Some(&small))).contains("`rest` was given, but a glTF clip does not use it"));
         assert!(err(&pc2, CacheOptions { animation: Some("x".into()), ..options(Some(30.0), Some(&small)) })
             .contains("`animation` was given, but a PC2 cache"));
-        assert!(
-            err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip")
-        );
+        assert!(err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip"));
         assert!(err(&glb, options(Some(-1.0), None)).contains("fps -1 is not a positive number"));
         assert!(err(&dir.join("a.abc"), CacheOptions::default()).contains("is not a vertex cache format blendsim reads"));
         assert!(err(&dir.join("f_####.obj"), CacheOptions::default()).contains("an OBJ sequence needs a frame rate"));

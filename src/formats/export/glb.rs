@@ -12,10 +12,10 @@ use json::validation::{Checked::Valid, USize64};
 use json::Index;
 use serde_json::{json as value, Value};
 
-use crate::algorithms::blendshape::clip::BlendShapeClip;
-use crate::algorithms::blendshape::fullframe::FullFrame;
 use super::sparse_is_smaller;
 use super::texture::Texture;
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::{split_at_seams, CornerAttributes};
 use crate::algorithms::geometry::Bounds;
 
@@ -52,13 +52,7 @@ pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placemen
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
 /// frames, the linear blend of two frames in between, and nothing an importer could drop
 /// (Blender's glTF importer ignores CUBICSPLINE tangents).
-pub fn blendshapes_sampled(
-    clip: &BlendShapeClip,
-    frame_times: &[f64],
-    surface: Surface,
-    name: &str,
-    placement: Placement,
-) -> Vec<u8> {
+pub fn blendshapes_sampled(clip: &BlendShapeClip, frame_times: &[f64], surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
     with_weights(clip, surface, name, placement, &times, &output, Interpolation::Linear)
@@ -134,7 +128,11 @@ fn vertex_normals(points: &[[f64; 3]], triangles: &[[u32; 3]], sources: Option<&
     n.into_iter()
         .map(|x| {
             let l = crate::algorithms::geometry::norm(x);
-            if l > 0.0 { x.map(|c| c / l) } else { x }
+            if l > 0.0 {
+                x.map(|c| c / l)
+            } else {
+                x
+            }
         })
         .collect()
 }
@@ -306,9 +304,7 @@ impl File {
             min_version: None,
             version: "2.0".into(),
         };
-        let split = attributes
-            .filter(|a| !a.uv_corners.is_empty() || !a.normal_corners.is_empty())
-            .map(|a| split_at_seams(triangles, base.len(), a));
+        let split = attributes.filter(|a| !a.uv_corners.is_empty() || !a.normal_corners.is_empty()).map(|a| split_at_seams(triangles, base.len(), a));
         let triangles: &[[u32; 3]] = split.as_ref().map_or(triangles, |s| &s.triangles);
         if let Some(s) = &split {
             f.sources = Some(s.sources.clone());
@@ -327,18 +323,28 @@ impl File {
                 .iter()
                 .map(|n| {
                     let length = crate::algorithms::geometry::norm(*n);
-                    if length > 0.0 { n.map(|x| (x / length) as f32) } else { [0.0, 0.0, 1.0] }
+                    if length > 0.0 {
+                        n.map(|x| (x / length) as f32)
+                    } else {
+                        [0.0, 0.0, 1.0]
+                    }
                 })
                 .collect();
             let offset = f.push(Block::Vertices, &vec3_bytes(unit.into_iter()));
             let count = normals.len();
-            attributes_json.push((Valid(json::mesh::Semantic::Normals), f.root.push(accessor(Some((Block::Vertices, offset)), count, ComponentType::F32, Type::Vec3))));
+            attributes_json.push((
+                Valid(json::mesh::Semantic::Normals),
+                f.root.push(accessor(Some((Block::Vertices, offset)), count, ComponentType::F32, Type::Vec3)),
+            ));
         }
         if let Some(uvs) = split.as_ref().and_then(|s| s.uvs.as_ref()) {
             // glTF's v runs down the image, OBJ's up.
             let bytes: Vec<u8> = uvs.iter().flat_map(|&[u, v]| [u as f32, (1.0 - v) as f32]).flat_map(f32::to_le_bytes).collect();
             let offset = f.push(Block::Texcoords, &bytes);
-            attributes_json.push((Valid(json::mesh::Semantic::TexCoords(0)), f.root.push(accessor(Some((Block::Texcoords, offset)), uvs.len(), ComponentType::F32, Type::Vec2))));
+            attributes_json.push((
+                Valid(json::mesh::Semantic::TexCoords(0)),
+                f.root.push(accessor(Some((Block::Texcoords, offset)), uvs.len(), ComponentType::F32, Type::Vec2)),
+            ));
         }
         let has_uvs = split.as_ref().is_some_and(|s| s.uvs.is_some());
         let vertex_count = split.as_ref().map_or(base.len(), |s| s.sources.len());
@@ -376,7 +382,8 @@ impl File {
                         i
                     }
                 };
-                material.pbr_metallic_roughness.base_color_texture = Some(json::texture::Info { index, tex_coord: 0, extensions: None, extras: None });
+                material.pbr_metallic_roughness.base_color_texture =
+                    Some(json::texture::Info { index, tex_coord: 0, extensions: None, extras: None });
             }
             let material = f.root.push(material);
             primitives.push(json::mesh::Primitive {
@@ -518,7 +525,13 @@ impl File {
     }
 
     /// Attach named morph targets (default weights 0) and their weights animation.
-    fn morph(&mut self, targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)>, times: &[f32], output: &[f32], interpolation: Interpolation) {
+    fn morph(
+        &mut self,
+        targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)>,
+        times: &[f32],
+        output: &[f32],
+        interpolation: Interpolation,
+    ) {
         self.target_names = targets.iter().map(|(n, _, _)| n.clone()).collect();
         let mesh = &mut self.root.meshes[0];
         mesh.weights = Some(vec![0.0; targets.len()]);
@@ -535,12 +548,7 @@ impl File {
             name,
             channels: vec![json::animation::Channel {
                 sampler: Index::new(0),
-                target: json::animation::Target {
-                    extensions: None,
-                    extras: None,
-                    node: Index::new(0),
-                    path: Valid(Property::MorphTargetWeights),
-                },
+                target: json::animation::Target { extensions: None, extras: None, node: Index::new(0), path: Valid(Property::MorphTargetWeights) },
                 extensions: None,
                 extras: None,
             }],

@@ -8,11 +8,11 @@
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
 //! gets is decided by the export stage (`crate::pipeline::stages::export`).
 
-mod usd_attributes;
 pub mod glb;
 pub mod layer;
 pub mod texture;
 pub mod usd;
+mod usd_attributes;
 pub mod usda;
 pub mod usdc;
 

@@ -70,7 +70,11 @@ pub fn load(textures: &[Option<String>]) -> Result<Vec<Option<Texture>>> {
             let (Some(path), Some(file_name)) = (path, name) else { return Ok(None) };
             let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the texture a material's map_Kd names"))?;
             let mime = mime_of(&bytes).ok_or_else(|| {
-                Error::in_file(path, "is not a PNG or JPEG image (glTF carries only those)", "convert it to PNG (or JPEG) and point the .mtl's map_Kd at the converted file")
+                Error::in_file(
+                    path,
+                    "is not a PNG or JPEG image (glTF carries only those)",
+                    "convert it to PNG (or JPEG) and point the .mtl's map_Kd at the converted file",
+                )
             })?;
             Ok(Some(Texture { file_name, bytes, mime }))
         })

@@ -1,10 +1,10 @@
 //! The USD layout of our animations as a [`Layer`] (written by `usda` as text and by `usdc`
 //! as a binary crate). Layout in `formats/usd.md`.
 
-use crate::algorithms::blendshape::clip::BlendShapeClip;
-use crate::algorithms::blendshape::fullframe::FullFrame;
 use super::layer::{Attribute, Layer, Prim, Value};
 use super::usd_attributes as attrs;
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::CornerAttributes;
 use crate::algorithms::geometry::Bounds;
 use crate::algorithms::spacetime::trajectory::frames_between;
@@ -125,7 +125,13 @@ pub fn points_path(settings: &UsdSettings) -> String {
 /// every sample with the same vertex count), under `Xform ROOT`: the full-frame file's layout,
 /// and a `.usdc` vertex cache's (`cache::usd`, whose `.usda` text is this layer too).
 /// `time_codes` is the stage's `(startTimeCode, endTimeCode)`.
-pub fn sampled_points(samples: Vec<(f64, Vec<[f32; 3]>)>, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, time_codes: (i64, i64)) -> Layer {
+pub fn sampled_points(
+    samples: Vec<(f64, Vec<[f32; 3]>)>,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    time_codes: (i64, i64),
+) -> Layer {
     let extents = samples.iter().map(|(code, p)| (*code, extent(p))).collect();
     let vertices = samples.first().map_or(0, |s| s.1.len());
     // The points move into the layer: a cache is held once, not copied.

@@ -33,7 +33,9 @@ fn uvs(uvs: impl Iterator<Item = [f64; 2]>) -> Value {
 pub(crate) fn push_properties(mesh: &mut Prim, triangles: &[[u32; 3]], vertices: usize, attributes: &CornerAttributes) {
     if !attributes.uv_corners.is_empty() {
         match attributes.uvs_per_vertex(triangles, vertices) {
-            Some(per_vertex) => mesh.attribute(Attribute::new("primvars:st", "texCoord2f[]", uvs(per_vertex.into_iter())).with_interpolation("vertex")),
+            Some(per_vertex) => {
+                mesh.attribute(Attribute::new("primvars:st", "texCoord2f[]", uvs(per_vertex.into_iter())).with_interpolation("vertex"))
+            }
             None => {
                 mesh.attribute(Attribute::new("primvars:st", "texCoord2f[]", uvs(attributes.uvs.iter().copied())).with_interpolation("faceVarying"));
                 let indices = attributes.uv_corners.iter().flatten().map(|&i| i as i32).collect();

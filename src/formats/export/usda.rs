@@ -8,11 +8,11 @@
 
 use std::fmt::Write;
 
-use crate::algorithms::blendshape::clip::BlendShapeClip;
-use crate::algorithms::blendshape::fullframe::FullFrame;
 use super::layer::{Attribute, Layer, Prim, Property, Value};
 pub(crate) use super::usd::extent;
 pub use super::usd::{prim_name, UsdSettings};
+use crate::algorithms::blendshape::clip::BlendShapeClip;
+use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::CornerAttributes;
 
 /// `usd::blendshapes` as text.
@@ -37,7 +37,13 @@ pub fn text(layer: &Layer) -> String {
 /// formatted from `frames` one sample at a time and the text passed on in pieces of about
 /// 1 MB, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
 /// the points is held. The same bytes.
-pub fn write_full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, file: &mut dyn std::io::Write) -> std::io::Result<()> {
+pub fn write_full_frame(
+    frames: &FullFrame,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    file: &mut dyn std::io::Write,
+) -> std::io::Result<()> {
     let layer = super::usd::full_frame_unsampled(frames, triangles, attributes, settings);
     let mut stream = Some(Streamed { attribute: super::usd::points_path(settings), frames, file, failed: None });
     let mut out = String::with_capacity(2 * PIECE);
@@ -380,7 +386,11 @@ mod tests {
         let triangles: Vec<[u32; 3]> = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
         let pose = |k: usize| -> Vec<[f32; 3]> { (0..n).map(|a| [a as f32 * 0.001, (k as f32 * 0.37).sin(), -0.5 * (a * k) as f32]).collect() };
         let frames = FullFrame { frames: vec![-1, 0, 1, 2], times: vec![-0.1, 0.0, 0.1, 0.2], points: (0..4).map(pose).collect() };
-        let groups = CornerAttributes { groups: vec!["a".into(), "b".into()], triangle_groups: (0..n - 2).map(|t| (t % 2) as u32).collect(), ..Default::default() };
+        let groups = CornerAttributes {
+            groups: vec!["a".into(), "b".into()],
+            triangle_groups: (0..n - 2).map(|t| (t % 2) as u32).collect(),
+            ..Default::default()
+        };
         for attributes in [None, Some(&groups)] {
             let want = text(&crate::formats::export::usd::full_frame(&frames, &triangles, attributes, &settings()));
             assert!(want.len() > 2 * PIECE, "several pieces: {}", want.len());

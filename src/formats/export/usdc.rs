@@ -27,9 +27,9 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use self::compression::{compressed_ints, fast_compression};
-use crate::algorithms::blendshape::fullframe::FullFrame;
 use super::layer::{Attribute, Layer, Prim, Property, Value};
 use super::usd::{self, UsdSettings};
+use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::CornerAttributes;
 use crate::support::error::{Error, Result};
 
@@ -86,7 +86,9 @@ fn inlined(ty: u64, payload: u32) -> u64 {
 /// in errors: a value the format cannot hold (a NUL byte in a name or string) or a non-finite
 /// number (a corrupted animation) is refused with a one-line error instead of a file.
 pub fn bytes(layer: &Layer, path: &Path) -> Result<Vec<u8>> {
-    check(layer).map_err(|problem| Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it"))?;
+    check(layer).map_err(|problem| {
+        Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it")
+    })?;
     let mut w = Writer::default();
     w.out.extend_from_slice(&[0; 88]);
     w.layer(layer);
@@ -111,7 +113,9 @@ pub type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()> +
 /// [`bytes`] with the samples of `streamed.attribute` read from `streamed` as they are written:
 /// the same bytes as [`bytes`] of the layer holding them.
 pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>) -> Result<Vec<u8>> {
-    let unwritable = |problem: String| Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it");
+    let unwritable = |problem: String| {
+        Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it")
+    };
     check(layer).map_err(unwritable)?;
     if streamed.times.iter().any(|t| !t.is_finite()) {
         return Err(unwritable(format!("{} has a non-finite sample time", streamed.attribute)));
@@ -130,7 +134,13 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
 /// of it, with the points streamed from `frames` instead of copied into the layer: a large
 /// animation's frames (40k vertices x 151 frames is 72 MB) are held by `frames` and once more
 /// as the file's bytes, not a third time in the layer.
-pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings, path: &Path) -> Result<Vec<u8>> {
+pub fn full_frame(
+    frames: &FullFrame,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    path: &Path,
+) -> Result<Vec<u8>> {
     let layer = usd::full_frame_unsampled(frames, triangles, attributes, settings);
     let times: Vec<f64> = frames.frames.iter().map(|&f| f as f64).collect();
     let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
@@ -384,7 +394,11 @@ impl Writer<'_> {
             let custom = ("custom", inlined(ty::BOOL, 0));
             match property {
                 Property::Attribute(a) => {
-                    let mut fields = vec![("typeName", inlined(ty::TOKEN, self.token(a.type_name))), custom, ("variability", inlined(ty::VARIABILITY, a.uniform as u32))];
+                    let mut fields = vec![
+                        ("typeName", inlined(ty::TOKEN, self.token(a.type_name))),
+                        custom,
+                        ("variability", inlined(ty::VARIABILITY, a.uniform as u32)),
+                    ];
                     if let Some(v) = &a.default {
                         fields.push(("default", self.value(v)));
                     }
@@ -559,8 +573,12 @@ impl Writer<'_> {
             }
             Value::Ints(items) => self.array(ty::INT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
             Value::Floats(items) => self.array(ty::FLOAT, items.len(), |out| items.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
-            Value::Vec2fs(items) => self.array(ty::VEC2F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
-            Value::Vec3fs(items) => self.array(ty::VEC3F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes()))),
+            Value::Vec2fs(items) => {
+                self.array(ty::VEC2F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes())))
+            }
+            Value::Vec3fs(items) => {
+                self.array(ty::VEC3F, items.len(), |out| items.iter().flatten().for_each(|x| out.extend_from_slice(&x.to_le_bytes())))
+            }
         }
     }
 
@@ -731,13 +749,22 @@ mod tests {
         mesh.attribute(Attribute::uniform("joints", "token[]", Value::Tokens(Vec::new())));
         mesh.attribute(Attribute::uniform("names", "token[]", Value::Tokens(vec!["a".into(), "b".into(), "a".into()])));
         mesh.attribute(Attribute::sampled("weights", "float[]", vec![(-2.0, Value::Floats(vec![0.25, -1.0])), (0.5, Value::Floats(vec![]))]));
-        mesh.attribute(Attribute::sampled("points", "point3f[]", vec![(1.0, Value::Vec3fs(vec![[1.0, 2.0, 3.0]])), (2.0, Value::Vec3fs(vec![[4.0, 5.0, 6.0]; 20]))]));
+        mesh.attribute(Attribute::sampled(
+            "points",
+            "point3f[]",
+            vec![(1.0, Value::Vec3fs(vec![[1.0, 2.0, 3.0]])), (2.0, Value::Vec3fs(vec![[4.0, 5.0, 6.0]; 20]))],
+        ));
         mesh.relationship("material:binding", vec!["/root/M".into()]);
         mesh.relationship("skel:blendShapeTargets", vec!["/root/M".into(), "/root/M/S".into()]);
         let mut root = Prim::new("Xform", "root");
         root.children.push(mesh);
         root.children.push(material);
-        let metadata = vec![("defaultPrim", Value::Token("root".into())), ("doc", Value::String("a \"doc\"".into())), ("metersPerUnit", Value::Double(0.01)), ("endTimeCode", Value::Double(1e300))];
+        let metadata = vec![
+            ("defaultPrim", Value::Token("root".into())),
+            ("doc", Value::String("a \"doc\"".into())),
+            ("metersPerUnit", Value::Double(0.01)),
+            ("endTimeCode", Value::Double(1e300)),
+        ];
         Layer { metadata, prims: vec![root, Prim::new("Scope", "second")] }
     }
 
@@ -758,7 +785,8 @@ mod tests {
         assert_eq!(bytes, super::bytes(&layer, &c).unwrap(), "same bytes every time");
         std::fs::write(&c, bytes).unwrap();
         let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/usd_same_layer.py");
-        let out = std::process::Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or("python3".into())).arg(checker).arg(&a).arg(&c).output().unwrap();
+        let out =
+            std::process::Command::new(std::env::var("BLENDSIM_PYTHON").unwrap_or("python3".into())).arg(checker).arg(&a).arg(&c).output().unwrap();
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success() && stdout.contains("\"ok\": true"), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
         std::fs::remove_dir_all(&d).unwrap();

@@ -58,13 +58,9 @@ pub fn parse(text: &str) -> Result<TetMesh> {
             "Vertices" | "Tetrahedra" => {
                 let rows = block_rows(keyword, value, line_no, &mut lines)?;
                 let duplicate = if keyword == "Vertices" {
-                    positions
-                        .replace(rows.iter().enumerate().map(|(k, row)| vertex_row(row, k + 1)).collect::<Result<_>>()?)
-                        .is_some()
+                    positions.replace(rows.iter().enumerate().map(|(k, row)| vertex_row(row, k + 1)).collect::<Result<_>>()?).is_some()
                 } else {
-                    tet_rows
-                        .replace(rows.iter().enumerate().map(|(k, row)| tet_row(row, k + 1)).collect::<Result<_>>()?)
-                        .is_some()
+                    tet_rows.replace(rows.iter().enumerate().map(|(k, row)| tet_row(row, k + 1)).collect::<Result<_>>()?).is_some()
                 };
                 if duplicate {
                     return Err(Error::general(
@@ -122,12 +118,7 @@ fn is_keyword(token: &str) -> bool {
 }
 
 /// The number after a keyword: on the same line or alone on the next one.
-fn block_value<'a>(
-    keyword: &str,
-    rest: &[&str],
-    line_no: usize,
-    lines: &mut impl Iterator<Item = Line<'a>>,
-) -> Result<usize> {
+fn block_value<'a>(keyword: &str, rest: &[&str], line_no: usize, lines: &mut impl Iterator<Item = Line<'a>>) -> Result<usize> {
     let (at, token) = match rest.first() {
         Some(token) => (line_no, token.to_string()),
         None => match lines.next() {
@@ -144,21 +135,12 @@ fn block_value<'a>(
 }
 
 /// The `count` rows of a block, one per line.
-fn block_rows<'a>(
-    keyword: &str,
-    count: usize,
-    line_no: usize,
-    lines: &mut impl Iterator<Item = Line<'a>>,
-) -> Result<Vec<Line<'a>>> {
+fn block_rows<'a>(keyword: &str, count: usize, line_no: usize, lines: &mut impl Iterator<Item = Line<'a>>) -> Result<Vec<Line<'a>>> {
     let mut rows = Vec::new();
     while rows.len() < count {
         let short = |found: String| {
             Error::general(
-                format!(
-                    "line {line_no}: {} declares {count} rows but only {} follow before {found}",
-                    quoted(keyword),
-                    rows.len()
-                ),
+                format!("line {line_no}: {} declares {count} rows but only {} follow before {found}", quoted(keyword), rows.len()),
                 format!("correct the count on line {line_no} or re-export the tet mesh"),
             )
         };
@@ -180,9 +162,11 @@ fn vertex_row((line_no, tokens): &Line, row: usize) -> Result<Point> {
     }
     let mut p = [0.0; 3];
     for (slot, token) in p.iter_mut().zip(tokens) {
-        *slot = token.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
-            Error::general(format!("line {line_no}: Vertices row {row}: {} is not a finite number", quoted(token)), REEXPORT)
-        })?;
+        *slot = token
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| Error::general(format!("line {line_no}: Vertices row {row}: {} is not a finite number", quoted(token)), REEXPORT))?;
     }
     Ok(p)
 }
@@ -196,9 +180,9 @@ fn tet_row((line_no, tokens): &Line, row: usize) -> Result<([i64; 4], usize, usi
     }
     let mut corners = [0i64; 4];
     for (slot, token) in corners.iter_mut().zip(tokens) {
-        *slot = token.parse().map_err(|_| {
-            Error::general(format!("line {line_no}: Tetrahedra row {row}: {} is not a vertex number", quoted(token)), REEXPORT)
-        })?;
+        *slot = token
+            .parse()
+            .map_err(|_| Error::general(format!("line {line_no}: Tetrahedra row {row}: {} is not a vertex number", quoted(token)), REEXPORT))?;
     }
     Ok((corners, *line_no, row))
 }
@@ -206,8 +190,8 @@ fn tet_row((line_no, tokens): &Line, row: usize) -> Result<([i64; 4], usize, usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::support::testing::paper_asset;
     use crate::algorithms::geometry::Bounds;
+    use crate::support::testing::paper_asset;
 
     const TWO_TETS: &str = "\
 MeshVersionFormatted 1
@@ -261,30 +245,18 @@ End
     #[test]
     fn malformed_files_name_the_row_and_a_fix() {
         let cases = [
-            (
-                TWO_TETS.replace("1 2 3 5 1", "1 2 3 6 1"),
-                "line 22: Tetrahedra row 2 refers to vertex 6, but vertices are numbered 1 to 5",
-            ),
+            (TWO_TETS.replace("1 2 3 5 1", "1 2 3 6 1"), "line 22: Tetrahedra row 2 refers to vertex 6, but vertices are numbered 1 to 5"),
             (TWO_TETS.replace("1 2 3 5 1", "0 1 2 3 1"), "line 22: Tetrahedra row 2 refers to vertex 0"),
             (TWO_TETS.replace("1 2 3 5 1", "1 2 3 3 1"), "line 22: Tetrahedra row 2 (vertices 1 2 3 3) is flat"),
             (TWO_TETS.replace("0 0 -1 7", "1 1 0 7"), "line 22: Tetrahedra row 2 (vertices 1 2 3 5) is flat"),
-            (
-                TWO_TETS.replace("Vertices 5", "Vertices 6"),
-                "line 6: `Vertices` declares 6 rows but only 5 follow before `Edges`",
-            ),
-            (
-                TWO_TETS.replace("Vertices 5", "Vertices 4"),
-                "line 11: expected a block keyword (Vertices, Tetrahedra, ...), found `0`",
-            ),
+            (TWO_TETS.replace("Vertices 5", "Vertices 6"), "line 6: `Vertices` declares 6 rows but only 5 follow before `Edges`"),
+            (TWO_TETS.replace("Vertices 5", "Vertices 4"), "line 11: expected a block keyword (Vertices, Tetrahedra, ...), found `0`"),
             (TWO_TETS.replace("1 0 0 1\n", "1 x 0 1\n"), "line 8: Vertices row 2: `x` is not a finite number"),
             (TWO_TETS.replace("1 0 0 1\n", "1 0 0 0 1\n"), "line 8: Vertices row 2 has 5 values"),
             (TWO_TETS.replace("1 2 3 4 1", "1 2 3.5 4 1"), "line 21: Tetrahedra row 1: `3.5` is not a vertex number"),
             (TWO_TETS.replace("Dimension\n3", "Dimension 2"), "line 3: the mesh has dimension 2, blendsim needs 3"),
             (TWO_TETS.replace("Tetrahedra\n2\n1 2 3 4 1\n1 2 3 5 1", "Tetrahedra\n0"), "has no tetrahedra"),
-            (
-                TWO_TETS.replace("Tetrahedra\n2", "Tetrahedra\nmany"),
-                "line 20: `Tetrahedra` must be followed by a count",
-            ),
+            (TWO_TETS.replace("Tetrahedra\n2", "Tetrahedra\nmany"), "line 20: `Tetrahedra` must be followed by a count"),
             (format!("{TWO_TETS}Vertices\n0\n").replace("End\n", ""), "a second `Vertices` block"),
             ("MeshVersionFormatted 1\nDimension 3\n".to_string(), "has no `Vertices` block"),
             // A NaN row is a NaN, not the end of its block.
@@ -327,8 +299,7 @@ End
 
     #[test]
     fn paper_stretch3d_keyframes_share_the_rest_topology() {
-        let (Some(p0), Some(p1), Some(p2)) =
-            (paper_asset("stretch3d/0.mesh"), paper_asset("stretch3d/1.mesh"), paper_asset("stretch3d/2.mesh"))
+        let (Some(p0), Some(p1), Some(p2)) = (paper_asset("stretch3d/0.mesh"), paper_asset("stretch3d/1.mesh"), paper_asset("stretch3d/2.mesh"))
         else {
             return;
         };

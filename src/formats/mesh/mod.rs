@@ -41,11 +41,6 @@ pub fn read(path: &Path) -> Result<MeshFile> {
         Some("obj") => obj::read(path).map(MeshFile::Surface),
         Some("mesh") => medit::read(path).map(MeshFile::Volume),
         Some("node") | Some("ele") => tetgen_io::read(path).map(MeshFile::Volume),
-        _ => Err(Error::in_file(
-            path,
-            "unknown mesh format",
-            "use .obj for surfaces, .mesh (MEDIT) or .node/.ele (TetGen) for tet meshes",
-        )),
+        _ => Err(Error::in_file(path, "unknown mesh format", "use .obj for surfaces, .mesh (MEDIT) or .node/.ele (TetGen) for tet meshes")),
     }
 }
-

@@ -27,8 +27,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::algorithms::geometry::attributes::CornerAttributes;
 use super::{Point, TriMesh};
+use crate::algorithms::geometry::attributes::CornerAttributes;
 use crate::support::error::{quoted, Error, Result};
 
 /// Read an OBJ surface; errors name the file and the line.
@@ -50,8 +50,7 @@ pub fn read(path: &Path) -> Result<TriMesh> {
                 found.extend(read_mtl_textures(&folder.join(name))?);
             }
         }
-        let textures: Vec<Option<String>> =
-            a.groups.iter().map(|g| found.iter().find(|(m, _)| m == g).map(|(_, t)| t.clone())).collect();
+        let textures: Vec<Option<String>> = a.groups.iter().map(|g| found.iter().find(|(m, _)| m == g).map(|(_, t)| t.clone())).collect();
         if textures.iter().any(Option::is_some) {
             a.textures = textures;
         }
@@ -229,10 +228,7 @@ fn parse_vertex<'a>(tokens: impl Iterator<Item = &'a str>, line_no: usize) -> Re
         count += 1;
     }
     if count < 3 {
-        return Err(Error::general(
-            format!("line {line_no}: vertex has {count} coordinates, needs 3"),
-            "write vertices as `v x y z`",
-        ));
+        return Err(Error::general(format!("line {line_no}: vertex has {count} coordinates, needs 3"), "write vertices as `v x y z`"));
     }
     Ok(p)
 }
@@ -447,12 +443,7 @@ mod tests {
     #[test]
     fn write_then_parse_is_exact_and_write_is_stable() {
         let mesh = TriMesh {
-            positions: vec![
-                [0.1 + 0.2, -0.0, 1e-300],
-                [1e300, 5e-324, -1.0 / 3.0],
-                [f64::MAX, 2.0, 0.5],
-                [7.0, 8.0, 9.0],
-            ],
+            positions: vec![[0.1 + 0.2, -0.0, 1e-300], [1e300, 5e-324, -1.0 / 3.0], [f64::MAX, 2.0, 0.5], [7.0, 8.0, 9.0]],
             triangles: vec![[0, 1, 2], [2, 1, 0]],
             attributes: None,
         };
@@ -471,21 +462,13 @@ mod tests {
     fn read_attaches_the_path_and_tolerates_latin1_comments() {
         let missing = Path::new("/nonexistent/blendsim/k0.obj");
         let s = read(missing).unwrap_err().to_string();
-        assert!(
-            s.starts_with("/nonexistent/blendsim/k0.obj: cannot read the OBJ surface") && s.contains("(fix: "),
-            "{s}"
-        );
+        assert!(s.starts_with("/nonexistent/blendsim/k0.obj: cannot read the OBJ surface") && s.contains("(fix: "), "{s}");
         let path = std::env::temp_dir().join(format!("blendsim-obj-test-{}.obj", std::process::id()));
         std::fs::write(&path, b"# mod\xe8le\ng caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n").unwrap();
         let s = read(&path).unwrap_err().to_string();
         std::fs::remove_file(&path).unwrap();
-        let expected =
-            "line 7: face has 2 vertices, needs at least 3 (fix: remove the line, or export edges as `l` lines";
-        assert_eq!(
-            s.split_once(": ").map(|(file, rest)| (file, rest.starts_with(expected))),
-            Some((path.to_str().unwrap(), true)),
-            "{s}"
-        );
+        let expected = "line 7: face has 2 vertices, needs at least 3 (fix: remove the line, or export edges as `l` lines";
+        assert_eq!(s.split_once(": ").map(|(file, rest)| (file, rest.starts_with(expected))), Some((path.to_str().unwrap(), true)), "{s}");
     }
 
     #[test]
@@ -509,10 +492,7 @@ mod tests {
         if let Some(path) = paper_asset("ball/unit_sphere.obj") {
             let mesh = read(&path).unwrap();
             assert_eq!((mesh.positions.len(), mesh.triangles.len()), (192, 380));
-            assert!(
-                mesh.positions.iter().all(|p| (crate::algorithms::geometry::norm(*p) - 0.5).abs() < 1e-5),
-                "a sphere of radius 0.5"
-            );
+            assert!(mesh.positions.iter().all(|p| (crate::algorithms::geometry::norm(*p) - 0.5).abs() < 1e-5), "a sphere of radius 0.5");
         }
     }
 }

@@ -42,9 +42,8 @@ pub(crate) fn parse_dmat(text: &str, n: usize) -> Result<Vec<bool>> {
         if mask.len() == n {
             return Err(Error::general(format!("line {line}: more values than the {n} of the header"), "give one value per vertex"));
         }
-        let x: f64 = value.parse().map_err(|_| {
-            Error::general(format!("line {line}: {} is not a number", quoted(value)), "write 0 or 1 per vertex")
-        })?;
+        let x: f64 =
+            value.parse().map_err(|_| Error::general(format!("line {line}: {} is not a number", quoted(value)), "write 0 or 1 per vertex"))?;
         if x != 0.0 && x != 1.0 {
             return Err(Error::general(
                 format!("line {line}: value {} is neither 0 nor 1", quoted(value)),

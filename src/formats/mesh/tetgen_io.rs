@@ -40,18 +40,14 @@ pub fn read(path: &Path) -> Result<TetMesh> {
 /// Parse `.node` text: returns the points and the first index (0 or 1).
 pub fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
     let mut lines = content_lines(text);
-    let (header_no, header) = lines
-        .next()
-        .ok_or_else(|| Error::general("is empty, expected a `count 3 attributes markers` header", REMESH))?;
+    let (header_no, header) = lines.next().ok_or_else(|| Error::general("is empty, expected a `count 3 attributes markers` header", REMESH))?;
     let count: usize = field(&header, 0, header_no, "the node count")?;
     let dimension: usize = optional_field(&header, 1, header_no, "the dimension")?.unwrap_or(3);
     let attributes: usize = optional_field(&header, 2, header_no, "the attribute count")?.unwrap_or(0);
     let markers: usize = optional_field(&header, 3, header_no, "the boundary-marker flag")?.unwrap_or(0);
     if dimension != 3 || markers > 1 {
         return Err(Error::general(
-            format!(
-                "line {header_no}: header says dimension {dimension} and marker flag {markers}, expected 3 and 0 or 1"
-            ),
+            format!("line {header_no}: header says dimension {dimension} and marker flag {markers}, expected 3 and 0 or 1"),
             REMESH,
         ));
     }
@@ -63,27 +59,18 @@ pub fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
         check_columns(&tokens, columns, line_no, "node", header_no)?;
         let number: usize = field(&tokens, 0, line_no, "the node number")?;
         if k == 0 && number > 1 {
-            return Err(Error::general(
-                format!("line {line_no}: the first node is numbered {number}, not 0 or 1"),
-                REMESH,
-            ));
+            return Err(Error::general(format!("line {line_no}: the first node is numbered {number}, not 0 or 1"), REMESH));
         }
         if k == 0 {
             first_index = number;
         } else if number != first_index + k {
-            return Err(Error::general(
-                format!("line {line_no}: node number {number} is out of sequence (expected {})", first_index + k),
-                REMESH,
-            ));
+            return Err(Error::general(format!("line {line_no}: node number {number} is out of sequence (expected {})", first_index + k), REMESH));
         }
         let mut p = [0.0; 3];
         for (d, slot) in p.iter_mut().enumerate() {
             *slot = field::<f64>(&tokens, d + 1, line_no, "a coordinate")?;
             if !slot.is_finite() {
-                return Err(Error::general(
-                    format!("line {line_no}: node {number} has a non-finite coordinate"),
-                    REMESH,
-                ));
+                return Err(Error::general(format!("line {line_no}: node {number} has a non-finite coordinate"), REMESH));
             }
         }
         points.push(p);
@@ -94,16 +81,12 @@ pub fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
 /// Parse `.ele` text given the first node index.
 pub fn parse_ele(text: &str, first_index: usize, node_count: usize) -> Result<Vec<[u32; 4]>> {
     let mut lines = content_lines(text);
-    let (header_no, header) =
-        lines.next().ok_or_else(|| Error::general("is empty, expected a `count 4 attributes` header", REMESH))?;
+    let (header_no, header) = lines.next().ok_or_else(|| Error::general("is empty, expected a `count 4 attributes` header", REMESH))?;
     let count: usize = field(&header, 0, header_no, "the tetrahedron count")?;
     let corners: usize = optional_field(&header, 1, header_no, "the nodes per tetrahedron")?.unwrap_or(4);
     let attributes: usize = optional_field(&header, 2, header_no, "the attribute count")?.unwrap_or(0);
     if corners != 4 && corners != 10 {
-        return Err(Error::general(
-            format!("line {header_no}: header says {corners} nodes per tetrahedron, expected 4 or 10"),
-            REMESH,
-        ));
+        return Err(Error::general(format!("line {header_no}: header says {corners} nodes per tetrahedron, expected 4 or 10"), REMESH));
     }
     let mut tets = Vec::new();
     for k in 0..count {
@@ -155,8 +138,7 @@ pub fn write_smesh(surface: &TriMesh) -> String {
 pub(crate) fn first_flat_tet(mesh: &TetMesh) -> Option<usize> {
     mesh.tets.iter().position(|tet| {
         let [a, b, c, d] = tet.map(|i| mesh.positions[i as usize]);
-        let longest =
-            [(a, b), (a, c), (a, d), (b, c), (b, d), (c, d)].iter().map(|&(p, q)| norm(sub(p, q))).fold(0.0, f64::max);
+        let longest = [(a, b), (a, c), (a, d), (b, c), (b, d), (c, d)].iter().map(|&(p, q)| norm(sub(p, q))).fold(0.0, f64::max);
         let volume6 = 6.0 * tet_signed_volume(a, b, c, d).abs();
         !(volume6.is_finite() && volume6 > 1e-12 * longest.powi(3))
     })
@@ -193,27 +175,19 @@ fn check_columns(tokens: &[&str], expected: usize, line_no: usize, what: &str, h
         return Ok(());
     }
     Err(Error::general(
-        format!(
-            "line {line_no}: {what} row has {} columns, but the header on line {header_no} implies {expected}",
-            tokens.len()
-        ),
+        format!("line {line_no}: {what} row has {} columns, but the header on line {header_no} implies {expected}", tokens.len()),
         REMESH,
     ))
 }
 
 fn field<T: FromStr>(tokens: &[&str], i: usize, line_no: usize, what: &str) -> Result<T> {
-    optional_field(tokens, i, line_no, what)?
-        .ok_or_else(|| Error::general(format!("line {line_no}: {what} is missing"), REMESH))
+    optional_field(tokens, i, line_no, what)?.ok_or_else(|| Error::general(format!("line {line_no}: {what} is missing"), REMESH))
 }
 
 fn optional_field<T: FromStr>(tokens: &[&str], i: usize, line_no: usize, what: &str) -> Result<Option<T>> {
     tokens
         .get(i)
-        .map(|token| {
-            token
-                .parse()
-                .map_err(|_| Error::general(format!("line {line_no}: {what} {} is not a valid number", quoted(token)), REMESH))
-        })
+        .map(|token| token.parse().map_err(|_| Error::general(format!("line {line_no}: {what} {} is not a valid number", quoted(token)), REMESH)))
         .transpose()
 }
 
@@ -251,17 +225,13 @@ mod tests {
     fn malformed_files_name_the_line() {
         assert!(err(parse_node("")).contains("is empty"));
         assert!(err(parse_node("2 2 0 0\n")).contains("line 1: header says dimension 2"));
-        assert!(err(parse_node("2 3 0 0\n0 0 0 0\n2 1 0 0\n"))
-            .contains("line 3: node number 2 is out of sequence (expected 1)"));
+        assert!(err(parse_node("2 3 0 0\n0 0 0 0\n2 1 0 0\n")).contains("line 3: node number 2 is out of sequence (expected 1)"));
         assert!(err(parse_node("2 3 0 0\n5 0 0 0\n")).contains("line 2: the first node is numbered 5"));
-        assert!(err(parse_node("2 3 0 0\n0 0 0 0\n"))
-            .contains("line 1: the header announces 2 node rows but the file ends after 1"));
-        assert!(err(parse_node("1 3 0 1\n0 0 0 0\n"))
-            .contains("line 2: node row has 4 columns, but the header on line 1 implies 5"));
+        assert!(err(parse_node("2 3 0 0\n0 0 0 0\n")).contains("line 1: the header announces 2 node rows but the file ends after 1"));
+        assert!(err(parse_node("1 3 0 1\n0 0 0 0\n")).contains("line 2: node row has 4 columns, but the header on line 1 implies 5"));
         assert!(err(parse_node("1 3 0 0\n0 0 y 0\n")).contains("line 2: a coordinate `y` is not a valid number"));
         assert!(err(parse_node("1 3 0 0\n0 0 inf 0\n")).contains("line 2: node 0 has a non-finite coordinate"));
-        assert!(err(parse_ele("1 4 0\n1 1 2 3 6\n", 1, 5))
-            .contains("line 2: tetrahedron 1 refers to node 6, but nodes are numbered 1 to 5"));
+        assert!(err(parse_ele("1 4 0\n1 1 2 3 6\n", 1, 5)).contains("line 2: tetrahedron 1 refers to node 6, but nodes are numbered 1 to 5"));
         assert!(err(parse_ele("1 4 0\n1 0 2 3 4\n", 1, 5)).contains("refers to node 0"));
         assert!(err(parse_ele("1 6 0\n", 0, 5)).contains("line 1: header says 6 nodes per tetrahedron"));
         assert_eq!(parse_node(&format!("\u{feff}{NODE}")).unwrap(), parse_node(NODE).unwrap(), "a byte order mark is skipped");
@@ -273,7 +243,8 @@ mod tests {
     #[test]
     fn a_tet_whose_volume_overflows_counts_as_flat() {
         // Finite coordinates whose volume is NaN in f64 (0 * inf): no orientation can be trusted.
-        let positions = vec![[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1e308, 0.0], [0.0, 0.0, 1e308], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let positions =
+            vec![[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1e308, 0.0], [0.0, 0.0, 1e308], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let mesh = TetMesh { positions, tets: vec![[0, 4, 5, 6], [0, 1, 2, 3]] };
         assert!(mesh.signed_volume_at(&mesh.positions, 1).is_nan());
         assert_eq!(first_flat_tet(&mesh), Some(1));
@@ -295,10 +266,7 @@ mod tests {
         assert!(flat.contains("flat.ele: tetrahedron 2 (nodes 1 2 3 5) is flat"), "{flat}");
         std::fs::write(dir.join("alone.node"), NODE).unwrap();
         let missing = read(&dir.join("alone.node")).unwrap_err().to_string();
-        assert!(
-            missing.contains("alone.ele: cannot read the TetGen tetrahedra") && missing.contains("(fix: "),
-            "{missing}"
-        );
+        assert!(missing.contains("alone.ele: cannot read the TetGen tetrahedra") && missing.contains("(fix: "), "{missing}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

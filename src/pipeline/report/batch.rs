@@ -4,9 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use super::Report;
-use crate::support::error::{Error, Result};
 use crate::pipeline::scene::{Basis, Format};
 use crate::pipeline::stage_file::OutputKind;
+use crate::support::error::{Error, Result};
 
 /// The `report.json` files of `dirs`: each folder's own, else those of its immediate
 /// subfolders (a folder of bakes), in name order.
@@ -21,7 +21,11 @@ pub fn find_reports(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, &e, "list the bake folders"))?;
         let mut inner: Vec<PathBuf> = entries.filter_map(|e| e.ok()).map(|e| e.path().join("report.json")).filter(|p| p.is_file()).collect();
         if inner.is_empty() {
-            return Err(Error::in_file(dir, "holds no report.json, nor do its subfolders", "pass bake output folders (blendsim bake --out DIR), or a folder of them"));
+            return Err(Error::in_file(
+                dir,
+                "holds no report.json, nor do its subfolders",
+                "pass bake output folders (blendsim bake --out DIR), or a folder of them",
+            ));
         }
         inner.sort();
         found.extend(inner);
@@ -32,12 +36,31 @@ pub fn find_reports(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
 /// Read one `report.json`.
 pub fn read(path: &Path) -> Result<Report> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the report"))?;
-    serde_json::from_slice(&bytes).map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
+    serde_json::from_slice(&bytes)
+        .map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }
 
 const COLUMNS: [&str; 20] = [
-    "bake", "scene", "method", "vertices", "tets", "keys", "frames", "basis", "rank", "cache_format", "cache_bytes", "usda_bytes", "full_usda_bytes",
-    "glb_bytes", "full_glb_bytes", "usda_ratio", "glb_ratio", "error_max", "error_rms", "fit_error_max",
+    "bake",
+    "scene",
+    "method",
+    "vertices",
+    "tets",
+    "keys",
+    "frames",
+    "basis",
+    "rank",
+    "cache_format",
+    "cache_bytes",
+    "usda_bytes",
+    "full_usda_bytes",
+    "glb_bytes",
+    "full_glb_bytes",
+    "usda_ratio",
+    "glb_ratio",
+    "error_max",
+    "error_rms",
+    "fit_error_max",
 ];
 
 /// One row per report: `bake` is the folder holding it.

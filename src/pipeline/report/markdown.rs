@@ -27,13 +27,20 @@ pub fn render(report: &Report) -> String {
     for w in &report.warnings {
         push(&mut s, format!("| warning | {} |", w.replace('|', "/")));
     }
-    push(&mut s, format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames));
+    push(
+        &mut s,
+        format!("| animation | {} keyframes, {:.3} s at {} fps ({} frames) |", report.keyframes, report.duration_s, report.fps, report.frames),
+    );
     push(&mut s, format!("| basis | {} |", basis(report)));
     let sv = &report.solver;
     let (w0, w1) = (sv.energy.first().copied().unwrap_or(0.0), sv.energy.last().copied().unwrap_or(0.0));
     let change = if w0 > 0.0 { format!(" ({:+.1}%)", 100.0 * (w1 - w0) / w0) } else { String::new() };
     // W is at the configured samples; the coarse phase's iterations are counted apart.
-    let coarse = if sv.coarse_iterations > 0 { format!(" ({} coarse at {} samples per interval + {} fine)", sv.coarse_iterations, sv.coarse_samples, sv.iterations - sv.coarse_iterations) } else { String::new() };
+    let coarse = if sv.coarse_iterations > 0 {
+        format!(" ({} coarse at {} samples per interval + {} fine)", sv.coarse_iterations, sv.coarse_samples, sv.iterations - sv.coarse_iterations)
+    } else {
+        String::new()
+    };
     push(
         &mut s,
         format!(
@@ -53,27 +60,66 @@ pub fn render(report: &Report) -> String {
         ),
     );
     if sv.method == crate::pipeline::scene::Method::Spacetime && sv.iterations > 0 {
-        let remaining = sv.predicted_remaining.map_or("no prediction (the last two windows' decreases do not shrink)".to_string(), |r| format!("predicted remaining decrease {:.3}%", 100.0 * r));
+        let remaining = sv.predicted_remaining.map_or("no prediction (the last two windows' decreases do not shrink)".to_string(), |r| {
+            format!("predicted remaining decrease {:.3}%", 100.0 * r)
+        });
         // W / S: the squared relative residual force (formats/scene.md, "When the solver stops").
-        let scale = sv.force_scale.filter(|s| *s > 0.0).map_or(String::new(), |s| format!("; W = {:.2e} S (S: the force scale)", sv.energy.last().copied().unwrap_or(0.0) / s));
-        push(&mut s, format!("| convergence | W fell {:.3}% over the last iterations of the stopping window; {remaining}{scale} |", 100.0 * sv.last_decrease));
+        let scale = sv
+            .force_scale
+            .filter(|s| *s > 0.0)
+            .map_or(String::new(), |s| format!("; W = {:.2e} S (S: the force scale)", sv.energy.last().copied().unwrap_or(0.0) / s));
+        push(
+            &mut s,
+            format!("| convergence | W fell {:.3}% over the last iterations of the stopping window; {remaining}{scale} |", 100.0 * sv.last_decrease),
+        );
     }
     if !sv.input_times.is_empty() && sv.times != sv.input_times {
         let list = |t: &[f64]| t.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>().join(", ");
-        push(&mut s, format!("| key times | optimized: {} s (input {} s; {} timing iterations, {} refactorizations) |", list(&sv.times), list(&sv.input_times), sv.timing_iterations, sv.refactorizations));
+        push(
+            &mut s,
+            format!(
+                "| key times | optimized: {} s (input {} s; {} timing iterations, {} refactorizations) |",
+                list(&sv.times),
+                list(&sv.input_times),
+                sv.timing_iterations,
+                sv.refactorizations
+            ),
+        );
     }
     if let Some(c) = sv.conjugate_gradients {
         let capped = if c.capped > 0 {
-            format!("WARNING: {} stopped at the cap of {} iterations, relative residual up to {:.1e} (goal {:.0e})", c.capped, c.max_iterations, c.worst_residual, c.tolerance)
+            format!(
+                "WARNING: {} stopped at the cap of {} iterations, relative residual up to {:.1e} (goal {:.0e})",
+                c.capped, c.max_iterations, c.worst_residual, c.tolerance
+            )
         } else {
             format!("all converged to a relative residual of {:.0e} (worst {:.1e})", c.tolerance, c.worst_residual)
         };
-        push(&mut s, format!("| global step | iterative (over the memory budget): {} CG solves, {:.1} iterations each on average; {capped} |", c.solves, c.iterations as f64 / c.solves.max(1) as f64));
+        push(
+            &mut s,
+            format!(
+                "| global step | iterative (over the memory budget): {} CG solves, {:.1} iterations each on average; {capped} |",
+                c.solves,
+                c.iterations as f64 / c.solves.max(1) as f64
+            ),
+        );
     }
     if let Some(c) = sv.clearance {
-        push(&mut s, format!("| obstacles | smallest node clearance {c:.3e} over keys and frames, {} node-obstacle checks held at the end |", sv.active_contacts));
+        push(
+            &mut s,
+            format!(
+                "| obstacles | smallest node clearance {c:.3e} over keys and frames, {} node-obstacle checks held at the end |",
+                sv.active_contacts
+            ),
+        );
     }
-    push(&mut s, format!("| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames (blendshape vs full-frame) |", report.error.max, report.error.rms, report.error.samples));
+    push(
+        &mut s,
+        format!(
+            "| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames (blendshape vs full-frame) |",
+            report.error.max, report.error.rms, report.error.samples
+        ),
+    );
     push(
         &mut s,
         format!(

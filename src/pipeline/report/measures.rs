@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use super::{Deviation, VolumeRange};
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::geometry::{norm, sub, surface, Point};
-use crate::pipeline::scene::Format;
 use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::pipeline::scene::Format;
 use crate::pipeline::stage_file::{OutputFile, OutputKind};
 
 /// Distances between the poses of `pairs`, relative to `diagonal` (the rest bounding-box

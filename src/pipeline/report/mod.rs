@@ -17,10 +17,10 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::support::error::Result;
-use crate::support::output::Staging;
 use crate::pipeline::scene::{Basis, Format};
 use crate::pipeline::stage_file::{CageInfo, OutputFile, SolverLog};
+use crate::support::error::Result;
+use crate::support::output::Staging;
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

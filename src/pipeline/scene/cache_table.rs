@@ -156,7 +156,10 @@ impl CacheSpec {
                 return invalid("[cache] tolerance is given, but keyframes lists the frames".into(), "remove tolerance, or set keyframes = \"auto\"");
             }
             (CacheKeys::Frames(_), None) if self.window_bytes.is_some() => {
-                return invalid("[cache] window_bytes is given, but keyframes lists the frames".into(), "remove window_bytes (it bounds the automatic selection), or set keyframes = \"auto\"");
+                return invalid(
+                    "[cache] window_bytes is given, but keyframes lists the frames".into(),
+                    "remove window_bytes (it bounds the automatic selection), or set keyframes = \"auto\"",
+                );
             }
             (CacheKeys::Frames(f), None) => {
                 if f.len() < 2 {
@@ -172,7 +175,10 @@ impl CacheSpec {
             _ => {}
         }
         if self.window_bytes == Some(0) {
-            return invalid("[cache] window_bytes = 0".into(), "give the bytes of frames the key selection may hold, e.g. 268435456 (256 MiB, the default)");
+            return invalid(
+                "[cache] window_bytes = 0".into(),
+                "give the bytes of frames the key selection may hold, e.g. 268435456 (256 MiB, the default)",
+            );
         }
         for (what, sel) in [("fixed", &self.fixed), ("fixed_velocity", &self.fixed_velocity)] {
             if let Some(sel) = sel {
@@ -222,10 +228,15 @@ mod tests {
         assert_eq!(c.window_bytes(), 256 << 20);
         assert_eq!(Scene::parse(&(CACHE.to_string() + "window_bytes = 1048576\n")).unwrap().cache.unwrap().window_bytes(), 1 << 20);
         assert_eq!((c.fixed_for(Method::Spacetime), c.fixed_for(Method::Fit)), (Selection::All, Selection::None));
-        let listed = Scene::parse(&(CACHE.to_string() + "keyframes = [0, 10, 20]\nfixed = { axis = \"x\", max = 0.0 }\n[solver]\nmethod = \"fit\"\n")).unwrap();
+        let listed =
+            Scene::parse(&(CACHE.to_string() + "keyframes = [0, 10, 20]\nfixed = { axis = \"x\", max = 0.0 }\n[solver]\nmethod = \"fit\"\n"))
+                .unwrap();
         let c = listed.cache.clone().unwrap();
         assert_eq!(c.keyframes, CacheKeys::Frames(vec![0, 10, 20]));
-        assert_eq!(c.fixed_for(Method::Fit), Selection::Slab { axis: crate::algorithms::geometry::Axis::X, min: None, max: Some(0.0), invert: false });
+        assert_eq!(
+            c.fixed_for(Method::Fit),
+            Selection::Slab { axis: crate::algorithms::geometry::Axis::X, min: None, max: Some(0.0), invert: false }
+        );
         // The stage files carry the scene: it round-trips through JSON.
         let json = serde_json::to_string(&listed).unwrap();
         assert_eq!(serde_json::from_str::<Scene>(&json).unwrap(), listed, "{json}");

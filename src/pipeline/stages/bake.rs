@@ -1,12 +1,12 @@
 //! The whole chain for one scene, in one process: the only place its order is written. The
 //! CLI's `bake`, the integration tests and the benchmark all run it, to the stage they need.
 
-use crate::support::error::Result;
-use crate::support::output::Staging;
-use crate::support::progress::Progress;
 use crate::pipeline::report::Report;
 use crate::pipeline::scene::{Method, SceneFile};
 use crate::pipeline::stage_file::{Animation, Body};
+use crate::support::error::Result;
+use crate::support::output::Staging;
+use crate::support::progress::Progress;
 
 use super::export::blendshape_clip;
 use super::report::{measure, with_outputs};
@@ -59,7 +59,9 @@ impl<'a> Bake<'a> {
         let solution = solve_within(&body, self.method, self.max_memory, self.progress)?;
         // The binding's searches run in parallel.
         let (tets, points) = (solution.body.mesh.as_ref().map_or(0, |m| m.tets.len()), solution.body.surface.positions.len());
-        let bar = self.progress.predicted("embed", crate::algorithms::embed::Binding::predicted_seconds(tets, points) / rayon::current_num_threads().max(1) as f64);
+        let bar = self
+            .progress
+            .predicted("embed", crate::algorithms::embed::Binding::predicted_seconds(tets, points) / rayon::current_num_threads().max(1) as f64);
         let animation = embed(&solution)?;
         bar.finish_and_clear();
         Ok(animation)

@@ -24,20 +24,20 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::formats::cache::{self, CacheFormat};
 use crate::algorithms::frames::MemoryFrames;
-use crate::support::error::{Error, Result};
-use crate::algorithms::massspring::{self, refine, Bending, Boundary, MassSpring, Settings, Targets};
-use crate::formats::mesh::{obj, selection};
 use crate::algorithms::geometry::{surface, Point, TetMesh, TriMesh};
+use crate::algorithms::massspring::{self, refine, Bending, Boundary, MassSpring, Settings, Targets};
 use crate::algorithms::physics::elastic::Elastic;
-use crate::support::progress::Progress;
-use crate::pipeline::scene::{self, Method, ObstacleSpec};
 use crate::algorithms::spacetime::solver;
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
-use crate::pipeline::stage_file::{Body, SolverLog};
+use crate::formats::cache::{self, CacheFormat};
+use crate::formats::mesh::{obj, selection};
 use crate::formats::tetgen::{self, TetgenOptions};
+use crate::pipeline::scene::{self, Method, ObstacleSpec};
+use crate::pipeline::stage_file::{Body, SolverLog};
+use crate::support::error::{Error, Result};
+use crate::support::progress::Progress;
 
 /// The weights of `blendsim blend`.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,8 +104,14 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
             "write an OBJ sequence (frames/frame_####.obj) or a cache (.pc2, .mdd, .glb, .usda)",
         ));
     }
-    if !out_is_obj && CacheFormat::of(&job.out).is_none_or(|f| f == CacheFormat::Gltf && job.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf"))) {
-        return Err(Error::in_file(&job.out, "is not a format blend writes", "name the output .obj (one blend), frames/frame_####.obj, .pc2, .mdd, .glb or .usda"));
+    if !out_is_obj
+        && CacheFormat::of(&job.out).is_none_or(|f| f == CacheFormat::Gltf && job.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("gltf")))
+    {
+        return Err(Error::in_file(
+            &job.out,
+            "is not a format blend writes",
+            "name the output .obj (one blend), frames/frame_####.obj, .pc2, .mdd, .glb or .usda",
+        ));
     }
     if !(job.fps.is_finite() && job.fps > 0.0) {
         return Err(Error::general(format!("--fps {} is not positive", job.fps), "give the cache's frame rate, e.g. 24"));
@@ -146,7 +152,10 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
     };
     if let Some(ratio) = job.refine {
         if !(ratio.is_finite() && ratio > 1.0) {
-            return Err(Error::general(format!("--refine {ratio} is not above 1"), "give the longest edge allowed as a multiple of the median edge, e.g. 2"));
+            return Err(Error::general(
+                format!("--refine {ratio} is not above 1"),
+                "give the longest edge allowed as a multiple of the median edge, e.g. 2",
+            ));
         }
     }
     let (positions, triangles): (Vec<Vec<Point>>, Vec<[u32; 3]>) = match job.refine {
@@ -161,7 +170,14 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
     if job.linear {
         let shapes: Vec<Vec<Point>> = weights.iter().map(|w| massspring::linear_blend(&positions, w)).collect();
         write_shapes(job, first, shapes, out_is_obj)?;
-        return Ok(BlendSummary { blends: weights.len(), vertices: first.positions.len(), springs: 0, iterations: 0, build_seconds: 0.0, blend_seconds: 0.0 });
+        return Ok(BlendSummary {
+            blends: weights.len(),
+            vertices: first.positions.len(),
+            springs: 0,
+            iterations: 0,
+            build_seconds: 0.0,
+            blend_seconds: 0.0,
+        });
     }
     let body = if job.body {
         if !surface::open_edges(first).is_empty() {
@@ -174,7 +190,8 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
         let bar = progress.stage("blend: TetGen");
         let d = scene::Tet::default();
         // With refinement, interior edges are bounded like the surface's (a regular tet's volume).
-        let max_volume = job.refine.map_or(d.max_volume, |ratio| refine::regular_tet_volume(ratio * refine::median_edge(&positions[..1], &first.triangles)));
+        let max_volume =
+            job.refine.map_or(d.max_volume, |ratio| refine::regular_tet_volume(ratio * refine::median_edge(&positions[..1], &first.triangles)));
         let body = tetgen::run(first, &TetgenOptions { quality: d.quality, max_volume, timeout: d.timeout }, &job.targets[0])?;
         bar.finish_and_clear();
         Some(body)
@@ -253,11 +270,16 @@ fn read_weights(weights: &Weights, targets: usize) -> Result<Vec<Vec<f64>>> {
                     .filter(|s| !s.is_empty())
                     .map(|s| {
                         s.parse::<f64>().map_err(|_| {
-                            Error::in_file(path, format!("line {}: {s:?} is not a number", number + 1), "write one blend per line: weights separated by commas or spaces")
+                            Error::in_file(
+                                path,
+                                format!("line {}: {s:?} is not a number", number + 1),
+                                "write one blend per line: weights separated by commas or spaces",
+                            )
                         })
                     })
                     .collect::<Result<_>>()?;
-                massspring::check_weights(&w, targets, tolerance).map_err(|e| Error::in_file(path, format!("line {}: {}", number + 1, e.problem), e.fix))?;
+                massspring::check_weights(&w, targets, tolerance)
+                    .map_err(|e| Error::in_file(path, format!("line {}: {}", number + 1, e.problem), e.fix))?;
                 all.push(w);
             }
             if all.is_empty() {
@@ -278,9 +300,17 @@ fn read_obstacles(path: &Path) -> Result<Vec<massspring::Obstacle>> {
     }
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, &e, "read the obstacles file"))?;
     let file: File = toml::from_str(&text).map_err(|e| {
-        Error::in_file(path, format!("is not an obstacles file: {}", e.message()), "write [[obstacle]] tables: kind = \"plane\" with point, normal; kind = \"sphere\" with center, radius")
+        Error::in_file(
+            path,
+            format!("is not an obstacles file: {}", e.message()),
+            "write [[obstacle]] tables: kind = \"plane\" with point, normal; kind = \"sphere\" with center, radius",
+        )
     })?;
-    file.obstacle.iter().enumerate().map(|(i, o)| model_obstacle(o).validated(&format!("obstacle {}", i + 1)).map_err(|e| e.with_path(path))).collect()
+    file.obstacle
+        .iter()
+        .enumerate()
+        .map(|(i, o)| model_obstacle(o).validated(&format!("obstacle {}", i + 1)).map_err(|e| e.with_path(path)))
+        .collect()
 }
 
 fn model_obstacle(o: &ObstacleSpec) -> massspring::Obstacle {
@@ -362,15 +392,16 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         let mut alphas = vec![0.0];
         let mut shapes = vec![keys.positions[k].clone()];
         for i in 1..steps {
-            crate::support::resources::check_time("mass-spring in-betweens", || format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens))?;
+            crate::support::resources::check_time("mass-spring in-betweens", || {
+                format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens)
+            })?;
             let (alpha, _) = ease(i as f64 / steps as f64);
             let mut w = vec![0.0; key_count];
             w[k] = 1.0 - alpha;
             w[k + 1] = alpha;
-            let shape = model.blend(&w, &obstacles).map_err(|e| Error {
-                problem: format!("mass-spring in-between {i} of interval {k} (t = {t0} to {t1}): {}", e.problem),
-                ..e
-            })?;
+            let shape = model
+                .blend(&w, &obstacles)
+                .map_err(|e| Error { problem: format!("mass-spring in-between {i} of interval {k} (t = {t0} to {t1}): {}", e.problem), ..e })?;
             iterations += shape.report.iterations;
             held_vertices += shape.report.held.len();
             blends += 1;

@@ -6,9 +6,9 @@
 //! compare like with like.
 
 use crate::algorithms::embed::Binding;
-use crate::support::error::Result;
 use crate::algorithms::geometry::Point;
 use crate::pipeline::stage_file::{Animation, Counts, Solution};
+use crate::support::error::Result;
 
 /// The exported surface's animation.
 pub fn embed(solution: &Solution) -> Result<Animation> {
@@ -17,7 +17,14 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         // Nothing simulated (`fit`): the trajectory is the surface's own.
         return Ok(Animation {
             scene: body.scene.clone(),
-            counts: Counts { vertices: body.surface.positions.len(), faces: body.surface.triangles.len(), tet_nodes: 0, tets: 0, keyframes: body.keys.times.len(), largest_tet_volume: None },
+            counts: Counts {
+                vertices: body.surface.positions.len(),
+                faces: body.surface.triangles.len(),
+                tet_nodes: 0,
+                tets: 0,
+                keyframes: body.keys.times.len(),
+                largest_tet_volume: None,
+            },
             mesh: body.surface.clone(),
             trajectory: solution.trajectory.clone(),
             input_keys: body.keys.positions.clone(),

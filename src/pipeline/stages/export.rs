@@ -12,17 +12,17 @@
 //! `formats/usd.md` and `formats/gltf.md`.
 
 use super::import_cache::error_against;
-use crate::support::error::{Error, Result};
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::blendshape::principal::{smallest_rank, Components};
-use crate::formats::export::{glb, texture, usd, usda, usdc};
 use crate::algorithms::geometry::{bbox_diagonal, Axis};
-use crate::support::output::Staging;
-use crate::support::progress::Progress;
+use crate::formats::export::{glb, texture, usd, usda, usdc};
 use crate::pipeline::report::measures::deviation;
 use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
 use crate::pipeline::stage_file::{Animation, OutputFile, OutputKind, Outputs};
+use crate::support::error::{Error, Result};
+use crate::support::output::Staging;
+use crate::support::progress::Progress;
 
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
 /// in the order usda, usdc, glb, whatever order the scene file gives.
@@ -79,13 +79,16 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
         // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
         // text: only the blendshape form builds its layer.
         let streamed = kind == OutputKind::FullFrame;
-        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| usd::blendshapes(clip, triangles, attributes, &settings));
+        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)))
+            .then(|| usd::blendshapes(clip, triangles, attributes, &settings));
         for &format in &formats {
             let name = format!("{stem}.{}", format.extension());
             bar.set_message(format!("export: {name}"));
             match format {
                 Format::Usda => match &full {
-                    Some(full) if streamed => staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?,
+                    Some(full) if streamed => {
+                        staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?
+                    }
                     _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
                 },
                 Format::Usdc => {
@@ -194,12 +197,7 @@ fn check(animation: &Animation) -> Result<()> {
     }
     if tr.frames(animation.scene.fps).is_empty() {
         return Err(Error::general(
-            format!(
-                "cannot export: the animation runs from {} s to {} s, between two frames at {} fps",
-                tr.start(),
-                tr.end(),
-                animation.scene.fps
-            ),
+            format!("cannot export: the animation runs from {} s to {} s, between two frames at {} fps", tr.start(), tr.end(), animation.scene.fps),
             "give the keys a time range that contains a frame, or raise fps",
         ));
     }

@@ -13,9 +13,9 @@ use proptest::test_runner::{Config, TestCaseError, TestRunner};
 use serde_json::Value;
 
 use crate::algorithms::geometry::TetMesh;
-use crate::support::progress::Progress;
 use crate::pipeline::scene::{Method, Scene};
 use crate::pipeline::stage_file::{self, Animation, Body, Keyframes, Outputs, Shape, Solution, StageData, VertexSet};
+use crate::support::progress::Progress;
 
 const DEFAULT_CASES: u32 = 1_000;
 

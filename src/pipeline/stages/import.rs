@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{self, surface, Point, TetMesh, TriMesh};
 use crate::formats::mesh::{self, MeshFile};
 use crate::pipeline::scene::{Rest, SceneFile, Selection};
 use crate::pipeline::stage_file::{Keyframes, Shape, VertexSet};
+use crate::support::error::{Error, Result};
 
 /// Meshes read once per path (scenes often repeat the rest mesh).
 #[derive(Default)]
@@ -84,11 +84,7 @@ fn check_same_topology(first: (&Path, &MeshFile, &Topology), other: (&Path, &Mes
         return Err(Error::in_file(op, format!("is a {o_kind} but {} is a {f_kind}", fp.display()), "give every keyframe the same kind of file"));
     }
     if fm.positions().len() != om.positions().len() {
-        return Err(Error::in_file(
-            op,
-            format!("has {} vertices but {} has {}", om.positions().len(), fp.display(), fm.positions().len()),
-            fix,
-        ));
+        return Err(Error::in_file(op, format!("has {} vertices but {} has {}", om.positions().len(), fp.display(), fm.positions().len()), fix));
     }
     if f_count != o_count {
         return Err(Error::in_file(op, format!("has {o_count} {o_what} but {} has {f_count} {f_what}", fp.display()), fix));
@@ -316,7 +312,11 @@ fn check_rest_fold(rest: &TetMesh, path: &Path) -> Result<()> {
     let [a, b, c] = face.map(|v| v + 1);
     Err(Error::in_file(
         path,
-        format!("the rest mesh is folded: {} and {} overlap across their shared face (vertices {a}, {b}, {c})", tet_in_file(rest, t), tet_in_file(rest, u)),
+        format!(
+            "the rest mesh is folded: {} and {} overlap across their shared face (vertices {a}, {b}, {c})",
+            tet_in_file(rest, t),
+            tet_in_file(rest, u)
+        ),
         "untangle the rest mesh in the modeling tool so that no tet is turned inside out",
     ))
 }

@@ -16,14 +16,14 @@ use std::path::{Path, PathBuf};
 use crate::algorithms::frames::deviation::{cache_diagonal, deviation, CacheDeviation};
 use crate::algorithms::frames::fit::{fit, FitSettings};
 use crate::algorithms::frames::keyframes::{select, AutoSettings};
-use crate::formats::cache::{CacheFormat, CacheOptions, VertexCache};
 use crate::algorithms::frames::{FrameRange, FrameSource, Metered};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{surface, Point, TriMesh};
+use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::formats::cache::{CacheFormat, CacheOptions, VertexCache};
 use crate::formats::mesh;
 use crate::pipeline::scene::{CacheKeys, CacheSpec, Method, Rest, SceneFile, Selection};
-use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::stage_file::{CacheRecord, CacheRecordOptions, Keyframes, Shape, VertexSet};
+use crate::support::error::{Error, Result};
 
 use super::import::resolve_selection;
 
@@ -70,7 +70,8 @@ pub fn reopen(record: &CacheRecord) -> Result<VertexCache> {
 pub fn fit_cache(record: &CacheRecord) -> Result<Trajectory> {
     let mut cache = reopen(record)?;
     let pins = if record.fixed.is_empty() { Vec::new() } else { vec![record.fixed.to_mask(record.vertices); record.keys.len()] };
-    fit(&mut timed(cache.frames.as_mut(), "cache fit"), &record.keys, &pins, &FitSettings::default()).map_err(|e| e.with_path(Path::new(&record.path)))
+    fit(&mut timed(cache.frames.as_mut(), "cache fit"), &record.keys, &pins, &FitSettings::default())
+        .map_err(|e| e.with_path(Path::new(&record.path)))
 }
 
 /// A cache whose every frame read first checks `--max-time` ([`crate::support::resources::check_time`]):
@@ -113,7 +114,11 @@ fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, Ca
         ));
     }
     if format == Some(CacheFormat::Usd) && spec.fps.is_some() {
-        return Err(Error::in_file(&path, "fps is given, but a USD stage carries its own rate (timeCodesPerSecond)", "remove fps from [cache]: the stage's rate is used"));
+        return Err(Error::in_file(
+            &path,
+            "fps is given, but a USD stage carries its own rate (timeCodesPerSecond)",
+            "remove fps from [cache]: the stage's rate is used",
+        ));
     }
     let options = CacheRecordOptions {
         fps: spec.fps,
@@ -139,7 +144,11 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     let frames = cache.frame_count();
     let vertices = cache.frames.vertex_count();
     if frames < 2 {
-        return Err(Error::in_file(&path, format!("has {frames} frame in the range: nothing moves"), "give a range of at least two frames (start, end)"));
+        return Err(Error::in_file(
+            &path,
+            format!("has {frames} frame in the range: nothing moves"),
+            "give a range of at least two frames (start, end)",
+        ));
     }
     let method = scene.solver.method;
     // The elastic rest shape: the topology mesh, another mesh, or a frame.
@@ -147,7 +156,11 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
     match &spec.rest {
         Some(Rest::Key(f)) => {
             if *f >= frames {
-                return Err(Error::in_file(&path, format!("rest = {f}, but the range has {frames} frames"), "give a frame index from `start`, below the frame count"));
+                return Err(Error::in_file(
+                    &path,
+                    format!("rest = {f}, but the range has {frames} frames"),
+                    "give a frame index from `start`, below the frame count",
+                ));
             }
             cache.frames.read_frame(*f, &mut rest.positions)?;
         }
@@ -157,7 +170,12 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
             if other.positions.len() != vertices || other.triangles != cache.mesh.triangles {
                 return Err(Error::in_file(
                     m,
-                    format!("is not the cache's mesh ({} vertices and {} triangles, the cache has {vertices} and {})", other.positions.len(), other.triangles.len(), cache.mesh.triangles.len()),
+                    format!(
+                        "is not the cache's mesh ({} vertices and {} triangles, the cache has {vertices} and {})",
+                        other.positions.len(),
+                        other.triangles.len(),
+                        cache.mesh.triangles.len()
+                    ),
                     "give the mesh the cache was made from, with the same vertex order, or a frame index",
                 ));
             }
@@ -190,7 +208,11 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
         }
         CacheKeys::Frames(list) => {
             if let Some(&f) = list.iter().find(|&&f| f >= frames) {
-                return Err(Error::in_file(&path, format!("keyframes lists frame {f}, but the range has {frames} frames"), "list frame indices from `start`, below the frame count"));
+                return Err(Error::in_file(
+                    &path,
+                    format!("keyframes lists frame {f}, but the range has {frames} frames"),
+                    "list frame indices from `start`, below the frame count",
+                ));
             }
             (list.clone(), None)
         }

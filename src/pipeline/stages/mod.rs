@@ -23,10 +23,10 @@
 
 pub mod bake;
 pub mod blend;
-pub mod import_cache;
 pub mod embed;
 pub mod export;
 pub mod import;
+pub mod import_cache;
 pub mod report;
 pub mod solve;
 pub mod tetrahedralize;

@@ -1,15 +1,15 @@
 //! The `report` stage: measure an animation and the files exported from it.
 
-use crate::support::error::Result;
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::geometry::{bbox_diagonal, surface};
+use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
-use crate::pipeline::scene::{Basis, Method};
-use crate::pipeline::stage_file::CacheRecord;
 use crate::pipeline::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
 use crate::pipeline::report::{Report, Volume};
-use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::pipeline::scene::{Basis, Method};
+use crate::pipeline::stage_file::CacheRecord;
 use crate::pipeline::stage_file::{Animation, Outputs};
+use crate::support::error::Result;
 
 /// The report of an animation and the files exported from it (for a cache, measured against
 /// the cache's frames, streamed again from it).

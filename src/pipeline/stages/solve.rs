@@ -10,17 +10,17 @@
 
 use std::time::Instant;
 
-use crate::support::error::{Error, Result};
 use crate::algorithms::physics::elastic::Elastic;
-use crate::support::progress::Progress;
-use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
 use crate::algorithms::spacetime::contact::Contacts;
 use crate::algorithms::spacetime::global_step::Method as GlobalMethod;
 use crate::algorithms::spacetime::obstacles::Obstacle;
 use crate::algorithms::spacetime::solver::{self, ModelHessian, Settings, Step};
 use crate::algorithms::spacetime::timing::TimingSettings;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
+use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
 use crate::pipeline::stage_file::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
+use crate::support::error::{Error, Result};
+use crate::support::progress::Progress;
 
 /// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
 /// the solution's scene records the method used.
@@ -102,20 +102,22 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             // each a fraction of a millisecond on a small body) then start inside the pool,
             // instead of each handing itself over from this thread and putting it to sleep (two
             // context switches apiece; the same bytes).
-            let solved = rayon::scope(|_| solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
-                let mut guard = estimate.lock().unwrap_or_else(|e| e.into_inner());
-                let (running, scales) = &mut *guard;
-                scales.truncate(k);
-                scales.push(if settings.negligible > 0.0 { floor / settings.negligible } else { 0.0 });
-                let total = running.update(k, w, floor, settings.tolerance, settings.max_iterations);
-                drop(guard);
-                match total {
-                    Some(total) => bar.set_length(total as u64),
-                    None => bar.unset_length(),
-                }
-                bar.set_position(k as u64);
-                bar.set_message(format!("solve: spacetime W = {w:.4e}"));
-            }))?;
+            let solved = rayon::scope(|_| {
+                solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
+                    let mut guard = estimate.lock().unwrap_or_else(|e| e.into_inner());
+                    let (running, scales) = &mut *guard;
+                    scales.truncate(k);
+                    scales.push(if settings.negligible > 0.0 { floor / settings.negligible } else { 0.0 });
+                    let total = running.update(k, w, floor, settings.tolerance, settings.max_iterations);
+                    drop(guard);
+                    match total {
+                        Some(total) => bar.set_length(total as u64),
+                        None => bar.unset_length(),
+                    }
+                    bar.set_position(k as u64);
+                    bar.set_message(format!("solve: spacetime W = {w:.4e}"));
+                })
+            })?;
             bar.finish_and_clear();
             let l = solved.log;
             let log = SolverLog {
@@ -176,7 +178,10 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
 /// `fixed` vertices held on the cache frames. No physics: W is not evaluated.
 fn solve_fit(body: Body) -> Result<Solution> {
     let start = Instant::now();
-    let record = body.cache.as_ref().ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
+    let record = body
+        .cache
+        .as_ref()
+        .ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
     let trajectory = super::import_cache::fit_cache(record)?;
     let log = SolverLog {
         method: Method::Fit,

@@ -20,14 +20,14 @@ use rayon::prelude::*;
 use crate::algorithms::cage::fit::{carry_mask, CageFit};
 use crate::algorithms::cage::{voxel_cage, CageError, Defects};
 use crate::algorithms::embed::Binding;
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{surface, Point, TetMesh, TriMesh};
 use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::equilibrium::Equilibrium;
-use crate::support::progress::Progress;
+use crate::formats::tetgen::{self, TetgenOptions};
 use crate::pipeline::scene::Method;
 use crate::pipeline::stage_file::{Body, CageInfo, KeyPoses, Keyframes, Shape, VertexSet};
-use crate::formats::tetgen::{self, TetgenOptions};
+use crate::support::error::{Error, Result};
+use crate::support::progress::Progress;
 
 /// The surface that is exported: the scene's display mesh, or the keyframe surface without
 /// unused vertices.
@@ -49,12 +49,26 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
     let cache = keys.cache.clone();
     match &keys.rest {
         // The fit of a cache simulates nothing: its trajectory is the surface's own.
-        Shape::Surface(rest) if scene.solver.method == Method::Fit => {
-            Ok(Body { scene: scene.clone(), mesh: None, keys: key_poses(keys.poses.clone()), surface: rest.clone(), cache, cage: None, warnings: Vec::new() })
-        }
+        Shape::Surface(rest) if scene.solver.method == Method::Fit => Ok(Body {
+            scene: scene.clone(),
+            mesh: None,
+            keys: key_poses(keys.poses.clone()),
+            surface: rest.clone(),
+            cache,
+            cage: None,
+            warnings: Vec::new(),
+        }),
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
-            Ok(Body { scene: scene.clone(), mesh: Some(mesh.clone()), keys: key_poses(keys.poses.clone()), surface: export_surface(keys, boundary), cache, cage: None, warnings: Vec::new() })
+            Ok(Body {
+                scene: scene.clone(),
+                mesh: Some(mesh.clone()),
+                keys: key_poses(keys.poses.clone()),
+                surface: export_surface(keys, boundary),
+                cache,
+                cage: None,
+                warnings: Vec::new(),
+            })
         }
         Shape::Surface(rest) => {
             if let Some(reason) = cage_reason(rest, &scene.tet) {
@@ -88,7 +102,15 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
             let mut warnings = unhonoured_max_volume(&mesh, scene.tet.max_volume, &keys.rest_source).into_iter().collect::<Vec<_>>();
             warnings.extend(folded_keys(&mesh, &positions, keys));
             warnings.iter().for_each(|w| progress.warn(w));
-            Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses(positions), surface: export_surface(keys, rest.clone()), cache, cage: None, warnings })
+            Ok(Body {
+                scene: scene.clone(),
+                mesh: Some(mesh),
+                keys: key_poses(positions),
+                surface: export_surface(keys, rest.clone()),
+                cache,
+                cage: None,
+                warnings,
+            })
         }
     }
 }
@@ -106,7 +128,8 @@ fn unhonoured_max_volume(mesh: &TetMesh, max_volume: f64, source: &str) -> Optio
     if max_volume <= 0.0 {
         return None;
     }
-    let (t, largest) = (0..mesh.tets.len()).map(|t| (t, mesh.signed_volume_at(&mesh.positions, t).abs())).fold((0, 0.0), |m, x| if x.1 > m.1 { x } else { m });
+    let (t, largest) =
+        (0..mesh.tets.len()).map(|t| (t, mesh.signed_volume_at(&mesh.positions, t).abs())).fold((0, 0.0), |m, x| if x.1 > m.1 { x } else { m });
     (largest > MAX_VOLUME_WARNING_FACTOR * max_volume).then(|| {
         format!(
             "{source}: TetGen could not honour [tet] max_volume = {max_volume:e}: the largest of its {} tets (tet {t}) has volume {largest:.3e}, {:.1}x the bound (raise max_volume to what the surface allows, or refine the surface)",
@@ -181,7 +204,8 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
     // The binding and the fit's keys run in parallel.
     let threads = rayon::current_num_threads().max(1) as f64;
     let (cage_tets, n_fine, n_keys) = (mesh.tets.len(), fine.positions.len(), keys.poses.len());
-    let fit_seconds = Binding::predicted_seconds(cage_tets, n_fine) / threads + CageFit::predicted_seconds(cage_tets, n_fine, n_keys) / threads.min(n_keys.max(1) as f64);
+    let fit_seconds = Binding::predicted_seconds(cage_tets, n_fine) / threads
+        + CageFit::predicted_seconds(cage_tets, n_fine, n_keys) / threads.min(n_keys.max(1) as f64);
     let bar = progress.predicted(format!("tetrahedralize: fit {n_keys} cage keys to {n_fine} vertices"), fit_seconds);
     let binding = Binding::compute(&mesh, &fine.positions);
     let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
@@ -215,5 +239,13 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         key_error_max: reproduction.max,
         key_error_rms: reproduction.rms,
     };
-    Ok(Body { scene: scene.clone(), mesh: Some(mesh), keys: key_poses, surface: export_surface(keys, rest.clone()), cache: keys.cache.clone(), cage: Some(info), warnings: Vec::new() })
+    Ok(Body {
+        scene: scene.clone(),
+        mesh: Some(mesh),
+        keys: key_poses,
+        surface: export_surface(keys, rest.clone()),
+        cache: keys.cache.clone(),
+        cage: Some(info),
+        warnings: Vec::new(),
+    })
 }

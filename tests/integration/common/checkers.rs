@@ -200,7 +200,11 @@ pub fn check_texture(files: &[&Path], texture: &Path, out_dir: &Path, poses: &[(
     let last = stdout.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
     match serde_json::from_str::<Value>(last) {
         Ok(v) if v["files"].as_array().is_some_and(|f| f.len() == files.len()) => v,
-        _ => panic!("texture_check.mjs gave no summary ({}):\n--- stdout\n{stdout}--- stderr\n{}", output.status, String::from_utf8_lossy(&output.stderr)),
+        _ => panic!(
+            "texture_check.mjs gave no summary ({}):\n--- stdout\n{stdout}--- stderr\n{}",
+            output.status,
+            String::from_utf8_lossy(&output.stderr)
+        ),
     }
 }
 

@@ -187,11 +187,7 @@ impl Spawned {
     pub fn start<S: AsRef<OsStr>>(cwd: &Path, args: &[S], env: &[(&str, &OsStr)]) -> Spawned {
         use std::io::{BufRead, Read};
         let mut cmd = Command::new(bin());
-        cmd.args(args)
-            .current_dir(cwd)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped());
+        cmd.args(args).current_dir(cwd).stdin(std::process::Stdio::null()).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
         for (k, v) in env {
             cmd.env(k, v);
         }

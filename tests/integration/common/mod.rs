@@ -12,19 +12,15 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use blendsim::algorithms::geometry::{Point, TriMesh};
-use blendsim::pipeline::scene::{Method, Scene};
 use blendsim::algorithms::spacetime::trajectory::Trajectory;
+use blendsim::pipeline::scene::{Method, Scene};
 use blendsim::pipeline::stage_file::{Animation, Counts, SolverLog};
 
 /// A fresh, empty folder under Cargo's per-target scratch space, kept after the test so its
 /// files can be inspected.
 pub fn scratch(name: &str) -> PathBuf {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
-        "{name}-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}-{}-{}", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -55,7 +51,14 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
     let scene = Scene::parse(&text).unwrap_or_else(|e| panic!("test scene does not parse: {e}\n{text}"));
     Animation {
         scene,
-        counts: Counts { vertices: mesh.positions.len(), faces: mesh.triangles.len(), tet_nodes: 0, tets: 0, keyframes: keys, largest_tet_volume: None },
+        counts: Counts {
+            vertices: mesh.positions.len(),
+            faces: mesh.triangles.len(),
+            tet_nodes: 0,
+            tets: 0,
+            keyframes: keys,
+            largest_tet_volume: None,
+        },
         input_keys: trajectory.positions.clone(),
         mesh,
         trajectory,

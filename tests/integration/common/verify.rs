@@ -6,10 +6,10 @@ use std::path::Path;
 
 use blendsim::algorithms::blendshape::clip::BlendShapeClip;
 use blendsim::algorithms::geometry::{bbox_diagonal, norm, sub, Point};
-use blendsim::support::progress::Progress;
 use blendsim::pipeline::scene::{Axis, Format, GltfInterpolation, Method, SceneFile};
 use blendsim::pipeline::stage_file::{Animation, OutputFile, OutputKind};
 use blendsim::pipeline::stages::Bake;
+use blendsim::support::progress::Progress;
 use serde_json::Value;
 
 use super::checkers::{check_glb, check_same_layer, check_usd, Expected};
@@ -92,7 +92,8 @@ pub fn same_layer_as_usda(usdc: &Path, anim: &Animation) -> Value {
     let summary = if beside.is_file() {
         check_same_layer(&beside, usdc)
     } else {
-        let scratch = std::env::temp_dir().join(format!("blendsim-same-layer-{}-{}", std::process::id(), usdc.file_name().unwrap().to_string_lossy()));
+        let scratch =
+            std::env::temp_dir().join(format!("blendsim-same-layer-{}-{}", std::process::id(), usdc.file_name().unwrap().to_string_lossy()));
         let _ = std::fs::remove_dir_all(&scratch);
         let mut usda_only = anim.clone();
         usda_only.scene.export.formats = vec![Format::Usda];
@@ -148,19 +149,15 @@ pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile]
             (OutputKind::Blendshape, Format::Glb) => {
                 check_glb(&path, &decorate(Expected::at(&glb_times(anim), fps, |t| clip.points_at(t)), "blendshape"))
             }
-            (OutputKind::FullFrame, Format::Glb) => {
-                check_glb(&path, &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame"))
-            }
+            (OutputKind::FullFrame, Format::Glb) => check_glb(&path, &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame")),
             (OutputKind::Blendshape, format) => check_usd(
                 &path,
                 &decorate(Expected::at(&frames_and_midpoints(&frames), fps, |t| sampled_points(&clip, &frames, t)), "blendshape"),
                 format == Format::Usda && round_trip,
             ),
-            (OutputKind::FullFrame, format) => check_usd(
-                &path,
-                &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame"),
-                format == Format::Usda && round_trip,
-            ),
+            (OutputKind::FullFrame, format) => {
+                check_usd(&path, &decorate(Expected::at(&frames, fps, |t| tr.evaluate(t)), "full-frame"), format == Format::Usda && round_trip)
+            }
         };
         eprintln!("{}: {} bytes: {summary}", f.path, f.bytes);
         assert_eq!(summary["ok"], true, "{}: {summary}", f.path);

@@ -73,8 +73,9 @@ fn residual_is_orthogonal_to_every_basis_function() {
     let keys = [0, 9, 20, 31];
     let mut cache = sampled(32, 3, |v, t| [(3.0 * t + v as f64).sin(), (7.0 * t).cos() * t, (t * t * 5.0).sin() + v as f64]);
     let got = fit(&mut cache, &keys, &[], &exact()).unwrap();
-    let residual: Vec<Vec<Point>> =
-        (0..32).map(|f| got.evaluate(cache.times[f]).iter().zip(&cache.frames[f]).map(|(x, y)| crate::algorithms::geometry::sub(*y, *x)).collect()).collect();
+    let residual: Vec<Vec<Point>> = (0..32)
+        .map(|f| got.evaluate(cache.times[f]).iter().zip(&cache.frames[f]).map(|(x, y)| crate::algorithms::geometry::sub(*y, *x)).collect())
+        .collect();
     let scale: f64 = residual.iter().flatten().map(|r| norm(*r)).fold(0.0, f64::max);
     assert!(scale > 1e-3, "the data must not be fitted exactly ({scale})");
     for k in 0..keys.len() {
@@ -200,7 +201,9 @@ fn pins_hold_key_positions_on_the_cache() {
 fn bad_keys_and_masks_are_one_line_errors() {
     let mut cache = sampled(10, 2, |_, t| [t, 0.0, 0.0]);
     let s = FitSettings::default();
-    for (keys, want) in [(vec![3], "at least 2 keys"), (vec![0, 10], "past the end"), (vec![0, 5, 5], "strictly increasing"), (vec![4, 2], "strictly increasing")] {
+    for (keys, want) in
+        [(vec![3], "at least 2 keys"), (vec![0, 10], "past the end"), (vec![0, 5, 5], "strictly increasing"), (vec![4, 2], "strictly increasing")]
+    {
         let e = fit(&mut cache, &keys, &[], &s).unwrap_err();
         assert!(e.problem.contains(want), "{keys:?}: {e}");
     }

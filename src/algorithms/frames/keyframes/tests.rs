@@ -77,7 +77,8 @@ fn a_hermite_cache_needs_no_more_keys_than_it_was_made_with() {
     let truth_keys = [0usize, 20, 45, 70, 100];
     let fps = 30.0;
     let times: Vec<f64> = truth_keys.iter().map(|&f| f as f64 / fps).collect();
-    let positions: Vec<Vec<Point>> = (0..5).map(|k| rest.iter().map(|p| [p[0] + (k % 2) as f64 * 0.4, p[1] * (1.0 + 0.1 * k as f64), p[2]]).collect()).collect();
+    let positions: Vec<Vec<Point>> =
+        (0..5).map(|k| rest.iter().map(|p| [p[0] + (k % 2) as f64 * 0.4, p[1] * (1.0 + 0.1 * k as f64), p[2]]).collect()).collect();
     let velocities: Vec<Vec<Point>> = (0..5).map(|k| rest.iter().map(|p| [0.3 * (k as f64 - 2.0), -p[0], 0.5 * p[1]]).collect()).collect();
     let truth = Trajectory { times, positions, velocities };
     let mut cache = sampled(101, fps, &rest, |_, _| [0.0; 3]);

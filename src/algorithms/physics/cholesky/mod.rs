@@ -202,7 +202,16 @@ impl Cholesky {
 /// a column are in the order met, which the numeric factorization does not need sorted.
 fn permute_lower(lower: &SparseColMat<usize, f64>, inverse: &[usize]) -> SparseColMat<usize, f64> {
     let n = lower.nrows();
-    let entries = || (0..n).flat_map(|j| lower.row_idx_of_col_raw(j).iter().zip(lower.val_of_col(j)).filter(move |e| *e.0 >= j).map(move |(&i, &v)| (inverse[i].max(inverse[j]), inverse[i].min(inverse[j]), v)));
+    let entries = || {
+        (0..n).flat_map(|j| {
+            lower
+                .row_idx_of_col_raw(j)
+                .iter()
+                .zip(lower.val_of_col(j))
+                .filter(move |e| *e.0 >= j)
+                .map(move |(&i, &v)| (inverse[i].max(inverse[j]), inverse[i].min(inverse[j]), v))
+        })
+    };
     let mut col_ptr = vec![0usize; n + 1];
     for (_, c, _) in entries() {
         col_ptr[c + 1] += 1;
@@ -314,7 +323,10 @@ mod tests {
         }
         let graph = crate::algorithms::physics::ordering::Graph { xadj, adj };
         let order = crate::algorithms::physics::ordering::nested_dissection(&graph, &coords);
-        (SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).unwrap(), crate::algorithms::physics::ordering::expand(&order, &(0..=n).collect::<Vec<_>>()))
+        (
+            SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).unwrap(),
+            crate::algorithms::physics::ordering::expand(&order, &(0..=n).collect::<Vec<_>>()),
+        )
     }
 
     /// `A x` for the symmetric matrix whose lower triangle is `lower`.
@@ -338,7 +350,8 @@ mod tests {
         let n = lower.nrows();
         let chol = Cholesky::factor(lower, ordering, Par::rayon(0)).unwrap();
         assert!(chol.numeric.is_some(), "the test needs a supernodal factor");
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| Cholesky::factor(lower, ordering, Par::rayon(0)).unwrap());
+        let one =
+            rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| Cholesky::factor(lower, ordering, Par::rayon(0)).unwrap());
         assert!(chol.values.iter().zip(&one.values).all(|(a, b)| a.to_bits() == b.to_bits()), "same bytes on one thread");
         let seq = Cholesky::factor(lower, ordering, Par::Seq).unwrap();
         assert!(chol.values.iter().zip(&seq.values).all(|(a, b)| a.to_bits() == b.to_bits()), "same bytes with Par::Seq");
@@ -376,7 +389,9 @@ mod tests {
     fn the_numeric_split_deals_whole_subtrees_to_two_groups() {
         let (a, perm) = grid_problem(12);
         let chol = Cholesky::analyse(&a, &FillOrdering::Custom(perm), Par::Seq);
-        let (SymbolicCholeskyRaw::Supernodal(sym), Some((_, Some(plan)))) = (chol.symbolic.raw(), &chol.numeric) else { panic!("the nested-dissection tree splits in two") };
+        let (SymbolicCholeskyRaw::Supernodal(sym), Some((_, Some(plan)))) = (chol.symbolic.raw(), &chol.numeric) else {
+            panic!("the nested-dissection tree splits in two")
+        };
         let (begin, end) = (sym.supernode_begin(), sym.supernode_end());
         let owner_of_row = |row: usize| (0..sym.n_supernodes()).find(|&s| begin[s] <= row && row < end[s]).unwrap();
         let flops = numeric::supernode_flops(sym);

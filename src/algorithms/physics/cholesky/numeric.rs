@@ -21,9 +21,9 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltRegularization};
 use faer::linalg::matmul::triangular::BlockStructure;
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::SparseColMatRef;
-use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, MatMut, MatRef, Par};
 use std::ops::Range;
 
@@ -108,7 +108,11 @@ struct Scratch {
 impl Scratch {
     fn new(sym: &SymbolicSupernodalCholesky<usize>, par: Par) -> Scratch {
         let widest = (0..sym.n_supernodes()).map(|s| sym.supernode_end()[s] - sym.supernode_begin()[s]).max().unwrap_or(0);
-        Scratch { local: vec![usize::MAX; sym.nrows()], product: Vec::new(), dense: MemBuffer::new(cholesky_in_place_scratch::<f64>(widest, par, Default::default())) }
+        Scratch {
+            local: vec![usize::MAX; sym.nrows()],
+            product: Vec::new(),
+            dense: MemBuffer::new(cholesky_in_place_scratch::<f64>(widest, par, Default::default())),
+        }
     }
 }
 
@@ -122,7 +126,14 @@ struct Front<'a> {
 /// Factor `lower` (same pattern as the analysed matrix) into `values`, splitting the work by
 /// `plan` when there is one; `par` is used inside the top supernodes' dense kernels, and
 /// `Par::Seq` runs everything on this thread (same bytes).
-pub(super) fn factorize(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updates, plan: Option<&GroupPlan>, values: &mut [f64], lower: SparseColMatRef<'_, usize, f64>, par: Par) -> Result<(), NotPositiveDefinite> {
+pub(super) fn factorize(
+    sym: &SymbolicSupernodalCholesky<usize>,
+    updates: &Updates,
+    plan: Option<&GroupPlan>,
+    values: &mut [f64],
+    lower: SparseColMatRef<'_, usize, f64>,
+    par: Par,
+) -> Result<(), NotPositiveDefinite> {
     let front = Front { sym, updates, lower };
     let ns = sym.n_supernodes();
     let cp = sym.col_ptr_for_val();
@@ -146,7 +157,9 @@ pub(super) fn factorize(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updat
             b.push(block_b);
             t.push(block_t);
         }
-        let group = |blocks: &mut Vec<&mut [f64]>, g: u8| phases::timed(g as usize, || front.group(blocks, |s| plan.owner[s] == g, &mut Scratch::new(sym, Par::Seq)));
+        let group = |blocks: &mut Vec<&mut [f64]>, g: u8| {
+            phases::timed(g as usize, || front.group(blocks, |s| plan.owner[s] == g, &mut Scratch::new(sym, Par::Seq)))
+        };
         let (ra, rb) = join(par, || group(&mut a, 0), || group(&mut b, 1));
         ra.0?;
         rb.0?;
@@ -166,7 +179,11 @@ pub(super) fn factorize(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updat
         let half = if ls.len() >= SPLIT_ENTRIES { front.half(s) } else { w };
         let (left, right) = ls.split_at_mut(half * rows);
         let (local, product, done) = (&scratch.local, &mut scratch.product, &*done);
-        let (l, r) = join(par, || phases::timed(2, || front.update(s, left, 0..half, done, local, product)), || phases::timed(3, || front.update(s, right, half..w, done, local, &mut other)));
+        let (l, r) = join(
+            par,
+            || phases::timed(2, || front.update(s, left, 0..half, done, local, product)),
+            || phases::timed(3, || front.update(s, right, half..w, done, local, &mut other)),
+        );
         phases::path(l.1.max(r.1));
         phases::timed(4, || front.finish(s, ls, &mut scratch, par)).0?;
         front.clear_pattern(s, &mut scratch.local);
@@ -319,7 +336,17 @@ impl Front<'_> {
                 let mut p = MatMut::from_column_major_slice_mut(product, h, k);
                 let (p_tri, p_rect) = p.rb_mut().split_at_row_mut(k);
                 let right = ld.subrows(c0, k).transpose();
-                faer::linalg::matmul::triangular::matmul(p_tri, BlockStructure::TriangularLower, Accum::Replace, ld.subrows(c0, k), BlockStructure::Rectangular, right, BlockStructure::Rectangular, 1.0, Par::Seq);
+                faer::linalg::matmul::triangular::matmul(
+                    p_tri,
+                    BlockStructure::TriangularLower,
+                    Accum::Replace,
+                    ld.subrows(c0, k),
+                    BlockStructure::Rectangular,
+                    right,
+                    BlockStructure::Rectangular,
+                    1.0,
+                    Par::Seq,
+                );
                 faer::linalg::matmul::matmul(p_rect, Accum::Replace, ld.subrows(c1, m - c1), right, 1.0, Par::Seq);
                 for j in 0..k {
                     let col = &mut ls[(below[c0 + j] - first_col) * s_rows..][..s_rows];
@@ -338,7 +365,8 @@ impl Front<'_> {
         let rows = w + self.sym.supernode(s).pattern().len();
         let block = MatMut::from_column_major_slice_mut(ls, rows, w);
         let (mut diag, mut below) = block.split_at_row_mut(w);
-        cholesky_in_place(diag.rb_mut(), LltRegularization::default(), par, MemStack::new(&mut scratch.dense), Default::default()).map_err(|_| NotPositiveDefinite)?;
+        cholesky_in_place(diag.rb_mut(), LltRegularization::default(), par, MemStack::new(&mut scratch.dense), Default::default())
+            .map_err(|_| NotPositiveDefinite)?;
         faer::linalg::triangular_solve::solve_lower_triangular_in_place(diag.rb(), below.rb_mut().transpose_mut(), par);
         Ok(())
     }
@@ -384,7 +412,12 @@ pub(super) fn shape_report(sym: &SymbolicSupernodalCholesky<usize>, updates: &Up
     out += &row("supernode widths (count, share of own flops)", &by_width, all);
     out += &row("update products by descendant width (count, share of product flops)", &by_depth, total);
     out += &row("update products by target columns", &by_cols, total);
-    out += &format!("own flops by owner: group 0 {:.1}%, group 1 {:.1}%, top {:.1}%\n", 100.0 * by_owner[0] / all, 100.0 * by_owner[1] / all, 100.0 * by_owner[2] / all);
+    out += &format!(
+        "own flops by owner: group 0 {:.1}%, group 1 {:.1}%, top {:.1}%\n",
+        100.0 * by_owner[0] / all,
+        100.0 * by_owner[1] / all,
+        100.0 * by_owner[2] / all
+    );
     out
 }
 

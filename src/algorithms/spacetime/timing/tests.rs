@@ -2,9 +2,9 @@
 
 use super::*;
 use crate::algorithms::physics::elastic::Elastic;
+use crate::algorithms::physics::svd3::svd3;
 use crate::algorithms::spacetime::tests::{all, from_mask, keys, material, settings, wobbly};
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
-use crate::algorithms::physics::svd3::svd3;
 use crate::support::testing::{cube_mesh, Rng};
 
 /// `tr` with interval `i` set to length `len`, later keys shifted with it.
@@ -189,7 +189,8 @@ fn fresh_derivatives_are_the_bytes_of_the_per_tet_definition() {
     let el = Elastic::new(&mesh, &material()).unwrap();
     assert_ne!(el.tet_count() % BATCH, 0);
     let supports: Vec<bool> = mesh.positions.iter().map(|p| p[1] == 0.0).collect();
-    for (tr, cyclic) in [(wobbly(&mesh.positions, false), false), (wobbly(&mesh.positions, true), true), (contact_trajectory(&mesh.positions), false)] {
+    for (tr, cyclic) in [(wobbly(&mesh.positions, false), false), (wobbly(&mesh.positions, true), true), (contact_trajectory(&mesh.positions), false)]
+    {
         for (damping, gravity, supports) in [(0.0, [0.0; 3], vec![false; el.node_count()]), (2.5, [0.3, -9.81, 0.0], supports.clone())] {
             let timing = Timing { damping, gravity, supports, ..plain_timing(&el, &tr.times, cyclic, 4) };
             let reference = per_tet_derivatives(&timing, &tr);
@@ -290,8 +291,7 @@ fn intervals_clamp_at_the_minimum() {
     for t in lengths(&clamped.times) {
         assert!((t - 0.2).abs() < 1e-12, "{:?}", clamped.times);
     }
-    let kept =
-        timing.optimize_times(&tr, &TimingSettings { min_interval: 0.25, keep_duration: true, ..TimingSettings::default() }).unwrap();
+    let kept = timing.optimize_times(&tr, &TimingSettings { min_interval: 0.25, keep_duration: true, ..TimingSettings::default() }).unwrap();
     let t = lengths(&kept.times);
     println!("clamped {:?}; kept duration with minimum 0.25: {t:?}", lengths(&clamped.times));
     assert!(t.iter().all(|&x| x >= 0.25 - 1e-12), "{t:?}");
@@ -402,11 +402,21 @@ fn retimed_global_step_equals_a_fresh_one() {
     let gradient = objective.evaluate(&moved, &objective.local_step(&moved, false)).gradient;
     let (a, b) = (global.step(&gradient), fresh.step(&gradient));
     let scale = b.iter().flatten().map(|v| crate::algorithms::geometry::norm(*v)).fold(0.0, f64::max);
-    let diff = a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y))).fold(0.0, f64::max);
+    let diff = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .map(|(x, y)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y)))
+        .fold(0.0, f64::max);
     assert!(diff < 1e-12 * scale, "retimed and fresh steps differ by {diff:e} of {scale:e}");
     // And it is not the old matrix: the step at the old times differs.
     let old = GlobalStep::new(&timing.objective(&tr.times), Unknowns::new(&keys, n), 0.1).unwrap().step(&gradient);
-    let change = a.iter().flatten().zip(old.iter().flatten()).map(|(x, y)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y))).fold(0.0, f64::max);
+    let change = a
+        .iter()
+        .flatten()
+        .zip(old.iter().flatten())
+        .map(|(x, y)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*x, *y)))
+        .fold(0.0, f64::max);
     assert!(change > 1e-3 * scale);
 }
 
@@ -506,7 +516,12 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
 }
 
 /// `solve` with the key times optimized under `timing`.
-fn solve_timed(el: &Elastic, keys: &KeyConstraints, settings: &crate::algorithms::spacetime::solver::Settings, timing: TimingSettings) -> crate::algorithms::spacetime::solver::Solved {
+fn solve_timed(
+    el: &Elastic,
+    keys: &KeyConstraints,
+    settings: &crate::algorithms::spacetime::solver::Settings,
+    timing: TimingSettings,
+) -> crate::algorithms::spacetime::solver::Solved {
     let settings = crate::algorithms::spacetime::solver::Settings { timing: Some(timing), ..settings.clone() };
     crate::algorithms::spacetime::solver::solve(el, keys, &settings, &|_, _, _| {}).unwrap()
 }
@@ -522,13 +537,26 @@ fn the_solver_moves_a_free_fall_key_to_the_parabola() {
     let settings = crate::algorithms::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let solved = solve_timed(&el, &keys, &settings, TimingSettings { keep_duration: true, ..TimingSettings::default() });
     let (t, log) = (&solved.trajectory.times, &solved.log);
-    println!("t1 = {:.8}, {} timing iterations of {}, {} refactorizations, W {:.3e} -> {:.3e}: {}", t[1], log.timing_iterations, log.iterations, log.refactorizations, log.energy[0], log.energy.last().unwrap(), log.stop_reason);
+    println!(
+        "t1 = {:.8}, {} timing iterations of {}, {} refactorizations, W {:.3e} -> {:.3e}: {}",
+        t[1],
+        log.timing_iterations,
+        log.iterations,
+        log.refactorizations,
+        log.energy[0],
+        log.energy.last().unwrap(),
+        log.stop_reason
+    );
     assert!((t[1] - 0.5).abs() < 1e-4, "t1 = {}", t[1]);
     assert_eq!(t[2], 1.0, "the duration is kept to the bit");
     assert!(log.energy.windows(2).all(|p| p[1] <= p[0]), "W never increases");
     // Iterations until |t1 - 0.5| < 1e-4 (the error is 0.12 at the start).
     let within = log.times.iter().position(|t| (t[1] - 0.5).abs() < 1e-4).unwrap();
-    println!("t1 within 1e-4 of 0.5 after {within} iterations ({} of them quasi-Newton); t1 history {:?}", within - (log.iterations - log.timing_iterations), log.times.iter().map(|t| t[1]).collect::<Vec<_>>());
+    println!(
+        "t1 within 1e-4 of 0.5 after {within} iterations ({} of them quasi-Newton); t1 history {:?}",
+        within - (log.iterations - log.timing_iterations),
+        log.times.iter().map(|t| t[1]).collect::<Vec<_>>()
+    );
     assert!(within - (log.iterations - log.timing_iterations) <= 25, "{within} iterations");
     assert!(*log.energy.last().unwrap() < 1e-10 * log.energy[0]);
 }

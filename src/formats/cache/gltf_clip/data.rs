@@ -19,8 +19,7 @@ use gltf::Document;
 use crate::formats::cache::binary::{open_regular, read_exact_at, require_regular};
 use crate::support::error::{Error, Result};
 
-const FIX_DAMAGED: &str =
-    "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
+const FIX_DAMAGED: &str = "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
 
 /// Where one buffer's bytes are.
 #[derive(Debug)]
@@ -84,10 +83,7 @@ pub(crate) fn load(path: &Path) -> Result<Loaded> {
         let data = match buffer.source() {
             Source::Bin => {
                 let Some((offset, bin_len)) = bin else {
-                    return Err(damaged(
-                        path,
-                        format!("buffer {} refers to the GLB's BIN chunk, which the file does not have", buffer.index()),
-                    ));
+                    return Err(damaged(path, format!("buffer {} refers to the GLB's BIN chunk, which the file does not have", buffer.index())));
                 };
                 if need > bin_len {
                     return Err(damaged(
@@ -98,13 +94,9 @@ pub(crate) fn load(path: &Path) -> Result<Loaded> {
                 BufferData::File { file: 0, offset, len: need }
             }
             Source::Uri(uri) if uri.starts_with("data:") => {
-                let bytes = decode_data_uri(uri)
-                    .ok_or_else(|| damaged(path, format!("buffer {}'s data URI is not base64 data", buffer.index())))?;
+                let bytes = decode_data_uri(uri).ok_or_else(|| damaged(path, format!("buffer {}'s data URI is not base64 data", buffer.index())))?;
                 if (bytes.len() as u64) < need {
-                    return Err(damaged(
-                        path,
-                        format!("buffer {} is {need} bytes, but its data URI holds {}", buffer.index(), bytes.len()),
-                    ));
+                    return Err(damaged(path, format!("buffer {} is {need} bytes, but its data URI holds {}", buffer.index(), bytes.len())));
                 }
                 BufferData::Memory(bytes)
             }
@@ -146,11 +138,7 @@ fn validate(path: &Path, root: gltf::json::Root) -> Result<Document> {
     // gltf-json's primitive check indexes the POSITION accessor before validating the index.
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
-            if primitive
-                .attributes
-                .get(&Checked::Valid(gltf::json::mesh::Semantic::Positions))
-                .is_some_and(|a| a.value() >= root.accessors.len())
-            {
+            if primitive.attributes.get(&Checked::Valid(gltf::json::mesh::Semantic::Positions)).is_some_and(|a| a.value() >= root.accessors.len()) {
                 return Err(damaged(
                     path,
                     format!("its glTF JSON is not valid glTF 2.0 (meshes[{m}].primitives[{p}].attributes.POSITION: Index out of range)"),
@@ -369,11 +357,7 @@ impl BufferStore {
         if offset as u128 + len as u128 > view_len as u128 {
             return Err(damaged(
                 &self.path,
-                format!(
-                    "{what} needs bytes {offset} to {} of buffer view {}, which has {view_len}",
-                    offset as u128 + len as u128,
-                    view.index()
-                ),
+                format!("{what} needs bytes {offset} to {} of buffer view {}, which has {view_len}", offset as u128 + len as u128, view.index()),
             ));
         }
         Ok(Span { buffer, offset: view_offset + offset, len })
@@ -418,8 +402,7 @@ impl BufferStore {
                     IndexType::U32 => DataType::U32,
                 };
                 let bytes = |size: usize| {
-                    u64::try_from(n as u128 * size as u128)
-                        .map_err(|_| damaged(&self.path, format!("{what} has an impossible sparse count {n}")))
+                    u64::try_from(n as u128 * size as u128).map_err(|_| damaged(&self.path, format!("{what} has an impossible sparse count {n}")))
                 };
                 let indices = self.span(
                     &s.indices().view(),
@@ -427,8 +410,7 @@ impl BufferStore {
                     bytes(component_size(index_type))?,
                     &format!("the sparse indices of {what}"),
                 )?;
-                let values =
-                    self.span(&s.values().view(), s.values().offset() as u64, bytes(element)?, &format!("the sparse values of {what}"))?;
+                let values = self.span(&s.values().view(), s.values().offset() as u64, bytes(element)?, &format!("the sparse values of {what}"))?;
                 Some(SparseLayout { count: n, index_type, indices, values })
             }
         };
@@ -443,9 +425,7 @@ impl BufferStore {
         match layout.dense {
             Some(_) => Ok(()),
             None if layout.count <= 1 => Ok(()),
-            None => {
-                Err(damaged(&self.path, format!("{what} (accessor {}) has {} elements but no buffer view", layout.index, layout.count)))
-            }
+            None => Err(damaged(&self.path, format!("{what} (accessor {}) has {} elements but no buffer view", layout.index, layout.count))),
         }
     }
 

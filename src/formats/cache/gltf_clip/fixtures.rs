@@ -58,10 +58,8 @@ impl Builder {
         let target = (type_ == Type::Vec3 || type_ == Type::Vec4).then_some(json::buffer::Target::ArrayBuffer).filter(|_| bounds);
         let mut a = self.accessor(&bytes, values.len() / width, ComponentType::F32, type_, target);
         if bounds {
-            let lo: Vec<f64> =
-                (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::INFINITY, |m, &x| m.min(x)) as f64).collect();
-            let hi: Vec<f64> =
-                (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::NEG_INFINITY, |m, &x| m.max(x)) as f64).collect();
+            let lo: Vec<f64> = (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::INFINITY, |m, &x| m.min(x)) as f64).collect();
+            let hi: Vec<f64> = (0..width).map(|k| values.iter().skip(k).step_by(width).fold(f32::NEG_INFINITY, |m, &x| m.max(x)) as f64).collect();
             (a.min, a.max) = (Some(value!(lo)), Some(value!(hi)));
         }
         self.root.push(a)
@@ -192,18 +190,12 @@ pub fn skinned_clip(path: &Path) {
     let mut b = Builder::new();
     let mesh = b.mesh(&positions, &triangles, &[thicken], Some((&joints, &weights)));
     let j2 = b.node(json::Node { name: Some("j2".into()), translation: Some([0.0, 1.0, 0.0]), ..Default::default() });
-    let j1 =
-        b.node(json::Node { name: Some("j1".into()), translation: Some([0.0, 1.0, 0.0]), children: Some(vec![j2]), ..Default::default() });
+    let j1 = b.node(json::Node { name: Some("j1".into()), translation: Some([0.0, 1.0, 0.0]), children: Some(vec![j2]), ..Default::default() });
     let j0 = b.node(json::Node { name: Some("j0".into()), children: Some(vec![j1]), ..Default::default() });
-    let armature = b.node(json::Node {
-        name: Some("armature".into()),
-        translation: Some([0.0, 0.5, 0.0]),
-        children: Some(vec![j0]),
-        ..Default::default()
-    });
+    let armature =
+        b.node(json::Node { name: Some("armature".into()), translation: Some([0.0, 0.5, 0.0]), children: Some(vec![j0]), ..Default::default() });
     // Inverse bind matrices: the joints' rest globals are translations by (0, 0.5 + j, 0).
-    let ibm: Vec<f32> =
-        (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -0.5 - j as f32, 0.0, 1.0]).collect();
+    let ibm: Vec<f32> = (0..3).flat_map(|j| [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -0.5 - j as f32, 0.0, 1.0]).collect();
     let ibm = b.floats(&ibm, Type::Mat4, false);
     let skin = b.root.push(json::Skin {
         extensions: None,

@@ -42,14 +42,13 @@ use gltf::scene::Transform;
 use gltf::Document;
 
 use super::{rate_of, FrameSource, MAX_FRAMES};
-use crate::support::error::{Error, Result};
 use crate::algorithms::geometry::{Point, TriMesh};
+use crate::support::error::{Error, Result};
 use data::{BufferStore, Layout};
 use sampler::{Curve, Interpolation};
 use transform::{apply, mul, Mat4, Trs, IDENTITY};
 
-const FIX_DAMAGED: &str =
-    "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
+const FIX_DAMAGED: &str = "the glTF file is damaged or was written by a faulty exporter; re-export it (and check it with the Khronos glTF validator)";
 
 /// An opened clip: the first frame's mesh, the frames, and the rate.
 #[derive(Debug)]
@@ -191,10 +190,7 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
         let (groups, per_key) =
             (if interpolation == Interpolation::CubicSpline { 3 } else { 1 }, if matches!(target, Target::Weights) { width } else { 1 });
         let components = if matches!(target, Target::Weights) { 1 } else { width };
-        if input.components != 1
-            || output.components != components
-            || output.count as u128 != input.count as u128 * groups * per_key as u128
-        {
+        if input.components != 1 || output.components != components || output.count as u128 != input.count as u128 * groups * per_key as u128 {
             return Err(damaged(
                 path,
                 format!(
@@ -228,17 +224,10 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
     let mut joint_sets: Vec<(usize, Vec<u32>, Vec<f32>, usize)> = Vec::new();
     let target_count = mesh.primitives().next().map_or(0, |p| p.morph_targets().len());
     for primitive in mesh.primitives() {
-        let what = format!(
-            "primitive {} of mesh {}",
-            primitive.index(),
-            mesh.name().map_or_else(|| mesh.index().to_string(), |n| format!("\"{n}\""))
-        );
+        let what =
+            format!("primitive {} of mesh {}", primitive.index(), mesh.name().map_or_else(|| mesh.index().to_string(), |n| format!("\"{n}\"")));
         if primitive.mode() != Mode::Triangles {
-            return Err(Error::in_file(
-                path,
-                format!("{what} draws {:?}, not triangles", primitive.mode()),
-                "export the mesh as triangles",
-            ));
+            return Err(Error::in_file(path, format!("{what} draws {:?}, not triangles", primitive.mode()), "export the mesh as triangles"));
         }
         let position = primitive.get(&Semantic::Positions).ok_or_else(|| damaged(path, format!("{what} has no POSITION")))?;
         let layout = store.layout(&position, &format!("POSITION of {what}"))?;
@@ -295,11 +284,9 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
             let mut set = 0;
             let (mut joints, mut weights) = (Vec::new(), Vec::new());
             while let Some(j) = primitive.get(&Semantic::Joints(set)) {
-                let w = primitive
-                    .get(&Semantic::Weights(set))
-                    .ok_or_else(|| damaged(path, format!("{what} has JOINTS_{set} but no WEIGHTS_{set}")))?;
-                let (jl, wl) =
-                    (store.layout(&j, &format!("JOINTS_{set} of {what}"))?, store.layout(&w, &format!("WEIGHTS_{set} of {what}"))?);
+                let w =
+                    primitive.get(&Semantic::Weights(set)).ok_or_else(|| damaged(path, format!("{what} has JOINTS_{set} but no WEIGHTS_{set}")))?;
+                let (jl, wl) = (store.layout(&j, &format!("JOINTS_{set} of {what}"))?, store.layout(&w, &format!("WEIGHTS_{set} of {what}"))?);
                 if jl.components != 4 || wl.components != 4 || jl.count != count || wl.count != count {
                     return Err(damaged(path, format!("JOINTS_{set} / WEIGHTS_{set} of {what} are not VEC4 with one element per vertex")));
                 }
@@ -329,9 +316,7 @@ pub fn open(path: &Path, animation: Option<&str>, fps: Option<f64>) -> Result<Op
 
     let default_weights: Vec<f64> = match node.weights().or_else(|| mesh.weights()) {
         Some(w) if w.len() == target_count => w.iter().map(|&x| x as f64).collect(),
-        Some(w) => {
-            return Err(damaged(path, format!("{} has {} default morph weights for {target_count} targets", node_name(&node), w.len())))
-        }
+        Some(w) => return Err(damaged(path, format!("{} has {} default morph weights for {target_count} targets", node_name(&node), w.len()))),
         None => vec![0.0; target_count],
     };
     let skin = match node.skin() {
@@ -415,9 +400,7 @@ fn choose_animation<'a>(path: &Path, document: &'a Document, name: Option<&str>)
             let mut all = document.animations();
             match (all.next(), all.next()) {
                 (Some(only), None) => Ok(only),
-                (None, _) => {
-                    Err(Error::in_file(path, "has no animation", "export the clip with its animation (morph weights or skinning)"))
-                }
+                (None, _) => Err(Error::in_file(path, "has no animation", "export the clip with its animation (morph weights or skinning)")),
                 _ => Err(Error::in_file(path, format!("has several animations ({list})"), "choose one with animation = \"NAME\"")),
             }
         }
@@ -528,22 +511,13 @@ fn read_skin(path: &Path, store: &mut BufferStore, skin: &gltf::Skin, sets: Vec<
             if let Some(k) = ws.iter().position(|&x| !(x.is_finite() && x >= 0.0)) {
                 return Err(damaged(
                     path,
-                    format!(
-                        "vertex {} of the skinned mesh has weight {} (weights must be finite and non-negative)",
-                        joint.len() / influences,
-                        ws[k]
-                    ),
+                    format!("vertex {} of the skinned mesh has weight {} (weights must be finite and non-negative)", joint.len() / influences, ws[k]),
                 ));
             }
             if let Some(k) = js.iter().position(|&x| x as usize >= joints.len()) {
                 return Err(damaged(
                     path,
-                    format!(
-                        "vertex {} of the skinned mesh uses joint {}, but {what} has {} joints",
-                        joint.len() / influences,
-                        js[k],
-                        joints.len()
-                    ),
+                    format!("vertex {} of the skinned mesh uses joint {}, but {what} has {} joints", joint.len() / influences, js[k], joints.len()),
                 ));
             }
             let sum: f64 = ws.iter().map(|&x| x as f64).sum();
@@ -644,10 +618,7 @@ impl GltfFrames {
             }
         }
         if let Some(v) = out.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-            return Err(damaged(
-                &self.path,
-                format!("at {t} s vertex {v} evaluates to a non-finite position (non-finite data in the file)"),
-            ));
+            return Err(damaged(&self.path, format!("at {t} s vertex {v} evaluates to a non-finite position (non-finite data in the file)")));
         }
         Ok(())
     }

@@ -199,15 +199,9 @@ mod tests {
     #[test]
     fn malformed_keys_are_refused() {
         assert!(Curve::new(vec![], vec![], 1, Interpolation::Linear, false).unwrap_err().contains("no keys"));
-        assert!(Curve::new(vec![0.0, 0.0], vec![1.0, 2.0], 1, Interpolation::Linear, false)
-            .unwrap_err()
-            .contains("do not increase at key 1"));
-        assert!(Curve::new(vec![0.0, f32::NAN], vec![1.0, 2.0], 1, Interpolation::Linear, false)
-            .unwrap_err()
-            .contains("key time 1 is NaN"));
-        assert!(Curve::new(vec![0.0, 1.0], vec![1.0, 2.0], 1, Interpolation::CubicSpline, false)
-            .unwrap_err()
-            .contains("expected 6 (3 x 1 per key)"));
+        assert!(Curve::new(vec![0.0, 0.0], vec![1.0, 2.0], 1, Interpolation::Linear, false).unwrap_err().contains("do not increase at key 1"));
+        assert!(Curve::new(vec![0.0, f32::NAN], vec![1.0, 2.0], 1, Interpolation::Linear, false).unwrap_err().contains("key time 1 is NaN"));
+        assert!(Curve::new(vec![0.0, 1.0], vec![1.0, 2.0], 1, Interpolation::CubicSpline, false).unwrap_err().contains("expected 6 (3 x 1 per key)"));
         assert!(Curve::new(vec![0.0], vec![f32::INFINITY], 1, Interpolation::Step, false).unwrap_err().contains("output value 0 is inf"));
     }
 }

@@ -11,8 +11,8 @@ use serde_json::json as value;
 
 use super::fixtures::{quat, skinned_clip, Builder};
 use super::*;
-use crate::formats::cache::tests::{assert_frames_equal, scratch, wave, wave_mesh};
 use crate::algorithms::frames::MemoryFrames;
+use crate::formats::cache::tests::{assert_frames_equal, scratch, wave, wave_mesh};
 
 fn f32s(points: &[[f64; 3]]) -> Vec<[f32; 3]> {
     points.iter().map(|p| p.map(|x| x as f32)).collect()
@@ -50,10 +50,7 @@ fn morph_clip(path: &Path) {
     ];
     b.animation("cubic", &[(node, Property::MorphTargetWeights, Interp::CubicSpline, &[0.0, 0.4, 1.0], &cubic)]);
     b.animation("linear", &[(node, Property::MorphTargetWeights, Interp::Linear, &[0.0, 0.5, 1.0], &[0.0, 0.0, 1.0, 0.5, 0.2, 1.0])]);
-    b.animation(
-        "step",
-        &[(node, Property::MorphTargetWeights, Interp::Step, &[0.0, 0.3, 0.6, 0.9], &[0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0])],
-    );
+    b.animation("step", &[(node, Property::MorphTargetWeights, Interp::Step, &[0.0, 0.3, 0.6, 0.9], &[0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0])]);
     let spin = [quat([0.0, 0.0, 1.0], 0.0), quat([0.0, 0.0, 1.0], 50.0), quat([1.0, 0.0, 0.0], 70.0)].concat();
     b.animation(
         "trs",
@@ -107,7 +104,10 @@ fn three_js_agrees(file: &Path, animation: Option<&str>, times: &[f64], points: 
 fn motion(points: &[Vec<Point>]) -> f64 {
     let all: Vec<Point> = points.iter().flatten().copied().collect();
     let diagonal = crate::algorithms::geometry::bbox_diagonal(&all);
-    points.iter().flat_map(|f| f.iter().zip(&points[0]).map(|(p, q)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q)))).fold(0.0, f64::max)
+    points
+        .iter()
+        .flat_map(|f| f.iter().zip(&points[0]).map(|(p, q)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q))))
+        .fold(0.0, f64::max)
         / diagonal
 }
 
@@ -255,10 +255,7 @@ fn bad_clips_are_one_line_errors_naming_the_file() {
     root["accessors"][0]["count"] = value!(26);
     std::fs::write(&short, root.to_string()).unwrap();
     let s = err(&short, Some("cubic"), Some(30.0));
-    assert!(
-        s.contains("POSITION of primitive 0 of mesh \"mesh\" (accessor 0) needs bytes 0 to 312 of buffer view 0, which has 300"),
-        "{s}"
-    );
+    assert!(s.contains("POSITION of primitive 0 of mesh \"mesh\" (accessor 0) needs bytes 0 to 312 of buffer view 0, which has 300"), "{s}");
     std::fs::write(&short, "{\"asset\": {\"version\": \"2.0\"}, \"accessors\": [{\"count\": 1}]}").unwrap();
     assert!(err(&short, None, None).contains("its glTF JSON"));
     std::fs::remove_dir_all(&dir).unwrap();
@@ -381,7 +378,8 @@ fn cubic_morph_and_skinned_clips_bake_end_to_end() {
         let scene = crate::pipeline::scene::SceneFile::load(&scene_path).unwrap();
         let out = dir.join(format!("out-{file}"));
         let mut staging = crate::support::output::Staging::new(&out).unwrap();
-        let report = crate::pipeline::stages::bake(&scene, None, &mut staging, &crate::support::progress::Progress::new(true)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let report = crate::pipeline::stages::bake(&scene, None, &mut staging, &crate::support::progress::Progress::new(true))
+            .unwrap_or_else(|e| panic!("{file}: {e}"));
         staging.commit().unwrap();
         let c = report.cache.expect("a cache report");
         assert_eq!((c.format.as_str(), c.frames), ("gltf", 31), "{file}");
@@ -395,7 +393,11 @@ fn cubic_morph_and_skinned_clips_bake_end_to_end() {
         assert!(motion(&expected) > 0.05, "{file}: the clip moves");
         let all: Vec<Point> = expected.iter().flatten().copied().collect();
         let diagonal = crate::algorithms::geometry::bbox_diagonal(&all);
-        let max = expected.iter().zip(&got).flat_map(|(a, b)| a.iter().zip(b).map(|(p, q)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q)))).fold(0.0, f64::max);
+        let max = expected
+            .iter()
+            .zip(&got)
+            .flat_map(|(a, b)| a.iter().zip(b).map(|(p, q)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *q))))
+            .fold(0.0, f64::max);
         assert!(max / diagonal <= 0.005 + 1e-6, "{file}: {}", max / diagonal);
     }
     std::fs::remove_dir_all(&dir).unwrap();

@@ -22,12 +22,12 @@ use json::validation::{Checked::Valid, USize64};
 use json::Index;
 use serde_json::{json as value, Value};
 
-use crate::formats::cache::check_writable;
 use crate::algorithms::frames::FrameSource;
-use crate::support::error::{Error, Result};
+use crate::algorithms::geometry::TriMesh;
+use crate::formats::cache::check_writable;
 use crate::formats::export::glb::accessor_in as accessor;
 use crate::formats::export::sparse_is_smaller;
-use crate::algorithms::geometry::TriMesh;
+use crate::support::error::{Error, Result};
 
 /// glTF targets are indexed by a u32 weight slot, and the one-hot output has frames^2 slots.
 pub const MAX_GLB_FRAMES: usize = 65_535;
@@ -112,12 +112,7 @@ fn sparse_of(
             extensions: None,
             extras: None,
         },
-        values: sparse::Values {
-            buffer_view: Index::new(value_view),
-            byte_offset: USize64(value_offset as u64),
-            extensions: None,
-            extras: None,
-        },
+        values: sparse::Values { buffer_view: Index::new(value_view), byte_offset: USize64(value_offset as u64), extensions: None, extras: None },
         extensions: None,
         extras: None,
     }
@@ -193,8 +188,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     let index_bytes = pad4(3 * mesh.triangles.len() * index_size);
     let dense = measures.iter().filter(|m| m.storage == Storage::Dense).count();
     let vertex_bytes = 12 * n * (1 + dense);
-    let sparse_bytes: usize =
-        measures.iter().filter(|m| m.storage == Storage::Sparse).map(|m| pad4(m.moved * sparse_size) + 12 * m.moved).sum();
+    let sparse_bytes: usize = measures.iter().filter(|m| m.storage == Storage::Sparse).map(|m| pad4(m.moved * sparse_size) + 12 * m.moved).sum();
     let animation_bytes = 12 * count;
     let asset = json::Asset {
         copyright: None,
@@ -288,13 +282,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
             extensions: None,
             extras: None,
         }],
-        samplers: vec![json::animation::Sampler {
-            extensions: None,
-            extras: None,
-            input,
-            interpolation: Valid(Interpolation::Linear),
-            output,
-        }],
+        samplers: vec![json::animation::Sampler { extensions: None, extras: None, input, interpolation: Valid(Interpolation::Linear), output }],
     });
     root.push(json::Buffer { byte_length: USize64(bin_len as u64), name: None, uri: None, extensions: None, extras: None });
     let mut json_bytes =
