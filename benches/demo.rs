@@ -18,6 +18,7 @@ use blendsim::pipeline::scene::{Format, SceneFile};
 use blendsim::pipeline::stage_file::Shape;
 use blendsim::pipeline::stages::solve::solver_inputs;
 use blendsim::pipeline::stages::{self, blendshape_clip, embed, export_with, import, solve, tetrahedralize};
+use blendsim::support::budget::Budget;
 use blendsim::support::output::Staging;
 use blendsim::support::progress::Progress;
 
@@ -167,6 +168,7 @@ fn main() {
     // Each phase in this process.
     let scene = SceneFile::load(&root.join(SCENE)).expect("the demo scene loads");
     let progress = Progress::hidden();
+    let budget = Budget::default();
     let mut rows: Vec<Row> = [
         "import",
         "TetGen alone",
@@ -187,7 +189,7 @@ fn main() {
     let mut iterations = Vec::new();
     let mut per_iteration = Vec::new();
     for r in 0..repeats {
-        let (w, c, keys) = timed(|| import(&scene).expect("import"));
+        let (w, c, keys) = timed(|| import(&scene, &budget).expect("import"));
         rows[0].push((w, c));
         if let Shape::Surface(rest) = &keys.rest {
             let s = &keys.scene.tet;
@@ -197,7 +199,7 @@ fn main() {
             rows[1].push((w, c + cpu(libc::RUSAGE_CHILDREN) - k0));
         }
         let k0 = cpu(libc::RUSAGE_CHILDREN);
-        let (w, c, body) = timed(|| tetrahedralize(&keys, &progress).expect("tetrahedralize"));
+        let (w, c, body) = timed(|| tetrahedralize(&keys, &budget, &progress).expect("tetrahedralize"));
         rows[2].push((w, c + cpu(libc::RUSAGE_CHILDREN) - k0));
         let (w, c, solution) = timed(|| solve(&body, None, &progress).expect("solve"));
         rows[3].push((w, c));
@@ -208,7 +210,7 @@ fn main() {
         per_iteration.push(log.iteration_seconds);
         let (w, c, animation) = timed(|| embed(&solution).expect("embed"));
         rows[6].push((w, c));
-        let (w, c, clip) = timed(|| blendshape_clip(&animation, None).expect("clip"));
+        let (w, c, clip) = timed(|| blendshape_clip(&animation, None, &budget).expect("clip"));
         rows[7].push((w, c));
         let mut light = animation.clone();
         light.scene.export.formats.retain(|f| *f != Format::Usdc);
@@ -225,7 +227,7 @@ fn main() {
             staging.commit().expect("commit");
         }
         rows[9].push((t.elapsed().as_secs_f64(), cpu(libc::RUSAGE_SELF) - c0 + cpu(libc::RUSAGE_CHILDREN) - k0));
-        let (w, c, _) = timed(|| stages::report::measure(&animation, &clip).expect("measure"));
+        let (w, c, _) = timed(|| stages::report::measure(&animation, &clip, &budget).expect("measure"));
         rows[10].push((w, c));
         // A re-bake into the same folder (`make demo` again, the process row): the commit also
         // removes the previous bake's files. Timed on the second of two.

@@ -26,21 +26,11 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
-    /// Memory the solve's global step may use (e.g. 4G, 512M); past it the step is solved
-    /// iteratively instead of by a sparse factorization; every other memory estimate (frames,
-    /// samples) must fit in it too. Default: 60% of the available memory.
-    #[arg(long, value_parser = super::parse_bytes)]
-    max_memory: Option<u64>,
-    /// Time the bake may take, in seconds (e.g. 600, 90s, 10m, 2h): TetGen gets at most what
-    /// is left of it (or [tet] timeout, the smaller); the solve checks it before its global
-    /// step is built (against the predicted cost) and at every iteration, a cache's key
-    /// selection, fit and error measure at every frame they read, the mass-spring blend at every Newton
-    /// iteration; the bake stops with an error (nothing written) once it is spent. Default: no limit.
-    #[arg(long, value_parser = super::parse_seconds)]
-    max_time: Option<f64>,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -50,20 +40,15 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
+    let budget = args.budget.budget();
     let start = Instant::now();
-    if let Some(bytes) = args.max_memory {
-        blendsim::support::resources::set_max_memory(bytes);
-    }
-    if let Some(seconds) = args.max_time {
-        blendsim::support::resources::set_max_time(seconds);
-    }
     let scene = SceneFile::load(&args.scene)?;
     // Check the output location before the work, not after.
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     // A bake is the folder's whole blendsim content: an earlier bake's files go, whatever
     // scene wrote them (a renamed scene's too); files blendsim did not write stay.
     staging.replace_every_group();
-    let r = stages::Bake::new(&scene, progress).method(args.method.map(Into::into)).max_memory(args.max_memory).files(&mut staging)?;
+    let r = stages::Bake::new(&scene, progress).method(args.method.map(Into::into)).budget(budget).files(&mut staging)?;
     let committed = staging.commit_with_summary()?;
     if !quiet {
         for line in committed.messages(&args.out, "bake") {

@@ -51,11 +51,8 @@ pub struct Args {
     /// Write the linear blend of the positions instead (the baseline, for comparison).
     #[arg(long)]
     linear: bool,
-    /// Time the blend may take, in seconds (e.g. 600, 90s, 10m, 2h): TetGen gets at most what
-    /// is left of it, every equilibrium checks it at each Newton iteration, and the blend
-    /// stops with an error (nothing written) once it is spent. Default: no limit.
-    #[arg(long, value_parser = super::parse_seconds)]
-    max_time: Option<f64>,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -66,9 +63,7 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
-    if let Some(seconds) = args.max_time {
-        blendsim::support::resources::set_max_time(seconds);
-    }
+    let budget = args.budget.budget();
     let job = BlendJob {
         targets: args.targets,
         weights: match (args.weights, args.weights_file) {
@@ -84,7 +79,7 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
         refine: args.refine,
         linear: args.linear,
     };
-    let s = stages::blend(&job, progress)?;
+    let s = stages::blend(&job, &budget, progress)?;
     if !quiet {
         eprintln!(
             "blendsim: {} blend(s) of {} springs on {} vertices in {:.2} s ({:.2} s building, {} Newton iterations); wrote {}",

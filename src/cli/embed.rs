@@ -16,6 +16,8 @@ pub struct Args {
     /// Where to write the animation stage file (JSON).
     #[arg(short, long)]
     output: PathBuf,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -25,6 +27,7 @@ impl Args {
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
-    let solution: Solution = stage_file::read(&args.solution)?;
+    let budget = args.budget.budget();
+    let solution: Solution = stage_file::read(&args.solution, &budget)?;
     stage_file::write(&args.output, &stages::embed(&solution)?)
 }

@@ -24,11 +24,8 @@ pub struct Args {
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
-    /// Time the export may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, the rank
-    /// search's error measure checks it at every cache frame it reads, and the export stops
-    /// with an error (nothing written) once it is spent. Default: no limit.
-    #[arg(long, value_parser = super::parse_seconds)]
-    max_time: Option<f64>,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -38,12 +35,10 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
-    if let Some(seconds) = args.max_time {
-        blendsim::support::resources::set_max_time(seconds);
-    }
-    let animation: Animation = stage_file::read(&args.animation)?;
+    let budget = args.budget.budget();
+    let animation: Animation = stage_file::read(&args.animation, &budget)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
-    let clip = stages::blendshape_clip(&animation, None)?;
+    let clip = stages::blendshape_clip(&animation, None, &budget)?;
     let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
     staging.write(&format!("{}.outputs.json", animation.scene.name), &stage_file::to_json(&outputs))?;
     staging.commit()

@@ -23,6 +23,8 @@ pub struct Args {
     /// Also (or only) write the scene's [cache] in the format this path names.
     #[arg(long)]
     cache_out: Option<PathBuf>,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -32,6 +34,7 @@ impl Args {
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+    let budget = args.budget.budget();
     let scene = SceneFile::load(&args.scene)?;
     if let Some(out) = &args.cache_out {
         let Some(spec) = &scene.scene.cache else {
@@ -44,7 +47,7 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
         stages::import_cache::convert(&scene, spec, out)?;
     }
     match &args.output {
-        Some(o) => stage_file::write(o, &stages::import(&scene)?),
+        Some(o) => stage_file::write(o, &stages::import(&scene, &budget)?),
         None => Ok(()),
     }
 }

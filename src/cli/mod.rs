@@ -16,6 +16,7 @@ mod tetrahedralize;
 use std::process::ExitCode;
 
 use blendsim::pipeline::scene::Method;
+use blendsim::support::budget::Budget;
 use blendsim::support::progress::Progress;
 use clap::{Parser, Subcommand};
 
@@ -73,6 +74,33 @@ impl From<MethodArg> for Method {
             MethodArg::MassSpring => Method::MassSpring,
             MethodArg::Fit => Method::Fit,
         }
+    }
+}
+
+/// `--max-memory` and `--max-time`, the same on every subcommand: the budget every stage
+/// checks before it allocates or runs long (`blendsim::support::budget`).
+#[derive(clap::Args)]
+pub struct BudgetArgs {
+    /// Memory the command may use (e.g. 4G, 512M): every large allocation (frames, solver
+    /// samples) is estimated first and refused past it, and the solve's global step is solved
+    /// iteratively instead of by a sparse factorization when its factor would not fit.
+    /// Default: 60% of the available memory.
+    #[arg(long, value_parser = parse_bytes)]
+    max_memory: Option<u64>,
+    /// Time the command may take, in seconds (e.g. 600, 90s, 10m, 2h), counted from its start:
+    /// TetGen gets at most what is left of it (or [tet] timeout, the smaller); the solve checks
+    /// it before its global step is built (against the predicted cost) and at every iteration;
+    /// a cache's key selection, fit and error measure at every frame they read; the mass-spring
+    /// blend at every Newton iteration. Once it is spent the command stops with an error and
+    /// writes nothing. Default: no limit.
+    #[arg(long, value_parser = parse_seconds)]
+    max_time: Option<f64>,
+}
+
+impl BudgetArgs {
+    /// The budget, its clock started now.
+    pub fn budget(&self) -> Budget {
+        Budget::new(self.max_memory, self.max_time)
     }
 }
 

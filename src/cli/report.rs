@@ -31,11 +31,8 @@ pub struct Args {
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
-    /// Time the report may take, in seconds (e.g. 600, 90s, 10m, 2h): for a cache, its error
-    /// measure and fit check it at every cache frame they read, and the report stops with an
-    /// error (nothing written) once it is spent. Default: no limit.
-    #[arg(long, value_parser = super::parse_seconds)]
-    max_time: Option<f64>,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -45,9 +42,7 @@ impl Args {
 }
 
 pub fn run(args: Args, _progress: &Progress) -> Result<()> {
-    if let Some(seconds) = args.max_time {
-        blendsim::support::resources::set_max_time(seconds);
-    }
+    let budget = args.budget.budget();
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
         let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;
@@ -58,9 +53,9 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
         return staging.commit();
     }
     let (Some(animation), Some(outputs)) = (&args.animation, &args.outputs) else { unreachable!("clap requires both without --batch") };
-    let animation: Animation = stage_file::read(animation)?;
-    let outputs: Outputs = stage_file::read(outputs)?;
-    let report = stages::report(&animation, &outputs)?;
+    let animation: Animation = stage_file::read(animation, &budget)?;
+    let outputs: Outputs = stage_file::read(outputs, &budget)?;
+    let report = stages::report(&animation, &outputs, &budget)?;
     report.write(&mut staging)?;
     staging.commit()
 }

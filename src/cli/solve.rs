@@ -22,16 +22,8 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
-    /// Memory the global step may use (e.g. 4G, 512M); past it the step is solved iteratively
-    /// instead of by a sparse factorization; every other memory estimate must fit in it too.
-    /// Default: 60% of the available memory.
-    #[arg(long, value_parser = super::parse_bytes)]
-    max_memory: Option<u64>,
-    /// Time the solve may take, in seconds (e.g. 600, 90s, 10m, 2h): the solve checks it
-    /// before its global step is built (against the predicted cost) and at every iteration,
-    /// and stops with an error (nothing written) once it is spent. Default: no limit.
-    #[arg(long, value_parser = super::parse_seconds)]
-    max_time: Option<f64>,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -41,12 +33,7 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
-    if let Some(bytes) = args.max_memory {
-        blendsim::support::resources::set_max_memory(bytes);
-    }
-    if let Some(seconds) = args.max_time {
-        blendsim::support::resources::set_max_time(seconds);
-    }
-    let body: Body = stage_file::read(&args.body)?;
-    stage_file::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), args.max_memory, progress)?)
+    let budget = args.budget.budget();
+    let body: Body = stage_file::read(&args.body, &budget)?;
+    stage_file::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), &budget, progress)?)
 }

@@ -16,6 +16,8 @@ pub struct Args {
     /// Where to write the body stage file (JSON).
     #[arg(short, long)]
     output: PathBuf,
+    #[command(flatten)]
+    budget: super::BudgetArgs,
 }
 
 impl Args {
@@ -25,6 +27,7 @@ impl Args {
 }
 
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
-    let keys: Keyframes = stage_file::read(&args.keyframes)?;
-    stage_file::write(&args.output, &stages::tetrahedralize(&keys, progress)?)
+    let budget = args.budget.budget();
+    let keys: Keyframes = stage_file::read(&args.keyframes, &budget)?;
+    stage_file::write(&args.output, &stages::tetrahedralize(&keys, &budget, progress)?)
 }

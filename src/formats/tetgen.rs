@@ -28,6 +28,7 @@ use std::time::{Duration, Instant};
 use crate::algorithms::geometry::surface::open_edges;
 use crate::algorithms::geometry::{bbox_diagonal, cross, norm, sub, Point, TetMesh, TriMesh};
 use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// TetGen's switches and time bound.
@@ -62,12 +63,17 @@ const TETGEN_START_SECONDS: f64 = 0.01;
 
 /// Tetrahedralize a closed surface. `source` is the file the surface came from (for errors).
 pub fn run(surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<TetMesh> {
-    let program = std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into());
-    run_with(&program, surface, options, source)
+    run_within(surface, options, source, &Budget::default())
 }
 
-/// [`run`] with an explicit TetGen binary (tests use it instead of the variable).
-pub(crate) fn run_with(program: &OsStr, surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<TetMesh> {
+/// [`run`], TetGen given at most the time left of `budget` (when less than its timeout).
+pub fn run_within(surface: &TriMesh, options: &TetgenOptions, source: &Path, budget: &Budget) -> Result<TetMesh> {
+    let program = std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into());
+    run_with(&program, surface, options, source, budget)
+}
+
+/// [`run_within`] with an explicit TetGen binary (tests use it instead of the variable).
+pub(crate) fn run_with(program: &OsStr, surface: &TriMesh, options: &TetgenOptions, source: &Path, budget: &Budget) -> Result<TetMesh> {
     check_surface(surface, source)?;
     let timeout = Duration::try_from_secs_f64(options.timeout).ok().filter(|t| !t.is_zero()).ok_or_else(|| {
         Error::in_file(
@@ -77,16 +83,16 @@ pub(crate) fn run_with(program: &OsStr, surface: &TriMesh, options: &TetgenOptio
         )
     })?;
     // `--max-time` bounds TetGen too: it gets what is left of the budget when that is less.
-    let left = crate::support::resources::time_left();
+    let left = budget.time_left();
     if left.is_some_and(|l| l <= 0.0) {
-        return Err(crate::support::resources::time_spent("tetrahedralization", "before TetGen started"));
+        return Err(budget.time_spent("tetrahedralization", "before TetGen started"));
     }
     let by_max_time = left.is_some_and(|l| l < timeout.as_secs_f64());
     let timeout = left.filter(|_| by_max_time).map_or(timeout, Duration::from_secs_f64);
     let dir = WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
     let input = dir.path.join(INPUT);
     std::fs::write(&input, write_smesh(surface)).map_err(|e| Error::io(&input, &e, "write the TetGen input"))?;
-    let run = run_process(program, &switches(options), &dir.path, timeout, by_max_time, source)?;
+    let run = run_process(program, &switches(options), &dir.path, timeout, by_max_time.then_some(budget), source)?;
     if !run.status.success() {
         return Err(diagnose_failure(program, surface, &run, &dir.path, timeout, source));
     }
@@ -228,7 +234,7 @@ fn check_output(surface: &TriMesh, node_text: &str, ele_text: Option<&str>, sour
 /// Why TetGen failed, as precisely as it can be told: self-intersections found by a
 /// `tetgen -d` rerun, else TetGen's own last words and what in the surface may cause them.
 fn diagnose_failure(program: &OsStr, surface: &TriMesh, failed: &Finished, dir: &Path, timeout: Duration, source: &Path) -> Error {
-    let pairs = run_process(program, "-dz", dir, timeout, false, source)
+    let pairs = run_process(program, "-dz", dir, timeout, None, source)
         .map(|check| intersecting_pairs(&check.stdout, surface.triangles.len()))
         .unwrap_or_default();
     if let Some(&(s, t)) = pairs.first() {
@@ -299,7 +305,7 @@ struct Finished {
 
 /// Run `program switches surface.smesh` in `dir`, killing it after `timeout` (what was left of
 /// `--max-time` when `by_max_time`, which then names the budget in the error).
-fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, by_max_time: bool, source: &Path) -> Result<Finished> {
+fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, by_max_time: Option<&Budget>, source: &Path) -> Result<Finished> {
     // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
     let mut guard = crate::support::interrupt::spawn(
         Command::new(program).args([switches, INPUT]).current_dir(dir).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
@@ -347,15 +353,13 @@ fn run_process(program: &OsStr, switches: &str, dir: &Path, timeout: Duration, b
             let _ = child.kill();
             let _ = child.wait();
             let _ = watcher.join();
-            return Err(match outcome {
-                Err(e) => Error::in_file(
+            return Err(match (outcome, by_max_time) {
+                (Err(e), _) => Error::in_file(
                     source,
                     format!("lost track of the TetGen process: {e}"),
                     "retry; if it persists, check the system's process limits",
                 ),
-                _ if by_max_time => {
-                    crate::support::resources::time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64()))
-                }
+                (_, Some(budget)) => budget.time_spent("tetrahedralization", &format!("TetGen stopped after {:.2} s", elapsed.as_secs_f64())),
                 _ => Error::in_file(
                     source,
                     format!("TetGen did not finish within {} s and was stopped", timeout.as_secs_f64()),
@@ -466,7 +470,7 @@ mod tests {
     }
 
     fn failure(surface: &TriMesh, options: &TetgenOptions, program: &str) -> String {
-        let e = run_with(program.as_ref(), surface, options, Path::new("keys/k0.obj")).expect_err("the run must fail");
+        let e = run_with(program.as_ref(), surface, options, Path::new("keys/k0.obj"), &Budget::default()).expect_err("the run must fail");
         let s = e.to_string();
         assert!(s.starts_with("keys/k0.obj: ") && s.contains(" (fix: ") && !s.contains('\n'), "{s}");
         s
@@ -505,7 +509,7 @@ mod tests {
         let mesh = run(&box_surface, &options(1.414, 0.0), Path::new("prism.obj")).unwrap();
         assert_faithful(&box_surface, &mesh);
         let sphere = icosphere(2);
-        let mesh = run_with(TETGEN.as_ref(), &sphere, &options(1.414, 0.01), Path::new("s.obj")).unwrap();
+        let mesh = run_with(TETGEN.as_ref(), &sphere, &options(1.414, 0.01), Path::new("s.obj"), &Budget::default()).unwrap();
         assert!(mesh.positions.len() > sphere.positions.len(), "refinement adds interior nodes");
         assert_faithful(&sphere, &mesh);
     }
@@ -514,7 +518,7 @@ mod tests {
     fn paper_rectangular_prism_keeps_its_interior_points_as_nodes() {
         let Some(path) = paper_asset("stretch3d/rectangular_prism.obj") else { return };
         let surface = obj::read(&path).unwrap();
-        let mesh = run_with(TETGEN.as_ref(), &surface, &options(0.0, 0.0), &path).unwrap();
+        let mesh = run_with(TETGEN.as_ref(), &surface, &options(0.0, 0.0), &path, &Budget::default()).unwrap();
         assert_eq!(mesh.positions, surface.positions, "the 252 unused interior points are nodes, no Steiner points");
         let mut used = vec![false; mesh.positions.len()];
         mesh.tets.iter().flatten().for_each(|&v| used[v as usize] = true);

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 pub use crate::algorithms::blendshape::clip::Weights;
 pub use crate::algorithms::geometry::Axis;
 pub use crate::algorithms::procedural::Twist;
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 mod cache_table;
@@ -657,6 +658,17 @@ fn check_name(name: &str) -> Result<()> {
 }
 
 impl Scene {
+    /// The memory the scene needs for the frames it exports (`vertices` exported vertices over
+    /// the key times at the scene's fps) and the samples it solves (`tets`, or a lower bound
+    /// before TetGen), checked against `budget` before anything that size is allocated.
+    pub fn check_resources(&self, times: &[f64], vertices: usize, tets: usize, budget: &Budget) -> Result<()> {
+        if let (Some(start), Some(end)) = (times.first(), times.last()) {
+            budget.check_frames(*start, *end, self.fps, vertices)?;
+        }
+        // Both methods evaluate W over the samples (`hermite` once, for the report).
+        budget.check_samples(self.solver.samples, times.len().saturating_sub(1), tets)
+    }
+
     /// Parse and validate scene text. Errors carry no path; [`SceneFile::load`] adds it.
     pub fn parse(text: &str) -> Result<Scene> {
         let scene: Scene = toml::from_str(text).map_err(|e| {

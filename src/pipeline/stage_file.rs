@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::scene::{Format, Method, Scene};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 mod cache_record;
@@ -382,7 +383,8 @@ pub trait StageData: Serialize + DeserializeOwned {
     /// The invariants the types document but JSON cannot enforce (lengths, index ranges,
     /// increasing times, finite numbers, the embedded scene), checked when a file is read, so a
     /// hand-edited or damaged file fails here with one line instead of deep inside a stage.
-    fn validate(&self) -> Result<()>;
+    /// The memory the stages after it need is checked against `budget`.
+    fn validate(&self, budget: &Budget) -> Result<()>;
     /// The surfaces the data carries, whose texture paths (absolute in memory) the file holds
     /// relative to its own folder ([`write()`], [`read`]), so a staged folder can be moved.
     fn surfaces_mut(&mut self) -> Vec<&mut TriMesh> {
@@ -437,8 +439,8 @@ impl StageData for Keyframes {
     fn files_mut(&mut self) -> Vec<&mut String> {
         std::iter::once(&mut self.rest_source).chain(self.cache.iter_mut().flat_map(cache_paths_mut)).collect()
     }
-    fn validate(&self) -> Result<()> {
-        let rerun = Check(Self::WRITER, contact_keys(&self.scene));
+    fn validate(&self, budget: &Budget) -> Result<()> {
+        let rerun = Check(Self::WRITER, contact_keys(&self.scene), budget);
         rerun.scene(&self.scene)?;
         let n = match &self.rest {
             Shape::Surface(m) => rerun.tri_mesh("rest surface", m)?,
@@ -476,8 +478,8 @@ impl StageData for Body {
     fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
         self.cache.as_mut()
     }
-    fn validate(&self) -> Result<()> {
-        let rerun = Check(Self::WRITER, contact_keys(&self.scene));
+    fn validate(&self, budget: &Budget) -> Result<()> {
+        let rerun = Check(Self::WRITER, contact_keys(&self.scene), budget);
         rerun.scene(&self.scene)?;
         // Without a tet mesh (method fit) the keys are the surface's own.
         let surface = rerun.tri_mesh("surface", &self.surface)?;
@@ -504,8 +506,8 @@ impl StageData for Solution {
     fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
         self.body.cache.as_mut()
     }
-    fn validate(&self) -> Result<()> {
-        let rerun = Check(Self::WRITER, contact_keys(&self.body.scene));
+    fn validate(&self, budget: &Budget) -> Result<()> {
+        let rerun = Check(Self::WRITER, contact_keys(&self.body.scene), budget);
         rerun.scene(&self.body.scene)?;
         let surface = rerun.tri_mesh("body surface", &self.body.surface)?;
         let (n, of) = match &self.body.mesh {
@@ -532,8 +534,8 @@ impl StageData for Animation {
     fn cache_mut(&mut self) -> Option<&mut CacheRecord> {
         self.cache.as_mut()
     }
-    fn validate(&self) -> Result<()> {
-        let rerun = Check(Self::WRITER, contact_keys(&self.scene));
+    fn validate(&self, budget: &Budget) -> Result<()> {
+        let rerun = Check(Self::WRITER, contact_keys(&self.scene), budget);
         rerun.scene(&self.scene)?;
         let n = rerun.tri_mesh("mesh", &self.mesh)?;
         rerun.trajectory(&self.trajectory, n, "mesh vertices")?;
@@ -558,14 +560,15 @@ impl StageData for Animation {
 impl StageData for Outputs {
     const STAGE: &'static str = "outputs";
     const WRITER: &'static str = "blendsim export";
-    fn validate(&self) -> Result<()> {
+    fn validate(&self, budget: &Budget) -> Result<()> {
         if self.rank == Some(0) {
-            return Check(Self::WRITER, 0).fail("rank is 0 (a principal clip has at least one component)".into());
+            return Check(Self::WRITER, 0, budget).fail("rank is 0 (a principal clip has at least one component)".into());
         }
         for (i, f) in self.files.iter().enumerate() {
             let plain = !f.path.is_empty() && !f.path.starts_with('.') && !f.path.contains(['/', '\\']) && !f.path.chars().any(char::is_control);
             if !plain {
-                return Check(Self::WRITER, 0).fail(format!("files[{i}] is {}, not a plain file name", crate::support::error::quoted(&f.path)));
+                return Check(Self::WRITER, 0, budget)
+                    .fail(format!("files[{i}] is {}, not a plain file name", crate::support::error::quoted(&f.path)));
             }
         }
         Ok(())
@@ -574,15 +577,16 @@ impl StageData for Outputs {
 
 /// The checks behind [`StageData::validate`]. Each returns the first problem, with the fix of
 /// re-running the subcommand that writes the stage (`.0`). `.1` is the number of contact keys
-/// of the scene: each is a zero-length interval, so that many key times may repeat.
-struct Check(&'static str, usize);
+/// of the scene: each is a zero-length interval, so that many key times may repeat. `.2` is
+/// the budget the next stages run under.
+struct Check<'a>(&'static str, usize, &'a Budget);
 
 /// The contact keys of a scene (`contact = [k]`; none for a cache).
 fn contact_keys(scene: &Scene) -> usize {
     scene.keyframes.as_ref().map_or(0, |k| k.contact.len())
 }
 
-impl Check {
+impl Check<'_> {
     fn fail<T>(&self, problem: String) -> Result<T> {
         Err(Error::general(problem, format!("the file was edited or damaged; re-run `{}` to rewrite it", self.0)))
     }
@@ -599,7 +603,8 @@ impl Check {
 
     /// The memory the stages after this one need, within the budget.
     fn resources(&self, scene: &Scene, times: &[f64], vertices: usize, tets: usize) -> Result<()> {
-        crate::pipeline::stages::check_resources(scene, times, vertices, tets)
+        scene
+            .check_resources(times, vertices, tets, self.2)
             .map_err(|e| Error::general(e.problem, format!("{}; edit the scene file, then re-run the chain from `blendsim import`", e.fix)))
     }
 
@@ -776,9 +781,9 @@ pub fn write<T: StageData + Clone>(path: &Path, value: &T) -> Result<()> {
 /// stage's invariants ([`StageData::validate`]). Relative texture paths are resolved against
 /// the file's folder; relative cache and rest source paths are joined to the folder as `path`
 /// names it (so a stage file in the working folder gives the path `import` had).
-pub fn read<T: StageData>(path: &Path) -> Result<T> {
+pub fn read<T: StageData>(path: &Path, budget: &Budget) -> Result<T> {
     let bytes = crate::support::input::read_bytes(path, &format!("the {} file", T::STAGE))?;
-    let mut value: T = from_json(&bytes, path)?;
+    let mut value: T = from_json(&bytes, path, budget)?;
     let parent = path.parent().unwrap_or(Path::new(""));
     for file in value.files_mut().into_iter().filter(|f| Path::new(f.as_str()).is_relative()) {
         *file = parent.join(file.as_str()).to_string_lossy().into_owned();
@@ -842,8 +847,9 @@ fn relative_to(from: &Path, path: &Path) -> PathBuf {
     out
 }
 
-/// Parse and validate the bytes of a stage file; `path` is named in errors.
-pub fn from_json<T: StageData>(bytes: &[u8], path: &Path) -> Result<T> {
+/// Parse and validate the bytes of a stage file (the memory of the stages after it within
+/// `budget`); `path` is named in errors.
+pub fn from_json<T: StageData>(bytes: &[u8], path: &Path, budget: &Budget) -> Result<T> {
     let wrong = |what: String| Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER));
     let header: HeaderIn = serde_json::from_slice(bytes).map_err(|e| wrong(format!("is not a blendsim stage file ({e})")))?;
     match (header.blendsim, header.stage.as_deref()) {
@@ -859,6 +865,6 @@ pub fn from_json<T: StageData>(bytes: &[u8], path: &Path) -> Result<T> {
         _ => return Err(wrong("has no blendsim stage header".into())),
     }
     let body: BodyIn<T> = serde_json::from_slice(bytes).map_err(|e| wrong(format!("has a malformed {} stage: {e}", T::STAGE)))?;
-    body.data.validate().map_err(|e| Error::in_file(path, format!("{} stage: {}", T::STAGE, e.problem), e.fix))?;
+    body.data.validate(budget).map_err(|e| Error::in_file(path, format!("{} stage: {}", T::STAGE, e.problem), e.fix))?;
     Ok(body.data)
 }

@@ -4,14 +4,14 @@
 //! - [`output`]: the output folder, staged and committed whole (never half-written);
 //! - [`interrupt`]: clean interruption (signals, and the child processes to stop);
 //! - [`progress`]: the progress bar and its quiet modes;
-//! - [`resources`]: memory and time budgets, checked before the large allocations;
+//! - [`budget`]: the memory and time a bake may use, a value passed down (no globals);
 //! - [`input`]: bounded reading of input files.
 
+pub mod budget;
 pub mod error;
 pub mod input;
 pub mod interrupt;
 pub mod output;
 pub mod progress;
-pub mod resources;
 #[cfg(test)]
 pub(crate) mod testing;

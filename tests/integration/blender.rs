@@ -278,7 +278,7 @@ fn up_axis_and_units_arrive_in_blender() {
     for (name, export) in cases {
         let anim = swaying_column(name, &format!("formats = [\"usda\", \"glb\"]\nfull_frame = false\ngltf_interpolation = \"linear\"\n{export}"));
         let mut staging = Staging::new(&dir.join(name)).unwrap();
-        blendsim::pipeline::stages::export(&anim, &mut staging).unwrap();
+        blendsim::pipeline::stages::export(&anim, &blendsim::support::budget::Budget::default(), &mut staging).unwrap();
         staging.commit().unwrap();
         let expected = every_frame(&anim);
         for ext in ["usda", "glb"] {

@@ -41,7 +41,7 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
         let error = &report["cache"]["error"];
         assert!(error["per_frame"].as_array().unwrap().iter().all(|e| e.as_f64().unwrap() <= 0.005), "{error}");
         let anim = library_animation(&dir.join(format!("{name}.toml")));
-        let (clip, chosen) = blendsim::pipeline::stages::export::blendshape_clip(&anim, None).unwrap();
+        let (clip, chosen) = blendsim::pipeline::stages::export::blendshape_clip(&anim, None, &blendsim::support::budget::Budget::default()).unwrap();
         assert_eq!(chosen, Some(rank), "the library chooses the rank the CLI wrote");
         assert_eq!(clip.targets.len(), rank);
         // Every weight in [0, 1]: the stored key values, and the curves at every frame and

@@ -242,3 +242,35 @@ fn max_time_stops_the_mass_spring_blend() {
     out_of_time(&dir, &blend("never.obj", &["--max-time", "1e-9"]), "a.obj", "in the tetrahedralization, before TetGen started");
     run(&dir.path, &blend("shape.obj", &["-q", "--max-time", "1h"])).success();
 }
+
+/// Budgets are values, not process state: two bakes of the demo in one process, at the same
+/// time, one under a budget its samples do not fit in (refused, with the estimate) and one
+/// under the default budget (baked), each getting its own answer; a time budget already spent
+/// stops a third before TetGen.
+#[test]
+fn two_bakes_in_one_process_keep_their_own_budgets() {
+    use blendsim::pipeline::scene::SceneFile;
+    use blendsim::pipeline::stages::Bake;
+    use blendsim::support::budget::Budget;
+    use blendsim::support::output::Staging;
+    use blendsim::support::progress::Progress;
+
+    let dir = TempDir::new("two-budgets");
+    let scene = SceneFile::load(&demo_scene()).unwrap();
+    let progress = Progress::hidden();
+    let bake = |budget: Budget, out: &str| {
+        let mut staging = Staging::new(&dir.join(out)).unwrap();
+        Bake::new(&scene, &progress).budget(budget).files(&mut staging).map(|report| report.solver.iterations)
+    };
+    let (small, default, spent) = std::thread::scope(|s| {
+        let small = s.spawn(|| bake(Budget::new(Some(1 << 20), None), "small"));
+        let default = s.spawn(|| bake(Budget::default(), "default"));
+        let spent = s.spawn(|| bake(Budget::new(None, Some(1e-9)), "spent"));
+        (small.join().unwrap(), default.join().unwrap(), spent.join().unwrap())
+    });
+    let small = small.expect_err("1 MB holds neither the demo's samples nor its frames");
+    assert!(small.problem.contains("more than the --max-memory budget of 1.0 MB"), "{small}");
+    assert!(default.expect("the default budget holds the demo") > 0);
+    let spent = spent.expect_err("a spent time budget stops the bake");
+    assert!(spent.problem.contains("ran past its --max-time budget"), "{spent}");
+}

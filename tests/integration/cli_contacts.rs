@@ -243,7 +243,8 @@ fn contact_samples_table() {
             run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
             run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
             run(&dir.path, &["solve", "body.json", "-o", "solution.json"]).success();
-            let solution: blendsim::pipeline::stage_file::Solution = blendsim::pipeline::stage_file::read(&dir.join("solution.json")).unwrap();
+            let solution: blendsim::pipeline::stage_file::Solution =
+                blendsim::pipeline::stage_file::read(&dir.join("solution.json"), &blendsim::support::budget::Budget::default()).unwrap();
             let tr = &solution.trajectory;
             let (elastic, mut keys, mut settings) = solver_inputs(&solution.body).unwrap();
             keys.times = tr.times.clone();

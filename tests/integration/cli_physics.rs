@@ -48,7 +48,7 @@ pub(crate) fn solve_scene(dir: &TempDir, meshes: &[(&str, String)], scene: &str)
     run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
     run(&dir.path, &["solve", "body.json", "-o", "solution.json"]).success();
-    stage_file::read(&dir.join("solution.json")).unwrap()
+    stage_file::read(&dir.join("solution.json"), &blendsim::support::budget::Budget::default()).unwrap()
 }
 
 #[test]

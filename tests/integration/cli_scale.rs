@@ -51,7 +51,7 @@ fn bake_and_solve(dir: &TempDir) -> (serde_json::Value, Solution) {
     run(&dir.path, &["import", "-q", "scene.toml", "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "-q", "keys.json", "-o", "body.json"]).success();
     run(&dir.path, &["solve", "-q", "body.json", "-o", "solution.json"]).success();
-    (read_json(&dir.join("out/report.json")), stage_file::read(&dir.join("solution.json")).unwrap())
+    (read_json(&dir.join("out/report.json")), stage_file::read(&dir.join("solution.json"), &blendsim::support::budget::Budget::default()).unwrap())
 }
 
 #[test]
@@ -90,7 +90,7 @@ fn a_scene_converted_to_any_unit_gives_the_scaled_result() {
 #[test]
 fn the_geometry_alone_scaled_bakes_at_every_decade() {
     // The default regularization's floor keeps the global step factorizable when the body is
-    // 1e16 times stiffer than its inertia (see global_step::PROXIMAL_FLOOR); a huge box is so
+    // 1e16 times stiffer than its inertia (see time_coefficients::PROXIMAL_FLOOR); a huge box is so
     // soft for its mass that the solver stops on max_iterations, which is a result, not an error.
     for s in decades() {
         let dir = TempDir::new(&format!("scale-geometry-{s:e}"));

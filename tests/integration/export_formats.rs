@@ -73,7 +73,7 @@ fn still_box(formats: &str) -> Animation {
 
 fn export_to(anim: &Animation, dir: &Path) -> Outputs {
     let mut staging = Staging::new(dir).unwrap();
-    let outputs = export(anim, &mut staging).unwrap();
+    let outputs = export(anim, &blendsim::support::budget::Budget::default(), &mut staging).unwrap();
     staging.commit().unwrap();
     outputs
 }
@@ -192,7 +192,7 @@ fn a_broken_animation_is_a_one_line_error_and_stages_nothing() {
     anim.trajectory.positions[1].pop();
     let dir = scratch("broken");
     let mut staging = Staging::new(&dir.join("out")).unwrap();
-    let e = export(&anim, &mut staging).unwrap_err().to_string();
+    let e = export(&anim, &blendsim::support::budget::Budget::default(), &mut staging).unwrap_err().to_string();
     assert!(e.contains("key 1 has 25 positions but the mesh has 26 vertices"), "{e}");
     assert!(e.contains("(fix: re-run `blendsim embed`"), "{e}");
     assert!(!e.contains('\n'));
@@ -203,7 +203,7 @@ fn a_broken_animation_is_a_one_line_error_and_stages_nothing() {
     let mut anim = still_box("[\"usda\"]");
     anim.trajectory.times = vec![0.010, 0.015];
     let mut staging = Staging::new(&dir.join("out")).unwrap();
-    let e = export(&anim, &mut staging).unwrap_err().to_string();
+    let e = export(&anim, &blendsim::support::budget::Budget::default(), &mut staging).unwrap_err().to_string();
     assert!(e.contains("between two frames at 60 fps (fix: "), "{e}");
 }
 

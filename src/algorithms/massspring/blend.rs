@@ -48,6 +48,7 @@ use super::refine::median_edge;
 use super::rigid::Rigid;
 use super::springs::{Bending, SpringKind, Springs};
 use crate::algorithms::geometry::{bbox_diagonal, norm, sub, Point, TetMesh};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// Relative residual of the linear solves in a blend (its tangent and its Newton steps): the
@@ -108,6 +109,8 @@ pub struct Settings {
     pub weight_tolerance: f64,
     /// Equilibria recomputed for collisions at most.
     pub max_collision_rounds: usize,
+    /// The time the equilibria may take.
+    pub budget: Budget,
 }
 
 impl Default for Settings {
@@ -121,6 +124,7 @@ impl Default for Settings {
             anchor_neighbours: 8,
             weight_tolerance: 1e-6,
             max_collision_rounds: 50,
+            budget: Budget::default(),
         }
     }
 }
@@ -320,6 +324,7 @@ impl MassSpring {
             exact_below: settings.exact_below * size,
             start_exact: false,
             forcing: 1e-6,
+            budget: settings.budget,
         };
         // Every target's full configuration.
         let anchor_first = body_count;
@@ -514,6 +519,7 @@ impl MassSpring {
             exact_below: self.settings.exact_below * self.size,
             start_exact: is_warm,
             forcing: FORCING,
+            budget: self.settings.budget,
         };
         let mut held = Vec::new();
         let mut fixed = self.fixed.clone();

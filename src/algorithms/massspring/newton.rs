@@ -48,6 +48,7 @@ use super::springs::Springs;
 use crate::algorithms::geometry::{norm, Point};
 use crate::algorithms::physics::cholesky::PARALLEL_FACTOR_FLOPS;
 use crate::algorithms::physics::ordering::{expand, minimum_degree, nested_dissection, postorder, predicted_cost, Graph};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// When to stop and when to trust the exact Hessian.
@@ -65,6 +66,8 @@ pub struct NewtonSettings {
     /// Relative residual at which the linear solves stop (the forcing term of inexact Newton:
     /// the error of a step shrinks at least by this factor, on top of Newton's quadratic rate).
     pub forcing: f64,
+    /// The time the solve may take (checked every iteration: an equilibrium may take many).
+    pub budget: Budget,
 }
 
 /// How a solve went.
@@ -311,10 +314,7 @@ impl Newton {
         let mut exact = settings.start_exact;
         let mut previous_step = f64::INFINITY;
         for _ in 0..settings.max_iterations {
-            // `--max-time` (when the CLI set one): an equilibrium may take many iterations.
-            crate::support::resources::check_time("mass-spring blend", || {
-                format!("after {} Newton iterations of an equilibrium", report.iterations)
-            })?;
+            settings.budget.check_time("mass-spring blend", || format!("after {} Newton iterations of an equilibrium", report.iterations))?;
             let mut gradient = std::mem::take(&mut self.gradient);
             system.gradient(x, &mut gradient);
             for v in 0..n {
@@ -416,7 +416,8 @@ impl Newton {
         let zero = vec![0.0; ends.len()];
         let system = SpringSystem { ends, rest: &zero, stiffness };
         // The energy is quadratic: one Newton step is exact (to the CG tolerance).
-        let settings = NewtonSettings { tolerance: 0.0, max_iterations: 1, exact_below: 0.0, start_exact: true, forcing: 1e-10 };
+        let settings =
+            NewtonSettings { tolerance: 0.0, max_iterations: 1, exact_below: 0.0, start_exact: true, forcing: 1e-10, budget: Budget::default() };
         self.solve(&system, x, fixed, &settings).map(|_| ())
     }
 
@@ -812,7 +813,8 @@ mod tests {
         let fixed: Vec<bool> = sphere.positions.iter().map(|p| p[2] < -0.8).collect();
         let mut x = sphere.positions.clone();
         let mut newton = Newton::new(&springs, &sphere.positions);
-        let settings = NewtonSettings { tolerance: 1e-12, max_iterations: 100, exact_below: 1e-2, start_exact: false, forcing: 1e-8 };
+        let settings =
+            NewtonSettings { tolerance: 1e-12, max_iterations: 100, exact_below: 1e-2, start_exact: false, forcing: 1e-8, budget: Budget::default() };
         let report = newton.solve(&sys, &mut x, &fixed, &settings).unwrap();
         assert!(report.converged, "{report:?}");
         assert!(report.exact_iterations > 0, "the exact Hessian is used near the end: {report:?}");

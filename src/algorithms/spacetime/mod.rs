@@ -5,8 +5,11 @@
 //! - [`unknowns`]: the keyframe constraints ([`unknowns::KeyConstraints`]) and the free keyframe
 //!   positions/velocities they leave (masks eliminated, loops aliased);
 //! - [`objective`]: W, its gradient, and the local step over all samples;
+//! - [`time_coefficients`]: the weights over pairs of time slots of the normal matrix's three
+//!   node matrices (`M`, `L`, `L M⁻¹ L`), shared by every way of inverting it;
 //! - [`global_step`]: the normal matrix, assembled and factorized once (refactorized on the
-//!   kept symbolic analysis when the key times move);
+//!   kept symbolic analysis when the key times move), or inverted in modes or by CG, as its
+//!   cost model chooses;
 //! - [`modal`]: the global step solved exactly in the body's vibration modes (many keys);
 //! - [`gauss_newton`]: the Gauss-Newton product `Jᵀ M⁻¹ J v` and truncated CG for its step;
 //! - [`quasi_newton`]: L-BFGS preconditioned by the global step or the tangent model;
@@ -33,6 +36,7 @@ pub mod quasi_newton;
 pub mod sampling;
 pub mod solver;
 pub mod tangent_step;
+pub mod time_coefficients;
 pub mod timing;
 pub mod trajectory;
 pub mod unknowns;

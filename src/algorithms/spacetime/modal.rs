@@ -31,7 +31,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, Conj, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::global_step::TimeCoefficients;
+use super::time_coefficients::TimeCoefficients;
 use super::unknowns::Unknowns;
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;

@@ -112,6 +112,7 @@ use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// Solver settings.
@@ -135,9 +136,9 @@ pub struct Settings {
     pub damping: f64,
     /// Gravitational acceleration.
     pub gravity: Point,
-    /// Bytes the global step may use (its direct factor's predicted peak); past them it is
-    /// solved iteratively. `None`: a fraction of the machine's available memory.
-    pub max_memory: Option<u64>,
+    /// The memory the global step may use (its direct factor's predicted peak; past it the
+    /// step is solved iteratively) and the time the solve may take.
+    pub budget: Budget,
     /// Optimize the key times too, under these constraints (`max_iterations` and `tolerance`
     /// of [`TimingSettings`] are those of [`Timing::optimize_times`], not used here).
     pub timing: Option<TimingSettings>,
@@ -251,7 +252,7 @@ impl Settings {
             regularization: 0.1,
             damping,
             gravity,
-            max_memory: None,
+            budget: Budget::default(),
             timing: None,
             contacts: None,
             model_hessian: ModelHessian::Auto,
@@ -687,7 +688,7 @@ fn solve_from(
 /// The global step of `objective` and, when the settings ask for it, the tangent model Hessian.
 fn factors(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, objective: &Objective) -> Result<Factors> {
     let unknowns = Unknowns::new(keys, elastic.node_count());
-    let global = GlobalStep::build(objective, unknowns, settings.regularization, settings.max_memory, settings.global_step)?;
+    let global = GlobalStep::build(objective, unknowns, settings.regularization, &settings.budget, settings.global_step)?;
     let global_unknowns = global.unknowns();
     // The active-set projection solves with the preconditioner per coordinate: with obstacles
     // the quasi-Newton phase keeps the global step's matrix.
@@ -889,9 +890,9 @@ impl<'a> Solver<'a> {
 
     /// Whether another iteration fits in `max_iterations`; an error once `--max-time` is spent.
     fn budget_left(&self, it: &Iterate) -> Result<bool> {
-        crate::support::resources::check_time("solve", || {
-            format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN))
-        })?;
+        self.settings
+            .budget
+            .check_time("solve", || format!("after {} iterations (W {:.4e})", it.energy.len() - 1, it.energy.last().copied().unwrap_or(f64::NAN)))?;
         Ok(it.energy.len() <= self.settings.max_iterations)
     }
 

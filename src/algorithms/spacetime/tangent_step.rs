@@ -23,8 +23,8 @@
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::Par;
 
-use super::global_step::TimeCoefficients;
 use super::objective::Objective;
+use super::time_coefficients::TimeCoefficients;
 use super::unknowns::Unknowns;
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::cholesky::Cholesky;

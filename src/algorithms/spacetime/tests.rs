@@ -1,7 +1,8 @@
 //! Verification of the spacetime solver: analytic cases, invariants, and derivatives.
 
-use super::global_step::{assemble, TimeCoefficients};
+use super::global_step::assemble;
 use super::solver::{apply_step, objective, solve, Settings};
+use super::time_coefficients::TimeCoefficients;
 use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
 use crate::algorithms::geometry::{add, norm, sub, Point};

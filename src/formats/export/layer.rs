@@ -156,3 +156,12 @@ pub struct Layer {
     /// The root prims, in the order written.
     pub prims: Vec<Prim>,
 }
+
+/// A valid USD prim name from an asset name: letters, digits and `_`, not starting with a digit.
+pub fn prim_name(name: &str) -> String {
+    let mut s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+    if !s.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
+        s.insert(0, '_');
+    }
+    s
+}

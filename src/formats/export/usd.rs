@@ -1,6 +1,7 @@
 //! The USD layout of our animations as a [`Layer`] (written by `usda` as text and by `usdc`
 //! as a binary crate). Layout in `formats/usd.md`.
 
+pub use super::layer::prim_name;
 use super::layer::{Attribute, Layer, Prim, Value};
 use super::usd_attributes as attrs;
 use crate::algorithms::blendshape::clip::BlendShapeClip;
@@ -20,15 +21,6 @@ pub struct UsdSettings {
     pub up_axis: char,
     /// Scene units in meters (`metersPerUnit`).
     pub meters_per_unit: f64,
-}
-
-/// A valid USD prim name from an asset name: letters, digits and `_`, not starting with a digit.
-pub fn prim_name(name: &str) -> String {
-    let mut s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
-    if !s.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
-        s.insert(0, '_');
-    }
-    s
 }
 
 /// UsdSkel blendshape animation: weights sampled at every frame of the clip's key range.

@@ -13,7 +13,7 @@ use crate::algorithms::geometry::attributes::CornerAttributes;
 pub(crate) fn group_prim_names(attributes: &CornerAttributes) -> Vec<String> {
     let mut names: Vec<String> = Vec::with_capacity(attributes.groups.len());
     for g in &attributes.groups {
-        let base = super::usd::prim_name(g);
+        let base = super::layer::prim_name(g);
         let mut name = base.clone();
         let mut k = 2;
         while names.contains(&name) {

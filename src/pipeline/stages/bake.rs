@@ -4,6 +4,7 @@
 use crate::pipeline::report::Report;
 use crate::pipeline::scene::{Method, SceneFile};
 use crate::pipeline::stage_file::{Animation, Body};
+use crate::support::budget::Budget;
 use crate::support::error::Result;
 use crate::support::output::Staging;
 use crate::support::progress::Progress;
@@ -17,14 +18,14 @@ use super::{embed, export_with, import, solve_within, tetrahedralize};
 pub struct Bake<'a> {
     scene: &'a SceneFile,
     method: Option<Method>,
-    max_memory: Option<u64>,
+    budget: Budget,
     progress: &'a Progress,
 }
 
 impl<'a> Bake<'a> {
     /// The chain for `scene`, reporting progress to `progress`.
     pub fn new(scene: &'a SceneFile, progress: &'a Progress) -> Bake<'a> {
-        Bake { scene, method: None, max_memory: None, progress }
+        Bake { scene, method: None, budget: Budget::default(), progress }
     }
 
     /// Solve with `method` instead of the scene's `[solver] method` (when given).
@@ -32,10 +33,10 @@ impl<'a> Bake<'a> {
         Bake { method, ..self }
     }
 
-    /// Solve the global step within `max_memory` bytes (when given; see
-    /// [`super::solve_within`]).
-    pub fn max_memory(self, max_memory: Option<u64>) -> Bake<'a> {
-        Bake { max_memory, ..self }
+    /// Bake within `budget` (the CLI's `--max-memory` and `--max-time`; default: 60% of the
+    /// available memory, no time limit): every stage checks it before it allocates or runs long.
+    pub fn budget(self, budget: Budget) -> Bake<'a> {
+        Bake { budget, ..self }
     }
 
     /// `import`, `tetrahedralize`: the simulation body. The method is known from the start, so
@@ -46,9 +47,9 @@ impl<'a> Bake<'a> {
             scene.scene.solver.method = m;
         }
         let bar = self.progress.stage("import");
-        let keys = import(&scene)?;
+        let keys = import(&scene, &self.budget)?;
         bar.finish_and_clear();
-        tetrahedralize(&keys, self.progress)
+        tetrahedralize(&keys, &self.budget, self.progress)
     }
 
     /// ... `solve`, `embed`: the exported surface's animation.
@@ -56,7 +57,7 @@ impl<'a> Bake<'a> {
         let body = self.body()?;
         // The interruption tests stop here, between TetGen and the solver.
         crate::support::interrupt::pause_point("solve", "");
-        let solution = solve_within(&body, self.method, self.max_memory, self.progress)?;
+        let solution = solve_within(&body, self.method, &self.budget, self.progress)?;
         // The binding's searches run in parallel.
         let (tets, points) = (solution.body.mesh.as_ref().map_or(0, |m| m.tets.len()), solution.body.surface.positions.len());
         let bar = self
@@ -73,9 +74,9 @@ impl<'a> Bake<'a> {
         let animation = self.animation()?;
         // The report's measures need no file: they run on a second thread while the files are
         // written, each computed as alone, so the same numbers. Export's error comes first, as when they ran one after the other.
-        let clip = blendshape_clip(&animation, None)?;
+        let clip = blendshape_clip(&animation, None, &self.budget)?;
         let (outputs, measured) = std::thread::scope(|scope| {
-            let measuring = scope.spawn(|| measure(&animation, &clip));
+            let measuring = scope.spawn(|| measure(&animation, &clip, &self.budget));
             let outputs = export_with(&animation, &clip, staging, self.progress);
             let bar = self.progress.stage("report");
             let measured = measuring.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));

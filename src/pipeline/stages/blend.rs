@@ -36,6 +36,7 @@ use crate::formats::mesh::{obj, selection};
 use crate::formats::tetgen::{self, TetgenOptions};
 use crate::pipeline::scene::{self, Method, ObstacleSpec};
 use crate::pipeline::stage_file::{Body, SolverLog};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
 
@@ -95,7 +96,7 @@ pub struct BlendSummary {
 }
 
 /// Blend the targets of `job` and write the result (see [`BlendJob`]).
-pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
+pub fn blend(job: &BlendJob, budget: &Budget, progress: &Progress) -> Result<BlendSummary> {
     let out_is_obj = job.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) && CacheFormat::of(&job.out).is_none();
     if out_is_obj && matches!(job.weights, Weights::File(_)) {
         return Err(Error::in_file(
@@ -192,7 +193,7 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
         // With refinement, interior edges are bounded like the surface's (a regular tet's volume).
         let max_volume =
             job.refine.map_or(d.max_volume, |ratio| refine::regular_tet_volume(ratio * refine::median_edge(&positions[..1], &first.triangles)));
-        let body = tetgen::run(first, &TetgenOptions { quality: d.quality, max_volume, timeout: d.timeout }, &job.targets[0])?;
+        let body = tetgen::run_within(first, &TetgenOptions { quality: d.quality, max_volume, timeout: d.timeout }, &job.targets[0], budget)?;
         bar.finish_and_clear();
         Some(body)
     } else {
@@ -201,7 +202,8 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
     let targets = Targets { surface: &positions, triangles: &first.triangles, body: body.as_ref(), body_poses: None };
     let start = Instant::now();
     let bar = progress.stage("blend: springs");
-    let mut model = MassSpring::new(&targets, &boundary, &Settings::default()).map_err(|e| in_targets(e, &job.targets))?;
+    let mut model =
+        MassSpring::new(&targets, &boundary, &Settings { budget: *budget, ..Settings::default() }).map_err(|e| in_targets(e, &job.targets))?;
     bar.finish_and_clear();
     let build_seconds = start.elapsed().as_secs_f64();
     let start = Instant::now();
@@ -209,7 +211,7 @@ pub fn blend(job: &BlendJob, progress: &Progress) -> Result<BlendSummary> {
     let mut shapes = Vec::with_capacity(weights.len());
     let mut iterations = 0;
     for (done, w) in weights.iter().enumerate() {
-        crate::support::resources::check_time("mass-spring blend", || format!("after {done} of {} blends", weights.len()))?;
+        budget.check_time("mass-spring blend", || format!("after {done} of {} blends", weights.len()))?;
         let shape = model.blend(w, &obstacles).map_err(|e| in_targets(e, &job.targets))?;
         iterations += shape.report.iterations;
         shapes.push(shape.surface().to_vec());
@@ -329,7 +331,7 @@ fn ease(theta: f64) -> (f64, f64) {
 /// equilibria per keyframe interval (see the module documentation), and its log. Its `W` is
 /// the spacetime objective of that trajectory (the same integral, sampled on the finer
 /// intervals), so reports compare it with the other methods.
-pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory, SolverLog)> {
+pub(crate) fn inbetween(body: &Body, budget: &Budget, progress: &Progress) -> Result<(Trajectory, SolverLog)> {
     let start = Instant::now();
     let scene = &body.scene;
     let spec = &scene.mass_spring;
@@ -369,6 +371,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
     let settings = Settings {
         bending: if spec.bending == "hinge" { Bending::Hinge } else { Bending::TwoRing },
         tolerance: spec.tolerance,
+        budget: *budget,
         ..Settings::default()
     };
     // The scene's `[[obstacle]]` entries, the same ones the spacetime solver's contacts use.
@@ -392,9 +395,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
         let mut alphas = vec![0.0];
         let mut shapes = vec![keys.positions[k].clone()];
         for i in 1..steps {
-            crate::support::resources::check_time("mass-spring in-betweens", || {
-                format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens)
-            })?;
+            budget.check_time("mass-spring in-betweens", || format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens))?;
             let (alpha, _) = ease(i as f64 / steps as f64);
             let mut w = vec![0.0; key_count];
             w[k] = 1.0 - alpha;

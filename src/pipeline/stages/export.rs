@@ -20,14 +20,15 @@ use crate::formats::export::{glb, texture, usd, usda, usdc};
 use crate::pipeline::report::measures::deviation;
 use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
 use crate::pipeline::stage_file::{Animation, OutputFile, OutputKind, Outputs};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::output::Staging;
 use crate::support::progress::Progress;
 
 /// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
 /// in the order usda, usdc, glb, whatever order the scene file gives.
-pub fn export(animation: &Animation, staging: &mut Staging) -> Result<Outputs> {
-    let clip = blendshape_clip(animation, None)?;
+pub fn export(animation: &Animation, budget: &Budget, staging: &mut Staging) -> Result<Outputs> {
+    let clip = blendshape_clip(animation, None, budget)?;
     export_with(animation, &clip, staging, &Progress::hidden())
 }
 
@@ -131,7 +132,7 @@ pub const PRINCIPAL_EXACT: f64 = 1e-6;
 ///   every cache frame, or, when the unreduced animation is itself farther from the cache than
 ///   that (spacetime), the tolerance against the unreduced animation at every frame;
 /// - for keyframes: [`PRINCIPAL_EXACT`] against the animation at every frame.
-pub fn blendshape_clip(animation: &Animation, rank: Option<usize>) -> Result<(BlendShapeClip, Option<usize>)> {
+pub fn blendshape_clip(animation: &Animation, rank: Option<usize>, budget: &Budget) -> Result<(BlendShapeClip, Option<usize>)> {
     let export = &animation.scene.export;
     let tr = &animation.trajectory;
     if export.basis_for(animation.cache.is_some() && animation.log.method == Method::Fit) == Basis::Keys {
@@ -147,8 +148,10 @@ pub fn blendshape_clip(animation: &Animation, rank: Option<usize>) -> Result<(Bl
             match &animation.cache {
                 Some(record) => {
                     let tolerance = record.tolerance.unwrap_or(DEFAULT_TOLERANCE);
-                    if error_against(record, tr)?.max <= tolerance {
-                        smallest_rank(&components, export.weights, |clip| Ok(error_against(record, &clip.played(&tr.times))?.max <= tolerance))?
+                    if error_against(record, tr, budget)?.max <= tolerance {
+                        smallest_rank(&components, export.weights, |clip| {
+                            Ok(error_against(record, &clip.played(&tr.times), budget)?.max <= tolerance)
+                        })?
                     } else {
                         smallest_rank::<Error>(&components, export.weights, |clip| Ok(from_animation(clip) <= tolerance))?
                     }

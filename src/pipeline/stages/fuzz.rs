@@ -15,6 +15,7 @@ use serde_json::Value;
 use crate::algorithms::geometry::TetMesh;
 use crate::pipeline::scene::{Method, Scene};
 use crate::pipeline::stage_file::{self, Animation, Body, Keyframes, Outputs, Shape, Solution, StageData, VertexSet};
+use crate::support::budget::Budget;
 use crate::support::progress::Progress;
 
 const DEFAULT_CASES: u32 = 1_000;
@@ -44,7 +45,7 @@ fn seeds() -> (Value, Value, Value, Value) {
         cache: None,
     };
     let progress = Progress::hidden();
-    let body = crate::pipeline::stages::tetrahedralize(&keys, &progress).unwrap();
+    let body = crate::pipeline::stages::tetrahedralize(&keys, &Budget::default(), &progress).unwrap();
     let solution = crate::pipeline::stages::solve(&body, Some(Method::Hermite), &progress).unwrap();
     let animation = crate::pipeline::stages::embed(&solution).unwrap();
     let json = |bytes: Vec<u8>| serde_json::from_slice::<Value>(&bytes).unwrap();
@@ -124,7 +125,7 @@ fn check<T: StageData>(v: Value, next: impl Fn(&T) -> crate::support::error::Res
         prop_assert!(!s.chars().any(char::is_control) && s.starts_with("f.json: ") && s.contains(" (fix: ") && s.len() < 5000, "{s:?}");
         Ok(())
     };
-    match stage_file::from_json::<T>(&bytes, Path::new("f.json")) {
+    match stage_file::from_json::<T>(&bytes, Path::new("f.json"), &Budget::default()) {
         Err(e) => one_line(e),
         Ok(data) => match next(&data) {
             Err(e) => one_line(e),
@@ -143,8 +144,10 @@ fn run(name: &str, seed: Value, property: impl Fn(Value) -> Result<(), TestCaseE
 fn mutated_stage_files_fail_cleanly_or_run() {
     let (keys, body, solution, animation) = seeds();
     let progress = Progress::hidden();
-    run("keyframes", keys, |v| check::<Keyframes>(v, |k| crate::pipeline::stages::tetrahedralize(k, &progress).map(drop)));
+    run("keyframes", keys, |v| check::<Keyframes>(v, |k| crate::pipeline::stages::tetrahedralize(k, &Budget::default(), &progress).map(drop)));
     run("body", body, |v| check::<Body>(v, |b| crate::pipeline::stages::solve(b, Some(Method::Hermite), &progress).map(drop)));
     run("solution", solution, |v| check::<Solution>(v, |s| crate::pipeline::stages::embed(s).map(drop)));
-    run("animation", animation, |v| check::<Animation>(v, |a| crate::pipeline::stages::report(a, &Outputs { files: vec![], rank: None }).map(drop)));
+    run("animation", animation, |v| {
+        check::<Animation>(v, |a| crate::pipeline::stages::report(a, &Outputs { files: vec![], rank: None }, &Budget::default()).map(drop))
+    });
 }

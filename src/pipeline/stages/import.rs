@@ -13,6 +13,7 @@ use crate::algorithms::geometry::{self, surface, Point, TetMesh, TriMesh};
 use crate::formats::mesh::{self, MeshFile};
 use crate::pipeline::scene::{Rest, SceneFile, Selection};
 use crate::pipeline::stage_file::{Keyframes, Shape, VertexSet};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// Meshes read once per path (scenes often repeat the rest mesh).
@@ -130,11 +131,11 @@ pub(super) fn resolve_selection(selection: &Selection, scene: &SceneFile, rest: 
 }
 
 /// Read and check the keyframes of a scene.
-pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
+pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
     let scene = &scene_file.scene;
     let keys = match (&scene.keyframes, &scene.cache) {
         (Some(keys), _) => keys,
-        (None, Some(cache)) => return super::import_cache::import(scene_file, cache),
+        (None, Some(cache)) => return super::import_cache::import(scene_file, cache, budget),
         (None, None) => return Err(Error::general("the scene has neither [keyframes] nor [cache]", "add one of them (formats/scene.md)")),
     };
     let mut meshes = KeyMeshes::read(scene_file)?;
@@ -180,7 +181,7 @@ pub fn import(scene_file: &SceneFile) -> Result<Keyframes> {
         Shape::Volume(v) => (v.positions.len(), v.tets.len()),
     };
     let vertices = display.as_ref().map_or(vertices, |d| d.positions.len());
-    super::check_resources(scene, &keys.times, vertices, tets)?;
+    scene.check_resources(&keys.times, vertices, tets, budget)?;
     // A contact key is duplicated at its own time: the two share the pose and the masks (the
     // solver aliases their positions), not the velocities.
     let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);

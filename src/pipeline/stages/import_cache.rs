@@ -23,6 +23,7 @@ use crate::formats::cache::{CacheFormat, CacheOptions, VertexCache};
 use crate::formats::mesh;
 use crate::pipeline::scene::{CacheKeys, CacheSpec, Method, Rest, SceneFile, Selection};
 use crate::pipeline::stage_file::{CacheRecord, CacheRecordOptions, Keyframes, Shape, VertexSet};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 use super::import::resolve_selection;
@@ -67,26 +68,32 @@ pub fn reopen(record: &CacheRecord) -> Result<VertexCache> {
 
 /// The least-squares fit of the cache of `record` on its keys, its `fixed` vertices held on
 /// the cache frames at every key.
-pub fn fit_cache(record: &CacheRecord) -> Result<Trajectory> {
+pub fn fit_cache(record: &CacheRecord, budget: &Budget) -> Result<Trajectory> {
     let mut cache = reopen(record)?;
     let pins = if record.fixed.is_empty() { Vec::new() } else { vec![record.fixed.to_mask(record.vertices); record.keys.len()] };
-    fit(&mut timed(cache.frames.as_mut(), "cache fit"), &record.keys, &pins, &FitSettings::default())
+    fit(&mut timed(cache.frames.as_mut(), "cache fit", budget), &record.keys, &pins, &FitSettings::default())
         .map_err(|e| e.with_path(Path::new(&record.path)))
 }
 
-/// A cache whose every frame read first checks `--max-time` ([`crate::support::resources::check_time`]):
+/// A cache whose every frame read first checks the time budget ([`Budget::check_time`]):
 /// the key selection, the fit and the error measure stream the cache, so a frame is their unit
 /// of work.
-fn timed<'a, S: FrameSource + ?Sized>(frames: &'a mut S, phase: &'static str) -> Metered<'a, S, impl FnMut(usize, usize) -> Result<()>> {
-    Metered::new(frames, move |_, reads| crate::support::resources::check_time(phase, || format!("after reading {reads} cache frames")))
+fn timed<'a, S: FrameSource + ?Sized>(
+    frames: &'a mut S,
+    phase: &'static str,
+    budget: &Budget,
+) -> Metered<'a, S, impl FnMut(usize, usize) -> Result<()>> {
+    let budget = *budget;
+    Metered::new(frames, move |_, reads| budget.check_time(phase, || format!("after reading {reads} cache frames")))
 }
 
 /// The distance of `trajectory` (over the cache's vertices) from every frame of the cache.
 /// It streams the whole cache (once per candidate rank in the export's rank search), so it
 /// checks `--max-time` at every frame like the fit.
-pub fn error_against(record: &CacheRecord, trajectory: &Trajectory) -> Result<CacheDeviation> {
+pub fn error_against(record: &CacheRecord, trajectory: &Trajectory, budget: &Budget) -> Result<CacheDeviation> {
     let mut cache = reopen(record)?;
-    deviation(&mut timed(cache.frames.as_mut(), "cache error measure"), trajectory, record.diagonal).map_err(|e| e.with_path(Path::new(&record.path)))
+    deviation(&mut timed(cache.frames.as_mut(), "cache error measure", budget), trajectory, record.diagonal)
+        .map_err(|e| e.with_path(Path::new(&record.path)))
 }
 
 /// Write the `[cache]` of a scene (its range, as the scene opens it) to `out`, in the format
@@ -132,7 +139,7 @@ fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, Ca
 }
 
 /// Read a `[cache]` scene: the keyframes stage data, with the record of the cache.
-pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
+pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Result<Keyframes> {
     let scene = &scene_file.scene;
     let (path, options) = open_options(scene_file, spec)?;
     let topology_mesh = options.rest.is_some();
@@ -203,7 +210,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec) -> Result<Keyframes> {
                 window_bytes: usize::try_from(spec.window_bytes()).unwrap_or(usize::MAX),
                 ..AutoSettings::default()
             };
-            let auto = select(&mut timed(cache.frames.as_mut(), "cache key selection"), &settings).map_err(|e| e.with_path(&path))?;
+            let auto = select(&mut timed(cache.frames.as_mut(), "cache key selection", budget), &settings).map_err(|e| e.with_path(&path))?;
             (auto.keys, Some(auto.stats))
         }
         CacheKeys::Frames(list) => {

@@ -46,17 +46,6 @@ pub use tetrahedralize::tetrahedralize;
 use crate::algorithms::physics::elastic;
 use crate::pipeline::scene;
 
-/// The memory the scene needs for the frames it exports (`vertices` exported vertices over the
-/// key times at the scene's fps) and the samples it solves (`tets`, or a lower bound before
-/// TetGen), checked against the budget before anything that size is allocated.
-pub(crate) fn check_resources(scene: &scene::Scene, times: &[f64], vertices: usize, tets: usize) -> crate::support::error::Result<()> {
-    if let (Some(start), Some(end)) = (times.first(), times.last()) {
-        crate::support::resources::check_frames(*start, *end, scene.fps, vertices)?;
-    }
-    // Both methods evaluate W over the samples (`hermite` once, for the report).
-    crate::support::resources::check_samples(scene.solver.samples, times.len().saturating_sub(1), tets)
-}
-
 /// The elastic constants of the scene's `[material]`.
 pub(crate) fn elastic_material(material: &scene::Material) -> elastic::Material {
     elastic::Material { stiffness: material.stiffness, volume: material.volume, density: material.density }

@@ -9,20 +9,21 @@ use crate::pipeline::report::{Report, Volume};
 use crate::pipeline::scene::{Basis, Method};
 use crate::pipeline::stage_file::CacheRecord;
 use crate::pipeline::stage_file::{Animation, Outputs};
+use crate::support::budget::Budget;
 use crate::support::error::Result;
 
 /// The report of an animation and the files exported from it (for a cache, measured against
 /// the cache's frames, streamed again from it).
-pub fn report(animation: &Animation, outputs: &Outputs) -> Result<Report> {
-    let clip = super::export::blendshape_clip(animation, outputs.rank)?;
-    Ok(with_outputs(measure(animation, &clip)?, outputs))
+pub fn report(animation: &Animation, outputs: &Outputs, budget: &Budget) -> Result<Report> {
+    let clip = super::export::blendshape_clip(animation, outputs.rank, budget)?;
+    Ok(with_outputs(measure(animation, &clip, budget)?, outputs))
 }
 
 /// The report's measures of the animation alone, without the files (no outputs, no size
 /// ratios): what takes time, so a bake measures while the files are written. [`with_outputs`]
 /// completes it. `clip` is the blendshape clip the files hold and its rank
 /// ([`super::export::blendshape_clip`]).
-pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)) -> Result<Report> {
+pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), budget: &Budget) -> Result<Report> {
     let scene = &animation.scene;
     let tr = &animation.trajectory;
     let frames = tr.frames(scene.fps);
@@ -48,7 +49,7 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)) ->
     });
     // A principal clip plays its own trajectory: that is what the files hold.
     let played = rank.map(|_| clip.played(&tr.times));
-    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record)).transpose()?;
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record, budget)).transpose()?;
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -89,13 +90,13 @@ pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
 /// trajectory of the exported surface, whose vertices are the cache's, or its principal clip)
 /// against every cache frame, and for the simulated methods
 /// the least-squares fit on the same keys and `fixed` constraints.
-fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord) -> Result<CacheReport> {
-    let error = super::import_cache::error_against(record, played)?;
+fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord, budget: &Budget) -> Result<CacheReport> {
+    let error = super::import_cache::error_against(record, played, budget)?;
     let fit_error = match animation.log.method {
         Method::Fit => None,
         Method::Hermite | Method::Spacetime | Method::MassSpring => {
-            let fit = super::import_cache::fit_cache(record)?;
-            Some(super::import_cache::error_against(record, &fit)?.into())
+            let fit = super::import_cache::fit_cache(record, budget)?;
+            Some(super::import_cache::error_against(record, &fit, budget)?.into())
         }
     };
     Ok(CacheReport {

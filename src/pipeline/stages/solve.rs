@@ -19,26 +19,26 @@ use crate::algorithms::spacetime::timing::TimingSettings;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
 use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
 use crate::pipeline::stage_file::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
 
 /// The solved body. `method` overrides the scene's `[solver] method` (the CLI's `--method`);
 /// the solution's scene records the method used.
 pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result<Solution> {
-    solve_within(body, method, None, progress)
+    solve_within(body, method, &Budget::default(), progress)
 }
 
-/// [`solve`] with the global step's memory budget in bytes (the CLI's `--max-memory`; `None`:
-/// a fraction of the machine's available memory). Past it the global step is solved
-/// iteratively, to the same solution within the solver's tolerance.
-pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>, progress: &Progress) -> Result<Solution> {
+/// [`solve`] within `budget` (the CLI's `--max-memory` and `--max-time`). Past its memory the
+/// global step is solved iteratively, to the same solution within the solver's tolerance.
+pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progress: &Progress) -> Result<Solution> {
     let mut body = body.clone();
     if let Some(m) = method {
         body.scene.solver.method = m;
     }
     let scene = &body.scene;
     let tets = match (&body.mesh, scene.solver.method) {
-        (None, Method::Fit) => return solve_fit(body),
+        (None, Method::Fit) => return solve_fit(body, budget),
         (Some(tets), Method::Hermite | Method::Spacetime | Method::MassSpring) => tets,
         (Some(_), Method::Fit) => {
             return Err(Error::general(
@@ -53,9 +53,9 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             ))
         }
     };
-    super::check_resources(scene, &body.keys.times, body.surface.positions.len(), tets.tets.len())?;
+    scene.check_resources(&body.keys.times, body.surface.positions.len(), tets.tets.len(), budget)?;
     let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
-    let settings = Settings { max_memory, ..settings(scene) };
+    let settings = Settings { budget: *budget, ..settings(scene) };
     let keys = key_constraints(&body.keys);
     let input_times = keys.times.clone();
     let (trajectory, log) = match scene.solver.method {
@@ -168,7 +168,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
             }
             (solved.trajectory, log)
         }
-        Method::MassSpring => super::blend::inbetween(&body, progress)?,
+        Method::MassSpring => super::blend::inbetween(&body, budget, progress)?,
         Method::Fit => unreachable!("handled above"),
     };
     Ok(Solution { body, trajectory, log })
@@ -176,13 +176,13 @@ pub fn solve_within(body: &Body, method: Option<Method>, max_memory: Option<u64>
 
 /// `fit`: the least-squares cubic Hermite fit of the body's cache on its keys, with the keys'
 /// `fixed` vertices held on the cache frames. No physics: W is not evaluated.
-fn solve_fit(body: Body) -> Result<Solution> {
+fn solve_fit(body: Body, budget: &Budget) -> Result<Solution> {
     let start = Instant::now();
     let record = body
         .cache
         .as_ref()
         .ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
-    let trajectory = super::import_cache::fit_cache(record)?;
+    let trajectory = super::import_cache::fit_cache(record, budget)?;
     let log = SolverLog {
         method: Method::Fit,
         iterations: 0,
@@ -239,7 +239,7 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         regularization: s.regularization,
         damping: scene.material.damping,
         gravity: scene.material.gravity,
-        max_memory: None,
+        budget: Budget::default(),
         model_hessian: match s.model_hessian.as_str() {
             "projective" => ModelHessian::Projective,
             "tangent" => ModelHessian::Tangent,

@@ -26,6 +26,7 @@ use crate::algorithms::physics::equilibrium::Equilibrium;
 use crate::formats::tetgen::{self, TetgenOptions};
 use crate::pipeline::scene::Method;
 use crate::pipeline::stage_file::{Body, CageInfo, KeyPoses, Keyframes, Shape, VertexSet};
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
 
@@ -37,7 +38,7 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
 /// to export.
-pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
+pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
     let scene = &keys.scene;
     let key_poses = |positions: Vec<Vec<Point>>| KeyPoses {
         times: keys.times.clone(),
@@ -76,7 +77,7 @@ pub fn tetrahedralize(keys: &Keyframes, progress: &Progress) -> Result<Body> {
             }
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.predicted("tetrahedralize: TetGen", tetgen::predicted_seconds(rest, &options));
-            let mesh: TetMesh = tetgen::run(rest, &options, std::path::Path::new(&keys.rest_source))?;
+            let mesh: TetMesh = tetgen::run_within(rest, &options, std::path::Path::new(&keys.rest_source), budget)?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();

@@ -98,7 +98,7 @@ pub fn same_layer_as_usda(usdc: &Path, anim: &Animation) -> Value {
         let mut usda_only = anim.clone();
         usda_only.scene.export.formats = vec![Format::Usda];
         let mut staging = blendsim::support::output::Staging::new(&scratch).unwrap();
-        blendsim::pipeline::stages::export::export(&usda_only, &mut staging).unwrap();
+        blendsim::pipeline::stages::export::export(&usda_only, &blendsim::support::budget::Budget::default(), &mut staging).unwrap();
         staging.commit().unwrap();
         let summary = check_same_layer(&scratch.join(beside.file_name().unwrap()), usdc);
         std::fs::remove_dir_all(&scratch).unwrap();
@@ -117,7 +117,7 @@ pub fn check_outputs_ranked(dir: &Path, anim: &Animation, outputs: &[OutputFile]
     let fps = anim.scene.fps;
     let export = &anim.scene.export;
     let clip = match rank {
-        Some(_) => blendsim::pipeline::stages::export::blendshape_clip(anim, rank).unwrap().0,
+        Some(_) => blendsim::pipeline::stages::export::blendshape_clip(anim, rank, &blendsim::support::budget::Budget::default()).unwrap().0,
         None => BlendShapeClip::new(tr, export.weights),
     };
     // The trajectory the clip plays: the animation's, or its principal projection.
