@@ -7,6 +7,8 @@ use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::refuse_warnings;
+
 /// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
 /// many bakes.
 ///
@@ -36,6 +38,10 @@ pub struct Args {
     /// error (nothing written) once it is spent. Default: no limit.
     #[arg(long, value_parser = super::parse_seconds)]
     max_time: Option<f64>,
+    /// Every warning (the animation's and the report's guard rails, formats/report.md
+    /// "Warnings") is an error: one line each, exit code 3, nothing written.
+    #[arg(long, conflicts_with = "batch")]
+    strict: bool,
 }
 
 impl Args {
@@ -44,7 +50,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<()> {
     if let Some(seconds) = args.max_time {
         blendsim::support::resources::set_max_time(seconds);
     }
@@ -61,6 +67,11 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let animation: Animation = stage_file::read(animation)?;
     let outputs: Outputs = stage_file::read(outputs)?;
     let report = stages::report(&animation, &outputs)?;
+    if args.strict {
+        refuse_warnings(&report.warnings)?;
+    }
+    // The stages' own warnings were printed by the stages; the guard rails' are new here.
+    report.warnings[animation.warnings.len()..].iter().for_each(|w| progress.warn(w));
     report.write(&mut staging)?;
     staging.commit()
 }
