@@ -254,10 +254,18 @@ fn a_rig_pose_inverting_tets_at_a_joint_bakes_with_one_warning_and_keeps_more_vo
     let (s_loss, h_loss) = (s["in_between_loss"].as_f64().unwrap(), h["in_between_loss"].as_f64().unwrap());
     println!("in-between volume loss: spacetime {s_loss:.4}, hermite {h_loss:.4}; min volume {} vs {}", s["min"], h["min"]);
     assert!(s_loss < h_loss && s["min"].as_f64() > h["min"].as_f64(), "spacetime {s}, hermite {h}");
-    // --strict refuses the folded key, in one line.
+    // --strict refuses the folded key, in one line, in the bake and in its stage.
     let r = run(&dir.path, &["bake", "-q", "--strict", "scene.toml", "--out", "strict"]);
     assert_eq!(r.code, Some(3), "{r}");
     assert_eq!(r.stderr.lines().count(), 1, "{r}");
     assert!(r.stderr.starts_with("error: folded-key: bent.mesh: key 1 folds the tet body"), "{r}");
     assert!(!dir.join("strict").exists());
+    run(&dir.path, &["import", "scene.toml", "-o", "keys.json"]).success();
+    let r = run(&dir.path, &["tetrahedralize", "--strict", "keys.json", "-o", "body.json"]);
+    assert_eq!(r.code, Some(3), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.starts_with("error: folded-key: bent.mesh: key 1 folds the tet body"), "{r}");
+    assert!(!dir.join("body.json").exists());
+    let r = run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
+    assert_eq!(warnings(&r).len(), 1, "{r}");
 }
