@@ -29,6 +29,10 @@ pub struct Args {
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
+    /// Every warning is an error (formats/report.md, "Warnings"): one `error: CODE: ...` line
+    /// each, exit code 3, nothing written and --out left as it was.
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -48,7 +52,13 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     // A bake is the folder's whole blendsim content: an earlier bake's files go, whatever
     // scene wrote them (a renamed scene's too); files blendsim did not write stay.
     staging.replace_every_group();
-    let r = stages::Bake::new(&scene, progress).method(args.method.map(Into::into)).budget(budget).files(&mut staging)?;
+    // Under --strict the warnings are printed once, as errors, if the bake gets that far.
+    let progress = if args.strict { progress.without_warnings() } else { progress.clone() };
+    let r = stages::Bake::new(&scene, &progress).method(args.method.map(Into::into)).budget(budget).files(&mut staging)?;
+    if args.strict {
+        // Before the commit: the staged files go with `staging`, --out stays as it was.
+        super::refuse_warnings(&r.warnings)?;
+    }
     let committed = staging.commit_with_summary()?;
     if !quiet {
         for line in committed.messages(&args.out, "bake") {

@@ -1,7 +1,8 @@
 //! Command-line definitions: one file per subcommand, nothing else.
 //!
 //! Exit codes: 0 success; 1 bad input or a failed stage (the message names the file, the
-//! problem and the fix); 2 usage errors (from clap). SIGINT, SIGTERM and SIGHUP remove the
+//! problem and the fix); 2 usage errors (from clap); 3 `--strict` refused the result because
+//! of warnings (one `error: CODE: ...` line each; nothing written, the previous output kept). SIGINT, SIGTERM and SIGHUP remove the
 //! unfinished outputs and end the process by the same signal (see `blendsim::support::interrupt`).
 
 mod bake;
@@ -35,6 +36,10 @@ use clap::{Parser, Subcommand};
 ///
 /// `blendsim bake SCENE.toml --out DIR` runs them all in one process; `blendsim blend`
 /// blends target meshes with mass-spring blendshapes.
+///
+/// Exit codes: 0 success (warnings, if any, on stderr and in the report); 1 bad input or a
+/// failed stage; 2 usage errors; 3 --strict refused a result that has warnings (nothing
+/// written, the previous output kept; see formats/report.md, "Warnings").
 #[derive(Parser)]
 #[command(name = "blendsim", version, about, long_about, verbatim_doc_comment, propagate_version = true)]
 struct Cli {
@@ -101,6 +106,15 @@ impl BudgetArgs {
     /// The budget, its clock started now.
     pub fn budget(&self) -> Budget {
         Budget::new(self.max_memory, self.max_time)
+    }
+}
+
+/// `--strict`: an error (exit code 3) when there are `warnings`.
+pub fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
+    if warnings.is_empty() {
+        Ok(())
+    } else {
+        Err(blendsim::support::error::Error::refused(warnings))
     }
 }
 
@@ -172,6 +186,13 @@ pub fn main() -> ExitCode {
     blendsim::support::interrupt::settle();
     match result.map_err(|e| e.with_path(input)) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if !e.refused.is_empty() => {
+            for w in &e.refused {
+                let line: String = w.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
+                eprintln!("error: {line}");
+            }
+            ExitCode::from(3)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(1)

@@ -7,6 +7,8 @@ use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::refuse_warnings;
+
 /// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
 /// many bakes.
 ///
@@ -33,6 +35,10 @@ pub struct Args {
     no_wait: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
+    /// Every warning (the animation's and the report's guard rails, formats/report.md
+    /// "Warnings") is an error: one line each, exit code 3, nothing written.
+    #[arg(long, conflicts_with = "batch")]
+    strict: bool,
 }
 
 impl Args {
@@ -41,7 +47,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let budget = args.budget.budget();
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
@@ -56,6 +62,11 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
     let animation: Animation = stage_file::read(animation, &budget)?;
     let outputs: Outputs = stage_file::read(outputs, &budget)?;
     let report = stages::report(&animation, &outputs, &budget)?;
+    if args.strict {
+        refuse_warnings(&report.warnings)?;
+    }
+    // The stages' own warnings were printed by the stages; the guard rails' are new here.
+    report.warnings[animation.warnings.len()..].iter().for_each(|w| progress.warn(w));
     report.write(&mut staging)?;
     staging.commit()
 }

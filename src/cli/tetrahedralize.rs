@@ -16,6 +16,10 @@ pub struct Args {
     /// Where to write the body stage file (JSON).
     #[arg(short, long)]
     output: PathBuf,
+    /// Every warning (folded-key, max-volume: formats/report.md, "Warnings") is an error: one
+    /// line each, exit code 3, nothing written.
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -29,5 +33,10 @@ impl Args {
 pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let budget = args.budget.budget();
     let keys: Keyframes = stage_file::read(&args.keyframes, &budget)?;
+    if args.strict {
+        let body = stages::tetrahedralize(&keys, &budget, &progress.without_warnings())?;
+        super::refuse_warnings(&body.warnings)?;
+        return stage_file::write(&args.output, &body);
+    }
     stage_file::write(&args.output, &stages::tetrahedralize(&keys, &budget, progress)?)
 }

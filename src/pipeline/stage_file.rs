@@ -167,8 +167,8 @@ pub struct Body {
     /// When `mesh` is a generated cage around the keyframe surface: how it was made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cage: Option<CageInfo>,
-    /// What `tetrahedralize` warned about (one line each, the file first): tets of a key that
-    /// the interior fit left inverted or flattened, a `max_volume` TetGen could not honour.
+    /// What `tetrahedralize` warned about (one line each, its code first: `folded-key`, a key
+    /// with inverted or flattened tets; `max-volume`, a `max_volume` TetGen could not honour).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
 }

@@ -2,7 +2,8 @@
 //!
 //! Every error a user can meet says three things on one line: the file it concerns, what is
 //! wrong with it, and how to fix it. `blendsim` prints it as
-//! `error: FILE: PROBLEM (fix: FIX)` and exits with code 1.
+//! `error: FILE: PROBLEM (fix: FIX)` and exits with code 1; warnings refused by `--strict`
+//! are printed one line each and exit with code 3.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -19,17 +20,20 @@ pub struct Error {
     pub problem: String,
     /// What the user can do about it.
     pub fix: String,
+    /// The warnings `--strict` turned into this error (one line each; the CLI exits with
+    /// code 3); empty for every other error.
+    pub refused: Vec<String>,
 }
 
 impl Error {
     /// A problem with a specific file.
     pub fn in_file(path: impl AsRef<Path>, problem: impl Into<String>, fix: impl Into<String>) -> Self {
-        Error { path: Some(path.as_ref().to_path_buf()), problem: problem.into(), fix: fix.into() }
+        Error { path: Some(path.as_ref().to_path_buf()), problem: problem.into(), fix: fix.into(), refused: Vec::new() }
     }
 
     /// A problem that concerns no single file (for example an external program that is missing).
     pub fn general(problem: impl Into<String>, fix: impl Into<String>) -> Self {
-        Error { path: None, problem: problem.into(), fix: fix.into() }
+        Error { path: None, problem: problem.into(), fix: fix.into(), refused: Vec::new() }
     }
 
     /// An I/O failure while `doing` something with `path`, with a fix chosen from the error kind.
@@ -43,6 +47,16 @@ impl Error {
             _ => "check the path and that the disk is not full",
         };
         Error::in_file(path, format!("cannot {doing}: {err}"), fix)
+    }
+
+    /// `--strict`: the `warnings` of a run, refused (none is written, the CLI exits with code 3).
+    pub fn refused(warnings: &[String]) -> Self {
+        let mut e = Error::general(
+            format!("--strict: {} warnings", warnings.len()),
+            "fix what each warning says, or run without --strict to accept the result",
+        );
+        e.refused = warnings.to_vec();
+        e
     }
 
     /// Attach a file to an error that has none (used when a reader does not know its own path).

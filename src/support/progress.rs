@@ -67,6 +67,12 @@ impl Progress {
         Progress { mode: Mode::Hidden, warnings: false, bars: Arc::default() }
     }
 
+    /// The same progress with its warnings kept in the stage data only, not printed (`--strict`
+    /// prints them once, as errors).
+    pub fn without_warnings(&self) -> Progress {
+        Progress { warnings: false, ..self.clone() }
+    }
+
     /// Whether anything is drawn.
     pub fn is_visible(&self) -> bool {
         self.mode != Mode::Hidden

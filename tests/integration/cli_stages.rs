@@ -270,6 +270,6 @@ fn a_moved_keyframes_file_names_the_rest_source_where_it_now_is() {
     );
     std::fs::rename(&staged, dir.join("moved")).unwrap();
     let r = run(&dir.path, &["tetrahedralize", "moved/keys.json", "-o", "moved/body.json"]).success();
-    assert!(r.stderr.starts_with("blendsim: warning: moved/box.obj: TetGen could not honour [tet] max_volume = 1e-9"), "{r}");
+    assert!(r.stderr.starts_with("blendsim: warning: max-volume: moved/box.obj: TetGen could not honour [tet] max_volume = 1e-9"), "{r}");
     run(&dir.join("moved"), &["solve", "body.json", "-o", "solution.json"]).success();
 }

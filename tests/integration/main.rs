@@ -25,6 +25,7 @@ mod cli_scale;
 mod cli_stages;
 mod cli_threads;
 mod cli_timing;
+mod cli_warnings;
 mod export_formats;
 mod fixtures;
 mod layers;

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::guard_rails::code_of;
 use super::Report;
 use crate::pipeline::scene::{Basis, Format};
 use crate::pipeline::stage_file::OutputKind;
@@ -40,7 +41,7 @@ pub fn read(path: &Path) -> Result<Report> {
         .map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }
 
-const COLUMNS: [&str; 20] = [
+const COLUMNS: [&str; 21] = [
     "bake",
     "scene",
     "method",
@@ -61,6 +62,7 @@ const COLUMNS: [&str; 20] = [
     "error_max",
     "error_rms",
     "fit_error_max",
+    "warnings",
 ];
 
 /// One row per report: `bake` is the folder holding it.
@@ -101,6 +103,8 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
                 format!("{max:.3e}"),
                 format!("{rms:.3e}"),
                 cache.and_then(|c| c.fit_error.as_ref()).map_or(String::new(), |f| format!("{:.3e}", f.max)),
+                // The codes, one per warning (the lines are in the bake's report).
+                r.warnings.iter().map(|w| code_of(w)).collect::<Vec<_>>().join(" "),
             ]
         })
         .collect()

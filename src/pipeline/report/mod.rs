@@ -10,6 +10,7 @@
 
 pub mod batch;
 pub mod cache_fit;
+pub mod guard_rails;
 pub mod markdown;
 pub mod measures;
 
@@ -116,8 +117,10 @@ pub struct Report {
     /// For the principal basis: the components the files hold.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rank: Option<usize>,
-    /// What the bake warned about on stderr (one line each): tets of a key that the interior
-    /// fit left inverted or flattened, a `[tet] max_volume` TetGen could not honour.
+    /// What the bake warned about on stderr (one line each, starting with its code: see
+    /// [`guard_rails`]): a key with inverted or flattened tets, a `[tet] max_volume` TetGen
+    /// could not honour, and the guard rails (not converged, keys moved, volume out of band,
+    /// times that look like frames, an output larger than what it replaces).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
 }

@@ -85,6 +85,8 @@ impl<'a> Bake<'a> {
         });
         let outputs = outputs?;
         let report = with_outputs(measured?, &outputs);
+        // The stages warned as they went; the guard rails' warnings come after theirs.
+        report.warnings[animation.warnings.len()..].iter().for_each(|w| self.progress.warn(w));
         report.write(staging)?;
         Ok(report)
     }

@@ -295,7 +295,7 @@ impl KeyMeshes {
     }
 }
 
-/// A tet key's tet at this fraction of its rest volume or below is flattened.
+/// A key's tet at this fraction of its rest volume or below is flattened (a `folded-key` warning).
 pub const FLAT_TET_RATIO: f64 = 1e-3;
 
 /// Tet numbers and vertices as the MEDIT file writes them (1-based).
@@ -320,27 +320,6 @@ fn check_rest_fold(rest: &TetMesh, path: &Path) -> Result<()> {
         ),
         "untangle the rest mesh in the modeling tool so that no tet is turned inside out",
     ))
-}
-
-/// A key of a tet mesh that inverts or flattens a tet (a local fold, even when the key's total
-/// volume is fine) is an error naming the key file and the tet: the key is a hard constraint,
-/// so the solver would have to keep the fold.
-fn check_key_tets(rest: &TetMesh, poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
-    for (k, pose) in poses.iter().enumerate() {
-        let collapsed = rest.collapsed_at(pose, FLAT_TET_RATIO);
-        let Some(&(t, ratio)) = collapsed.first() else { continue };
-        let what = if ratio < 0.0 { "inverted" } else { "flattened" };
-        let others = match collapsed.len() - 1 {
-            0 => String::new(),
-            n => format!(" (and {n} more tets)"),
-        };
-        return Err(Error::in_file(
-            &paths[k],
-            format!("key {k} folds the body: {} is {what}, at {:.1}% of its rest volume{others}", tet_in_file(rest, t), 100.0 * ratio),
-            "re-export the key so that no tet is turned inside out or squashed flat",
-        ));
-    }
-    Ok(())
 }
 
 /// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or
@@ -375,8 +354,7 @@ fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> R
             "re-export the key from the same object without a zero or negative scale",
         ));
     }
-    match rest {
-        Shape::Volume(v) => check_key_tets(v, poses, paths),
-        Shape::Surface(_) => Ok(()),
-    }
+    // A key that inverts or flattens some tets (a rig pose folding a joint) bakes: the local step
+    // projects an inverted tet to its nearest rotation. `tetrahedralize` warns about it.
+    Ok(())
 }

@@ -4,6 +4,7 @@ use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::geometry::{bbox_diagonal, surface};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
+use crate::pipeline::report::guard_rails::guard_rails;
 use crate::pipeline::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
 use crate::pipeline::report::{Report, Volume};
 use crate::pipeline::scene::{Basis, Method};
@@ -76,13 +77,16 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     })
 }
 
-/// `report` (from [`measure`]) with the files of `outputs` and the size ratios they give.
+/// `report` (from [`measure`]) with the files of `outputs`, the size ratios they give, and the
+/// guard rails' warnings after the stages' own.
 pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
     report.outputs = outputs.files.clone();
     report.ratios = size_ratios(&outputs.files);
     if let Some(cache) = &mut report.cache {
         cache.ratios = cache_ratios(cache.bytes, &outputs.files);
     }
+    let rails = guard_rails(&report);
+    report.warnings.extend(rails);
     report
 }
 

@@ -24,6 +24,7 @@ use crate::algorithms::geometry::{surface, Point, TetMesh, TriMesh};
 use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::equilibrium::Equilibrium;
 use crate::formats::tetgen::{self, TetgenOptions};
+use crate::pipeline::report::guard_rails::{code, coded};
 use crate::pipeline::scene::Method;
 use crate::pipeline::stage_file::{Body, CageInfo, KeyPoses, Keyframes, Shape, VertexSet};
 use crate::support::budget::Budget;
@@ -61,6 +62,8 @@ pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) ->
         }),
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
+            let warnings = folded_keys(mesh, &keys.poses, keys);
+            warnings.iter().for_each(|w| progress.warn(w));
             Ok(Body {
                 scene: scene.clone(),
                 mesh: Some(mesh.clone()),
@@ -68,7 +71,7 @@ pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) ->
                 surface: export_surface(keys, boundary),
                 cache,
                 cage: None,
-                warnings: Vec::new(),
+                warnings,
             })
         }
         Shape::Surface(rest) => {
@@ -132,17 +135,23 @@ fn unhonoured_max_volume(mesh: &TetMesh, max_volume: f64, source: &str) -> Optio
     let (t, largest) =
         (0..mesh.tets.len()).map(|t| (t, mesh.signed_volume_at(&mesh.positions, t).abs())).fold((0, 0.0), |m, x| if x.1 > m.1 { x } else { m });
     (largest > MAX_VOLUME_WARNING_FACTOR * max_volume).then(|| {
-        format!(
+        coded(
+            code::MAX_VOLUME,
+            format!(
             "{source}: TetGen could not honour [tet] max_volume = {max_volume:e}: the largest of its {} tets (tet {t}) has volume {largest:.3e}, {:.1}x the bound (raise max_volume to what the surface allows, or refine the surface)",
             mesh.tets.len(),
-            largest / max_volume
+                largest / max_volume
+            ),
         )
     })
 }
 
-/// The warnings for keys whose interior fit left tets inverted or flattened (the surface key
-/// folds locally, or bends more sharply than its interior nodes can follow): one line per key,
-/// naming the key's mesh as the scene gives it and its worst tet.
+/// The warnings for keys with inverted or flattened tets: a tet key posed by a rig (linear-blend
+/// skinning folds a few tets at a joint), or a surface key whose interior fit left them so (it
+/// folds locally, or bends more sharply than its interior nodes can follow). One line per key,
+/// naming the key's mesh as the scene gives it, how many tets and its worst. They bake: the
+/// local step projects an inverted tet to its nearest rotation (signed SVD), so the solve pulls
+/// the in-betweens back towards the rest shape; only a folded rest mesh is an error (import).
 fn folded_keys(mesh: &TetMesh, positions: &[Vec<Point>], keys: &Keyframes) -> Vec<String> {
     // The scene's mesh of every key (a contact key's duplicate shares it, as in import).
     let mut names: Vec<String> = keys.scene.keyframes.as_ref().map_or(Vec::new(), |k| k.meshes.iter().map(|m| m.path().to_string()).collect());
@@ -158,12 +167,15 @@ fn folded_keys(mesh: &TetMesh, positions: &[Vec<Point>], keys: &Keyframes) -> Ve
         let Some(&(t, ratio)) = collapsed.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else { continue };
         let inverted = collapsed.iter().filter(|c| c.1 < 0.0).count();
         let [a, b, c, d] = mesh.tets[t];
-        out.push(format!(
-            "{}: key {k} folds the tet body: {inverted} tets inverted, {} flattened below {:.1}% of their rest volume; the worst, tet {t} (nodes {a}, {b}, {c}, {d}), is at {:.1}%",
-            names[k],
-            collapsed.len() - inverted,
-            100.0 * super::import::FLAT_TET_RATIO,
-            100.0 * ratio
+        out.push(coded(
+            code::FOLDED_KEY,
+            format!(
+                "{}: key {k} folds the tet body: {inverted} tets inverted, {} flattened below {:.1}% of their rest volume; the worst, tet {t} (nodes {a}, {b}, {c}, {d}), is at {:.1}% (it bakes; the key holds the fold, re-pose the key to remove it)",
+                names[k],
+                collapsed.len() - inverted,
+                100.0 * super::import::FLAT_TET_RATIO,
+                100.0 * ratio
+            ),
         ));
     }
     out
