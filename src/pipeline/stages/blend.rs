@@ -440,7 +440,7 @@ pub(crate) fn inbetween(body: &Body, progress: &Progress) -> Result<(Trajectory,
     };
     // W on the spacetime scale: the trajectory's keys (in-betweens included) as the keys of
     // the objective, so its samples cover every sub-interval.
-    let elastic = Elastic::new(mesh, &super::elastic_material(&scene.material))?;
+    let elastic = Elastic::new(mesh, &super::elastic_material(scene))?;
     let constraints = KeyConstraints {
         times: trajectory.times.clone(),
         positions: trajectory.positions.clone(),
