@@ -59,6 +59,10 @@ pub struct Scene {
     /// Full-frame rate, and the USD weight sample rate (frames per second).
     #[serde(default = "default_fps")]
     pub fps: f64,
+    /// The length unit of every coordinate and length in the input (`None`: `[export]
+    /// meters_per_unit`, by default meters); see [`Scene::meters_per_unit`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<Units>,
     /// `[keyframes]`: the keyframe meshes, their times and constraints (exclusive with
     /// `[cache]`: a scene has exactly one of them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -87,6 +91,29 @@ pub struct Scene {
     /// `[[obstacle]]`: static obstacles the body may not enter.
     #[serde(default, rename = "obstacle", skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<ObstacleSpec>,
+}
+
+/// The input's length unit (`units`): a name, or the meters in one unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Units {
+    /// One of [`UNIT_NAMES`].
+    Name(String),
+    /// Meters per unit (> 0).
+    MetersPerUnit(f64),
+}
+
+/// The unit names `units` accepts, with their meters, the most used first.
+pub const UNIT_NAMES: [(&str, f64); 7] = [("m", 1.0), ("cm", 0.01), ("mm", 0.001), ("in", 0.0254), ("ft", 0.3048), ("dm", 0.1), ("km", 1000.0)];
+
+impl Units {
+    /// Meters per unit (`None` for an unknown name or a number that is not positive).
+    pub fn meters_per_unit(&self) -> Option<f64> {
+        match self {
+            Units::Name(name) => UNIT_NAMES.iter().find(|(n, _)| n == name).map(|&(_, m)| m),
+            Units::MetersPerUnit(m) => (m.is_finite() && *m > 0.0).then_some(*m),
+        }
+    }
 }
 
 /// One `[[obstacle]]` entry.
@@ -292,7 +319,7 @@ pub struct Export {
     pub full_frame: bool,
     /// The scene's up axis, "y" or "z" (USD `upAxis`; glTF files are rotated to y-up).
     pub up_axis: Axis,
-    /// Scene units in meters (USD `metersPerUnit`; glTF files are scaled to meters).
+    /// Scene units in meters: the older alias of the scene's `units` ([`Scene::meters_per_unit`]).
     pub meters_per_unit: f64,
     /// The blendshape form of the trajectory in every blendshape file.
     pub weights: Weights,
@@ -688,12 +715,41 @@ impl Scene {
         Ok(scene)
     }
 
+    /// Meters per unit of the input: `units`, else its alias `[export] meters_per_unit` (both
+    /// validated). The physics runs in SI (`formats/scene.md`, "Units"); the files are written
+    /// in the input's units with this as their metadata.
+    pub fn meters_per_unit(&self) -> f64 {
+        self.units.as_ref().and_then(Units::meters_per_unit).unwrap_or(self.export.meters_per_unit)
+    }
+
     /// Every table's values in range, checked table by table in file order (the first problem
     /// is reported). Also run on the scene embedded in a stage file.
     pub(crate) fn validate(&self) -> Result<()> {
         check_name(&self.name)?;
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
+        }
+        if let Some(units) = &self.units {
+            let names = UNIT_NAMES.map(|(n, _)| format!("\"{n}\"")).join(", ");
+            match units.meters_per_unit() {
+                None => {
+                    let given = match units {
+                        Units::Name(n) => format!("\"{n}\""),
+                        Units::MetersPerUnit(m) => format!("{m:e}"),
+                    };
+                    return invalid(
+                        format!("units = {given} is not a length unit"),
+                        &format!("use one of {names}, or the meters in one unit (a number > 0)"),
+                    );
+                }
+                Some(m) if self.export.meters_per_unit != 1.0 && self.export.meters_per_unit != m => {
+                    return invalid(
+                        format!("units ({m:e} m) and [export] meters_per_unit = {:e} disagree", self.export.meters_per_unit),
+                        "give the unit once, as units (the [export] key is its older alias)",
+                    );
+                }
+                Some(_) => {}
+            }
         }
         match (&self.keyframes, &self.cache) {
             (Some(k), None) => k.validate()?,
@@ -1284,6 +1340,22 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
             assert!(e.contains("(fix: ") && !e.contains('\n') && !e.contains('\u{1b}'), "{e}");
         }
         assert!(Scene::parse(&sel("{ axis = \"y\", min = 1.0, max = 1.0 }")).is_ok(), "a slab of zero thickness is fine");
+    }
+
+    #[test]
+    fn units_are_a_name_or_meters_and_the_old_key_is_their_alias() {
+        let mpu = |extra: &str| Scene::parse(&MINIMAL.replacen("\n", &format!("\n{extra}\n"), 1)).map(|s| s.meters_per_unit());
+        assert_eq!(mpu("").unwrap(), 1.0);
+        assert_eq!(mpu("units = \"cm\"").unwrap(), 0.01);
+        assert_eq!(mpu("units = 100").unwrap(), 100.0);
+        assert_eq!(mpu("units = 0.0254").unwrap(), 0.0254);
+        assert_eq!(Scene::parse(&(MINIMAL.to_string() + "[export]\nmeters_per_unit = 0.001\n")).unwrap().meters_per_unit(), 0.001);
+        for (bad, says) in [("units = \"yd\"", "units = \"yd\" is not a length unit"), ("units = -1", "units = -1e0 is not a length unit")] {
+            let e = mpu(bad).unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains("\"cm\""), "{e}");
+        }
+        let both = MINIMAL.replacen("\n", "\nunits = \"cm\"\n", 1) + "[export]\nmeters_per_unit = 0.001\n";
+        assert!(Scene::parse(&both).unwrap_err().to_string().contains("disagree"));
     }
 
     #[test]

@@ -13,6 +13,9 @@ pub mod code {
     pub const FOLDED_KEY: &str = "folded-key";
     /// TetGen left a tet far over `[tet] max_volume` (`tetrahedralize`).
     pub const MAX_VOLUME: &str = "max-volume";
+    /// The body's size, in meters after `units`, is far from what the material is meant for
+    /// (`tetrahedralize`).
+    pub const BODY_SIZE: &str = "body-size";
     /// The solve stopped before its stopping rule was met.
     pub const NOT_CONVERGED: &str = "not-converged";
     /// The exported animation misses the input keyframes by more than [`super::KEYS_MOVED_SHARE`].

@@ -441,7 +441,7 @@ pub(crate) fn inbetween(body: &Body, budget: &Budget, progress: &Progress) -> Re
     };
     // W on the spacetime scale: the trajectory's keys (in-betweens included) as the keys of
     // the objective, so its samples cover every sub-interval.
-    let elastic = Elastic::new(mesh, &super::elastic_material(&scene.material))?;
+    let elastic = Elastic::new(mesh, &super::elastic_material(scene))?;
     let constraints = KeyConstraints {
         times: trajectory.times.clone(),
         positions: trajectory.positions.clone(),

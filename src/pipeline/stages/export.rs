@@ -48,9 +48,9 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
         name: usd::prim_name(&scene.name),
         fps: scene.fps,
         up_axis: if scene.export.up_axis == Axis::Z { 'Z' } else { 'Y' },
-        meters_per_unit: scene.export.meters_per_unit,
+        meters_per_unit: scene.meters_per_unit(),
     };
-    let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.export.meters_per_unit };
+    let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.meters_per_unit() };
 
     let (clip, rank) = (&clip.0, clip.1);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));

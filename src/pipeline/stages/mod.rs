@@ -46,7 +46,17 @@ pub use tetrahedralize::tetrahedralize;
 use crate::algorithms::physics::elastic;
 use crate::pipeline::scene;
 
-/// The elastic constants of the scene's `[material]`.
-pub(crate) fn elastic_material(material: &scene::Material) -> elastic::Material {
-    elastic::Material { stiffness: material.stiffness, volume: material.volume, density: material.density }
+/// The elastic constants of the scene's `[material]` (SI), in the units of its geometry
+/// (`units`, [`scene::Scene::meters_per_unit`] `m`): a body measured in units of `m` meters
+/// is the same physical body when its weights (stresses) are multiplied by `m` and its
+/// density by `m³` (the elastic and inertial forces then keep their ratio at every size;
+/// `formats/scene.md`, "Units"). With meters (`m = 1`) the values are the scene's, bit for bit.
+pub(crate) fn elastic_material(scene: &scene::Scene) -> elastic::Material {
+    let (material, m) = (&scene.material, scene.meters_per_unit());
+    elastic::Material { stiffness: material.stiffness * m, volume: material.volume * m, density: material.density * m * m * m }
+}
+
+/// The scene's gravity (m/s²) in its units per second squared.
+pub(crate) fn gravity(scene: &scene::Scene) -> crate::algorithms::geometry::Point {
+    scene.material.gravity.map(|g| g / scene.meters_per_unit())
 }

@@ -54,7 +54,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progre
         }
     };
     scene.check_resources(&body.keys.times, body.surface.positions.len(), tets.tets.len(), budget)?;
-    let elastic = Elastic::new(tets, &super::elastic_material(&scene.material))?;
+    let elastic = Elastic::new(tets, &super::elastic_material(scene))?;
     let settings = Settings { budget: *budget, ..settings(scene) };
     let keys = key_constraints(&body.keys);
     let input_times = keys.times.clone();
@@ -218,7 +218,7 @@ fn solve_fit(body: Body, budget: &Budget) -> Result<Solution> {
 /// solver's parts one by one).
 pub fn solver_inputs(body: &Body) -> Result<(Elastic, KeyConstraints, Settings)> {
     let tets = body.mesh.as_ref().ok_or_else(|| Error::general("the body has no tet mesh (method fit)", "tetrahedralize for spacetime"))?;
-    let elastic = Elastic::new(tets, &super::elastic_material(&body.scene.material))?;
+    let elastic = Elastic::new(tets, &super::elastic_material(&body.scene))?;
     Ok((elastic, key_constraints(&body.keys), settings(&body.scene)))
 }
 
@@ -238,7 +238,7 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         negligible: crate::algorithms::spacetime::solver::NEGLIGIBLE,
         regularization: s.regularization,
         damping: scene.material.damping,
-        gravity: scene.material.gravity,
+        gravity: super::gravity(scene),
         budget: Budget::default(),
         model_hessian: match s.model_hessian.as_str() {
             "projective" => ModelHessian::Projective,

@@ -38,8 +38,52 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 }
 
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
-/// to export.
+/// to export; a body whose size is far from the material's ([`implausible_size`]) is warned of.
 pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
+    let mut body = simulation_body(keys, budget, progress)?;
+    let rest = match &keys.rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    if body.mesh.is_some() {
+        if let Some(w) = implausible_size(crate::algorithms::geometry::bbox_diagonal(rest), keys.scene.meters_per_unit(), &keys.rest_source) {
+            progress.warn(&w);
+            body.warnings.push(w);
+        }
+    }
+    Ok(body)
+}
+
+/// The body sizes (bounding-box diagonal, meters) the default material is meant for
+/// (`formats/scene.md`, "The default material"): below, the body is so stiff for its mass
+/// that the in-betweens are statics; above, so soft that it cannot follow its keys.
+pub const PLAUSIBLE_METERS: [f64; 2] = [1e-3, 20.0];
+
+/// The warning for a body of diagonal `diagonal` (in units of `meters_per_unit` meters) outside
+/// [`PLAUSIBLE_METERS`], naming the unit that would bring it inside.
+fn implausible_size(diagonal: f64, meters_per_unit: f64, source: &str) -> Option<String> {
+    let meters = diagonal * meters_per_unit;
+    let [low, high] = PLAUSIBLE_METERS;
+    if (low..=high).contains(&meters) || !meters.is_finite() || meters <= 0.0 {
+        return None;
+    }
+    let side = if meters < low { "under" } else { "over" };
+    // The most used unit that would put the body inside the range.
+    let fix = crate::pipeline::scene::UNIT_NAMES
+        .iter()
+        .find(|&&(_, unit)| unit != meters_per_unit && (low..=high).contains(&(diagonal * unit)))
+        .map_or(String::new(), |(name, _)| format!("if the mesh is in {name}, set units = \"{name}\" at the top of the scene; "));
+    Some(crate::pipeline::report::guard_rails::coded(
+        crate::pipeline::report::guard_rails::code::BODY_SIZE,
+        format_args!(
+            "{source}: the body is {diagonal:.3e} units across ({meters:.3e} m at {meters_per_unit:e} m per unit), {side} the {low:e} to {high} m \
+         the material is meant for: {fix}otherwise scale [material] to the body (formats/scene.md, \"The default material\")"
+        ),
+    ))
+}
+
+/// The body of `keys`, before its size is judged ([`tetrahedralize`]).
+fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
     let scene = &keys.scene;
     let key_poses = |positions: Vec<Vec<Point>>| KeyPoses {
         times: keys.times.clone(),
@@ -84,7 +128,7 @@ pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) ->
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();
-            let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
+            let elastic = Elastic::new(&mesh, &super::elastic_material(scene))?;
             let equilibrium = Equilibrium::new(&elastic, &pinned)?;
             let tolerance = 1e-10 * crate::algorithms::geometry::bbox_diagonal(&mesh.positions);
             let bar = progress.bar(keys.poses.len() as u64, "tetrahedralize: fit interior nodes");
@@ -221,7 +265,7 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         + CageFit::predicted_seconds(cage_tets, n_fine, n_keys) / threads.min(n_keys.max(1) as f64);
     let bar = progress.predicted(format!("tetrahedralize: fit {n_keys} cage keys to {n_fine} vertices"), fit_seconds);
     let binding = Binding::compute(&mesh, &fine.positions);
-    let elastic = Elastic::new(&mesh, &super::elastic_material(&scene.material))?;
+    let elastic = Elastic::new(&mesh, &super::elastic_material(scene))?;
     let fit = CageFit::new(&mesh, &binding, &elastic);
     let positions: Vec<Vec<Point>> = fine_poses.par_iter().map(|pose| fit.pose(&fine.positions, pose)).collect();
     let reproduction = fit.reproduction(&positions, &fine_poses, crate::algorithms::geometry::bbox_diagonal(&fine.positions));
