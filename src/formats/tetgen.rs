@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::algorithms::geometry::surface::open_edges;
-use crate::algorithms::geometry::{bbox_diagonal, cross, norm, sub, Point, TetMesh, TriMesh};
+use crate::algorithms::geometry::{bbox_diagonal, cross, norm, scale, sub, Point, TetMesh, TriMesh};
 use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
 use crate::support::error::{Error, Result};
 
@@ -131,8 +131,14 @@ fn check_surface(surface: &TriMesh, source: &Path) -> Result<()> {
             return fail(format!("triangle {t} refers to vertex {v}, but the surface has {} vertices", positions.len()), "re-export the surface");
         }
         let [a, b, c] = triangle.map(|v| positions[v as usize]);
-        let longest = norm(sub(a, b)).max(norm(sub(b, c))).max(norm(sub(c, a)));
-        if norm(cross(sub(b, a), sub(c, a))) <= 1e-12 * longest * longest {
+        // Edges scaled by their largest coordinate before any product: squares and cross
+        // products overflow for a body 1e300 wide and vanish for one 1e-300 wide. A zero
+        // triangle gives NaN: no area.
+        let size = [sub(a, b), sub(b, c), sub(c, a)].iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let unit = |e: Point| scale(e, 1.0 / size);
+        let longest = norm(unit(sub(a, b))).max(norm(unit(sub(b, c)))).max(norm(unit(sub(c, a))));
+        let area = norm(cross(unit(sub(b, a)), unit(sub(c, a))));
+        if area.is_nan() || area <= 1e-12 * longest * longest {
             let [i, j, k] = triangle;
             return fail(
                 format!("triangle {t} (vertices {i} {j} {k}) has no area, near {}", at(a)),
@@ -548,6 +554,17 @@ mod tests {
         let mut surface = cube_at([0.0; 3]);
         surface.triangles[2] = [1, 1, 5];
         assert!(failure(&surface, &options(0.0, 0.0), TETGEN).contains("triangle 2 (vertices 1 1 5) has no area"));
+    }
+
+    #[test]
+    fn triangle_areas_are_judged_at_any_scale() {
+        for s in [1e-300, 1e300] {
+            let mut surface = cube_at([0.0; 3]);
+            surface.positions.iter_mut().for_each(|p| *p = scale(*p, s));
+            assert_eq!(check_surface(&surface, Path::new("box.obj")), Ok(()), "a box {s:e} wide");
+            surface.triangles[2] = [1, 1, 5];
+            assert!(check_surface(&surface, Path::new("box.obj")).unwrap_err().to_string().contains("triangle 2 (vertices 1 1 5) has no area"));
+        }
     }
 
     #[test]
