@@ -681,6 +681,17 @@ fn corpus() -> Vec<Bad> {
             "in/k1.obj",
             &["key 1 has a coordinate of 1.000e12, 5.8e11 times the rest shape's size (1.732e0) from the origin, beyond the 8192"],
         ),
+        // Once "has no area", then a TetGen abort.
+        bad(
+            "box-1e300",
+            vec![
+                text("k0.obj", obj::write(&scaled(cube(), [1e300; 3]))),
+                text("k1.obj", obj::write(&scaled(translated(cube(), [0.0, 0.5, 0.0]), [1e300; 3]))),
+                text("scene.toml", base.clone()),
+            ],
+            "in/k0.obj",
+            &["the surface is 1e300 units across, outside the 1e-30 to 1e30 that TetGen's arithmetic handles"],
+        ),
         // Materials and textures: a FIFO once hung the bake; a folder or device "did not exist";
         // a damaged or huge PNG was embedded as it was.
         bad(
