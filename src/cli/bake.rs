@@ -52,6 +52,8 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
     // A bake is the folder's whole blendsim content: an earlier bake's files go, whatever
     // scene wrote them (a renamed scene's too); files blendsim did not write stay.
     staging.replace_every_group();
+    // A user's file or folder at one of the names is refused before the work, not after.
+    staging.claim(&stages::bake::file_names(&scene))?;
     // Under --strict the warnings are printed once, as errors, if the bake gets that far.
     let progress = if args.strict { progress.without_warnings() } else { progress.clone() };
     let r = stages::Bake::new(&scene, &progress).method(args.method.map(Into::into)).budget(budget).files(&mut staging)?;

@@ -40,6 +40,6 @@ pub fn run(args: Args, progress: &Progress) -> Result<()> {
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None, &budget)?;
     let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
-    staging.write(&format!("{}.outputs.json", animation.scene.name), &stage_file::to_json(&outputs))?;
+    staging.write(&stages::export::outputs_list_name(&animation.scene), &stage_file::to_json(&outputs))?;
     staging.commit()
 }

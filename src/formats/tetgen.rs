@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::algorithms::geometry::surface::open_edges;
-use crate::algorithms::geometry::{bbox_diagonal, cross, norm, sub, Point, TetMesh, TriMesh};
+use crate::algorithms::geometry::{bbox_diagonal, cross, norm, scale, sub, Bounds, Point, TetMesh, TriMesh};
 use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
@@ -137,8 +137,14 @@ fn check_surface(surface: &TriMesh, source: &Path) -> Result<()> {
             return fail(format!("triangle {t} refers to vertex {v}, but the surface has {} vertices", positions.len()), "re-export the surface");
         }
         let [a, b, c] = triangle.map(|v| positions[v as usize]);
-        let longest = norm(sub(a, b)).max(norm(sub(b, c))).max(norm(sub(c, a)));
-        if norm(cross(sub(b, a), sub(c, a))) <= 1e-12 * longest * longest {
+        // Edges scaled by their largest coordinate before any product: squares and cross
+        // products overflow for a body 1e300 wide and vanish for one 1e-300 wide. A zero
+        // triangle gives NaN: no area.
+        let size = [sub(a, b), sub(b, c), sub(c, a)].iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let unit = |e: Point| scale(e, 1.0 / size);
+        let longest = norm(unit(sub(a, b))).max(norm(unit(sub(b, c)))).max(norm(unit(sub(c, a))));
+        let area = norm(cross(unit(sub(b, a)), unit(sub(c, a))));
+        if area.is_nan() || area <= 1e-12 * longest * longest {
             let [i, j, k] = triangle;
             return fail(
                 format!("triangle {t} (vertices {i} {j} {k}) has no area, near {}", at(a)),
@@ -176,8 +182,22 @@ fn check_surface(surface: &TriMesh, source: &Path) -> Result<()> {
             "close the hole in your modeling tool (fill it, or merge the vertices along the seam), then re-export",
         );
     }
+    // TetGen's predicates multiply up to five coordinates: beyond this extent they overflow
+    // or vanish (a box 1e300 wide made it abort).
+    let bounds = Bounds::of(positions);
+    let extent = (0..3).map(|d| bounds.hi[d] - bounds.lo[d]).fold(0.0f64, f64::max);
+    if !(MIN_EXTENT..=MAX_EXTENT).contains(&extent) {
+        return fail(
+            format!("the surface is {extent:e} units across, outside the {MIN_EXTENT:e} to {MAX_EXTENT:e} that TetGen's arithmetic handles"),
+            "export the mesh in sensible units (e.g. metres, and set [export] meters_per_unit)",
+        );
+    }
     Ok(())
 }
+
+/// The extents of a surface TetGen is given (see `check_surface`).
+const MIN_EXTENT: f64 = 1e-30;
+const MAX_EXTENT: f64 = 1e30;
 
 /// Read TetGen's output and check what the contract promises: some tets, the surface
 /// vertices as the first nodes in order, every tet with volume (then oriented positive).
@@ -552,6 +572,24 @@ mod tests {
         let mut surface = cube_at([0.0; 3]);
         surface.triangles[2] = [1, 1, 5];
         assert!(failure(&surface, &options(0.0, 0.0), TETGEN).contains("triangle 2 (vertices 1 1 5) has no area"));
+    }
+
+    #[test]
+    fn triangle_areas_are_judged_at_any_scale() {
+        for s in [1e-30, 1e30] {
+            let mut surface = cube_at([0.0; 3]);
+            surface.positions.iter_mut().for_each(|p| *p = scale(*p, s));
+            assert_eq!(check_surface(&surface, Path::new("box.obj")), Ok(()), "a box {s:e} wide");
+        }
+        // Beyond TetGen's range, the extent is the error, not "no area".
+        for s in [1e-300, 1e300] {
+            let mut surface = cube_at([0.0; 3]);
+            surface.positions.iter_mut().for_each(|p| *p = scale(*p, s));
+            let e = check_surface(&surface, Path::new("box.obj")).unwrap_err().to_string();
+            assert!(e.contains(&format!("the surface is {s:e} units across, outside the 1e-30 to 1e30")), "{e}");
+            surface.triangles[2] = [1, 1, 5];
+            assert!(check_surface(&surface, Path::new("box.obj")).unwrap_err().to_string().contains("triangle 2 (vertices 1 1 5) has no area"));
+        }
     }
 
     #[test]

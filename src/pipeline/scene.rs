@@ -14,7 +14,7 @@ pub use crate::algorithms::blendshape::clip::Weights;
 pub use crate::algorithms::geometry::Axis;
 pub use crate::algorithms::procedural::Twist;
 use crate::support::budget::Budget;
-use crate::support::error::{Error, Result};
+use crate::support::error::{number, Error, Result};
 
 mod cache_table;
 pub use cache_table::{CacheKeys, CacheSpec, DEFAULT_TOLERANCE};
@@ -727,7 +727,7 @@ impl Scene {
     pub(crate) fn validate(&self) -> Result<()> {
         check_name(&self.name)?;
         if !(self.fps.is_finite() && self.fps > 0.0) {
-            return invalid(format!("fps = {} must be positive", self.fps), "set fps to the frame rate, e.g. 60");
+            return invalid(format!("fps = {} must be positive", number(self.fps)), "set fps to the frame rate, e.g. 60");
         }
         if let Some(units) = &self.units {
             let names = UNIT_NAMES.map(|(n, _)| format!("\"{n}\"")).join(", ");
@@ -740,6 +740,13 @@ impl Scene {
                     return invalid(
                         format!("units = {given} is not a length unit"),
                         &format!("use one of {names}, or the meters in one unit (a number > 0)"),
+                    );
+                }
+                Some(m) if !(METERS_PER_UNIT_RANGE.0..=METERS_PER_UNIT_RANGE.1).contains(&m) => {
+                    let (min, max) = METERS_PER_UNIT_RANGE;
+                    return invalid(
+                        format!("units = {} m is out of range ({} to {} m per unit)", number(m), number(min), number(max)),
+                        &format!("use one of {names}, or the meters in one unit between {} and {}", number(min), number(max)),
                     );
                 }
                 Some(m) if self.export.meters_per_unit != 1.0 && self.export.meters_per_unit != m => {
@@ -805,7 +812,11 @@ fn check_selections(k: &KeyframeSpec) -> Result<()> {
                 if let (Some(lo), Some(hi)) = (min, max) {
                     if lo > hi {
                         return Err(Error::general(
-                            format!("[keyframes] {what}[{key}]: the {axis} slab has min = {lo} > max = {hi}, so it selects nothing"),
+                            format!(
+                                "[keyframes] {what}[{key}]: the {axis} slab has min = {} > max = {}, so it selects nothing",
+                                number(*lo),
+                                number(*hi)
+                            ),
                             "swap the bounds (use `invert = true` to select outside a slab)",
                         ));
                     }
@@ -841,13 +852,13 @@ impl KeyframeSpec {
             // (JSON has no infinity).
             if !twist.degrees.is_finite() {
                 return invalid(
-                    format!("[keyframes] meshes[{i}] has a twist of {} degrees", twist.degrees),
+                    format!("[keyframes] meshes[{i}] has a twist of {} degrees", number(twist.degrees)),
                     "give the twist angle as a finite number of degrees, e.g. 90.0",
                 );
             }
             if !(twist.axial_scale.is_finite() && twist.axial_scale > 0.0) {
                 return invalid(
-                    format!("[keyframes] meshes[{i}] has a twist with axial_scale = {} (it scales the axial coordinate: a zero or negative one flattens or mirrors the mesh)", twist.axial_scale),
+                    format!("[keyframes] meshes[{i}] has a twist with axial_scale = {} (it scales the axial coordinate: a zero or negative one flattens or mirrors the mesh)", number(twist.axial_scale)),
                     "give a positive axial_scale, e.g. 0.8, or leave it out (1)",
                 );
             }
@@ -855,13 +866,13 @@ impl KeyframeSpec {
         for i in 1..n {
             if self.times[i] < self.times[i - 1] {
                 return invalid(
-                    format!("[keyframes] times decrease at key {i} ({} after {})", self.times[i], self.times[i - 1]),
+                    format!("[keyframes] times decrease at key {i} ({} after {})", number(self.times[i]), number(self.times[i - 1])),
                     "list keyframe times in increasing order",
                 );
             }
             if self.times[i] == self.times[i - 1] {
                 return invalid(
-                    format!("[keyframes] keys {} and {i} share the time {} (a zero-length interval)", i - 1, self.times[i]),
+                    format!("[keyframes] keys {} and {i} share the time {} (a zero-length interval)", i - 1, number(self.times[i])),
                     "give every key its own time; for a contact list the key in `contact = [k]` and it is duplicated for you",
                 );
             }
@@ -912,13 +923,16 @@ impl KeyframeSpec {
 impl Tet {
     fn validate(&self) -> Result<()> {
         if !(self.quality.is_finite() && self.quality >= 1.0) && self.quality != 0.0 {
-            return invalid(format!("[tet] quality = {} must be >= 1 (or 0 for none)", self.quality), "TetGen needs a radius-edge bound like 1.414");
+            return invalid(
+                format!("[tet] quality = {} must be >= 1 (or 0 for none)", number(self.quality)),
+                "TetGen needs a radius-edge bound like 1.414",
+            );
         }
         if !(self.max_volume.is_finite() && self.max_volume >= 0.0) {
-            return invalid(format!("[tet] max_volume = {} must be >= 0", self.max_volume), "use 0 for no bound");
+            return invalid(format!("[tet] max_volume = {} must be >= 0", number(self.max_volume)), "use 0 for no bound");
         }
         if !(self.timeout.is_finite() && self.timeout > 0.0) {
-            return invalid(format!("[tet] timeout = {} must be positive", self.timeout), "give seconds, e.g. 120");
+            return invalid(format!("[tet] timeout = {} must be positive", number(self.timeout)), "give seconds, e.g. 120");
         }
         if self.max_nodes < 4 {
             return invalid(format!("[tet] max_nodes = {} is too small for a body", self.max_nodes), "use e.g. 3000");
@@ -930,16 +944,29 @@ impl Tet {
     }
 }
 
+/// The range of a material number (`stiffness`, `volume`, `density`, `damping`; all but
+/// `density` may also be 0): 21 decades around the defaults. Beyond it the solve's matrices
+/// lose every digit (a stiffness of 1e308 overflows; a density of 1e-300 leaves the body's
+/// motion without cost) and the bake would fail later as a "singular" system.
+pub const MATERIAL_RANGE: (f64, f64) = (1e-9, 1e12);
+
+/// The range of `[export] meters_per_unit`: micrometres to 1000 km. The glTF node scale is
+/// written as a 32-bit float, which holds it exactly enough (1e300 would be written as null,
+/// 1e-300 as 0).
+pub const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
+
 impl Material {
     fn validate(&self) -> Result<()> {
-        for (key, v, min_ok) in [
-            ("stiffness", self.stiffness, self.stiffness >= 0.0),
-            ("volume", self.volume, self.volume >= 0.0),
-            ("density", self.density, self.density > 0.0),
-            ("damping", self.damping, self.damping >= 0.0),
-        ] {
-            if !(v.is_finite() && min_ok) {
-                return invalid(format!("[material] {key} = {v} is out of range"), "use a finite, non-negative value (density > 0)");
+        let (min, max) = MATERIAL_RANGE;
+        for (key, v, zero_ok) in
+            [("stiffness", self.stiffness, true), ("volume", self.volume, true), ("density", self.density, false), ("damping", self.damping, true)]
+        {
+            if !((zero_ok && v == 0.0) || (min..=max).contains(&v)) {
+                let zero = if zero_ok { "0 or " } else { "" };
+                return invalid(
+                    format!("[material] {key} = {} is out of range ({zero}{} to {})", number(v), number(min), number(max)),
+                    "give a value in the range (the defaults are stiffness = volume = 70, density = 1, damping = 0.1)",
+                );
             }
         }
         if self.stiffness + self.volume <= 0.0 {
@@ -989,16 +1016,22 @@ impl Solver {
             );
         }
         if !(self.min_interval.is_finite() && self.min_interval > 0.0) {
-            return invalid(format!("[solver] min_interval = {} must be positive", self.min_interval), "use a small length in seconds, e.g. 0.001");
+            return invalid(
+                format!("[solver] min_interval = {} must be positive", number(self.min_interval)),
+                "use a small length in seconds, e.g. 0.001",
+            );
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
             return invalid(
-                format!("[solver] tolerance = {} must be positive", self.tolerance),
+                format!("[solver] tolerance = {} must be positive", number(self.tolerance)),
                 "use e.g. 0.001 (W decreasing by 0.1% over the last iterations)",
             );
         }
         if !(self.regularization.is_finite() && self.regularization >= 0.0) {
-            return invalid(format!("[solver] regularization = {} must be >= 0", self.regularization), "use a time scale like 0.1, or 0 for none");
+            return invalid(
+                format!("[solver] regularization = {} must be >= 0", number(self.regularization)),
+                "use a time scale like 0.1, or 0 for none",
+            );
         }
         Ok(())
     }
@@ -1031,10 +1064,17 @@ impl Export {
         if self.up_axis == Axis::X {
             return invalid("[export] up_axis = \"x\"".into(), "USD and glTF support \"y\" or \"z\" up");
         }
+        let (min, max) = METERS_PER_UNIT_RANGE;
         if !(self.meters_per_unit.is_finite() && self.meters_per_unit > 0.0) {
             return invalid(
-                format!("[export] meters_per_unit = {} must be positive", self.meters_per_unit),
+                format!("[export] meters_per_unit = {} must be positive", number(self.meters_per_unit)),
                 "use 1.0 for meters, 0.01 for centimeters",
+            );
+        }
+        if !(min..=max).contains(&self.meters_per_unit) {
+            return invalid(
+                format!("[export] meters_per_unit = {} is out of range ({} to {})", number(self.meters_per_unit), number(min), number(max)),
+                "give the length of one unit in metres: 1.0 for metres, 0.01 for centimetres, 0.001 for millimetres",
             );
         }
         if self.formats.is_empty() {
@@ -1099,7 +1139,7 @@ impl MassSpring {
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
             return invalid(
-                format!("[mass_spring] tolerance = {} must be between 0 and 1", self.tolerance),
+                format!("[mass_spring] tolerance = {} must be between 0 and 1", number(self.tolerance)),
                 "use e.g. 1e-7 (a fraction of the size)",
             );
         }

@@ -138,6 +138,17 @@ pub fn quoted(token: &str) -> String {
     format!("`{}...` ({} bytes)", printable(&head), token.len())
 }
 
+/// A number a user gave, for a message: in decimal from 1e-4 to 1e7 (`0.5`, `70`, `-1`),
+/// in exponent form beyond (`1e300`, `1e-300`, `1.5e-7`), so a message never echoes 300
+/// digits. Always the shortest text that reads back as the same number.
+pub fn number(x: f64) -> String {
+    if x.is_finite() && x != 0.0 && !(1e-4..1e7).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 impl std::error::Error for Error {}
 
 #[cfg(test)]
@@ -165,6 +176,30 @@ mod tests {
         let q = quoted(&"9".repeat(200_000_000 / 1000));
         assert_eq!(q, format!("`{}...` (200000 bytes)", "9".repeat(MAX_TOKEN - 8)));
         assert_eq!(quoted("a\u{1b}b"), "`a\\u{1b}b`");
+    }
+
+    #[test]
+    fn numbers_are_short() {
+        let cases = [
+            (1e300, "1e300"),
+            (1e-300, "1e-300"),
+            (-1e300, "-1e300"),
+            (0.5, "0.5"),
+            (70.0, "70"),
+            (-1.0, "-1"),
+            (0.0, "0"),
+            (1e6, "1000000"),
+            (1e7, "1e7"),
+            (123456789.0, "1.23456789e8"),
+            (1.5e-7, "1.5e-7"),
+            (f64::NAN, "NaN"),
+        ];
+        for (x, text) in cases {
+            assert_eq!(number(x), text);
+            assert!(x.is_nan() || text.parse::<f64>() == Ok(x), "{text} reads back");
+        }
+        assert_eq!(number(f64::MAX), "1.7976931348623157e308");
+        assert_eq!(number(f64::INFINITY), "inf");
     }
 
     #[test]

@@ -39,7 +39,8 @@ pub(crate) fn read_text(path: &Path, what: &str) -> Result<String> {
     })
 }
 
-fn kind(meta: &std::fs::Metadata) -> &'static str {
+/// What a file that is not a regular one is, for messages ("a folder", "a named pipe (FIFO)").
+pub(crate) fn kind(meta: &std::fs::Metadata) -> &'static str {
     let t = meta.file_type();
     if t.is_dir() {
         return "a folder";

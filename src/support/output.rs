@@ -19,7 +19,10 @@
 //!   formats leaves no stale file) and keeps everything else: other groups' files (`export`
 //!   then `report` into one folder) and files that are not blendsim's, which are hard-linked
 //!   into the new folder (folders re-created and their files linked), so they are never copied,
-//!   moved or lost. A file of the same name as one the commit writes is replaced. A run that
+//!   moved or lost. A file of the same name as one the commit writes is replaced only if it is
+//!   blendsim's (a regular file the manifest lists); anything else at such a name (a user's
+//!   file, a folder, a link, a FIFO) is refused by [`Staging::claim`] and the run fails with
+//!   nothing written, so a user's folder at `report.md` is never replaced. A run that
 //!   writes a folder's whole content ([`Staging::replace_every_group`]: a bake) removes every
 //!   file of the manifest it does not write again, whatever its group (a renamed scene's files
 //!   too), so the folder holds one bake. [`Staging::commit_with_summary`] says what was
@@ -496,14 +499,41 @@ impl Staging {
     }
 
     fn check_name(&self, name: &str) -> Result<()> {
-        if contained(name) == name && name != MANIFEST && name != MARKER {
-            return Ok(());
+        if contained(name) != name || name == MANIFEST || name == MARKER {
+            return Err(Error::in_file(
+                &self.target,
+                format!("refuses the output file name {}: it is not a plain file name", crate::support::error::quoted(name)),
+                "give the scene a `name` of letters, digits, '-' and '_'",
+            ));
         }
-        Err(Error::in_file(
-            &self.target,
-            format!("refuses the output file name {}: it is not a plain file name", crate::support::error::quoted(name)),
-            "give the scene a `name` of letters, digits, '-' and '_'",
-        ))
+        self.claim(&[name])
+    }
+
+    /// Refuse output names at which the folder holds something blendsim did not write: an
+    /// entry its manifest does not list, or one that is no longer a regular file (a folder
+    /// the user put at `report.md`). The commit would replace it, a folder with all it holds.
+    /// Checked when a file is staged and again at commit; a run that knows its names calls it
+    /// first, so the refusal comes before any work.
+    pub fn claim<S: AsRef<str>>(&self, names: &[S]) -> Result<()> {
+        let mut manifest = None;
+        for name in names.iter().map(AsRef::as_ref) {
+            let Ok(meta) = std::fs::symlink_metadata(self.folder.join(contained(name))) else { continue };
+            let ours = meta.is_file() && manifest.get_or_insert_with(|| read_manifest(&self.folder)).contains_key(name);
+            if ours {
+                continue;
+            }
+            let what = match meta.file_type() {
+                t if t.is_symlink() => "a link",
+                t if t.is_file() => "a file",
+                _ => crate::support::input::kind(&meta),
+            };
+            return Err(Error::in_file(
+                self.final_path(name),
+                format!("is {what} that blendsim did not write, at the name of a file this run writes; it is left as it is and nothing is written"),
+                "move or rename it, or choose another --out",
+            ));
+        }
+        Ok(())
     }
 
     /// Replace the output folder by the staged files (plus the files kept from it) in one step.

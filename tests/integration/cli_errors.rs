@@ -489,6 +489,27 @@ fn corpus() -> Vec<Bad> {
     };
     let index = |content: &str| vec![text("ends.txt", content), text("scene.toml", with("fixed = [\"all\", \"ends.txt\"]"))];
     let huge = "7".repeat(1_000_000);
+    // Keys in the material `wood` of m.mtl, whose texture is `tex`.
+    let textured = |mtl: Content, tex: Option<Content>| {
+        let with_mtl = |mesh: TriMesh| format!("mtllib m.mtl\nusemtl wood\n{}", obj::write(&mesh));
+        let mut files = vec![
+            text("k0.obj", with_mtl(cube())),
+            text("k1.obj", with_mtl(translated(cube(), [0.0, 0.5, 0.0]))),
+            ("m.mtl".to_string(), mtl),
+            text("scene.toml", base.clone()),
+        ];
+        files.extend(tex.map(|t| ("tex.png".to_string(), t)));
+        files
+    };
+    let mtl = || Content::Text("newmtl wood\nmap_Kd tex.png\n".into());
+    let png = crate::texture::png(2, 2, |x, y| [64 * x as u8, 64 * y as u8, 128]);
+    // The same PNG, its header claiming 10^6 x 10^6 pixels (the CRC made to match).
+    let mut claiming = png.clone();
+    claiming[16..24].copy_from_slice(&[1_000_000u32.to_be_bytes(), 1_000_000u32.to_be_bytes()].concat());
+    let crc = crate::texture::crc32(&claiming[12..29]);
+    claiming[29..33].copy_from_slice(&crc.to_be_bytes());
+    let garbage = [&png[..8], &[0x5a; 64]].concat();
+    let material = |key: &str, value: &str| table(&format!("[material]\n{key} = {value}"));
     vec![
         // The scene file itself.
         bad_scene("scene-syntax", "name = \"t\"\n[keyframes\nmeshes = []\n".into(), &["line 2: "]),
@@ -542,6 +563,13 @@ fn corpus() -> Vec<Bad> {
         bad_scene("max-volume", table("[tet]\nmax_volume = -1.0"), &["[tet] max_volume = -1 must be >= 0"]),
         bad_scene("timeout", table("[tet]\ntimeout = 0"), &["[tet] timeout = 0 must be positive"]),
         bad_scene("density", table("[material]\ndensity = 0.0"), &["[material] density = 0 is out of range"]),
+        // Once "singular: some motion costs nothing", with a fix that did not help.
+        bad_scene("stiffness-1e308", material("stiffness", "1e308"), &["[material] stiffness = 1e308 is out of range (0 or 1e-9 to 1e12)"]),
+        bad_scene("volume-1e308", material("volume", "1e308"), &["[material] volume = 1e308 is out of range"]),
+        bad_scene("density-1e-300", material("density", "1e-300"), &["[material] density = 1e-300 is out of range (1e-9 to 1e12)"]),
+        bad_scene("damping-huge", material("damping", "1e20"), &["[material] damping = 1e20 is out of range"]),
+        // Numbers echoed short, not in 300 digits.
+        bad_scene("tolerance-short", table("[solver]\ntolerance = -1e300"), &["tolerance = -1e300 must be positive"]),
         bad_scene("no-stiffness", table("[material]\nstiffness = 0.0\nvolume = 0.0"), &["stiffness and volume are both 0"]),
         bad_scene("samples-zero", table("[solver]\nsamples = 0"), &["[solver] samples = 0"]),
         bad_scene("samples-negative", table("[solver]\nsamples = -3"), &["line 7: invalid value: integer `-3`, expected usize"]),
@@ -550,6 +578,12 @@ fn corpus() -> Vec<Bad> {
         bad_scene("method", table("[solver]\nmethod = \"magic\""), &["unknown variant `magic`"]),
         bad_scene("up-axis", table("[export]\nup_axis = \"x\""), &["up_axis = \"x\""]),
         bad_scene("meters-per-unit", table("[export]\nmeters_per_unit = 0.0"), &["meters_per_unit = 0 must be positive"]),
+        bad_scene(
+            "meters-per-unit-1e300",
+            table("[export]\nmeters_per_unit = 1e300"),
+            &["meters_per_unit = 1e300 is out of range (1e-6 to 1000000)"],
+        ),
+        bad_scene("meters-per-unit-1e-300", table("[export]\nmeters_per_unit = 1e-300"), &["meters_per_unit = 1e-300 is out of range"]),
         bad_scene("formats-empty", table("[export]\nformats = []"), &["formats is empty"]),
         bad_scene("formats-unknown", table("[export]\nformats = [\"fbx\"]"), &["unknown variant `fbx`"]),
         // OBJ keyframes.
@@ -640,6 +674,60 @@ fn corpus() -> Vec<Bad> {
             "in/k0.node",
             &["line 1: the node count `x` is not a valid number"],
         ),
+        // Keys the files' 32-bit positions cannot hold: once baked 19801 diagonals off.
+        bad(
+            "key-far-away",
+            key1(obj::write(&translated(cube(), [1e12, 0.0, 0.0]))),
+            "in/k1.obj",
+            &["key 1 has a coordinate of 1.000e12, 5.8e11 times the rest shape's size (1.732e0) from the origin, beyond the 8192"],
+        ),
+        // Once "has no area", then a TetGen abort.
+        bad(
+            "box-1e300",
+            vec![
+                text("k0.obj", obj::write(&scaled(cube(), [1e300; 3]))),
+                text("k1.obj", obj::write(&scaled(translated(cube(), [0.0, 0.5, 0.0]), [1e300; 3]))),
+                text("scene.toml", base.clone()),
+            ],
+            "in/k0.obj",
+            &["the surface is 1e300 units across, outside the 1e-30 to 1e30 that TetGen's arithmetic handles"],
+        ),
+        // Materials and textures: a FIFO once hung the bake; a folder or device "did not exist";
+        // a damaged or huge PNG was embedded as it was.
+        bad(
+            "mtl-fifo",
+            textured(Content::Fifo, None),
+            "in/m.mtl",
+            &["is a named pipe (FIFO), not a regular file, so it cannot be read as the material library"],
+        ),
+        bad(
+            "texture-folder",
+            textured(mtl(), Some(Content::Folder)),
+            "in/m.mtl",
+            &["line 2: map_Kd names the texture `tex.png`, which is a folder, not an image file"],
+        ),
+        bad(
+            "texture-device",
+            textured(mtl(), Some(Content::Link("/dev/zero"))),
+            "in/m.mtl",
+            &["line 2: map_Kd names the texture `tex.png`, which is a device, not an image file"],
+        ),
+        bad(
+            "texture-damaged",
+            textured(mtl(), Some(Content::Bytes(garbage))),
+            "in/m.mtl",
+            &["line 2: map_Kd names the texture `tex.png`, which is not a readable png image: ", "(fix: re-save the image"],
+        ),
+        bad(
+            "texture-huge",
+            textured(mtl(), Some(Content::Bytes(claiming))),
+            "in/m.mtl",
+            &[
+                "which is a png image of 1000000 x 1000000 pixels, over the 16384 a side",
+                "(fix: scale the image down to at most 16384 pixels a side)",
+            ],
+        ),
+        bad("texture-gif", textured(mtl(), Some(Content::Bytes(b"GIF89a....".to_vec()))), "in/m.mtl", &["which is not a PNG or JPEG image"]),
         // Selection files.
         bad("dmat-half", dmat("0.5"), "in/sel.dmat", &["line 27: value `0.5` is neither 0 nor 1"]),
         bad("dmat-two", dmat("2"), "in/sel.dmat", &["value `2` is neither 0 nor 1"]),
@@ -1089,4 +1177,175 @@ fn corpus_of_bad_stage_files() {
         std::fs::remove_file(dir.join("bad.json")).unwrap();
     }
     eprintln!("| stage file edit | message (exit 1) |\n|---|---|\n{}", rows.join("\n"));
+}
+
+// --- Output names taken by the user, reports that are not files, and measures of nothing. ---
+
+/// A user's folder or file at the name of a file the bake writes (`report.md/`, `t.glb/`, a
+/// `t.glb` of their own) is refused before any stage runs: exit 1, one line naming it, the
+/// output folder and everything in it as it was. Once the folder was replaced and the user's
+/// files in it deleted without a word.
+#[test]
+fn a_users_folder_or_file_at_an_output_name_is_refused_before_the_work() {
+    let dir = TempDir::new("errors-output-names");
+    std::fs::create_dir_all(dir.join("in")).unwrap();
+    std::fs::write(dir.join("in/k0.obj"), obj::write(&cube())).unwrap();
+    std::fs::write(dir.join("in/k1.obj"), obj::write(&translated(cube(), [0.0, 0.5, 0.0]))).unwrap();
+    std::fs::write(dir.join("in/scene.toml"), good_scene("", "[export]\nformats = [\"glb\"]")).unwrap();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked", "-q"]).success();
+    let good = crate::common::cli::snapshot(&dir.join("out/baked"));
+    // Progress lines forced: a refusal before the work prints no stage.
+    let lines = [("BLENDSIM_PROGRESS", OsStr::new("lines"))];
+    let refused = |out: &str, entry: &str, what: &str| {
+        let before = tree(&dir.path);
+        let r = run_env(&dir.path, &["bake", "in/scene.toml", "--out", out], &lines);
+        assert_eq!(r.code, Some(1), "{entry}:\n{r}");
+        assert_one_line_error(&r);
+        assert_names(&r, &format!("{out}/{entry}"));
+        assert_says(&r, &format!("is {what} that blendsim did not write, at the name of a file this run writes"));
+        assert_says(&r, "(fix: move or rename it, or choose another --out)");
+        assert_eq!(tree(&dir.path), before, "{entry}: the run changed files:\n{r}");
+    };
+
+    // Over a bake: report.md replaced by a folder holding a user's file.
+    std::fs::remove_file(dir.join("out/baked/report.md")).unwrap();
+    std::fs::create_dir(dir.join("out/baked/report.md")).unwrap();
+    std::fs::write(dir.join("out/baked/report.md/notes.txt"), "mine").unwrap();
+    refused("out/baked", "report.md", "a folder");
+    assert_eq!(std::fs::read_to_string(dir.join("out/baked/report.md/notes.txt")).unwrap(), "mine");
+    std::fs::remove_dir_all(dir.join("out/baked/report.md")).unwrap();
+    // A folder, a file and a FIFO of the user's at t.glb in a folder blendsim never wrote.
+    std::fs::create_dir_all(dir.join("out/mine/t.glb")).unwrap();
+    std::fs::write(dir.join("out/mine/t.glb/keep.txt"), "mine").unwrap();
+    refused("out/mine", "t.glb", "a folder");
+    std::fs::remove_dir_all(dir.join("out/mine/t.glb")).unwrap();
+    std::fs::write(dir.join("out/mine/t.glb"), "my own glb").unwrap();
+    refused("out/mine", "t.glb", "a file");
+    std::fs::remove_file(dir.join("out/mine/t.glb")).unwrap();
+    make(&dir.join("out/mine"), "report.json", &Content::Fifo);
+    refused("out/mine", "report.json", "a named pipe (FIFO)");
+    std::fs::remove_file(dir.join("out/mine/report.json")).unwrap();
+
+    // Files blendsim wrote are replaced as before; the user's other files are kept.
+    std::fs::write(dir.join("out/mine/notes.txt"), "mine").unwrap();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "out/mine", "-q"]).success();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "out/baked", "-q"]).success();
+    assert_eq!(std::fs::read_to_string(dir.join("out/mine/notes.txt")).unwrap(), "mine");
+    let mut again = crate::common::cli::snapshot(&dir.join("out/baked"));
+    let mut good = good;
+    for report in [&mut again, &mut good] {
+        report.retain(|name, _| !name.starts_with("report."));
+    }
+    assert_eq!(again, good, "a re-bake gives the same files");
+}
+
+/// A texture named like a file the bake writes beside the USD files (`report.json`) would be
+/// overwritten by it: refused, naming the texture. Embedded in a glb it is harmless and bakes.
+#[test]
+fn a_texture_named_like_an_output_is_refused() {
+    let dir = TempDir::new("errors-texture-name");
+    std::fs::create_dir_all(dir.join("in")).unwrap();
+    let with_mtl = |mesh: TriMesh| format!("mtllib m.mtl\nusemtl wood\n{}", obj::write(&mesh));
+    std::fs::write(dir.join("in/k0.obj"), with_mtl(cube())).unwrap();
+    std::fs::write(dir.join("in/k1.obj"), with_mtl(translated(cube(), [0.0, 0.5, 0.0]))).unwrap();
+    std::fs::write(dir.join("in/m.mtl"), "newmtl wood\nmap_Kd report.json\n").unwrap();
+    std::fs::write(dir.join("in/report.json"), crate::texture::png(2, 2, |_, _| [200, 100, 50])).unwrap();
+    let scene_with = |formats: &str| scene(&["k0.obj", "k1.obj"], "", &format!("[export]\nformats = {formats}"));
+    std::fs::write(dir.join("in/scene.toml"), scene_with("[\"usda\"]")).unwrap();
+    let before = tree(&dir.path);
+    let r = run(&dir.path, &["bake", "in/scene.toml", "--out", "out"]);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_one_line_error(&r);
+    let texture = dir.join("in/report.json").canonicalize().unwrap();
+    assert_names(&r, &texture.display().to_string());
+    assert_says(&r, "the texture's file name `report.json` is that of a file the bake writes beside the USD files");
+    assert_says(&r, "(fix: rename the texture and its .mtl map_Kd line)");
+    assert_eq!(tree(&dir.path), before, "nothing written:\n{r}");
+    std::fs::write(dir.join("in/scene.toml"), scene_with("[\"glb\"]")).unwrap();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "out", "-q"]).success();
+    assert_eq!(crate::common::cli::read_json(&dir.join("out/report.json"))["scene"], "t", "the report is the report");
+}
+
+/// `report` over an outputs list whose files are empty (0 bytes) prints no `NaNx` or `infx`:
+/// the ratio is "n/a" in report.md and absent from report.json.
+#[test]
+fn a_report_of_empty_outputs_has_no_ratio() {
+    let dir = TempDir::new("errors-empty-outputs");
+    stage_files(&dir.path);
+    let mut outputs = crate::common::cli::read_json(&dir.join("exported/t.outputs.json"));
+    for f in outputs["data"]["files"].as_array_mut().unwrap() {
+        if f["kind"] == "blendshape" {
+            f["bytes"] = 0.into();
+        }
+    }
+    std::fs::write(dir.join("empty.outputs.json"), serde_json::to_vec(&outputs).unwrap()).unwrap();
+    run(&dir.path, &["report", "animation.json", "--outputs", "empty.outputs.json", "--out", "reported"]).success();
+    let md = std::fs::read_to_string(dir.join("reported/report.md")).unwrap();
+    assert!(!md.contains("NaN") && !md.contains("inf"), "{md}");
+    assert!(md.lines().any(|l| l.starts_with("| glb |") && l.ends_with("| 0 B | n/a |")), "{md}");
+    let json = crate::common::cli::read_json(&dir.join("reported/report.json"));
+    assert_eq!(json["ratios"], serde_json::json!({}), "{json}");
+}
+
+/// `report --batch` over a folder of bakes, one of whose report.json is a folder or a FIFO:
+/// one line naming it (once it was silently left out of the summary).
+#[test]
+fn a_batch_report_names_a_report_that_is_not_a_file() {
+    let dir = TempDir::new("errors-batch");
+    std::fs::create_dir_all(dir.join("in")).unwrap();
+    std::fs::write(dir.join("in/k0.obj"), obj::write(&cube())).unwrap();
+    std::fs::write(dir.join("in/k1.obj"), obj::write(&translated(cube(), [0.0, 0.5, 0.0]))).unwrap();
+    std::fs::write(dir.join("in/scene.toml"), good_scene("", "[export]\nformats = [\"glb\"]")).unwrap();
+    run(&dir.path, &["bake", "in/scene.toml", "--out", "bakes/a", "-q"]).success();
+    run(&dir.path, &["report", "--batch", "bakes", "--out", "summary"]).success();
+    std::fs::create_dir_all(dir.join("bakes/b/report.json")).unwrap();
+    for (content, what) in [(None, "a folder"), (Some(Content::Fifo), "a named pipe (FIFO)")] {
+        if let Some(content) = content {
+            std::fs::remove_dir(dir.join("bakes/b/report.json")).unwrap();
+            make(&dir.join("bakes/b"), "report.json", &content);
+        }
+        for batch in ["bakes", "bakes/b"] {
+            let before = crate::common::cli::snapshot(&dir.join("summary"));
+            let r = run(&dir.path, &["report", "--batch", batch, "--out", "summary"]);
+            assert_eq!(r.code, Some(1), "{r}");
+            assert_one_line_error(&r);
+            assert_names(&r, "bakes/b/report.json");
+            assert_says(&r, &format!("is {what}, not a regular file, so it cannot be read as a blendsim report"));
+            assert_eq!(crate::common::cli::snapshot(&dir.join("summary")), before, "the summary changed");
+        }
+    }
+}
+
+/// An `[embed] surface` far outside the body bakes with a warning on stderr, in report.json's
+/// `warnings` and in report.md; one on the body does not.
+#[test]
+fn an_embedded_surface_far_outside_the_body_is_a_warning() {
+    let dir = TempDir::new("errors-embed-far");
+    std::fs::create_dir_all(dir.join("in")).unwrap();
+    std::fs::write(dir.join("in/k0.obj"), obj::write(&cube())).unwrap();
+    std::fs::write(dir.join("in/k1.obj"), obj::write(&translated(cube(), [0.0, 0.5, 0.0]))).unwrap();
+    // The body's diagonal is sqrt(3): the far box's far side is 10 units out (5.77 diagonals),
+    // the near box's 0.05 (0.029).
+    std::fs::write(dir.join("in/far.obj"), obj::write(&translated(cube(), [10.0, 0.0, 0.0]))).unwrap();
+    std::fs::write(dir.join("in/near.obj"), obj::write(&translated(scaled(cube(), [1.1, 1.0, 1.0]), [-0.05, 0.0, 0.0]))).unwrap();
+    for (surface, warned) in [("far.obj", true), ("near.obj", false)] {
+        let text = good_scene("", &format!("[embed]\nsurface = \"{surface}\"\n[export]\nformats = [\"glb\"]"));
+        std::fs::write(dir.join("in/scene.toml"), text).unwrap();
+        let out = format!("out/{surface}");
+        let r = run(&dir.path, &["bake", "in/scene.toml", "--out", &out]).success();
+        let says = "the [embed] surface reaches";
+        let line = r.stderr.lines().find(|l| l.contains(says));
+        assert_eq!(line.is_some(), warned, "{surface}:\n{r}");
+        let json = crate::common::cli::read_json(&dir.join(&out).join("report.json"));
+        let listed = json["warnings"].as_array().is_some_and(|list| list.iter().any(|w| w.as_str().unwrap().contains(says)));
+        assert_eq!(listed, warned, "{surface}: {}", json["warnings"]);
+        let md = std::fs::read_to_string(dir.join(&out).join("report.md")).unwrap();
+        assert_eq!(md.contains(says), warned, "{surface}");
+        if let Some(line) = line {
+            assert!(
+                line.starts_with("blendsim: warning: in/k0.obj: the [embed] surface reaches 5.77 of this body's bounding-box diagonal"),
+                "{line}"
+            );
+        }
+    }
 }

@@ -25,16 +25,6 @@ use crate::common::verify::{check_outputs, library_animation, output_files};
 /// A PNG (8-bit RGB, no interlace) with stored (uncompressed) deflate blocks: every decoder
 /// reads it, and the test needs no image crate.
 pub(crate) fn png(width: usize, height: usize, pixel: impl Fn(usize, usize) -> [u8; 3]) -> Vec<u8> {
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut c = !0u32;
-        for &b in bytes {
-            c ^= b as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
-            }
-        }
-        !c
-    }
     let mut raw = Vec::with_capacity(height * (1 + 3 * width));
     for y in 0..height {
         raw.push(0); // filter: none
@@ -73,6 +63,18 @@ pub(crate) fn png(width: usize, height: usize, pixel: impl Fn(usize, usize) -> [
     chunk(b"IDAT", &zlib);
     chunk(b"IEND", &[]);
     out
+}
+
+/// The CRC-32 of a PNG chunk (its type and data).
+pub(crate) fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
+        }
+    }
+    !c
 }
 
 /// A UV-colour texture: red grows with u, green with v (OBJ's v, up the image), blue an 8 x 8
@@ -226,8 +228,8 @@ fn textured_obj_renders_with_its_texture_in_chromium_and_usd_references_it() {
 }
 
 /// Bad textures are one-line errors naming the file, with exit code 1 and no output folder: a
-/// `map_Kd` naming a missing file (the `.mtl` and its line), and an image that is neither PNG
-/// nor JPEG (the image).
+/// `map_Kd` naming a missing file or an image that is neither PNG nor JPEG (the `.mtl` and its
+/// line, found before the solve).
 #[test]
 fn missing_or_unsupported_textures_are_one_line_errors() {
     let dir = TempDir::new("texture-errors");
@@ -246,7 +248,7 @@ fn missing_or_unsupported_textures_are_one_line_errors() {
     std::fs::write(dir.join("uvgrid.gif"), b"GIF89a....").unwrap();
     let r = run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]);
     assert_eq!(r.code, Some(1), "{r}");
-    assert!(r.stderr.contains("uvgrid.gif: is not a PNG or JPEG image"), "{r}");
+    assert!(r.stderr.contains("prism.mtl: line 2: map_Kd names the texture `uvgrid.gif`, which is not a PNG or JPEG image"), "{r}");
     assert!(!dir.join("out").exists(), "no partial output");
 }
 

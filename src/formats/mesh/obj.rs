@@ -61,7 +61,11 @@ pub fn read(path: &Path) -> Result<TriMesh> {
 /// `(material, absolute texture path)` for each `newmtl` of a `.mtl` file with a `map_Kd`;
 /// nothing when the file does not exist.
 fn read_mtl_textures(mtl: &Path) -> Result<Vec<(String, String)>> {
-    let Ok(bytes) = std::fs::read(mtl) else { return Ok(Vec::new()) };
+    if std::fs::symlink_metadata(mtl).is_err() {
+        return Ok(Vec::new());
+    }
+    // Read as a regular file only: a FIFO would block the bake forever.
+    let bytes = crate::support::input::read_bytes(mtl, "the material library (.mtl)")?;
     let folder = mtl.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
     let mut material: Option<String> = None;
@@ -73,12 +77,22 @@ fn read_mtl_textures(mtl: &Path) -> Result<Vec<(String, String)>> {
                 let (Some(m), Some(file)) = (&material, tokens.last()) else { continue };
                 // Exporters on Windows write backslashes.
                 let texture = folder.join(file.replace('\\', "/"));
-                if !texture.is_file() {
+                let wrong = match std::fs::metadata(&texture) {
+                    Err(_) => Some("does not exist".to_string()),
+                    Ok(m) if !m.is_file() => Some(format!("is {}, not an image file", crate::support::input::kind(&m))),
+                    Ok(_) => None,
+                };
+                if let Some(what) = wrong {
                     return Err(Error::in_file(
                         mtl,
-                        format!("line {}: map_Kd names the texture {}, which does not exist", number + 1, quoted(file)),
+                        format!("line {}: map_Kd names the texture {}, which {what}", number + 1, quoted(file)),
                         "put the texture beside the .mtl (paths are relative to it), or remove the map_Kd line",
                     ));
+                }
+                // Checked now, before the solve, not when the export embeds it.
+                let header = std::fs::File::open(&texture).map_err(|e| Error::io(&texture, &e, "read the texture"))?;
+                if let Err((problem, fix)) = crate::formats::export::texture::inspect(std::io::BufReader::new(header)) {
+                    return Err(Error::in_file(mtl, format!("line {}: map_Kd names the texture {}, which {problem}", number + 1, quoted(file)), fix));
                 }
                 let absolute = texture.canonicalize().map_err(|e| Error::io(&texture, &e, "resolve the texture path"))?;
                 out.retain(|(x, _): &(String, String)| x != m);
@@ -313,7 +327,7 @@ mod tests {
     fn map_kd_of_the_mtl_gives_each_group_its_texture() {
         let dir = std::env::temp_dir().join(format!("blendsim-obj-mtl-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("tex")).unwrap();
-        std::fs::write(dir.join("tex/wood.png"), b"png").unwrap();
+        std::fs::write(dir.join("tex/wood.png"), crate::formats::export::texture::png_claiming(1, 1)).unwrap();
         let obj = "mtllib a.mtl\nmtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n\
                    usemtl wood\nf 1/1 2/1 3/1\nusemtl plain\nf 2/1 4/1 3/1\n";
         std::fs::write(dir.join("m.obj"), obj).unwrap();

@@ -14,13 +14,15 @@ use crate::support::error::{Error, Result};
 pub fn find_reports(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut found = Vec::new();
     for dir in dirs {
+        // Whatever is at a report's name is read as one: a folder or FIFO there is an error
+        // naming it, not a bake silently left out.
         let own = dir.join("report.json");
-        if own.is_file() {
+        if own.exists() {
             found.push(own);
             continue;
         }
         let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, &e, "list the bake folders"))?;
-        let mut inner: Vec<PathBuf> = entries.filter_map(|e| e.ok()).map(|e| e.path().join("report.json")).filter(|p| p.is_file()).collect();
+        let mut inner: Vec<PathBuf> = entries.filter_map(|e| e.ok()).map(|e| e.path().join("report.json")).filter(|p| p.exists()).collect();
         if inner.is_empty() {
             return Err(Error::in_file(
                 dir,
@@ -36,7 +38,7 @@ pub fn find_reports(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 /// Read one `report.json`.
 pub fn read(path: &Path) -> Result<Report> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, &e, "read the report"))?;
+    let bytes = crate::support::input::read_bytes(path, "a blendsim report")?;
     serde_json::from_slice(&bytes)
         .map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }

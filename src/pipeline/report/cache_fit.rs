@@ -74,7 +74,7 @@ impl From<CacheDeviation> for CacheError {
 
 /// Per format: `cache_bytes` / the blendshape file's bytes.
 pub fn cache_ratios(cache_bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
-    outputs.iter().filter(|f| f.kind == OutputKind::Blendshape).map(|f| (f.format, cache_bytes as f64 / f.bytes as f64)).collect()
+    outputs.iter().filter(|f| f.kind == OutputKind::Blendshape && f.bytes > 0).map(|f| (f.format, cache_bytes as f64 / f.bytes as f64)).collect()
 }
 
 /// The report.md lines of a cache bake: the error and the sizes side by side.
@@ -101,7 +101,8 @@ pub fn markdown(c: &CacheReport, outputs: &[OutputFile]) -> String {
     s.push_str(&format!("| input cache | {} | {} | 1.0 |\n", c.format, c.bytes));
     for kind in [OutputKind::FullFrame, OutputKind::Blendshape] {
         for f in outputs.iter().filter(|f| f.kind == kind) {
-            s.push_str(&format!("| {} | {} | {} | {:.1} |\n", f.path, f.format, f.bytes, c.bytes as f64 / f.bytes as f64));
+            let ratio = if f.bytes > 0 { format!("{:.1}", c.bytes as f64 / f.bytes as f64) } else { "n/a".into() };
+            s.push_str(&format!("| {} | {} | {} | {ratio} |\n", f.path, f.format, f.bytes));
         }
     }
     s

@@ -16,6 +16,8 @@ pub mod code {
     /// The body's size, in meters after `units`, is far from what the material is meant for
     /// (`tetrahedralize`).
     pub const BODY_SIZE: &str = "body-size";
+    /// An `[embed] surface` reaching far outside the body (`tetrahedralize`).
+    pub const EMBED_FAR: &str = "embed-far";
     /// The solve stopped before its stopping rule was met.
     pub const NOT_CONVERGED: &str = "not-converged";
     /// The exported animation misses the input keyframes by more than [`super::KEYS_MOVED_SHARE`].

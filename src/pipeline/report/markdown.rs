@@ -1,6 +1,7 @@
 //! `report.md`: the report as Markdown tables.
 
 use super::Report;
+use crate::pipeline::scene::Format;
 use crate::pipeline::stage_file::OutputKind;
 
 /// The report as Markdown tables: a person reads it in a terminal or a merge request.
@@ -144,12 +145,15 @@ pub fn render(report: &Report) -> String {
     push(&mut s, String::new());
     push(&mut s, "| format | full-frame | blendshape | smaller by |".into());
     push(&mut s, "|---|---:|---:|---:|".into());
-    for (format, ratio) in &report.ratios {
-        let size = |kind| report.outputs.iter().find(|f| f.format == *format && f.kind == kind).map_or(0, |f| f.bytes);
-        push(
-            &mut s,
-            format!("| {format} | {} | {} | {ratio:.1}x |", human_bytes(size(OutputKind::FullFrame)), human_bytes(size(OutputKind::Blendshape))),
-        );
+    let mut formats: Vec<Format> = report.outputs.iter().filter(|f| f.kind == OutputKind::FullFrame).map(|f| f.format).collect();
+    formats.sort();
+    formats.dedup();
+    for format in formats {
+        let size = |kind| report.outputs.iter().find(|f| f.format == format && f.kind == kind).map(|f| f.bytes);
+        let (Some(full), Some(blend)) = (size(OutputKind::FullFrame), size(OutputKind::Blendshape)) else { continue };
+        // An empty file has no ratio (see `size_ratios`).
+        let ratio = report.ratios.get(&format).map_or("n/a".to_string(), |r| format!("{r:.1}x"));
+        push(&mut s, format!("| {format} | {} | {} | {ratio} |", human_bytes(full), human_bytes(blend)));
     }
     push(&mut s, String::new());
     push(&mut s, "| file | kind | bytes |".into());

@@ -61,7 +61,8 @@ pub fn size_ratios(outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
     let mut ratios = BTreeMap::new();
     for format in [Format::Usda, Format::Usdc, Format::Glb] {
         let size = |kind| outputs.iter().find(|f| f.format == format && f.kind == kind).map(|f| f.bytes);
-        if let (Some(full), Some(blend)) = (size(OutputKind::FullFrame), size(OutputKind::Blendshape)) {
+        // No ratio of an empty file (a damaged outputs list): it would read NaN or inf.
+        if let (Some(full @ 1..), Some(blend @ 1..)) = (size(OutputKind::FullFrame), size(OutputKind::Blendshape)) {
             ratios.insert(format, full as f64 / blend as f64);
         }
     }

@@ -23,6 +23,9 @@ use crate::pipeline::stage_file::{CageInfo, OutputFile, SolverLog};
 use crate::support::error::Result;
 use crate::support::output::Staging;
 
+/// The files [`Report::write`] stages.
+pub const FILES: [&str; 2] = ["report.json", "report.md"];
+
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Deviation {
@@ -136,8 +139,9 @@ impl Report {
     /// Stage `report.json` and `report.md`, in the staging group `report` (a commit replaces
     /// the report an earlier run wrote, and keeps an export's files beside it).
     pub fn write(&self, staging: &mut Staging) -> Result<()> {
+        let [json, md] = FILES;
         staging.set_group("report");
-        staging.write("report.json", &self.to_json())?;
-        staging.write("report.md", markdown::render(self).as_bytes())
+        staging.write(json, &self.to_json())?;
+        staging.write(md, markdown::render(self).as_bytes())
     }
 }

@@ -92,6 +92,13 @@ impl<'a> Bake<'a> {
     }
 }
 
+/// The files a bake of `scene` writes, textures aside: the export's and the report.
+pub fn file_names(scene: &SceneFile) -> Vec<String> {
+    let mut names = super::export::file_names(&scene.scene);
+    names.extend(crate::pipeline::report::FILES.map(String::from));
+    names
+}
+
 /// Bake `scene` into `staging`: the files of every stage and the report (see [`Bake::files`]).
 pub fn bake(scene: &SceneFile, method: Option<Method>, staging: &mut Staging, progress: &Progress) -> Result<Report> {
     Bake::new(scene, progress).method(method).files(staging)

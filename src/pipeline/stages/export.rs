@@ -18,10 +18,10 @@ use crate::algorithms::blendshape::principal::{smallest_rank, Components};
 use crate::algorithms::geometry::{bbox_diagonal, Axis};
 use crate::formats::export::{glb, texture, usd, usda, usdc};
 use crate::pipeline::report::measures::deviation;
-use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, DEFAULT_TOLERANCE};
+use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, Scene, DEFAULT_TOLERANCE};
 use crate::pipeline::stage_file::{Animation, OutputFile, OutputKind, Outputs};
 use crate::support::budget::Budget;
-use crate::support::error::{Error, Result};
+use crate::support::error::{quoted, Error, Result};
 use crate::support::output::Staging;
 use crate::support::progress::Progress;
 
@@ -59,6 +59,24 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
     let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
     if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {
+        // Beside the USD files a texture named like a file the run writes would be overwritten.
+        let taken: Vec<String> =
+            file_names(scene).into_iter().chain(crate::pipeline::report::FILES.map(String::from)).chain([outputs_list_name(scene)]).collect();
+        let sources = attributes.map_or(&[][..], |a| &a.textures);
+        for (source, t) in sources.iter().zip(&textures) {
+            if let (Some(source), Some(t)) = (source, t) {
+                if taken.contains(&t.file_name) {
+                    return Err(Error::in_file(
+                        source,
+                        format!(
+                            "the texture's file name {} is that of a file the bake writes beside the USD files, so one would overwrite the other",
+                            quoted(&t.file_name)
+                        ),
+                        "rename the texture and its .mtl map_Kd line",
+                    ));
+                }
+            }
+        }
         let mut copied: Vec<&str> = Vec::new();
         for t in textures.iter().flatten() {
             if !copied.contains(&t.file_name.as_str()) {
@@ -67,15 +85,10 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
             }
         }
     }
-    let mut forms = vec![(OutputKind::Blendshape, String::new())];
-    if full.is_some() {
-        forms.push((OutputKind::FullFrame, ".full".into()));
-    }
-
+    let forms = forms(scene);
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
-    for (kind, suffix) in forms {
-        let stem = format!("{}{suffix}", scene.name);
+    for kind in forms {
         // The full-frame USD files are written from `full` itself, its points streamed
         // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
         // text: only the blendshape form builds its layer.
@@ -83,7 +96,7 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
         let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)))
             .then(|| usd::blendshapes(clip, triangles, attributes, &settings));
         for &format in &formats {
-            let name = format!("{stem}.{}", format.extension());
+            let name = file_name(&scene.name, kind, format);
             bar.set_message(format!("export: {name}"));
             match format {
                 Format::Usda => match &full {
@@ -119,6 +132,32 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     }
     bar.finish_and_clear();
     Ok(Outputs { files, rank })
+}
+
+/// The forms the scene exports: blendshapes, and full-frame when `[export] full_frame`.
+fn forms(scene: &Scene) -> Vec<OutputKind> {
+    let mut forms = vec![OutputKind::Blendshape];
+    if scene.export.full_frame {
+        forms.push(OutputKind::FullFrame);
+    }
+    forms
+}
+
+/// `NAME.EXT` (blendshapes) or `NAME.full.EXT` (full-frame).
+fn file_name(name: &str, kind: OutputKind, format: Format) -> String {
+    let suffix = if kind == OutputKind::FullFrame { ".full" } else { "" };
+    format!("{name}{suffix}.{}", format.extension())
+}
+
+/// The names of the files [`export_with`] stages for `scene`, its textures aside (they are
+/// known once the meshes are read).
+pub fn file_names(scene: &Scene) -> Vec<String> {
+    forms(scene).into_iter().flat_map(|kind| scene.export.formats.iter().map(move |&f| file_name(&scene.name, kind, f))).collect()
+}
+
+/// `NAME.outputs.json`: the list of files `blendsim export` writes beside them.
+pub fn outputs_list_name(scene: &Scene) -> String {
+    format!("{}.outputs.json", scene.name)
 }
 
 /// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):

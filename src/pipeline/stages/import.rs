@@ -166,6 +166,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         meshes.check_loop(rest_points)?;
     }
     check_key_volumes(&rest, &meshes.poses, &meshes.paths)?;
+    check_key_precision(rest_points, &meshes.poses, &meshes.paths)?;
     let display = match &scene.embed.surface {
         Some(p) => {
             let mut s = mesh::obj::read(&scene_file.resolve(p))?;
@@ -320,6 +321,35 @@ fn check_rest_fold(rest: &TetMesh, path: &Path) -> Result<()> {
         ),
         "untangle the rest mesh in the modeling tool so that no tet is turned inside out",
     ))
+}
+
+/// How far from the origin, in rest bounding-box diagonals, a key's coordinates may lie: the
+/// files keep positions as 32-bit floats, whose spacing there is 2^13 * 2^-23 = 2^-10 (about
+/// 0.1%) of the diagonal. Farther, the shape is rounded by more (keys moved 1e12 units away
+/// came back 19801 diagonals off).
+pub const MAX_OFFSET_DIAGONALS: f64 = 8192.0;
+
+/// Every key's coordinates must be within [`MAX_OFFSET_DIAGONALS`] of the origin, so the
+/// exported 32-bit positions keep the shape.
+fn check_key_precision(rest: &[Point], poses: &[Vec<Point>], paths: &[PathBuf]) -> Result<()> {
+    let diagonal = geometry::bbox_diagonal(rest);
+    if diagonal.is_nan() || diagonal <= 0.0 {
+        return Ok(()); // the rest shape's own checks report it
+    }
+    for (k, pose) in poses.iter().enumerate() {
+        let farthest = pose.iter().flat_map(|p| p.iter()).fold(0.0f64, |m, c| m.max(c.abs()));
+        let offset = farthest / diagonal;
+        if offset.is_nan() || offset > MAX_OFFSET_DIAGONALS {
+            return Err(Error::in_file(
+                &paths[k],
+                format!(
+                    "key {k} has a coordinate of {farthest:.3e}, {offset:.1e} times the rest shape's size ({diagonal:.3e}) from the origin, beyond the {MAX_OFFSET_DIAGONALS} that the files' 32-bit positions keep to 0.1%"
+                ),
+                "move the object near the origin before exporting the keys (or check that every key is in the same units)",
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A key whose enclosed volume is negative (mirrored: a negative scale in the exporter) or

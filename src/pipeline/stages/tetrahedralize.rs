@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use crate::algorithms::cage::fit::{carry_mask, CageFit};
 use crate::algorithms::cage::{voxel_cage, CageError, Defects};
 use crate::algorithms::embed::Binding;
-use crate::algorithms::geometry::{surface, Point, TetMesh, TriMesh};
+use crate::algorithms::geometry::{surface, Bounds, Point, TetMesh, TriMesh};
 use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::equilibrium::Equilibrium;
 use crate::formats::tetgen::{self, TetgenOptions};
@@ -38,7 +38,8 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 }
 
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
-/// to export; a body whose size is far from the material's ([`implausible_size`]) is warned of.
+/// to export; a body whose size is far from the material's ([`implausible_size`]) and an
+/// `[embed] surface` far outside the body ([`embedded_far_outside`]) are warned of.
 pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
     let mut body = simulation_body(keys, budget, progress)?;
     let rest = match &keys.rest {
@@ -50,6 +51,10 @@ pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) ->
             progress.warn(&w);
             body.warnings.push(w);
         }
+    }
+    if let Some(w) = keys.display.as_ref().and_then(|display| embedded_far_outside(&display.positions, keys)) {
+        progress.warn(&w);
+        body.warnings.push(w);
     }
     Ok(body)
 }
@@ -80,6 +85,32 @@ fn implausible_size(diagonal: f64, meters_per_unit: f64, source: &str) -> Option
          the material is meant for: {fix}otherwise scale [material] to the body (formats/scene.md, \"The default material\")"
         ),
     ))
+}
+
+/// An embedded surface point farther than this share of the body's bounding-box diagonal
+/// outside the body's box is a warning: points outside the tets are carried by the nearest
+/// tet's motion extrapolated, which is right only close to the body.
+pub const EMBED_FAR: f64 = 0.1;
+
+/// The warning for an `[embed] surface` whose farthest point lies more than [`EMBED_FAR`]
+/// of the body's diagonal outside the body's bounding box (at rest).
+fn embedded_far_outside(display: &[Point], keys: &Keyframes) -> Option<String> {
+    let rest = match &keys.rest {
+        Shape::Surface(s) => &s.positions,
+        Shape::Volume(v) => &v.positions,
+    };
+    let body = Bounds::of(rest);
+    let diagonal = body.diagonal();
+    let farthest = display.iter().map(|&p| body.distance(p)).fold(0.0, f64::max);
+    (farthest > EMBED_FAR * diagonal).then(|| {
+        crate::pipeline::report::guard_rails::coded(
+            crate::pipeline::report::guard_rails::code::EMBED_FAR,
+            format_args!(
+            "{}: the [embed] surface reaches {:.2} of this body's bounding-box diagonal outside its box (more than {EMBED_FAR}), and its far points follow the nearest tets' motion extrapolated (give an [embed] surface that lies on or inside the body, in the keys' units and placement)",
+            keys.rest_source,
+            farthest / diagonal
+        ))
+    })
 }
 
 /// The body of `keys`, before its size is judged ([`tetrahedralize`]).
