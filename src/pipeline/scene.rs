@@ -944,11 +944,15 @@ impl Tet {
     }
 }
 
-/// The range of a material number (`stiffness`, `volume`, `density`, `damping`; all but
-/// `density` may also be 0): 21 decades around the defaults. Beyond it the solve's matrices
-/// lose every digit (a stiffness of 1e308 overflows; a density of 1e-300 leaves the body's
-/// motion without cost) and the bake would fail later as a "singular" system.
-pub const MATERIAL_RANGE: (f64, f64) = (1e-9, 1e12);
+/// The range of `stiffness`, `volume` and `density` (the first two may also be 0): wide enough
+/// for a material converted by hand to any length unit (density scales with the cube of the
+/// unit: a body in nanometres has density 1e27), narrow enough that the solve's matrices keep
+/// their digits (a stiffness of 1e308 overflows; a density of 1e-300 leaves the body's motion
+/// without cost, and the bake would fail later as a "singular" system).
+pub const MATERIAL_RANGE: (f64, f64) = (1e-30, 1e30);
+
+/// The range of `damping` (per second, whatever the length unit; it may also be 0).
+pub const DAMPING_RANGE: (f64, f64) = (1e-9, 1e12);
 
 /// The range of `[export] meters_per_unit`: micrometres to 1000 km. The glTF node scale is
 /// written as a 32-bit float, which holds it exactly enough (1e300 would be written as null,
@@ -957,10 +961,12 @@ pub const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
 
 impl Material {
     fn validate(&self) -> Result<()> {
-        let (min, max) = MATERIAL_RANGE;
-        for (key, v, zero_ok) in
-            [("stiffness", self.stiffness, true), ("volume", self.volume, true), ("density", self.density, false), ("damping", self.damping, true)]
-        {
+        for (key, v, zero_ok, (min, max)) in [
+            ("stiffness", self.stiffness, true, MATERIAL_RANGE),
+            ("volume", self.volume, true, MATERIAL_RANGE),
+            ("density", self.density, false, MATERIAL_RANGE),
+            ("damping", self.damping, true, DAMPING_RANGE),
+        ] {
             if !((zero_ok && v == 0.0) || (min..=max).contains(&v)) {
                 let zero = if zero_ok { "0 or " } else { "" };
                 return invalid(

@@ -212,7 +212,8 @@ fn interrupt(signal: i32, phase: &Phase) -> String {
             assert_eq!(normalized(&folder), f.old, "restored by the next run");
         }
         let r = run_env(&case.path, &["bake", "in/new.toml", "--out", "out/box", "-q"], &[("TMPDIR", tmp.as_os_str())]).success();
-        assert!(r.stderr.is_empty(), "{r}");
+        // Quiet but for the scene's own warnings (its free middle key moves: keys-moved).
+        assert!(r.stderr.lines().all(|l| l.starts_with("blendsim: warning: ")), "{r}");
         assert_eq!(normalized(&folder), f.new, "the next bake completes");
         format!("{} left; removed by the next bake", leftovers.join(" "))
     } else {
