@@ -10,7 +10,7 @@
 //!
 //! # Algorithm
 //!
-//! 1. A BVH over the tets' boxes ([`bvh`]) is built once per [`Binding::compute`].
+//! 1. A BVH over the tets' boxes (`bvh`) is built once per [`Binding::compute`].
 //! 2. Containment: among the tets whose box holds the point, the lowest-index one whose
 //!    barycentric coordinates are all `>= -EPS` binds it, with those coordinates.
 //! 3. Otherwise, nearest: a best-first search by box distance computes the closest point on

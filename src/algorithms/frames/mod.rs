@@ -1,6 +1,6 @@
 //! Frame sequences (what a vertex cache holds) and the algorithms on them: the least-squares
 //! Hermite [`fit`] on given keys, the automatic choice of [`keyframes`], the [`deviation`] of a
-//! trajectory from every frame, and frame [`range`]s.
+//! trajectory from every frame, and frame `range`s.
 //!
 //! [`FrameSource`] is the contract between the cache readers ([`crate::formats::cache`]) and
 //! what consumes a cache: the readers implement it, the algorithms here only read frames

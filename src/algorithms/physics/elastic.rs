@@ -483,7 +483,7 @@ impl Elastic {
 
     /// `J p(x)` with fresh projections, on the calling thread, without storing the targets:
     /// the bytes of `apply_j_sequential(&local_step_sequential(x))` (the projection and its
-    /// node forces in one vectorized kernel, [`project_forces`]).
+    /// node forces in one vectorized kernel, `project_forces`).
     pub fn projected_forces_sequential(&self, x: &[Point], out: &mut [Point]) {
         out.fill([0.0; 3]);
         let (share, count) = (self.strain_share(), self.tet_count());

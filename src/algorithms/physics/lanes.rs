@@ -1,12 +1,12 @@
 //! The SIMD lane layer: `N` values of `f64` (or `N` conditions) combined lane by lane, 3-vectors
 //! and 3x3 matrices of lanes, and the run-time choice of the widest vector instructions.
 //!
-//! Kernels written on [`Lanes`] do per lane exactly the operations their scalar form does (every
+//! Kernels written on `Lanes` do per lane exactly the operations their scalar form does (every
 //! branch a per-lane select; no fused multiply-adds are ever generated), so a value gets the same
 //! bytes whether it goes through one lane, a batch of [`BATCH`], or a build for AVX2 or AVX-512.
 //! Users: the signed SVD and the projections of the local step ([`super::svd3`],
 //! [`super::projection`]), and the supernodal sweeps of the Cholesky solve
-//! ([`super::cholesky`]), which are compiled for AVX2 by [`simd_dispatch`].
+//! ([`super::cholesky`]), which are compiled for AVX2 by `simd_dispatch`.
 
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 

@@ -194,7 +194,7 @@ pub(crate) type PathForces = [[[Lanes<BATCH>; 3]; 4]; 3];
 /// (value, first, second derivative) and corner `k`, `weights[l] P_m grads[l][k]` with the
 /// sums of [`Elastic::apply_j_sequential`](super::elastic::Elastic::apply_j_sequential), so
 /// that adding them per node in tet order gives its bytes. Written into `out[l][m][k]` (the
-/// kernel itself writes lanes, [`project_along_forces_lanes`]).
+/// kernel itself writes lanes, `project_along_forces_lanes`).
 #[cfg_attr(not(test), allow(dead_code))]
 pub fn project_along_forces(
     f: &[Mat3; BATCH],

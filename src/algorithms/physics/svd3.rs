@@ -17,7 +17,7 @@
 //!
 //! Speed: one decomposition is a chain of dependent square roots and divisions (latency bound,
 //! ~370 ns), so the local step decomposes [`BATCH`] matrices at once
-//! ([`svd_lanes`]): the same code runs on lanes ([`super::lanes`]: `[f64; N]` arithmetic that
+//! (`svd_lanes`): the same code runs on lanes ([`super::lanes`]: `[f64; N]` arithmetic that
 //! the compiler turns into SIMD, AVX-512 or AVX2 chosen at run time), every branch a per-lane
 //! select and the Jacobi sweeps continuing until the slowest lane has converged while converged
 //! lanes stay frozen. Each lane does exactly the operations [`svd3`] does on its own (which is
@@ -175,7 +175,7 @@ pub fn svd3(f: &Mat3) -> Svd3 {
 }
 
 /// [`svd3`] of [`BATCH`] matrices at once (bit-identical to it, lane by lane). The batched
-/// kernels (the local step, the timing derivatives) run [`svd_lanes`] inside themselves; this
+/// kernels (the local step, the timing derivatives) run `svd_lanes` inside themselves; this
 /// entry point is for callers that need the decompositions themselves.
 #[cfg_attr(not(test), allow(dead_code))]
 pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {

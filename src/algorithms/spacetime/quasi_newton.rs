@@ -11,7 +11,7 @@
 //! along the slow (bending, twisting) motions, and the preconditioned direction is too short:
 //! every accepted step measures the curvature along its direction (`sᵀy / t²` for the step
 //! `s = t d`), and with it the step a quadratic model would have taken, `t* = -gᵀd t² / sᵀy`,
-//! which is 1.3 to 4.7 on TWIST and the demo (measured, not 1). With [`Lbfgs::scaled`], `H₀` is
+//! which is 1.3 to 4.7 on TWIST and the demo (measured, not 1). With `Lbfgs::scaled`, `H₀` is
 //! multiplied by the product of these ratios (kept within [`H0_SCALE_RANGE`]), so the next
 //! direction's `H₀` part is as long as the last one should have been. Scaling `H₀` leaves the
 //! pairs' secant equations intact. It is Shanno and Phua's scaling (Nocedal & Wright, eq. 7.20,

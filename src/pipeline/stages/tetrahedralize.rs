@@ -38,8 +38,8 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 }
 
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
-/// to export; a body whose size is far from the material's ([`implausible_size`]) and an
-/// `[embed] surface` far outside the body ([`embedded_far_outside`]) are warned of.
+/// to export; a body whose size is far from the material's (`implausible_size`) and an
+/// `[embed] surface` far outside the body (`embedded_far_outside`) are warned of.
 pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
     let mut body = simulation_body(keys, budget, progress)?;
     let rest = match &keys.rest {

@@ -4,8 +4,8 @@
 //! ([`Cholesky::solve_rows3`]).
 //!
 //! Three concerns, three files: this one wraps faer (symbolic analysis in a given
-//! [`FillOrdering`], numeric factorization, solves through faer); [`split`] plans how the elimination tree is shared by
-//! two threads; [`sweeps`] are the forward and backward sweeps for three right-hand sides
+//! [`FillOrdering`], numeric factorization, solves through faer); `split` plans how the elimination tree is shared by
+//! two threads; `sweeps` are the forward and backward sweeps for three right-hand sides
 //! (portable code, compiled for AVX2 when the CPU has it; same bytes either way).
 
 mod numeric;
@@ -89,7 +89,7 @@ impl Cholesky {
     }
 
     /// Numeric refactorization of a matrix with the same pattern. A supernodal factor is
-    /// computed by [`numeric::factorize`] (two threads on the two halves of the elimination
+    /// computed by `numeric::factorize` (two threads on the two halves of the elimination
     /// tree, same bytes on one); a simplicial one (small systems) by faer.
     pub fn refactor(&mut self, lower: &SparseColMat<usize, f64>) -> Result<(), NotPositiveDefinite> {
         let par = self.par;

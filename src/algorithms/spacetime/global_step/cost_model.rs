@@ -29,7 +29,7 @@ pub(super) const ASSUMED_CG_ITERATIONS: f64 = 40.0;
 pub(super) const CG_ITERATION_PER_SWEEP: f64 = 1.3;
 
 /// The size of the modal step: basis nodes, time slots, held entries in the basis and the
-/// nodes they are on (see [`super::modal`]).
+/// nodes they are on (see `super::modal`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ModalSize {
     /// Nodes of the basis (every node but the supports).
@@ -43,11 +43,11 @@ pub struct ModalSize {
 }
 
 impl ModalSize {
-    /// Predicted (seconds, peak bytes) of building the modal step and [`ASSUMED_SOLVES`] solves:
+    /// Predicted (seconds, peak bytes) of building the modal step and `ASSUMED_SOLVES` solves:
     /// the eigendecomposition (`EIGEN_SECONDS_PER_NODE3 n³`), the capacitance matrix (`c² n`
     /// flops) and its factor (`c³ / 3`), and per solve the two products with `Φ`
     /// (`2 × 2 n² × 3 slots` flops), the two with the held rows of `Φ`, the capacitance solve and
-    /// the per-mode systems, times [`MODAL_SOLVE_OVERHEAD`].
+    /// the per-mode systems, times `MODAL_SOLVE_OVERHEAD`.
     pub fn predicted(&self) -> (f64, f64) {
         let (n, s, c, h) = (self.nodes as f64, self.slots as f64, self.held as f64, self.held_nodes as f64);
         let setup = EIGEN_SECONDS_PER_NODE3 * n * n * n + (c * c * n + c * c * c / 3.0) / DENSE_FLOPS_PER_SECOND;
@@ -82,8 +82,8 @@ pub(super) const MODAL_SOLVE_OVERHEAD: f64 = 1.5;
 pub(super) const MODAL_COPIES: f64 = 3.0;
 
 /// The cost model: predicted (seconds, bytes) of a bake's global steps, direct (factorize
-/// once, then [`ASSUMED_SOLVES`] solves), iterative (the per-key blocks factorized once, then
-/// [`ASSUMED_SOLVES`] CG solves of [`ASSUMED_CG_ITERATIONS`] iterations each) and, when
+/// once, then `ASSUMED_SOLVES` solves), iterative (the per-key blocks factorized once, then
+/// `ASSUMED_SOLVES` CG solves of `ASSUMED_CG_ITERATIONS` iterations each) and, when
 /// `modal` is given, modal ([`ModalSize::predicted`]). Returns the fastest whose peak fits in
 /// `budget` (the iterative step when none does), and the (seconds, bytes) of the three (the
 /// modal ones 0 without `modal`).

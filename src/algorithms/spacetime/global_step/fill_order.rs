@@ -79,7 +79,7 @@ pub fn fill_reducing_order(
 ///
 /// The key-separator candidate is weighed only when `weigh_keys` says so for the node order's
 /// cost: its graph of (node, key) blocks and two symbolic counts took 1.3 of the 10 CPU s of a
-/// modal step's set-up at 20 keys on 2.7k nodes, so [`GlobalStep::build`] skips it when only a
+/// modal step's set-up at 20 keys on 2.7k nodes, so `GlobalStep::build` skips it when only a
 /// direct step could use it.
 ///
 /// `orders` are the node graph's orders ([`NodeOrders`]), shared with the iterative step's key blocks.
@@ -120,7 +120,7 @@ pub const KEY_SEPARATOR_MIN_KEYS: usize = 8;
 
 /// The most the key-separator order is assumed to cut the node order's predicted flops and
 /// factor entries (measured at most 2.5x: 20 keys on a 1k-node body), for skipping it when even
-/// that cut could not make the direct step the choice ([`GlobalStep::build`]).
+/// that cut could not make the direct step the choice (`GlobalStep::build`).
 pub const KEY_SEPARATOR_MAX_GAIN: f64 = 4.0;
 
 /// The key-separator candidate, with the node order's cost on the same (node, key) graph so

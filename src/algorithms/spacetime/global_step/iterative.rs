@@ -115,7 +115,7 @@ pub struct CgLog {
     pub iterations: usize,
     /// CG iterations of the last solve.
     pub last_iterations: usize,
-    /// Solves that stopped at [`CG_MAX_ITERATIONS`] above [`CG_TOLERANCE`].
+    /// Solves that stopped at `CG_MAX_ITERATIONS` above `CG_TOLERANCE`.
     pub capped: usize,
     /// The largest final relative residual of any solve.
     pub worst_residual: f64,
