@@ -23,7 +23,7 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test lint deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -37,6 +37,8 @@ help:
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
 	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
+	@echo "make completions  shell completions (bash, zsh, fish) and man pages into build/share"
+	@echo "make install  the binary, completions and man pages under PREFIX=$(PREFIX)"
 	@echo "make test-deps / build / clean"
 
 build:
@@ -174,16 +176,41 @@ bench-cache: deps-usd
 
 SCENE_NAMES := $(basename $(notdir $(wildcard $(SCENES)/*.toml)))
 batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
-	@for n in $(SCENE_NAMES); do echo "$(BATCH_OUT)/$$n/report.md"; done
-	$(BIN) report --batch $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)) --out $(BATCH_OUT)
-	@echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
+	@baked="$(dir $(wildcard $(BATCH_OUT)/*/report.json))"; \
+	if [ -z "$$baked" ]; then echo "==> nothing baked (every scene was skipped)"; exit 0; fi; \
+	for d in $$baked; do echo "$${d}report.md"; done; \
+	$(BIN) report --batch $$baked -o $(BATCH_OUT); \
+	echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
 
 # The simulated test caches (rapier3d bar, 2 and 1 Hz, every cache format) baked and summarized.
 batch-caches: deps-usd
 	BLENDSIM_BATCH_DIR=$(CURDIR)/build/batch-caches $(CARGO) test --release --locked --test integration cache_bake::batch_of_the_generated_caches -- --ignored --nocapture
 
+# Each bake writes a depfile (every mesh, selection, texture and cache it read), so editing any
+# of them re-bakes that scene. A scene whose files are missing (the paper's assets live beside
+# the clone, in ../shared/assets) is skipped with one line, so `make batch` works on any clone.
 $(BATCH_OUT)/%/report.json: $(SCENES)/%.toml | build deps-tetgen
-	$(BIN) bake $< --out $(@D) --quiet
+	@missing=$$(grep -oE '"[^"]+\.(obj|mesh|dmat|txt|pc2|mdd|glb|gltf|usd|usda|usdc)"' $< | tr -d '"' | sort -u \
+		| while read -r f; do [ -e "$(<D)/$$f" ] || echo "$$f"; done | head -n 1); \
+	if [ -n "$$missing" ]; then echo "==> skipping $*: $(<D)/$$missing is missing (the paper's assets are not beside this clone)"; \
+	else echo "$(BIN) bake $< -o $(@D) --depfile $(BATCH_OUT)/$*.d --quiet"; $(BIN) bake $< -o $(@D) --depfile $(BATCH_OUT)/$*.d --quiet; fi
+
+-include $(wildcard $(BATCH_OUT)/*.d)
+
+# Shell completions and man pages, generated from the command-line definitions.
+completions: build
+	@echo "==> generating shell completions and man pages into build/share"
+	$(BIN) generate completions bash -o build/share/bash-completion/completions
+	$(BIN) generate completions zsh -o build/share/zsh/site-functions
+	$(BIN) generate completions fish -o build/share/fish/vendor_completions.d
+	$(BIN) generate man -o build/share/man/man1
+
+# `make install PREFIX=/usr/local`: the binary, its completions and man pages.
+PREFIX ?= $(HOME)/.local
+install: completions
+	@echo "==> installing blendsim, its completions and man pages under $(PREFIX)"
+	install -Dm755 $(BIN) $(PREFIX)/bin/blendsim
+	cd build/share && find . -type f -exec install -Dm644 {} $(PREFIX)/share/{} \;
 
 clean:
 	rm -rf build

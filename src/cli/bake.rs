@@ -7,7 +7,7 @@ use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
-use super::MethodArg;
+use super::{MethodArg, Summary};
 
 /// Bake a scene: import, tetrahedralize, solve, embed, export and report in one process.
 ///
@@ -21,7 +21,7 @@ pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
     scene: PathBuf,
     /// Output folder (created if missing).
-    #[arg(long)]
+    #[arg(short = 'o', long, alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
@@ -33,6 +33,11 @@ pub struct Args {
     /// each, exit code 3, nothing written and --out left as it was.
     #[arg(long)]
     strict: bool,
+    /// Also write a Make depfile: every file written depends on every file the bake read (the
+    /// scene, meshes, selections, .mtl files, textures, the cache's frames), with an empty rule
+    /// per input (as `cc -MD -MP`). Written only when the bake succeeds.
+    #[arg(long, value_name = "FILE")]
+    depfile: Option<PathBuf>,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -43,7 +48,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
+pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     let budget = args.budget.budget();
     let start = Instant::now();
     let scene = SceneFile::load(&args.scene)?;
@@ -61,7 +66,14 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
         // Before the commit: the staged files go with `staging`, --out stays as it was.
         super::refuse_warnings(&r.warnings)?;
     }
+    // The inputs are listed before the commit: a bake whose depfile cannot be made writes nothing.
+    let inputs = args.depfile.as_ref().map(|_| blendsim::pipeline::depfile::inputs(&scene)).transpose()?;
     let committed = staging.commit_with_summary()?;
+    let mut summary = Summary::folder(&args.out, &committed);
+    if let (Some(depfile), Some(inputs)) = (&args.depfile, inputs) {
+        blendsim::support::output::write_atomic(depfile, blendsim::pipeline::depfile::render(&summary.outputs, &inputs).as_bytes())?;
+        summary.outputs.push(depfile.clone());
+    }
     if !quiet {
         for line in committed.messages(&args.out, "bake") {
             eprintln!("blendsim: {line}");
@@ -78,5 +90,5 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
             args.out.join("report.md").display()
         );
     }
-    Ok(())
+    Ok(Summary { ratios: r.ratios.iter().map(|(f, x)| (f.to_string(), *x)).collect(), warnings: r.warnings, ..summary })
 }

@@ -5,6 +5,8 @@ use blendsim::pipeline::stages::blend::{BlendJob, Weights};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::Summary;
+
 /// Blend target meshes with mass-spring blendshapes (Ma et al. 2012): the rest lengths of a
 /// spring network on the targets are blended with convex weights, and the network's
 /// equilibrium is the shape.
@@ -29,7 +31,7 @@ pub struct Args {
     #[arg(long)]
     weights_file: Option<PathBuf>,
     /// The output: shape.obj for --weights; frames/frame_####.obj or a cache for --weights-file.
-    #[arg(long)]
+    #[arg(short = 'o', long, alias = "output", value_name = "PATH")]
     out: PathBuf,
     /// Frame rate of a cache output.
     #[arg(long, default_value_t = 24.0)]
@@ -62,7 +64,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
+pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     let budget = args.budget.budget();
     let job = BlendJob {
         targets: args.targets,
@@ -92,5 +94,5 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<()> {
             job.out.display()
         );
     }
-    Ok(())
+    Ok(Summary::wrote([job.out]))
 }

@@ -5,6 +5,8 @@ use blendsim::pipeline::stages;
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::Summary;
+
 /// Carry the exported surface on the solved tet trajectory and write the animation stage file.
 ///
 /// The surface is bound to the rest tet mesh by barycentric coordinates (the closest tet for
@@ -14,7 +16,7 @@ pub struct Args {
     /// The solution stage file from `blendsim solve`.
     solution: PathBuf,
     /// Where to write the animation stage file (JSON).
-    #[arg(short, long)]
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
     output: PathBuf,
     #[command(flatten)]
     budget: super::BudgetArgs,
@@ -26,8 +28,10 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+pub fn run(args: Args, _progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let solution: Solution = stage_file::read(&args.solution, &budget)?;
-    stage_file::write(&args.output, &stages::embed(&solution)?)
+    let animation = stages::embed(&solution)?;
+    stage_file::write(&args.output, &animation)?;
+    Ok(Summary { warnings: animation.warnings, ..Summary::wrote([args.output]) })
 }

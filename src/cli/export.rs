@@ -6,6 +6,8 @@ use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::Summary;
+
 /// Write the blendshape and full-frame animation files into --out.
 ///
 /// Formats are the scene's [export] formats; NAME.outputs.json lists what was written.
@@ -19,7 +21,7 @@ pub struct Args {
     /// The animation stage file from `blendsim embed`.
     animation: PathBuf,
     /// Output folder (created if missing).
-    #[arg(long)]
+    #[arg(short = 'o', long, alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
@@ -34,12 +36,13 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let animation: Animation = stage_file::read(&args.animation, &budget)?;
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None, &budget)?;
     let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
     staging.write(&stages::export::outputs_list_name(&animation.scene), &stage_file::to_json(&outputs))?;
-    staging.commit()
+    let committed = staging.commit_with_summary()?;
+    Ok(Summary { warnings: animation.warnings, ..Summary::folder(&args.out, &committed) })
 }

@@ -6,6 +6,8 @@ use blendsim::support::progress::Progress;
 use blendsim::Error;
 use blendsim::Result;
 
+use super::Summary;
+
 /// Read a scene's keyframe meshes (or vertex cache) and write the keyframes stage file; or
 /// convert the scene's cache to another cache format.
 ///
@@ -18,7 +20,7 @@ pub struct Args {
     /// The scene file (TOML; see formats/scene.md).
     scene: PathBuf,
     /// Where to write the keyframes stage file (JSON).
-    #[arg(short, long, required_unless_present = "cache_out")]
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE", required_unless_present = "cache_out")]
     output: Option<PathBuf>,
     /// Also (or only) write the scene's [cache] in the format this path names.
     #[arg(long)]
@@ -33,7 +35,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<()> {
+pub fn run(args: Args, _progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let scene = SceneFile::load(&args.scene)?;
     if let Some(out) = &args.cache_out {
@@ -46,8 +48,8 @@ pub fn run(args: Args, _progress: &Progress) -> Result<()> {
         };
         stages::import_cache::convert(&scene, spec, out)?;
     }
-    match &args.output {
-        Some(o) => stage_file::write(o, &stages::import(&scene, &budget)?),
-        None => Ok(()),
+    if let Some(o) = &args.output {
+        stage_file::write(o, &stages::import(&scene, &budget)?)?;
     }
+    Ok(Summary::wrote(args.cache_out.into_iter().chain(args.output)))
 }

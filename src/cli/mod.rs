@@ -9,17 +9,21 @@ mod bake;
 mod blend;
 mod embed;
 mod export;
+mod generate;
 mod import;
 mod report;
 mod solve;
 mod tetrahedralize;
 
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
 use blendsim::pipeline::scene::Method;
 use blendsim::support::budget::Budget;
 use blendsim::support::progress::Progress;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// Turn keyframe meshes into compact, physically plausible blendshape animation for USD and
 /// glTF (BlendSim: spacetime projective dynamics on cubic Hermite trajectories), and report how
@@ -31,11 +35,13 @@ use clap::{Parser, Subcommand};
 ///   blendsim tetrahedralize keys.json -o body.json
 ///   blendsim solve body.json -o solution.json
 ///   blendsim embed solution.json -o animation.json
-///   blendsim export animation.json --out DIR
-///   blendsim report animation.json --outputs DIR/NAME.outputs.json --out DIR
+///   blendsim export animation.json -o DIR
+///   blendsim report animation.json --outputs DIR/NAME.outputs.json -o DIR
 ///
-/// `blendsim bake SCENE.toml --out DIR` runs them all in one process; `blendsim blend`
-/// blends target meshes with mass-spring blendshapes.
+/// `blendsim bake SCENE.toml -o DIR` runs them all in one process; `blendsim blend`
+/// blends target meshes with mass-spring blendshapes. Every subcommand takes its output as
+/// `-o/--out` (a file for the stage files, a folder otherwise), `--max-memory`, `--max-time`
+/// and `--json`.
 ///
 /// Exit codes: 0 success (warnings, if any, on stderr and in the report); 1 bad input or a
 /// failed stage; 2 usage errors; 3 --strict refused a result that has warnings (nothing
@@ -46,6 +52,11 @@ struct Cli {
     /// No progress output on stderr.
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Print one line of JSON on stdout when done: the command, its status (ok, error,
+    /// refused), exit code, files written, size ratios, warnings, error message and seconds
+    /// (docs/cli.md).
+    #[arg(long, global = true)]
+    json: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -60,6 +71,65 @@ enum Command {
     Report(report::Args),
     Bake(bake::Args),
     Blend(blend::Args),
+    /// Write shell completions or the man pages (generated from these definitions).
+    #[command(hide = true)]
+    Generate(generate::Args),
+}
+
+impl Command {
+    /// The subcommand's name, as typed.
+    fn name(&self) -> &'static str {
+        match self {
+            Command::Import(_) => "import",
+            Command::Tetrahedralize(_) => "tetrahedralize",
+            Command::Solve(_) => "solve",
+            Command::Embed(_) => "embed",
+            Command::Export(_) => "export",
+            Command::Report(_) => "report",
+            Command::Bake(_) => "bake",
+            Command::Blend(_) => "blend",
+            Command::Generate(_) => "generate",
+        }
+    }
+}
+
+/// What a subcommand did, for `--json`.
+#[derive(Debug, Default, serde::Serialize)]
+pub struct Summary {
+    /// Every file written, as the user named its place (`-o` joined with the file's name).
+    pub outputs: Vec<PathBuf>,
+    /// Bytes of the full-frame file over bytes of the blendshape file, per format (bake and
+    /// report only).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub ratios: BTreeMap<String, f64>,
+    /// The run's warnings (also on stderr and in the reports).
+    pub warnings: Vec<String>,
+}
+
+impl Summary {
+    /// A run that wrote `outputs` and had no warnings.
+    pub fn wrote(outputs: impl IntoIterator<Item = PathBuf>) -> Summary {
+        Summary { outputs: outputs.into_iter().collect(), ..Summary::default() }
+    }
+
+    /// The files of a committed output folder.
+    pub fn folder(out: &Path, committed: &blendsim::support::output::Committed) -> Summary {
+        Summary::wrote(committed.written.iter().map(|n| out.join(n)))
+    }
+}
+
+/// The `--json` line: [`Summary`] plus how the run ended.
+#[derive(serde::Serialize)]
+struct JsonLine<'a> {
+    command: &'a str,
+    /// `ok` (exit 0), `error` (exit 1) or `refused` (exit 3: --strict and warnings).
+    status: &'a str,
+    exit: u8,
+    #[serde(flatten)]
+    summary: Summary,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+    seconds: f64,
 }
 
 /// `--method`, for `solve` and `bake`: overrides the scene's `[solver] method`.
@@ -118,25 +188,34 @@ pub fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
     }
 }
 
-/// A byte count as `--max-memory` takes it: a number with an optional K, M, G or T suffix
-/// (powers of 1024; `4G`, `512M`, `1500000`).
+/// A byte count as `--max-memory` takes it: a number with an optional unit. `K`, `M`, `G`, `T`
+/// and `KiB`..`TiB` are powers of 1024 (`4G`, `2GiB`); `KB`..`TB` are powers of 1000 (`512MB`);
+/// no unit or `B` is bytes. More than 2^64 bytes is refused, not wrapped.
 pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim();
-    let (number, unit) = match t.char_indices().last() {
-        Some((i, c)) if c.is_ascii_alphabetic() => (&t[..i], c.to_ascii_uppercase()),
-        _ => (t, 'B'),
+    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+    let (number, unit) = (t[..split].trim(), t[split..].to_ascii_uppercase());
+    let scale: f64 = match unit.as_str() {
+        "" | "B" => 1.0,
+        "K" | "KIB" => 1024.0,
+        "M" | "MIB" => 1024f64.powi(2),
+        "G" | "GIB" => 1024f64.powi(3),
+        "T" | "TIB" => 1024f64.powi(4),
+        "KB" => 1e3,
+        "MB" => 1e6,
+        "GB" => 1e9,
+        "TB" => 1e12,
+        _ => {
+            return Err(format!(
+                "unknown unit {:?} in {text:?}: use K, M, G, T (powers of 1024, also KiB..TiB) or KB, MB, GB, TB (powers of 1000), e.g. 4G or 512MB",
+                &t[split..]
+            ))
+        }
     };
-    let scale: f64 = match unit {
-        'B' => 1.0,
-        'K' => 1024.0,
-        'M' => 1024.0 * 1024.0,
-        'G' => 1024.0 * 1024.0 * 1024.0,
-        'T' => 1024.0f64.powi(4),
-        _ => return Err(format!("unknown unit {unit:?} in {text:?}: use K, M, G or T, e.g. 4G")),
-    };
-    match number.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 => Ok((x * scale) as u64),
-        _ => Err(format!("{text:?} is not a positive amount of memory: give e.g. 4G or 512M")),
+    match number.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 && x * scale < u64::MAX as f64 => Ok((x * scale).round().max(1.0) as u64),
+        Ok(x) if x.is_finite() && x > 0.0 => Err(format!("{text:?} is more memory than any machine has (at most 16 EiB): give e.g. 4G or 512MB")),
+        _ => Err(format!("{text:?} is not a positive amount of memory: give e.g. 4G, 2GiB or 512MB")),
     }
 }
 
@@ -149,8 +228,13 @@ pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
         Some('h') => (&t[..t.len() - 1], 3600.0),
         _ => (t, 1.0),
     };
+    // A year is past any bake; beyond it a budget is a typo (and 1e300 s would overflow the clock).
+    const LONGEST: f64 = 366.0 * 24.0 * 3600.0;
     match number.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 => Ok(x * scale),
+        Ok(x) if x.is_finite() && x > 0.0 && x * scale <= LONGEST => Ok(x * scale),
+        Ok(x) if x.is_finite() && x > 0.0 => {
+            Err(format!("{text:?} is longer than a year: give seconds, e.g. 600, 90s, 10m or 2h (or no --max-time for no limit)"))
+        }
         _ => Err(format!("{text:?} is not a positive duration: give seconds, e.g. 600, 90s, 10m or 2h")),
     }
 }
@@ -158,8 +242,16 @@ pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
 pub fn main() -> ExitCode {
     // Before any thread starts, so every thread inherits the blocked signals.
     blendsim::support::interrupt::install();
+    let start = Instant::now();
     let cli = Cli::parse();
-    let progress = Progress::new(cli.quiet);
+    let progress = match Progress::from_env(cli.quiet) {
+        Ok(p) => p,
+        Err(message) => {
+            eprintln!("error: {message}");
+            return ExitCode::from(2);
+        }
+    };
+    let command = cli.command.name();
     // An error that concerns no particular file is about the command's input.
     let input = match &cli.command {
         Command::Import(a) => a.input(),
@@ -170,6 +262,7 @@ pub fn main() -> ExitCode {
         Command::Report(a) => a.input(),
         Command::Bake(a) => a.input(),
         Command::Blend(a) => a.input(),
+        Command::Generate(a) => a.input(),
     }
     .to_path_buf();
     let result = match cli.command {
@@ -181,21 +274,32 @@ pub fn main() -> ExitCode {
         Command::Report(a) => report::run(a, &progress),
         Command::Bake(a) => bake::run(a, &progress, cli.quiet),
         Command::Blend(a) => blend::run(a, &progress, cli.quiet),
+        Command::Generate(a) => generate::run(a, Cli::command()),
     };
     // Stopped by a signal: its cleanup ends the process, with the signal's status.
     blendsim::support::interrupt::settle();
-    match result.map_err(|e| e.with_path(input)) {
-        Ok(()) => ExitCode::SUCCESS,
+    let (code, line) = match result.map_err(|e| e.with_path(input)) {
+        Ok(summary) => (0, JsonLine { command, status: "ok", exit: 0, summary, error: None, seconds: 0.0 }),
         Err(e) if !e.refused.is_empty() => {
             for w in &e.refused {
-                let line: String = w.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
-                eprintln!("error: {line}");
+                eprintln!("error: {}", one_line(w));
             }
-            ExitCode::from(3)
+            let summary = Summary { warnings: e.refused.clone(), ..Summary::default() };
+            (3, JsonLine { command, status: "refused", exit: 3, summary, error: None, seconds: 0.0 })
         }
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(1)
+            (1, JsonLine { command, status: "error", exit: 1, summary: Summary::default(), error: Some(e.to_string()), seconds: 0.0 })
         }
+    };
+    if cli.json {
+        let line = JsonLine { seconds: start.elapsed().as_secs_f64(), ..line };
+        println!("{}", serde_json::to_string(&line).expect("a summary serializes"));
     }
+    ExitCode::from(code)
+}
+
+/// `line` with control characters (a newline inside a user's name) folded to spaces.
+fn one_line(line: &str) -> String {
+    line.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
 }

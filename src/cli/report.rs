@@ -7,7 +7,7 @@ use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
-use super::refuse_warnings;
+use super::{refuse_warnings, Summary};
 
 /// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
 /// many bakes.
@@ -21,14 +21,14 @@ pub struct Args {
     /// The animation stage file from `blendsim embed`.
     #[arg(required_unless_present = "batch", conflicts_with = "batch")]
     animation: Option<PathBuf>,
-    /// The NAME.outputs.json written by `blendsim export`.
+    /// The NAME.outputs.json written by `blendsim export` (required without --batch).
     #[arg(long, required_unless_present = "batch", conflicts_with = "batch")]
     outputs: Option<PathBuf>,
     /// Bake output folders (or folders of them) to summarize.
     #[arg(long, num_args = 1..)]
     batch: Vec<PathBuf>,
     /// Output folder for report.json and report.md (summary.csv and summary.md with --batch).
-    #[arg(long)]
+    #[arg(short = 'o', long, alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
@@ -47,7 +47,7 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
@@ -56,7 +56,8 @@ pub fn run(args: Args, progress: &Progress) -> Result<()> {
         staging.set_group("summary");
         staging.write("summary.csv", csv.as_bytes())?;
         staging.write("summary.md", md.as_bytes())?;
-        return staging.commit();
+        let committed = staging.commit_with_summary()?;
+        return Ok(Summary::folder(&args.out, &committed));
     }
     let (Some(animation), Some(outputs)) = (&args.animation, &args.outputs) else { unreachable!("clap requires both without --batch") };
     let animation: Animation = stage_file::read(animation, &budget)?;
@@ -68,5 +69,10 @@ pub fn run(args: Args, progress: &Progress) -> Result<()> {
     // The stages' own warnings were printed by the stages; the guard rails' are new here.
     report.warnings[animation.warnings.len()..].iter().for_each(|w| progress.warn(w));
     report.write(&mut staging)?;
-    staging.commit()
+    let committed = staging.commit_with_summary()?;
+    Ok(Summary {
+        ratios: report.ratios.iter().map(|(f, x)| (f.to_string(), *x)).collect(),
+        warnings: report.warnings,
+        ..Summary::folder(&args.out, &committed)
+    })
 }

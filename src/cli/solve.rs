@@ -5,19 +5,20 @@ use blendsim::pipeline::stages;
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
-use super::MethodArg;
+use super::{MethodArg, Summary};
 
 /// Optimize the keyframe trajectory of a body and write the solution stage file.
 ///
 /// `spacetime` (default) runs BlendSim's spacetime projective dynamics; `hermite` joins the
 /// keyframes with zero velocities (the geometric baseline); `mass-spring` makes in-between
-/// shapes by Ma et al. 2012's mass-spring blendshapes ([mass_spring] in the scene).
+/// shapes by Ma et al. 2012's mass-spring blendshapes ([mass_spring] in the scene); `fit`
+/// (a [cache] scene) fits Hermite keys, positions and velocities, to the cache's frames.
 #[derive(clap::Args)]
 pub struct Args {
     /// The body stage file from `blendsim tetrahedralize`.
     body: PathBuf,
     /// Where to write the solution stage file (JSON).
-    #[arg(short, long)]
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
     output: PathBuf,
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
@@ -32,8 +33,10 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let body: Body = stage_file::read(&args.body, &budget)?;
-    stage_file::write(&args.output, &stages::solve_within(&body, args.method.map(Into::into), &budget, progress)?)
+    let solution = stages::solve_within(&body, args.method.map(Into::into), &budget, progress)?;
+    stage_file::write(&args.output, &solution)?;
+    Ok(Summary { warnings: solution.body.warnings, ..Summary::wrote([args.output]) })
 }

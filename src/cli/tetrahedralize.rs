@@ -5,6 +5,8 @@ use blendsim::pipeline::stages;
 use blendsim::support::progress::Progress;
 use blendsim::Result;
 
+use super::Summary;
+
 /// Turn keyframes into a simulation body (tet mesh and per-node keyframe poses).
 ///
 /// Surface keyframes are tetrahedralized by TetGen (`apt-get install tetgen`); the interior
@@ -14,7 +16,7 @@ pub struct Args {
     /// The keyframes stage file from `blendsim import`.
     keyframes: PathBuf,
     /// Where to write the body stage file (JSON).
-    #[arg(short, long)]
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
     output: PathBuf,
     /// Every warning (folded-key, max-volume: formats/report.md, "Warnings") is an error: one
     /// line each, exit code 3, nothing written.
@@ -30,13 +32,16 @@ impl Args {
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<()> {
+pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let keys: Keyframes = stage_file::read(&args.keyframes, &budget)?;
-    if args.strict {
+    let body = if args.strict {
         let body = stages::tetrahedralize(&keys, &budget, &progress.without_warnings())?;
         super::refuse_warnings(&body.warnings)?;
-        return stage_file::write(&args.output, &body);
-    }
-    stage_file::write(&args.output, &stages::tetrahedralize(&keys, &budget, progress)?)
+        body
+    } else {
+        stages::tetrahedralize(&keys, &budget, progress)?
+    };
+    stage_file::write(&args.output, &body)?;
+    Ok(Summary { warnings: body.warnings, ..Summary::wrote([args.output]) })
 }

@@ -245,6 +245,8 @@ pub struct Committed {
     /// Top-level entries that blendsim did not write (not in the manifest), kept through the
     /// commit, sorted. Entries the commit wrote under the same name were replaced instead.
     pub kept: Vec<String>,
+    /// The files this commit wrote (names inside the folder), sorted.
+    pub written: Vec<String>,
 }
 
 impl Committed {
@@ -636,7 +638,10 @@ impl Staging {
             }
         }
         kept.sort();
-        Ok(Committed { removed, kept })
+        let mut written: Vec<String> = self.files.iter().map(|(n, _)| n.clone()).collect();
+        written.sort();
+        written.dedup();
+        Ok(Committed { removed, kept, written })
     }
 
     /// Swap the staging folder with the output folder. `Ok(None)`: exchanged in one step (the
@@ -1014,7 +1019,11 @@ mod tests {
         let summary = s.commit_with_summary().unwrap();
         assert_eq!(
             summary,
-            Committed { removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()], kept: vec!["notes.txt".into(), "renders".into()] }
+            Committed {
+                removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()],
+                kept: vec!["notes.txt".into(), "renders".into()],
+                written: vec![]
+            }
         );
         assert_eq!(
             summary.messages(Path::new("build/x"), "bake"),
@@ -1032,9 +1041,9 @@ mod tests {
         let summary = s.commit_with_summary().unwrap();
         assert_eq!(summary.removed, Vec::<String>::new());
         assert!(Committed::default().messages(Path::new("x"), "bake").is_empty());
-        let many = Committed { removed: vec![], kept: (0..7).map(|i| format!("f{i}")).chain(["bad\nname".into()]).collect() };
+        let many = Committed { removed: vec![], kept: (0..7).map(|i| format!("f{i}")).chain(["bad\nname".into()]).collect(), written: vec![] };
         assert_eq!(many.messages(Path::new("x"), "bake"), ["kept in x 8 entries that blendsim did not write: f0, f1, f2, f3, f4 and 3 more"]);
-        let one = Committed { removed: vec!["a\u{1b}[2J".into()], kept: vec![] };
+        let one = Committed { removed: vec!["a\u{1b}[2J".into()], kept: vec![], written: vec![] };
         assert_eq!(one.messages(Path::new("x"), "bake"), ["removed from x 1 file of an earlier run that this bake did not write again: a\\u{1b}[2J"]);
         assert_eq!(listing(&target), [MANIFEST, "new.glb", "notes.txt", "other.glb", "renders", "report.md", "shared.png"]);
         std::fs::remove_dir_all(&d).unwrap();

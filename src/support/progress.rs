@@ -3,8 +3,9 @@
 //!
 //! `BLENDSIM_PROGRESS=lines` (or `1`) forces progress on when stderr is not a terminal (a CI log,
 //! a render farm's job output): then a bar's first frame and at most one frame a second after it are plain lines
-//! (`solve: spacetime [=====>   ] 40/200 3s eta 12s`), never cursor movements. `--quiet` wins
-//! over it; `BLENDSIM_PROGRESS=0` hides progress even on a terminal.
+//! (`solve: spacetime [=====>   ] 40/200 3s eta 12s`), never cursor movements, and every stage
+//! that finishes prints `MESSAGE: done in 1.2s`. `--quiet` wins over it; `BLENDSIM_PROGRESS=0`
+//! hides progress even on a terminal; any other value is an error ([`Progress::from_env`]).
 //!
 //! Every bar estimates the time left: a loop over counted steps from their rate
 //! ([`Progress::bar`]); a solve whose iteration count is predicted as it goes from that
@@ -18,6 +19,9 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use indicatif::{HumanDuration, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle, TermLike, WeakProgressBar};
+
+/// The values `BLENDSIM_PROGRESS` takes (empty: as if unset).
+const PROGRESS_VALUES: [&str; 7] = ["", "0", "off", "never", "1", "lines", "always"];
 
 /// How progress is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,17 +53,33 @@ impl std::fmt::Debug for Progress {
 
 impl Progress {
     /// Visible when not `quiet` and stderr is a terminal or `BLENDSIM_PROGRESS` asks for it
-    /// (see the module documentation).
+    /// (see the module documentation); an unknown `BLENDSIM_PROGRESS` is taken as unset.
     pub fn new(quiet: bool) -> Progress {
-        let forced = std::env::var("BLENDSIM_PROGRESS").ok();
-        let mode = match forced.as_deref().map(str::trim) {
+        Progress::with_setting(quiet, std::env::var("BLENDSIM_PROGRESS").ok().as_deref())
+            .unwrap_or_else(|_| Progress::with_setting(quiet, None).expect("unset is valid"))
+    }
+
+    /// [`Progress::new`], with an unknown `BLENDSIM_PROGRESS` value an error (the CLI's choice:
+    /// a typo in a farm's environment should not silently hide the progress it asked for).
+    pub fn from_env(quiet: bool) -> std::result::Result<Progress, String> {
+        Progress::with_setting(quiet, std::env::var("BLENDSIM_PROGRESS").ok().as_deref())
+    }
+
+    fn with_setting(quiet: bool, setting: Option<&str>) -> std::result::Result<Progress, String> {
+        let terminal = std::io::stderr().is_terminal();
+        let mode = match setting.map(str::trim).filter(|v| !v.is_empty()) {
+            Some(v) if !PROGRESS_VALUES.contains(&v) => {
+                return Err(format!(
+                    "BLENDSIM_PROGRESS={v:?} is not a progress setting: use lines (or 1, always) for plain lines, 0 (or off, never) for none, or leave it unset"
+                ))
+            }
             _ if quiet => Mode::Hidden,
             Some("0" | "off" | "never") => Mode::Hidden,
-            Some("1" | "lines" | "always") if !std::io::stderr().is_terminal() => Mode::Lines,
-            _ if std::io::stderr().is_terminal() => Mode::Terminal,
+            Some(_) if !terminal => Mode::Lines,
+            _ if terminal => Mode::Terminal,
             _ => Mode::Hidden,
         };
-        Progress { mode, warnings: true, bars: Arc::default() }
+        Ok(Progress { mode, warnings: true, bars: Arc::default() })
     }
 
     /// Never drawn (library use, tests).
@@ -107,25 +127,26 @@ impl Progress {
     }
 
     /// `bar` with `style` and `message`, redrawn every `tick`, and remembered for [`Progress::warn`].
-    fn start(&self, bar: ProgressBar, style: ProgressStyle, message: String, tick: Duration) -> ProgressBar {
+    fn start(&self, bar: ProgressBar, style: ProgressStyle, message: String, tick: Duration) -> Bar {
         bar.set_style(style);
-        bar.set_message(message);
+        bar.set_message(message.clone());
         bar.enable_steady_tick(tick);
         let mut bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
         bars.retain(|b| b.upgrade().is_some_and(|b| !b.is_finished()));
         bars.push(bar.downgrade());
-        bar
+        let started = (self.mode == Mode::Lines).then(Instant::now);
+        Bar { bar, started, label: message, done: Arc::default() }
     }
 
     /// A spinner naming a stage too short to need an estimate; call `finish` on it (or drop it)
     /// when the stage is done.
-    pub fn stage(&self, message: impl Into<String>) -> ProgressBar {
+    pub fn stage(&self, message: impl Into<String>) -> Bar {
         let style = ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template");
         self.start(ProgressBar::with_draw_target(None, self.target()), style, message.into(), Duration::from_millis(120))
     }
 
     /// A bar over `len` steps, with the time left estimated from the steps' rate.
-    pub fn bar(&self, len: u64, message: impl Into<String>) -> ProgressBar {
+    pub fn bar(&self, len: u64, message: impl Into<String>) -> Bar {
         let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {elapsed} eta {eta}").expect("valid template").progress_chars("=> ");
         // Redrawn at least once a second even while a step runs long (elapsed keeps moving).
         self.start(ProgressBar::with_draw_target(Some(len), self.target()), style, message.into(), Duration::from_millis(500))
@@ -134,7 +155,7 @@ impl Progress {
     /// A bar over iterations whose total is not known up front but predicted as they go: set it
     /// with `set_length` (and `unset_length` while there is no prediction). Shows `K/~N` and the
     /// time left at the iterations' measured rate, or `?` for both without a prediction.
-    pub fn iterations(&self, message: impl Into<String>) -> ProgressBar {
+    pub fn iterations(&self, message: impl Into<String>) -> Bar {
         let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{total} {elapsed} eta {left}")
             .expect("valid template")
             .progress_chars("=> ")
@@ -157,7 +178,7 @@ impl Progress {
     /// library call), filled by the elapsed time against `seconds`, the duration its cost
     /// model predicts on this machine's threads: shows `elapsed of ~predicted` and the time
     /// left of the prediction, or `?` once the phase runs over it (a loaded machine).
-    pub fn predicted(&self, message: impl Into<String>, seconds: f64) -> ProgressBar {
+    pub fn predicted(&self, message: impl Into<String>, seconds: f64) -> Bar {
         let predicted = Duration::try_from_secs_f64(seconds).unwrap_or(Duration::ZERO);
         let style = ProgressStyle::with_template("{msg} [{fill}] {elapsed} of ~{predicted} eta {left}")
             .expect("valid template")
@@ -176,6 +197,54 @@ impl Progress {
                 };
             });
         self.start(ProgressBar::with_draw_target(None, self.target()), style, message.into(), Duration::from_millis(120))
+    }
+}
+
+/// A stage's spinner or bar: an indicatif [`ProgressBar`] (through `Deref`) whose `finish*`
+/// methods, in `lines` mode, also print `MESSAGE: done in 1.2s` (once, however many clones).
+#[derive(Debug, Clone)]
+pub struct Bar {
+    bar: ProgressBar,
+    /// When the stage started, in `lines` mode only.
+    started: Option<Instant>,
+    /// The stage's name, as first given (the message may change as it runs).
+    label: String,
+    done: Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl std::ops::Deref for Bar {
+    type Target = ProgressBar;
+    fn deref(&self) -> &ProgressBar {
+        &self.bar
+    }
+}
+
+impl Bar {
+    /// Finish, leaving the last frame drawn.
+    pub fn finish(&self) {
+        self.bar.finish();
+        self.done_line();
+    }
+
+    /// Finish and take the bar off the terminal.
+    pub fn finish_and_clear(&self) {
+        self.bar.finish_and_clear();
+        self.done_line();
+    }
+
+    /// Finish with `message` as the last frame.
+    pub fn finish_with_message(&self, message: impl Into<std::borrow::Cow<'static, str>>) {
+        self.bar.finish_with_message(message);
+        self.done_line();
+    }
+
+    fn done_line(&self) {
+        if let Some(started) = self.started {
+            if !self.done.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                let label: String = self.label.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
+                eprintln!("{}: done in {}", label.trim_end_matches(|c: char| c == ':' || c.is_whitespace()), short(started.elapsed()));
+            }
+        }
     }
 }
 

@@ -401,10 +401,10 @@ fn help_of_every_subcommand() {
     let dir = TempDir::new("errors-help");
     let cases: [(&str, &[&str]); 8] = [
         ("", &["import", "tetrahedralize", "solve", "embed", "export", "report", "bake", "--quiet"]),
-        ("import", &["<SCENE>", "scene file", "--output", "keyframes stage file"]),
-        ("tetrahedralize", &["<KEYFRAMES>", "keyframes stage file", "--output", "body stage file", "TetGen"]),
-        ("solve", &["<BODY>", "body stage file", "--output", "solution stage file", "--method", "hermite", "spacetime"]),
-        ("embed", &["<SOLUTION>", "solution stage file", "--output", "animation stage file"]),
+        ("import", &["<SCENE>", "scene file", "-o, --out", "keyframes stage file"]),
+        ("tetrahedralize", &["<KEYFRAMES>", "keyframes stage file", "-o, --out", "body stage file", "TetGen"]),
+        ("solve", &["<BODY>", "body stage file", "-o, --out", "solution stage file", "--method", "hermite", "spacetime"]),
+        ("embed", &["<SOLUTION>", "solution stage file", "-o, --out", "animation stage file"]),
         ("export", &["<ANIMATION>", "animation stage file", "--out", "NAME.usda", "NAME.usdc", "NAME.glb", "NAME.full.EXT", "NAME.outputs.json"]),
         (
             "report",

@@ -16,6 +16,7 @@ mod cache_fit;
 mod cli_budget;
 mod cli_cage;
 mod cli_contacts;
+mod cli_conventions;
 mod cli_degenerate;
 mod cli_errors;
 mod cli_interrupt;

@@ -22,6 +22,7 @@ mod usd;
 mod vertex_cache;
 
 pub use gltf_clip::fixtures as gltf_fixtures;
+pub use sequence::SequencePattern;
 pub use vertex_cache::{write, CacheFormat, CacheOptions, FpsSource, VertexCache};
 
 use std::path::Path;

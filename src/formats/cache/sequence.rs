@@ -128,8 +128,8 @@ impl SequencePattern {
         digits.parse().ok()
     }
 
-    /// The numbers of the matching files in the folder, sorted.
-    fn scan(&self, pattern: &Path) -> Result<Vec<u64>> {
+    /// The numbers of the matching files in the folder, sorted (an error when none matches).
+    pub fn scan(&self, pattern: &Path) -> Result<Vec<u64>> {
         let entries = std::fs::read_dir(self.dir()).map_err(|e| Error::io(self.dir(), &e, "list the frames of the OBJ sequence"))?;
         let mut numbers = Vec::new();
         for entry in entries {

@@ -58,6 +58,40 @@ pub fn read(path: &Path) -> Result<TriMesh> {
     Ok(mesh)
 }
 
+/// The files an OBJ brings in besides itself, as a build tool must know them (`bake
+/// --depfile`): each `.mtl` of its `mtllib` lines that exists, and each texture a `map_Kd` of
+/// those names that exists. Nothing is checked here: [`read`] does that.
+pub fn companions(path: &Path) -> Result<Vec<std::path::PathBuf>> {
+    let bytes = crate::support::input::read_bytes(path, "the OBJ surface")?;
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for line in String::from_utf8_lossy(&bytes).lines() {
+        let mut tokens = line.split('#').next().unwrap_or("").split_whitespace();
+        if tokens.next() != Some("mtllib") {
+            continue;
+        }
+        let mtl = folder.join(tokens.collect::<Vec<_>>().join(" "));
+        if !mtl.is_file() {
+            continue;
+        }
+        let text = crate::support::input::read_bytes(&mtl, "the material library (.mtl)")?;
+        let mtl_folder = mtl.parent().unwrap_or(Path::new(".")).to_path_buf();
+        for line in String::from_utf8_lossy(&text).lines() {
+            let mut tokens = line.split('#').next().unwrap_or("").split_whitespace();
+            if tokens.next().is_some_and(|k| k.eq_ignore_ascii_case("map_Kd")) {
+                if let Some(file) = tokens.last() {
+                    let texture = mtl_folder.join(file.replace('\\', "/"));
+                    if texture.is_file() {
+                        out.push(texture);
+                    }
+                }
+            }
+        }
+        out.push(mtl);
+    }
+    Ok(out)
+}
+
 /// `(material, absolute texture path)` for each `newmtl` of a `.mtl` file with a `map_Kd`;
 /// nothing when the file does not exist.
 fn read_mtl_textures(mtl: &Path) -> Result<Vec<(String, String)>> {
