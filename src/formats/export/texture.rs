@@ -128,7 +128,11 @@ fn check_memory(path: &Path, budget: &Budget) -> Result<()> {
     let mut head = Vec::with_capacity(8);
     let _ = reader.by_ref().take(8).read_to_end(&mut head);
     let pixels = match (mime_of(&head), reader.seek(SeekFrom::Start(0))) {
-        (Some(mime), Ok(_)) => decoded_size(reader, mime).map_or(0.0, |(w, h, c)| w as f64 * h as f64 * c as f64),
+        // A header over MAX_SIDE (or unreadable) is `inspect`'s error, with its own message.
+        (Some(mime), Ok(_)) => decoded_size(reader, mime)
+            .ok()
+            .filter(|&(w, h, _)| w <= MAX_SIDE && h <= MAX_SIDE)
+            .map_or(0.0, |(w, h, c)| w as f64 * h as f64 * c as f64),
         _ => 0.0, // `inspect` reports it
     };
     budget
