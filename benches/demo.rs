@@ -216,14 +216,14 @@ fn main() {
         light.scene.export.formats.retain(|f| *f != Format::Usdc);
         let (w, c, _) = timed(|| {
             let mut staging = Staging::new(&out(&format!("light{r}"))).expect("staging");
-            export_with(&light, &clip, &mut staging, &progress).expect("export");
+            export_with(&light, &clip, &mut staging, &budget, &progress).expect("export");
             staging.commit().expect("commit");
         });
         rows[8].push((w, c));
         let (t, c0, k0) = (Instant::now(), cpu(libc::RUSAGE_SELF), cpu(libc::RUSAGE_CHILDREN));
         {
             let mut staging = Staging::new(&out(&format!("all{r}"))).expect("staging");
-            export_with(&animation, &clip, &mut staging, &progress).expect("export with usdc");
+            export_with(&animation, &clip, &mut staging, &budget, &progress).expect("export with usdc");
             staging.commit().expect("commit");
         }
         rows[9].push((t.elapsed().as_secs_f64(), cpu(libc::RUSAGE_SELF) - c0 + cpu(libc::RUSAGE_CHILDREN) - k0));
@@ -233,7 +233,7 @@ fn main() {
         // removes the previous bake's files. Timed on the second of two.
         for timed_commit in [false, true] {
             let mut staging = Staging::new(&out("again")).expect("staging");
-            export_with(&animation, &clip, &mut staging, &progress).expect("export");
+            export_with(&animation, &clip, &mut staging, &budget, &progress).expect("export");
             let (w, c, _) = timed(|| staging.commit().expect("commit"));
             if timed_commit {
                 rows[11].push((w, c));

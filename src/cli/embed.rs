@@ -1,5 +1,6 @@
 use std::path::PathBuf;
 
+use blendsim::pipeline::report::guard_rails::not_converged;
 use blendsim::pipeline::stage_file::{self, Solution};
 use blendsim::pipeline::stages;
 use blendsim::support::progress::Progress;
@@ -18,6 +19,10 @@ pub struct Args {
     /// Where to write the animation stage file (JSON).
     #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
     output: PathBuf,
+    /// Every warning the solution carries (formats/report.md, "Warnings") is an error: one
+    /// line each, exit code 3, nothing written.
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -32,6 +37,11 @@ pub fn run(args: Args, _progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let solution: Solution = stage_file::read(&args.solution, &budget)?;
     let animation = stages::embed(&solution)?;
+    if args.strict {
+        let mut warnings = animation.warnings.clone();
+        warnings.extend(not_converged(&solution.log));
+        super::refuse_warnings(&warnings)?;
+    }
     stage_file::write(&args.output, &animation)?;
     Ok(Summary { warnings: animation.warnings, ..Summary::wrote([args.output]) })
 }

@@ -1,5 +1,6 @@
 use std::path::PathBuf;
 
+use blendsim::pipeline::report::guard_rails::not_converged;
 use blendsim::pipeline::stage_file::{self, Animation};
 use blendsim::pipeline::stages;
 use blendsim::support::output::{LockWait, Staging};
@@ -26,6 +27,10 @@ pub struct Args {
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
     #[arg(long)]
     no_wait: bool,
+    /// Every warning the animation carries (formats/report.md, "Warnings") is an error: one
+    /// line each, exit code 3, nothing written and --out left as it was.
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -39,9 +44,14 @@ impl Args {
 pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let animation: Animation = stage_file::read(&args.animation, &budget)?;
+    if args.strict {
+        let mut warnings = animation.warnings.clone();
+        warnings.extend(not_converged(&animation.log));
+        super::refuse_warnings(&warnings)?;
+    }
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     let clip = stages::blendshape_clip(&animation, None, &budget)?;
-    let outputs = stages::export_with(&animation, &clip, &mut staging, progress)?;
+    let outputs = stages::export_with(&animation, &clip, &mut staging, &budget, progress)?;
     staging.write(&stages::export::outputs_list_name(&animation.scene), &stage_file::to_json(&outputs))?;
     let committed = staging.commit_with_summary()?;
     Ok(Summary { warnings: animation.warnings, ..Summary::folder(&args.out, &committed) })

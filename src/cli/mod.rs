@@ -157,17 +157,19 @@ impl From<MethodArg> for Method {
 #[derive(clap::Args)]
 pub struct BudgetArgs {
     /// Memory the command may use (e.g. 4G, 512M): every large allocation (frames, solver
-    /// samples) is estimated first and refused past it, and the solve's global step is solved
+    /// samples, textures: their file and decoded size from the header) is estimated first and
+    /// refused past it, and the solve's global step is solved
     /// iteratively instead of by a sparse factorization when its factor would not fit.
     /// Default: 60% of the available memory.
     #[arg(long, value_parser = parse_bytes)]
     max_memory: Option<u64>,
     /// Time the command may take, in seconds (e.g. 600, 90s, 10m, 2h), counted from its start:
-    /// TetGen gets at most what is left of it (or [tet] timeout, the smaller); the solve checks
+    /// the keyframe import checks it before every key; TetGen and usd-core's cache reader get
+    /// at most what is left of it (TetGen: or [tet] timeout, the smaller); the solve checks
     /// it before its global step is built (against the predicted cost) and at every iteration;
     /// a cache's key selection, fit and error measure at every frame they read; the mass-spring
     /// blend at every Newton iteration. Once it is spent the command stops with an error and
-    /// writes nothing. Default: no limit.
+    /// writes nothing. At most 1e9 s. Default: no limit.
     #[arg(long, value_parser = parse_seconds)]
     max_time: Option<f64>,
 }
@@ -214,10 +216,14 @@ pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     };
     match number.parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 && x * scale < u64::MAX as f64 => Ok((x * scale).round().max(1.0) as u64),
-        Ok(x) if x.is_finite() && x > 0.0 => Err(format!("{text:?} is more memory than any machine has (at most 16 EiB): give e.g. 4G or 512MB")),
+        Ok(x) if x.is_finite() && x > 0.0 => Err(format!("{text:?} is more memory than a byte count holds (16 EiB): give e.g. 4G or 512MB")),
         _ => Err(format!("{text:?} is not a positive amount of memory: give e.g. 4G, 2GiB or 512MB")),
     }
 }
+
+/// The longest `--max-time`, in seconds (about 31.7 years): far beyond any bake, and small
+/// enough that a deadline computed from it stays a valid `Duration` and `Instant`.
+pub const MAX_SECONDS: f64 = 1e9;
 
 /// `--max-time`: seconds, or a number with `s`, `m` or `h`.
 pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
@@ -228,12 +234,10 @@ pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
         Some('h') => (&t[..t.len() - 1], 3600.0),
         _ => (t, 1.0),
     };
-    // A year is past any bake; beyond it a budget is a typo (and 1e300 s would overflow the clock).
-    const LONGEST: f64 = 366.0 * 24.0 * 3600.0;
     match number.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 && x * scale <= LONGEST => Ok(x * scale),
+        Ok(x) if x.is_finite() && x > 0.0 && x * scale <= MAX_SECONDS => Ok(x * scale),
         Ok(x) if x.is_finite() && x > 0.0 => {
-            Err(format!("{text:?} is longer than a year: give seconds, e.g. 600, 90s, 10m or 2h (or no --max-time for no limit)"))
+            Err(format!("{text:?} is longer than the longest --max-time, 1e9 s (31 years): give seconds, e.g. 600, 90s, 10m or 2h"))
         }
         _ => Err(format!("{text:?} is not a positive duration: give seconds, e.g. 600, 90s, 10m or 2h")),
     }

@@ -1,5 +1,6 @@
 use std::path::PathBuf;
 
+use blendsim::pipeline::report::guard_rails::not_converged;
 use blendsim::pipeline::stage_file::{self, Body};
 use blendsim::pipeline::stages;
 use blendsim::support::progress::Progress;
@@ -23,6 +24,10 @@ pub struct Args {
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
+    /// Every warning known after the solve (the body's, `cg-capped`, `not-converged`:
+    /// formats/report.md, "Warnings") is an error: one line each, exit code 3, nothing written.
+    #[arg(long)]
+    strict: bool,
     #[command(flatten)]
     budget: super::BudgetArgs,
 }
@@ -36,7 +41,13 @@ impl Args {
 pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let body: Body = stage_file::read(&args.body, &budget)?;
-    let solution = stages::solve_within(&body, args.method.map(Into::into), &budget, progress)?;
+    let progress = if args.strict { progress.without_warnings() } else { progress.clone() };
+    let solution = stages::solve_within(&body, args.method.map(Into::into), &budget, &progress)?;
+    if args.strict {
+        let mut warnings = solution.body.warnings.clone();
+        warnings.extend(not_converged(&solution.log));
+        super::refuse_warnings(&warnings)?;
+    }
     stage_file::write(&args.output, &solution)?;
     Ok(Summary { warnings: solution.body.warnings, ..Summary::wrote([args.output]) })
 }

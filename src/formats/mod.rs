@@ -12,3 +12,4 @@ pub mod cache;
 pub mod export;
 pub mod mesh;
 pub mod tetgen;
+pub(crate) mod work_dir;

@@ -20,14 +20,14 @@
 
 use std::ffi::OsStr;
 use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::algorithms::geometry::surface::open_edges;
 use crate::algorithms::geometry::{bbox_diagonal, cross, norm, scale, sub, Bounds, Point, TetMesh, TriMesh};
 use crate::formats::mesh::tetgen_io::{first_flat_tet, parse_ele, parse_node, write_smesh};
+use crate::formats::work_dir::WorkDir;
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
@@ -89,7 +89,7 @@ pub(crate) fn run_with(program: &OsStr, surface: &TriMesh, options: &TetgenOptio
     }
     let by_max_time = left.is_some_and(|l| l < timeout.as_secs_f64());
     let timeout = left.filter(|_| by_max_time).map_or(timeout, Duration::from_secs_f64);
-    let dir = WorkDir::create().map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
+    let dir = WorkDir::create("tetgen").map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for TetGen"))?;
     let input = dir.path.join(INPUT);
     std::fs::write(&input, write_smesh(surface)).map_err(|e| Error::io(&input, &e, "write the TetGen input"))?;
     let run = run_process(program, &switches(options), &dir.path, timeout, by_max_time.then_some(budget), source)?;
@@ -405,75 +405,6 @@ fn wait_for_exit(pid: u32) {
     }
 }
 
-/// A fresh folder only this run uses (so no stray `surface.poly` is picked up), removed
-/// with everything in it when dropped or when the run is interrupted. It is flocked while in
-/// use; creating one removes the work folders of runs that were killed (their process is gone
-/// and nobody holds their lock: the lock also protects a run in another PID namespace sharing
-/// the temporary folder).
-struct WorkDir {
-    path: PathBuf,
-    _lock: Option<std::fs::File>,
-    _token: crate::support::interrupt::Token,
-}
-
-impl WorkDir {
-    fn create() -> std::io::Result<WorkDir> {
-        static NEXT: AtomicUsize = AtomicUsize::new(0);
-        let mut builder = std::fs::DirBuilder::new();
-        #[cfg(unix)]
-        std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
-        remove_dead_work_dirs();
-        loop {
-            let name = format!("blendsim-tetgen-{}-{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
-            let path = std::env::temp_dir().join(name);
-            // Created and registered with the signal cleanup waiting, so it never misses it.
-            let _critical = crate::support::interrupt::critical();
-            match builder.create(&path) {
-                Ok(()) => {
-                    let token = crate::support::interrupt::register_tree(path.clone());
-                    let lock = std::fs::File::open(&path).ok().filter(|f| f.lock().is_ok());
-                    return Ok(WorkDir { path, _lock: lock, _token: token });
-                }
-                // Left behind by an earlier process with the same id: take the next name.
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-                Err(e) => return Err(e),
-            }
-        }
-    }
-}
-
-/// `blendsim-tetgen-PID-N` folders of our user in the temporary folder whose process is gone
-/// and whose lock nobody holds.
-fn remove_dead_work_dirs() {
-    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else { return };
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let pid = name.to_str().and_then(|n| n.strip_prefix("blendsim-tetgen-")).and_then(|r| r.split_once('-'));
-        let Some(pid) = pid.and_then(|(p, _)| p.parse::<u32>().ok()) else { continue };
-        #[cfg(unix)]
-        {
-            // Only our own user's folders (a shared /tmp holds other users' too).
-            use std::os::unix::fs::MetadataExt;
-            // SAFETY: getuid cannot fail and touches no memory.
-            let uid = unsafe { libc::getuid() };
-            let mine = entry.metadata().is_ok_and(|m| m.uid() == uid);
-            if !mine {
-                continue;
-            }
-        }
-        let unlocked = || std::fs::File::open(entry.path()).is_ok_and(|f| f.try_lock().is_ok());
-        if pid != std::process::id() && !crate::support::interrupt::process_alive(pid) && unlocked() {
-            let _ = std::fs::remove_dir_all(entry.path());
-        }
-    }
-}
-
-impl Drop for WorkDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.path);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -677,7 +608,7 @@ mod tests {
 
     #[test]
     fn work_folder_is_private_and_removed() {
-        let dir = WorkDir::create().unwrap();
+        let dir = WorkDir::create("tetgen").unwrap();
         let path = dir.path.clone();
         std::fs::write(path.join("surface.1.node"), "0 3 0 0\n").unwrap();
         #[cfg(unix)]
@@ -685,7 +616,7 @@ mod tests {
             use std::os::unix::fs::PermissionsExt;
             assert_eq!(std::fs::metadata(&path).unwrap().permissions().mode() & 0o777, 0o700);
         }
-        assert_ne!(WorkDir::create().unwrap().path, path);
+        assert_ne!(WorkDir::create("tetgen").unwrap().path, path);
         drop(dir);
         assert!(!path.exists());
     }

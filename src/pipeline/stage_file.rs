@@ -80,6 +80,16 @@ pub enum Shape {
     Volume(TetMesh),
 }
 
+impl Shape {
+    /// The vertex positions (the surface's, or the tet mesh's nodes).
+    pub fn positions(&self) -> &[Point] {
+        match self {
+            Shape::Surface(s) => &s.positions,
+            Shape::Volume(v) => &v.positions,
+        }
+    }
+}
+
 /// Output of `import`: keyframe poses on one topology, with their constraints.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Keyframes {
@@ -167,10 +177,20 @@ pub struct Body {
     /// When `mesh` is a generated cage around the keyframe surface: how it was made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cage: Option<CageInfo>,
-    /// What `tetrahedralize` warned about (one line each, its code first: `folded-key`, a key
-    /// with inverted or flattened tets; `max-volume`, a `max_volume` TetGen could not honour).
+    /// What `tetrahedralize` and `solve` warned about (one line each, its code first:
+    /// `folded-key`, a key with inverted or flattened tets; `max-volume`, a `max_volume` TetGen
+    /// could not honour; `body-size`, `embed-far`, `units-conflict`; `cg-capped` from `solve`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+}
+
+impl Body {
+    /// Print `line` as a warning (through `progress`, silent under `--strict`) and keep it
+    /// for the report.
+    pub fn warn(&mut self, progress: &crate::support::progress::Progress, line: String) {
+        progress.warn(&line);
+        self.warnings.push(line);
+    }
 }
 
 /// What the solver did.

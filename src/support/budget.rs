@@ -119,6 +119,11 @@ impl Budget {
         }
     }
 
+    /// [`Budget::check_time`] with a phase's own `fix` instead of the solve's advice.
+    pub fn check_time_to(&self, phase: &str, reached: impl FnOnce() -> String, fix: &str) -> Result<()> {
+        self.check_time(phase, reached).map_err(|e| Error { fix: fix.into(), ..e })
+    }
+
     /// Seconds left of `--max-time` (negative once spent), `None` when none was set. A
     /// process the bake waits for (TetGen) is given at most this long.
     pub fn time_left(&self) -> Option<f64> {

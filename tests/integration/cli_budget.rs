@@ -157,14 +157,129 @@ fn max_time_bounds_tetgen_by_what_is_left_of_it() {
     let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1h"]);
     assert_eq!(r.code, Some(1), "{r}");
     assert!(r.stderr.contains("TetGen did not finish within 1 s and was stopped") && r.stderr.contains("raise [tet] timeout"), "{r}");
-    // A budget spent before TetGen starts (1 ns: spent by the time the scene is read, so every
-    // phase below meets it at its first check).
+    // A budget spent before TetGen starts (1 ns: spent by the time the scene is read, so the
+    // keyframe import meets it at its first key).
     out_of_time(
         &dir,
         &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1e-9"],
         "twist.toml",
-        "in the tetrahedralization, before TetGen started",
+        "in the keyframe import, after reading 0 of 5 keys",
     );
+}
+
+#[test]
+fn max_time_bounds_the_keyframe_import_key_by_key() {
+    // 400 keys (the demo's three poses over and over): a budget spent by the time the scene is
+    // read stops the import at its first key, with the import's own fix; `import` alone too.
+    let dir = TempDir::new("budget-import");
+    let scene = lean_demo(&dir, "auto");
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let n = 400;
+    let meshes: Vec<String> = (0..n).map(|k| format!("\"{}\"", ["prism_rest.obj", "prism_left.obj", "prism_right.obj"][k % 3])).collect();
+    let times: Vec<String> = (0..n).map(|k| format!("{:.3}", k as f64 / 60.0)).collect();
+    let long: String = text
+        .lines()
+        .filter(|l| !l.starts_with("fixed") && !l.starts_with("cyclic"))
+        .map(|l| match l {
+            l if l.starts_with("meshes = ") => format!("meshes = [{}]\n", meshes.join(", ")),
+            l if l.starts_with("times = ") => format!("times = [{}]\n", times.join(", ")),
+            l => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(&scene, long).unwrap();
+    let phase = format!("in the keyframe import, after reading 0 of {n} keys");
+    out_of_time(&dir, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-time", "1e-9"], "twist.toml", &phase);
+    out_of_time(&dir, &["import", scene.to_str().unwrap(), "-o", "never.json", "--max-time", "1e-9"], "twist.toml", &phase);
+    assert!(!dir.join("never.json").exists());
+    let r = run(&dir.path, &["import", scene.to_str().unwrap(), "-o", "never.json", "--max-time", "1e-9"]);
+    assert!(r.stderr.contains("or give fewer keys"), "{r}");
+    // Given the time, the same scene imports.
+    run(&dir.path, &["import", "-q", scene.to_str().unwrap(), "-o", "keys.json", "--max-time", "1h"]).success();
+}
+
+/// A stand-in for the Python that runs usd-core's reader: it hangs (as a reader stuck on a
+/// network file or a FIFO would) until killed.
+fn hanging_python(dir: &TempDir) -> PathBuf {
+    let path = dir.join("hanging-python");
+    std::fs::write(&path, "#!/bin/sh\nexec sleep 600\n").unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    path
+}
+
+/// The `blendsim-usd-read-*` folders in `tmp`.
+fn usd_work_dirs(tmp: &Path) -> Vec<String> {
+    let names = std::fs::read_dir(tmp).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned());
+    names.filter(|n| n.starts_with("blendsim-usd-read-")).collect()
+}
+
+#[test]
+fn max_time_kills_a_hanging_usd_reader_and_leaves_no_folder() {
+    let dir = TempDir::new("budget-usd");
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    std::fs::write(dir.join("bar.usda"), "#usda 1.0\n").unwrap();
+    std::fs::write(dir.join("scene.toml"), "name = \"bar\"\n[cache]\npath = \"bar.usda\"\nkeyframes = [0, 1]\n[solver]\nmethod = \"fit\"\n").unwrap();
+    // A folder left by a killed run (its process is gone): the next reader removes it.
+    let stale = tmp.join("blendsim-usd-read-4194999-0");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::write(stale.join("frames.pc2"), "partial").unwrap();
+    let python = hanging_python(&dir);
+    let env = [("TMPDIR", tmp.as_os_str()), ("BLENDSIM_PYTHON", python.as_os_str())];
+    let start = std::time::Instant::now();
+    let r = crate::common::cli::run_timeout(&dir.path, &["bake", "scene.toml", "--out", "never", "--max-time", "2"], &env, 300.0);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.contains("bar.usda: blendsim ran past its --max-time budget") && r.stderr.contains("if the reader hangs"), "{r}");
+    assert!(r.stderr.contains("--max-time budget of 2 s") && r.stderr.contains("in the cache reading, usd-core's reader stopped after "), "{r}");
+    assert!(start.elapsed().as_secs_f64() < 250.0, "stopped by the budget, not by the reader's end");
+    assert_eq!(usd_work_dirs(&tmp), Vec::<String>::new(), "the killed reader's folder and the stale one are gone");
+    assert!(!dir.join("never").exists());
+}
+
+#[test]
+fn a_texture_over_the_memory_budget_is_refused_before_it_is_read() {
+    // A PNG header claiming 16000 x 16000 RGB pixels (768 MB decoded) in a few hundred bytes.
+    let dir = TempDir::new("budget-texture");
+    crate::texture::textured_prism(&dir.path, "formats = [\"glb\"]\nfull_frame = false");
+    let scene = std::fs::read_to_string(dir.join("scene.toml")).unwrap().replace("formats = [\"usda\", \"usdc\", \"glb\"]\n", "");
+    std::fs::write(dir.join("scene.toml"), scene).unwrap();
+    let mut png = crate::texture::png(2, 2, |_, _| [128, 128, 128]);
+    png[16..20].copy_from_slice(&16000u32.to_be_bytes());
+    png[20..24].copy_from_slice(&16000u32.to_be_bytes());
+    let crc = crate::texture::crc32(&png[12..29]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    std::fs::write(dir.join("uvgrid.png"), &png).unwrap();
+    let args = ["bake", "-q", "--method", "hermite", "scene.toml", "--out", "out", "--max-memory", "256M"];
+    let r = run(&dir.path, &args);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(r.stderr.contains("uvgrid.png: the scene would need about ") && r.stderr.contains("768.0 MB of pixels decoded"), "{r}");
+    assert!(r.stderr.contains("more than the --max-memory budget of 0.3 GB") && r.stderr.contains("scale the texture down"), "{r}");
+    assert!(!dir.join("out").exists());
+    // Under a budget that holds it, the same scene bakes.
+    run(&dir.path, &["bake", "-q", "--method", "hermite", "scene.toml", "--out", "out", "--max-memory", "4G"]).success();
+}
+
+#[test]
+fn budgets_past_what_their_numbers_hold_are_usage_errors() {
+    let dir = TempDir::new("budget-overflow");
+    let scene = demo_scene();
+    for (flag, value, says) in [
+        ("--max-memory", "99999999999999999999G", "more memory than a byte count holds"),
+        ("--max-memory", "1e300T", "more memory than a byte count holds"),
+        ("--max-time", "1e300s", "longer than the longest --max-time"),
+        ("--max-time", "1e20h", "longer than the longest --max-time"),
+    ] {
+        let r = run(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", flag, value]);
+        assert_eq!(r.code, Some(2), "{flag} {value}: {r}");
+        assert_eq!(r.stderr.lines().filter(|l| l.starts_with("error: ")).count(), 1, "{r}");
+        assert!(r.stderr.contains(says) && r.stderr.contains(flag), "{flag} {value}: {r}");
+    }
+    assert!(!dir.join("never").exists());
 }
 
 #[test]
@@ -217,8 +332,8 @@ fn max_time_stops_the_cache_fit_its_key_selection_and_its_error_measure() {
 
 #[test]
 fn max_time_stops_the_mass_spring_blend() {
-    // Tet-mesh keys: no TetGen, so the mass-spring model (its first equilibrium, built with it)
-    // is the first to check the budget.
+    // Tet-mesh keys, imported without a budget (the import checks it at every key): the
+    // mass-spring model (its first equilibrium, built with it) is the solve's first check.
     let dir = TempDir::new("budget-mass-spring");
     let cube = crate::cli_physics::cube_medit(2, |p| p);
     let sheared = crate::cli_physics::cube_medit(2, |p| [p[0] + 0.3 * p[1], p[1], p[2]]);
@@ -226,12 +341,15 @@ fn max_time_stops_the_mass_spring_blend() {
     std::fs::write(dir.join("b.mesh"), sheared).unwrap();
     let scene = "name = \"shear\"\nfps = 24.0\n[keyframes]\nmeshes = [\"a.mesh\", \"b.mesh\"]\ntimes = [0.0, 1.0]\n[solver]\nmethod = \"mass-spring\"\n[mass_spring]\ninbetweens = 3\n[export]\nformats = [\"usda\"]\n";
     std::fs::write(dir.join("shear.toml"), scene).unwrap();
+    run(&dir.path, &["import", "-q", "shear.toml", "-o", "keys.json"]).success();
+    run(&dir.path, &["tetrahedralize", "-q", "keys.json", "-o", "body.json"]).success();
     out_of_time(
         &dir,
-        &["bake", "shear.toml", "--out", "never", "--max-time", "1e-9"],
-        "shear.toml",
+        &["solve", "body.json", "-o", "never.json", "--max-time", "1e-9"],
+        "body.json",
         "in the mass-spring blend, after 0 Newton iterations",
     );
+    assert!(!dir.join("never.json").exists());
     run(&dir.path, &["bake", "-q", "shear.toml", "--out", "timed", "--max-time", "1h"]).success();
     // `blend` takes the budget too: its equilibria, and TetGen for the body.
     crate::blend::targets(&dir);

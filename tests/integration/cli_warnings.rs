@@ -269,3 +269,33 @@ fn a_rig_pose_inverting_tets_at_a_joint_bakes_with_one_warning_and_keeps_more_vo
     let r = run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
     assert_eq!(warnings(&r).len(), 1, "{r}");
 }
+
+#[test]
+fn strict_on_solve_embed_and_export_refuses_what_they_carry() {
+    // One iteration: a not-converged solve, known as soon as the solve ends.
+    let dir = TempDir::new("rails-strict-stages");
+    cube_scene(&dir, "", "[0.0, 0.5, 1.0]", "max_iterations = 1");
+    run(&dir.path, &["import", "-q", "scene.toml", "-o", "keys.json"]).success();
+    run(&dir.path, &["tetrahedralize", "-q", "--strict", "keys.json", "-o", "body.json"]).success();
+    let refused = |r: Run| {
+        assert_eq!(r.code, Some(3), "{r}");
+        assert_eq!(r.stderr.lines().count(), 1, "{r}");
+        assert!(r.stderr.starts_with("error: not-converged: the spacetime solve did not converge after 1 iterations"), "{r}");
+    };
+    refused(run(&dir.path, &["solve", "-q", "--strict", "body.json", "-o", "solution.json"]));
+    assert!(!dir.join("solution.json").exists());
+    run(&dir.path, &["solve", "-q", "body.json", "-o", "solution.json"]).success();
+    refused(run(&dir.path, &["embed", "-q", "--strict", "solution.json", "-o", "animation.json"]));
+    assert!(!dir.join("animation.json").exists());
+    run(&dir.path, &["embed", "-q", "solution.json", "-o", "animation.json"]).success();
+    refused(run(&dir.path, &["export", "-q", "--strict", "animation.json", "--out", "out"]));
+    assert!(!dir.join("out").exists());
+    run(&dir.path, &["export", "-q", "animation.json", "--out", "out"]).success();
+    // A converged solve passes every --strict.
+    cube_scene(&dir, "", "[0.0, 0.5, 1.0]", "");
+    run(&dir.path, &["import", "-q", "scene.toml", "-o", "keys.json"]).success();
+    run(&dir.path, &["tetrahedralize", "-q", "--strict", "keys.json", "-o", "body.json"]).success();
+    run(&dir.path, &["solve", "-q", "--strict", "body.json", "-o", "solution.json"]).success();
+    run(&dir.path, &["embed", "-q", "--strict", "solution.json", "-o", "animation.json"]).success();
+    run(&dir.path, &["export", "-q", "--strict", "animation.json", "--out", "clean"]).success();
+}

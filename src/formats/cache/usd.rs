@@ -19,9 +19,8 @@
 use std::ffi::OsString;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::binary::require_regular;
 use super::pc2::{self, Pc2Frames};
@@ -30,6 +29,8 @@ use crate::algorithms::frames::FrameRange;
 use crate::algorithms::geometry::{Point, TriMesh};
 use crate::formats::export::layer::Value;
 use crate::formats::export::usda::{extent, header, prim_name, push_topology, push_vec3s, UsdSettings};
+use crate::formats::work_dir::WorkDir;
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 const SCRIPT: &str = include_str!("usd_cache.py");
@@ -37,32 +38,15 @@ const NO_PXR: i32 = 3;
 const USER_ERROR: i32 = 4;
 const FIX_PXR: &str = "pip install usd-core (or set BLENDSIM_PYTHON to a Python that has it)";
 
-/// A folder of temporaries, removed with its owner.
-#[derive(Debug)]
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(what: &str) -> Result<TempDir> {
-        static COUNTER: AtomicU64 = AtomicU64::new(0);
-        let dir = std::env::temp_dir().join(format!("blendsim-{what}-{}-{}", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, &e, "create a temporary folder"))?;
-        Ok(TempDir(dir))
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// Run `usd_cache.py` with `args`; its one-line errors become errors about `path`.
-fn run_script(path: &Path, args: &[&std::ffi::OsStr]) -> Result<()> {
+/// Run `usd_cache.py` with `args`; its one-line errors become errors about `path`. Under a
+/// `--max-time` budget the process is killed (with its process group) once the budget is
+/// spent: a hanging reader stops the bake at the deadline with the budget's error.
+fn run_script(path: &Path, args: &[&std::ffi::OsStr], budget: &Budget) -> Result<()> {
     let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
     let py = python.to_string_lossy().into_owned();
     let cannot_run = |e: std::io::Error| Error::in_file(path, format!("cannot run {py} to read or write USD: {e}"), FIX_PXR);
     // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
-    let child = crate::support::interrupt::spawn(
+    let mut child = crate::support::interrupt::spawn(
         Command::new(&python)
             // usd-core maps .usdc files into memory by default, so every sample read stays
             // resident; pread keeps the reader at one sample.
@@ -75,7 +59,29 @@ fn run_script(path: &Path, args: &[&std::ffi::OsStr]) -> Result<()> {
             .stderr(Stdio::piped()),
     )
     .map_err(cannot_run)?;
-    let output = child.wait_with_output().map_err(cannot_run)?;
+    let output = match budget.time_left() {
+        None => child.wait_with_output().map_err(cannot_run)?,
+        Some(_) => {
+            let started = std::time::Instant::now();
+            // Poll: the reader takes half a second to start Python, so 20 ms is nothing, and
+            // the pipes are drained by `wait_with_output` once it has exited (its summary goes
+            // to a file, its stdout and stderr carry a line or two).
+            while child.child().try_wait().map_err(cannot_run)?.is_none() {
+                if budget.time_left().is_some_and(|left| left <= 0.0) {
+                    // Dropping the guard kills the reader's process group.
+                    drop(child);
+                    let spent =
+                        budget.time_spent("cache reading", &format!("usd-core's reader stopped after {:.2} s", started.elapsed().as_secs_f64()));
+                    return Err(Error {
+                        fix: "raise --max-time; if the reader hangs, check that usd-core opens the file (python3 -c \"from pxr import Usd; Usd.Stage.Open('FILE')\")".into(),
+                        ..spent.with_path(path)
+                    });
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            child.wait_with_output().map_err(cannot_run)?
+        }
+    };
     if output.status.success() {
         return Ok(());
     }
@@ -105,6 +111,10 @@ struct ReadInfo {
     face_vertex_counts: Vec<i64>,
     face_vertex_indices: Vec<i64>,
     left_handed: bool,
+    /// The stage's `metersPerUnit` when authored (USD's fallback, centimeters, is not assumed:
+    /// a stage without it gets the scene's `units`).
+    #[serde(default)]
+    meters_per_unit: Option<f64>,
 }
 
 /// The frames of a USD point cache, served from a temporary PC2 copy of the selected samples.
@@ -113,7 +123,7 @@ pub struct UsdFrames {
     pc2: Pc2Frames,
     /// Frame times in seconds.
     times: Vec<f64>,
-    _temp: TempDir,
+    _temp: WorkDir,
 }
 
 /// An opened USD point cache.
@@ -127,17 +137,25 @@ pub struct OpenedUsd {
     /// The Mesh prim read.
     pub prim: String,
     pub bytes: u64,
+    /// The stage's authored `metersPerUnit` (positive and finite), if any.
+    pub meters_per_unit: Option<f64>,
 }
 
 /// Open the `points` time samples of `prim` (or the stage's only / only animated Mesh).
-pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<OpenedUsd> {
+pub fn open(path: &Path, prim: Option<&str>, range: FrameRange, budget: &Budget) -> Result<OpenedUsd> {
     let bytes = require_regular(path, "USD file")?;
-    let temp = TempDir::new("usd-read")?;
+    let temp = WorkDir::create("usd-read").map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for usd-core's reader"))?;
     let (start, end) = (range.start.to_string(), range.end.to_string());
-    let args =
-        [std::ffi::OsStr::new("read"), path.as_os_str(), std::ffi::OsStr::new(prim.unwrap_or("-")), start.as_ref(), end.as_ref(), temp.0.as_os_str()];
-    run_script(path, &args)?;
-    let info_path = temp.0.join("info.json");
+    let args = [
+        std::ffi::OsStr::new("read"),
+        path.as_os_str(),
+        std::ffi::OsStr::new(prim.unwrap_or("-")),
+        start.as_ref(),
+        end.as_ref(),
+        temp.path.as_os_str(),
+    ];
+    run_script(path, &args, budget)?;
+    let info_path = temp.path.join("info.json");
     let text = std::fs::read(&info_path).map_err(|e| Error::io(&info_path, &e, "read what usd-core found"))?;
     let info: ReadInfo =
         serde_json::from_slice(&text).map_err(|e| Error::in_file(path, format!("usd-core's summary does not parse: {e}"), "report this as a bug"))?;
@@ -172,7 +190,7 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
             info.face_vertex_indices.len()
         )));
     }
-    let pc2_path = temp.0.join("frames.pc2");
+    let pc2_path = temp.path.join("frames.pc2");
     let mut pc2 = pc2::open(&pc2_path, fps).map_err(|e| Error { path: Some(path.to_path_buf()), ..e })?;
     if pc2.frame_count() != info.time_codes.len() || pc2.vertex_count() != n {
         return Err(bad("usd-core's frames do not match its summary".into()));
@@ -181,7 +199,11 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange) -> Result<Opened
     pc2.read_frame(0, &mut positions).map_err(|e| Error { path: Some(path.to_path_buf()), ..e })?;
     let times = info.time_codes.iter().map(|t| t / fps).collect();
     let frames = UsdFrames { pc2, times, _temp: temp };
-    Ok(OpenedUsd { mesh: TriMesh { positions, triangles, attributes: None }, frames, fps, prim: info.prim, bytes })
+    let meters_per_unit = match info.meters_per_unit {
+        Some(m) if !(m.is_finite() && m > 0.0) => return Err(bad(format!("the stage's metersPerUnit is {m}, not a positive length"))),
+        m => m,
+    };
+    Ok(OpenedUsd { mesh: TriMesh { positions, triangles, attributes: None }, frames, fps, prim: info.prim, bytes, meters_per_unit })
 }
 
 impl FrameSource for UsdFrames {
@@ -324,12 +346,12 @@ mod tests {
         for name in ["wave.usda", "wave.usdc"] {
             let path = dir.join(name);
             write(&path, &mesh, &mut frames, 24.0).unwrap();
-            let mut opened = open(&path, None, FrameRange::ALL).unwrap();
+            let mut opened = open(&path, None, FrameRange::ALL, &Budget::default()).unwrap();
             assert_eq!((opened.fps, opened.prim.as_str()), (24.0, "/wave/Mesh"), "{name}");
             assert_eq!(opened.mesh.triangles, mesh.triangles, "{name}");
             assert_eq!(opened.bytes, std::fs::metadata(&path).unwrap().len());
             assert_frames_equal(&mut frames, &mut opened.frames, 0.0);
-            let sub = open(&path, Some("/wave/Mesh"), FrameRange { start: 1, end: -2 }).unwrap();
+            let sub = open(&path, Some("/wave/Mesh"), FrameRange { start: 1, end: -2 }, &Budget::default()).unwrap();
             assert_eq!((sub.frames.frame_count(), sub.frames.time(0)), (3, 1.0 / 24.0));
         }
         assert_eq!(&std::fs::read(dir.join("wave.usdc")).unwrap()[..8], b"PXR-USDC");
@@ -367,7 +389,7 @@ mod tests {
                     point3f[] points.timeSamples = {\n        3: [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)],\n        \
                     4: [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],\n    }\n}\n";
         std::fs::write(&path, text).unwrap();
-        let opened = open(&path, None, FrameRange::ALL).unwrap();
+        let opened = open(&path, None, FrameRange::ALL, &Budget::default()).unwrap();
         assert_eq!(opened.mesh.triangles, vec![[0, 2, 1], [0, 3, 2]]);
         assert_eq!((opened.fps, opened.frames.time(0), opened.frames.time(1)), (30.0, 0.1, 4.0 / 30.0));
         std::fs::remove_dir_all(&dir).unwrap();
@@ -379,7 +401,7 @@ mod tests {
         let (mesh, mut frames) = (wave_mesh(2), wave(4, 2, 24.0));
         let path = dir.join("a.usda");
         write(&path, &mesh, &mut frames, 24.0).unwrap();
-        let err = |prim: Option<&str>, range: FrameRange| open(&path, prim, range).unwrap_err().to_string();
+        let err = |prim: Option<&str>, range: FrameRange| open(&path, prim, range, &Budget::default()).unwrap_err().to_string();
         let s = err(Some("/nope"), FrameRange::ALL);
         assert!(s.starts_with(&format!("{}: has no prim /nope (its meshes: /a/Mesh) (fix: set prim", path.display())), "{s}");
         let s = err(Some("/a"), FrameRange::ALL);
@@ -389,7 +411,7 @@ mod tests {
 
         let static_mesh = dir.join("static.usda");
         std::fs::write(&static_mesh, "#usda 1.0\ndef Mesh \"M\"\n{\n    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0, 1, 2]\n    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]\n}\n").unwrap();
-        let s = open(&static_mesh, None, FrameRange::ALL).unwrap_err().to_string();
+        let s = open(&static_mesh, None, FrameRange::ALL, &Budget::default()).unwrap_err().to_string();
         assert!(
             s.starts_with(&format!(
                 "{}: the points of /M have no time samples (a static mesh, not a point cache) (fix: export the animation as points time samples",
@@ -401,7 +423,7 @@ mod tests {
 
         let broken = dir.join("broken.usda");
         std::fs::write(&broken, "#usda 1.0\ndef Mesh \"M\" {\n").unwrap();
-        let s = open(&broken, None, FrameRange::ALL).unwrap_err().to_string();
+        let s = open(&broken, None, FrameRange::ALL, &Budget::default()).unwrap_err().to_string();
         assert!(s.contains("usd-core failed") && !s.contains('\n'), "{s}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -102,6 +102,8 @@ def read(path, prim_path, start, end, out_dir):
         "face_vertex_counts": list(counts),
         "face_vertex_indices": list(indices),
         "left_handed": mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded,
+        # Only when authored: USD's fallback (0.01) would turn every unitless stage into cm.
+        "meters_per_unit": UsdGeom.GetStageMetersPerUnit(stage) if UsdGeom.StageHasAuthoredMetersPerUnit(stage) else None,
     }
     with open(f"{out_dir}/info.json", "w") as f:
         json.dump(info, f)

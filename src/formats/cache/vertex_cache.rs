@@ -7,6 +7,7 @@ use super::{gltf_clip, mdd, pc2, sequence, usd, FrameSource};
 use crate::algorithms::frames::{FrameRange, Subrange};
 use crate::algorithms::geometry::TriMesh;
 use crate::formats::mesh::obj;
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// The file formats of vertex caches.
@@ -81,6 +82,8 @@ pub struct CacheOptions {
     pub prim: Option<String>,
     /// The frames to read.
     pub range: FrameRange,
+    /// `--max-time`: bounds the USD reader's process (killed at the deadline).
+    pub budget: Budget,
 }
 
 /// Where a cache's frame rate came from.
@@ -112,6 +115,10 @@ pub struct VertexCache {
     pub fps_source: FpsSource,
     /// Bytes of the input: every frame file of a sequence, a glTF's external buffers.
     pub bytes: u64,
+    /// The length unit the file states, in meters: a glTF's (always meters), a USD stage's
+    /// authored `metersPerUnit`; `None` for formats that carry none (OBJ, PC2, MDD) and a USD
+    /// stage without the metadata.
+    pub meters_per_unit: Option<f64>,
 }
 
 impl std::fmt::Debug for VertexCache {
@@ -213,6 +220,7 @@ impl VertexCache {
                     fps,
                     fps_source: FpsSource::Caller,
                     bytes: opened.bytes,
+                    meters_per_unit: None,
                 }
             }
             CacheFormat::Pc2 => {
@@ -229,6 +237,7 @@ impl VertexCache {
                     fps: sample_fps,
                     fps_source: FpsSource::Caller,
                     bytes,
+                    meters_per_unit: None,
                 }
             }
             CacheFormat::Mdd => {
@@ -239,14 +248,33 @@ impl VertexCache {
                     mdd::MddTimes::Caller { fps } => (fps, FpsSource::Caller),
                 };
                 let bytes = std::fs::metadata(path).map_err(|e| Error::io(path, &e, "measure the cache"))?.len();
-                VertexCache { format, path: path_buf, mesh, frames: subrange(path, frames, options.range)?, fps, fps_source, bytes }
+                VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh,
+                    frames: subrange(path, frames, options.range)?,
+                    fps,
+                    fps_source,
+                    bytes,
+                    meters_per_unit: None,
+                }
             }
             CacheFormat::Gltf => {
                 let opened = gltf_clip::open(path, options.animation.as_deref(), options.fps)?;
                 let fps_source =
                     if opened.fps_from_keys { FpsSource::File("the spacing of the glTF animation's keys".into()) } else { FpsSource::Caller };
                 let frames = subrange(path, opened.frames, options.range)?;
-                let mut cache = VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
+                // glTF's unit is the meter (glTF 2.0, "Coordinate System and Units").
+                let mut cache = VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh: opened.mesh,
+                    frames,
+                    fps: opened.fps,
+                    fps_source,
+                    bytes: opened.bytes,
+                    meters_per_unit: Some(1.0),
+                };
                 if options.range != FrameRange::ALL {
                     // The mesh is the first frame of the range.
                     cache.frames.read_frame(0, &mut cache.mesh.positions)?;
@@ -254,7 +282,7 @@ impl VertexCache {
                 cache
             }
             CacheFormat::Usd => {
-                let opened = usd::open(path, options.prim.as_deref(), options.range)?;
+                let opened = usd::open(path, options.prim.as_deref(), options.range, &options.budget)?;
                 let fps_source = FpsSource::File(format!("the stage's timeCodesPerSecond (prim {})", opened.prim));
                 VertexCache {
                     format,
@@ -264,6 +292,7 @@ impl VertexCache {
                     fps: opened.fps,
                     fps_source,
                     bytes: opened.bytes,
+                    meters_per_unit: opened.meters_per_unit,
                 }
             }
         };

@@ -10,6 +10,7 @@
 use std::io::{BufRead, Cursor, Read, Seek, SeekFrom};
 use std::path::Path;
 
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 /// An image file's bytes and MIME type (`image/png` or `image/jpeg`).
@@ -38,21 +39,23 @@ pub fn mime_of(bytes: &[u8]) -> Option<&'static str> {
 /// load); a header claiming more is damaged or would not display.
 pub const MAX_SIDE: u32 = 16384;
 
-/// The width and height in an image's header, decoded by the PNG or JPEG decoder (no pixels).
-fn decoded_size<R: BufRead + Seek>(reader: R, mime: &str) -> std::result::Result<(u32, u32), String> {
+/// The width, height and channels in an image's header, decoded by the PNG or JPEG decoder
+/// (no pixels).
+fn decoded_size<R: BufRead + Seek>(reader: R, mime: &str) -> std::result::Result<(u32, u32, u32), String> {
     if mime == "image/png" {
         let mut decoder = png::Decoder::new(reader);
-        let (width, height) = decoder.read_header_info().map(|info| (info.width, info.height)).map_err(|e| e.to_string())?;
+        let (width, height, channels) =
+            decoder.read_header_info().map(|info| (info.width, info.height, info.color_type.samples() as u32)).map_err(|e| e.to_string())?;
         // A size beyond the limit is its own message; below it the rest of the header is read.
         if width <= MAX_SIDE && height <= MAX_SIDE {
             decoder.read_info().map_err(|e| e.to_string())?;
         }
-        Ok((width, height))
+        Ok((width, height, channels))
     } else {
         let mut decoder = jpeg_decoder::Decoder::new(reader);
         decoder.read_info().map_err(|e| e.to_string())?;
         let info = decoder.info().ok_or("no frame header")?;
-        Ok((u32::from(info.width), u32::from(info.height)))
+        Ok((u32::from(info.width), u32::from(info.height), info.pixel_format.pixel_bytes() as u32))
     }
 }
 
@@ -70,7 +73,7 @@ pub fn inspect<R: BufRead + Seek>(mut reader: R) -> std::result::Result<&'static
         )
     })?;
     let kind = &mime["image/".len()..];
-    let (width, height) = decoded_size(reader, mime).map_err(|e| damaged(format!("is not a readable {kind} image: {e}")))?;
+    let (width, height, _) = decoded_size(reader, mime).map_err(|e| damaged(format!("is not a readable {kind} image: {e}")))?;
     if width > MAX_SIDE || height > MAX_SIDE {
         return Err((
             format!("is a {kind} image of {width} x {height} pixels, over the {MAX_SIDE} a side that most GPUs can sample"),
@@ -110,14 +113,52 @@ pub fn file_names(textures: &[Option<String>]) -> Vec<Option<String>> {
         .collect()
 }
 
-/// Read every group's texture (`None` for groups without one). Errors name the image file.
-pub fn load(textures: &[Option<String>]) -> Result<Vec<Option<Texture>>> {
+/// Copies of a texture file's bytes an export holds at once: the file as read, and the glb
+/// buffers the blendshape and full-frame files are assembled in (a 600 MB texture peaked at
+/// 2.47 GB, about four).
+pub const FILE_COPIES: f64 = 4.0;
+
+/// The memory a texture needs, estimated before it is read: [`FILE_COPIES`] of its file, and
+/// its pixels once decoded (width x height x channels from the header), which a viewer of the
+/// output needs and a header claiming far more than the file holds betrays.
+fn check_memory(path: &Path, budget: &Budget) -> Result<()> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, &e, "read the texture a material's map_Kd names"))?;
+    let bytes = file.metadata().map_err(|e| Error::io(path, &e, "measure the texture"))?.len() as f64;
+    let mut reader = std::io::BufReader::new(file);
+    let mut head = Vec::with_capacity(8);
+    let _ = reader.by_ref().take(8).read_to_end(&mut head);
+    let pixels = match (mime_of(&head), reader.seek(SeekFrom::Start(0))) {
+        // A header over MAX_SIDE (or unreadable) is `inspect`'s error, with its own message.
+        (Some(mime), Ok(_)) => decoded_size(reader, mime)
+            .ok()
+            .filter(|&(w, h, _)| w <= MAX_SIDE && h <= MAX_SIDE)
+            .map_or(0.0, |(w, h, c)| w as f64 * h as f64 * c as f64),
+        _ => 0.0, // `inspect` reports it
+    };
+    budget
+        .check(
+            FILE_COPIES * bytes + pixels,
+            &format!(
+                "the texture {} ({:.1} MB, {:.1} MB of pixels decoded)",
+                path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned()),
+                bytes / 1e6,
+                pixels / 1e6
+            ),
+            "scale the texture down or save it compressed (PNG or JPEG)",
+        )
+        .map_err(|e| e.with_path(path))
+}
+
+/// Read every group's texture (`None` for groups without one), each first checked against the
+/// memory `budget` ([`check_memory`]). Errors name the image file.
+pub fn load(textures: &[Option<String>], budget: &Budget) -> Result<Vec<Option<Texture>>> {
     let names = file_names(textures);
     textures
         .iter()
         .zip(names)
         .map(|(path, name)| {
             let (Some(path), Some(file_name)) = (path, name) else { return Ok(None) };
+            check_memory(Path::new(path), budget)?;
             let bytes = crate::support::input::read_bytes(Path::new(path), "the texture a material's map_Kd names")?;
             let mime = inspect(Cursor::new(&bytes)).map_err(|(problem, fix)| Error::in_file(path, problem, fix))?;
             Ok(Some(Texture { file_name, bytes, mime }))
@@ -166,8 +207,8 @@ mod tests {
 
     #[test]
     fn headers_are_decoded_and_their_size_bounded() {
-        assert_eq!(decoded_size(Cursor::new(png_claiming(1, 1)), "image/png"), Ok((1, 1)));
-        assert_eq!(decoded_size(Cursor::new(png_claiming(1_000_000, 1_000_000)), "image/png"), Ok((1_000_000, 1_000_000)));
+        assert_eq!(decoded_size(Cursor::new(png_claiming(1, 1)), "image/png").map(|(w, h, _)| (w, h)), Ok((1, 1)));
+        assert_eq!(decoded_size(Cursor::new(png_claiming(1_000_000, 1_000_000)), "image/png").map(|(w, h, _)| (w, h)), Ok((1_000_000, 1_000_000)));
         let garbage = [&b"\x89PNG\r\n\x1a\n"[..], &[0x5a; 40]].concat();
         assert!(decoded_size(Cursor::new(&garbage), "image/png").is_err());
         let mut bad_crc = png_claiming(2, 2);
@@ -180,7 +221,7 @@ mod tests {
         let load_one = |name: &str, bytes: &[u8]| {
             let p = dir.join(name);
             std::fs::write(&p, bytes).unwrap();
-            load(&[Some(p.to_string_lossy().into_owned())]).map(|t| t[0].as_ref().map(|t| t.mime))
+            load(&[Some(p.to_string_lossy().into_owned())], &Budget::default()).map(|t| t[0].as_ref().map(|t| t.mime))
         };
         assert_eq!(load_one("ok.png", &png_claiming(1, 1)), Ok(Some("image/png")));
         let e = load_one("big.png", &png_claiming(1_000_000, 1_000_000)).unwrap_err().to_string();
@@ -201,7 +242,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let gif = dir.join("t.gif");
         std::fs::write(&gif, b"GIF89a").unwrap();
-        let e = load(&[Some(gif.to_string_lossy().into_owned())]).unwrap_err().to_string();
+        let e = load(&[Some(gif.to_string_lossy().into_owned())], &Budget::default()).unwrap_err().to_string();
         assert!(e.contains("t.gif") && e.contains("not a PNG or JPEG"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

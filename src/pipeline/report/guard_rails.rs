@@ -6,6 +6,7 @@
 
 use super::Report;
 use crate::pipeline::scene::Method;
+use crate::pipeline::stage_file::SolverLog;
 
 /// The codes of the warnings a bake can give, in the order the report lists them.
 pub mod code {
@@ -18,6 +19,11 @@ pub mod code {
     pub const BODY_SIZE: &str = "body-size";
     /// An `[embed] surface` reaching far outside the body (`tetrahedralize`).
     pub const EMBED_FAR: &str = "embed-far";
+    /// A cache file stating a unit other than the scene's `units` (`tetrahedralize`).
+    pub const UNITS_CONFLICT: &str = "units-conflict";
+    /// Iterative global-step solves stopped at their iteration cap short of their residual
+    /// goal (`solve`).
+    pub const CG_CAPPED: &str = "cg-capped";
     /// The solve stopped before its stopping rule was met.
     pub const NOT_CONVERGED: &str = "not-converged";
     /// The exported animation misses the input keyframes by more than [`super::KEYS_MOVED_SHARE`].
@@ -70,15 +76,7 @@ pub fn looks_like_frames(times: &[f64]) -> bool {
 pub fn guard_rails(report: &Report) -> Vec<String> {
     let mut out = Vec::new();
     let sv = &report.solver;
-    if !sv.converged {
-        out.push(coded(
-            code::NOT_CONVERGED,
-            format!(
-                "the {} solve did not converge after {} iterations ({}); the in-betweens may be far from the solution (raise [solver] max_iterations, or hold more vertices with [keyframes] fixed)",
-                sv.method, sv.iterations, sv.stop_reason
-            ),
-        ));
-    }
+    out.extend(not_converged(sv));
     let moved = report.keyframe_deviation.max;
     if moved > KEYS_MOVED_SHARE {
         out.push(coded(
@@ -122,6 +120,19 @@ pub fn guard_rails(report: &Report) -> Vec<String> {
     }
     out.extend(larger_outputs(report));
     out
+}
+
+/// The `not-converged` warning of a solve that stopped before its stopping rule was met.
+pub fn not_converged(sv: &SolverLog) -> Option<String> {
+    (!sv.converged).then(|| {
+        coded(
+            code::NOT_CONVERGED,
+            format!(
+                "the {} solve did not converge after {} iterations ({}); the in-betweens may be far from the solution (raise [solver] max_iterations, or hold more vertices with [keyframes] fixed)",
+                sv.method, sv.iterations, sv.stop_reason
+            ),
+        )
+    })
 }
 
 /// `[0, 24, 48]`, or its first three and last for long lists.

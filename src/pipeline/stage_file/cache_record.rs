@@ -43,6 +43,10 @@ pub struct CacheRecord {
     pub tolerance: Option<f64>,
     /// What the automatic selection did (`keyframes = "auto"`).
     pub selection: Option<SelectionStats>,
+    /// The length unit the file states, in meters (glTF: 1; USD: its authored
+    /// `metersPerUnit`), or none; the scene's `units` default to it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub meters_per_unit: Option<f64>,
 }
 
 /// The reader options of a [`CacheRecord`], so a later stage opens the cache the same way.

@@ -77,7 +77,7 @@ impl<'a> Bake<'a> {
         let clip = blendshape_clip(&animation, None, &self.budget)?;
         let (outputs, measured) = std::thread::scope(|scope| {
             let measuring = scope.spawn(|| measure(&animation, &clip, &self.budget));
-            let outputs = export_with(&animation, &clip, staging, self.progress);
+            let outputs = export_with(&animation, &clip, staging, &self.budget, self.progress);
             let bar = self.progress.stage("report");
             let measured = measuring.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             bar.finish_and_clear();

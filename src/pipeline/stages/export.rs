@@ -29,12 +29,18 @@ use crate::support::progress::Progress;
 /// in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, budget: &Budget, staging: &mut Staging) -> Result<Outputs> {
     let clip = blendshape_clip(animation, None, budget)?;
-    export_with(animation, &clip, staging, &Progress::hidden())
+    export_with(animation, &clip, staging, budget, &Progress::hidden())
 }
 
 /// [`export`] of `clip` (the animation's [`blendshape_clip`], chosen once by the caller, who
 /// may also measure it), showing a bar over the files on `progress`.
-pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), staging: &mut Staging, progress: &Progress) -> Result<Outputs> {
+pub fn export_with(
+    animation: &Animation,
+    clip: &(BlendShapeClip, Option<usize>),
+    staging: &mut Staging,
+    budget: &Budget,
+    progress: &Progress,
+) -> Result<Outputs> {
     check(animation)?;
     let scene = &animation.scene;
     staging.set_group(&format!("export:{}", scene.name));
@@ -55,7 +61,7 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
     let (clip, rank) = (&clip.0, clip.1);
     let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
-    let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures))?;
+    let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures), budget)?;
     let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
     let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
     if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {

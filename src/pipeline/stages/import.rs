@@ -16,6 +16,12 @@ use crate::pipeline::stage_file::{Keyframes, Shape, VertexSet};
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
+/// The phase `--max-time` names when the keyframe import runs out of it.
+const IMPORT_PHASE: &str = "keyframe import";
+/// What to do when the keyframe import runs out of `--max-time`.
+const IMPORT_TIME_FIX: &str =
+    "raise --max-time, or give fewer keys (a long clip keyed at every frame is a vertex cache: give it as [cache] with keyframes = \"auto\")";
+
 /// Meshes read once per path (scenes often repeat the rest mesh).
 #[derive(Default)]
 struct MeshCache(HashMap<PathBuf, MeshFile>);
@@ -32,11 +38,13 @@ impl MeshCache {
     /// Read the files of `paths` not read yet, in parallel (each file parsed on its own, so the
     /// same meshes). A file that fails is left out, for `get` to read again and report in key
     /// order, as without the prefetch.
-    fn prefetch(&mut self, paths: &[PathBuf]) {
+    /// Files not read once `--max-time` is spent are left out too; the key loop then stops.
+    fn prefetch(&mut self, paths: &[PathBuf], budget: &Budget) {
         let mut todo: Vec<&PathBuf> = paths.iter().filter(|p| !self.0.contains_key(p.as_path())).collect();
         todo.sort();
         todo.dedup();
-        let read: Vec<(PathBuf, Result<MeshFile>)> = todo.into_par_iter().map(|p| (p.clone(), mesh::read(p))).collect();
+        let read_in_time = |p: &PathBuf| budget.check_time(IMPORT_PHASE, String::new).and_then(|()| mesh::read(p));
+        let read: Vec<(PathBuf, Result<MeshFile>)> = todo.into_par_iter().map(|p| (p.clone(), read_in_time(p))).collect();
         self.0.extend(read.into_iter().filter_map(|(p, m)| Some((p, m.ok()?))));
     }
 }
@@ -138,12 +146,9 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         (None, Some(cache)) => return super::import_cache::import(scene_file, cache, budget),
         (None, None) => return Err(Error::general("the scene has neither [keyframes] nor [cache]", "add one of them (formats/scene.md)")),
     };
-    let mut meshes = KeyMeshes::read(scene_file)?;
+    let mut meshes = KeyMeshes::read(scene_file, budget)?;
     let (rest, rest_source) = meshes.rest_shape(scene_file)?;
-    let rest_points = match &rest {
-        Shape::Surface(s) => &s.positions,
-        Shape::Volume(v) => &v.positions,
-    };
+    let rest_points = rest.positions();
     // One selection per key, usually the same one at every key: each distinct one is resolved
     // (its file read) once.
     let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
@@ -219,16 +224,18 @@ struct KeyMeshes {
 
 impl KeyMeshes {
     /// Read every key's mesh (each file once), check it has the first one's topology, and
-    /// deform it as the scene says.
-    fn read(scene_file: &SceneFile) -> Result<KeyMeshes> {
+    /// deform it as the scene says; `--max-time` is checked before every file and every key.
+    fn read(scene_file: &SceneFile, budget: &Budget) -> Result<KeyMeshes> {
         let keys = scene_file.scene.keyframes.as_ref().expect("a keyframe scene");
         let mut cache = MeshCache::default();
         let paths: Vec<PathBuf> = keys.meshes.iter().map(|m| scene_file.resolve(m.path())).collect();
-        cache.prefetch(&paths);
+        let n = paths.len();
+        cache.prefetch(&paths, budget);
         let first = cache.get(&paths[0])?.clone();
         let first_topology = Topology::of(&first);
         let mut poses: Vec<Vec<Point>> = Vec::with_capacity(keys.meshes.len());
         for (k, key) in keys.meshes.iter().enumerate() {
+            budget.check_time_to(IMPORT_PHASE, || format!("after reading {k} of {n} keys"), IMPORT_TIME_FIX)?;
             let m = cache.get(&paths[k])?;
             if k > 0 {
                 check_same_topology((&paths[0], &first, &first_topology), (&paths[k], m, &Topology::of(m)))?;
@@ -361,10 +368,7 @@ fn check_key_volumes(rest: &Shape, poses: &[Vec<Point>], paths: &[PathBuf]) -> R
         Shape::Surface(s) => surface::enclosed_volume(p, &s.triangles),
         Shape::Volume(v) => v.volume_at(p),
     };
-    let rest_points = match rest {
-        Shape::Surface(s) => &s.positions,
-        Shape::Volume(v) => &v.positions,
-    };
+    let rest_points = rest.positions();
     let rest_volume = volume(rest_points);
     if rest_volume.is_nan() || rest_volume <= 0.0 {
         return Ok(()); // the rest shape's own checks report it

@@ -36,8 +36,9 @@ fn modified_ns(path: &Path) -> Option<u64> {
     u64::try_from(since.as_nanos()).ok()
 }
 
-fn reader_options(o: &CacheRecordOptions) -> CacheOptions {
+fn reader_options(o: &CacheRecordOptions, budget: &Budget) -> CacheOptions {
     CacheOptions {
+        budget: *budget,
         fps: o.fps,
         rest: o.rest.as_ref().map(PathBuf::from),
         animation: o.animation.clone(),
@@ -48,9 +49,9 @@ fn reader_options(o: &CacheRecordOptions) -> CacheOptions {
 
 /// Open the cache of `record` again, checking it is the one `import` read (same format,
 /// bytes, modification time, frames and vertices).
-pub fn reopen(record: &CacheRecord) -> Result<VertexCache> {
+pub fn reopen(record: &CacheRecord, budget: &Budget) -> Result<VertexCache> {
     let path = Path::new(&record.path);
-    let cache = VertexCache::open(path, &reader_options(&record.options))?;
+    let cache = VertexCache::open(path, &reader_options(&record.options, budget))?;
     let now = (cache.format.name(), cache.bytes, modified_ns(path), cache.frame_count(), cache.frames.vertex_count());
     let then = (record.format.as_str(), record.bytes, record.modified_ns, record.frames, record.vertices);
     if now != then {
@@ -69,7 +70,7 @@ pub fn reopen(record: &CacheRecord) -> Result<VertexCache> {
 /// The least-squares fit of the cache of `record` on its keys, its `fixed` vertices held on
 /// the cache frames at every key.
 pub fn fit_cache(record: &CacheRecord, budget: &Budget) -> Result<Trajectory> {
-    let mut cache = reopen(record)?;
+    let mut cache = reopen(record, budget)?;
     let pins = if record.fixed.is_empty() { Vec::new() } else { vec![record.fixed.to_mask(record.vertices); record.keys.len()] };
     fit(&mut timed(cache.frames.as_mut(), "cache fit", budget), &record.keys, &pins, &FitSettings::default())
         .map_err(|e| e.with_path(Path::new(&record.path)))
@@ -91,7 +92,7 @@ fn timed<'a, S: FrameSource + ?Sized>(
 /// It streams the whole cache (once per candidate rank in the export's rank search), so it
 /// checks `--max-time` at every frame like the fit.
 pub fn error_against(record: &CacheRecord, trajectory: &Trajectory, budget: &Budget) -> Result<CacheDeviation> {
-    let mut cache = reopen(record)?;
+    let mut cache = reopen(record, budget)?;
     deviation(&mut timed(cache.frames.as_mut(), "cache error measure", budget), trajectory, record.diagonal)
         .map_err(|e| e.with_path(Path::new(&record.path)))
 }
@@ -100,7 +101,7 @@ pub fn error_against(record: &CacheRecord, trajectory: &Trajectory, budget: &Bud
 /// `out` names: a converter, streaming one frame at a time.
 pub fn convert(scene_file: &SceneFile, spec: &CacheSpec, out: &Path) -> Result<()> {
     let (path, options) = open_options(scene_file, spec)?;
-    let mut cache = VertexCache::open(&path, &reader_options(&options))?;
+    let mut cache = VertexCache::open(&path, &reader_options(&options, &Budget::default()))?;
     crate::formats::cache::write(out, &cache.mesh, cache.frames.as_mut(), cache.fps)
 }
 
@@ -147,7 +148,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         Some(Rest::Mesh(m)) => Some(scene_file.resolve(m)),
         _ => None,
     };
-    let mut cache = VertexCache::open(&path, &reader_options(&options))?;
+    let mut cache = VertexCache::open(&path, &reader_options(&options, budget))?;
     let frames = cache.frame_count();
     let vertices = cache.frames.vertex_count();
     if frames < 2 {
@@ -246,9 +247,20 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         fixed: VertexSet::from_mask(&fixed),
         tolerance: matches!(spec.keyframes, CacheKeys::Auto).then(|| spec.tolerance()),
         selection,
+        meters_per_unit: cache.meters_per_unit,
     };
     let mut scene = scene.clone();
     scene.fps = cache.fps;
+    // The file's unit is the scene's when the scene gives none (`tetrahedralize` warns when
+    // they differ: `units-conflict`).
+    let (low, high) = crate::pipeline::scene::METERS_PER_UNIT_RANGE;
+    match cache.meters_per_unit {
+        // (A file in meters changes nothing: the scene stays as written, bit for bit.)
+        Some(m) if scene.units.is_none() && scene.export.meters_per_unit == 1.0 && m != 1.0 && (low..=high).contains(&m) => {
+            scene.units = Some(crate::pipeline::scene::Units::MetersPerUnit(m));
+        }
+        _ => {}
+    }
     let per_key = |m: &[bool]| vec![VertexSet::from_mask(m); keys.len()];
     Ok(Keyframes {
         scene,

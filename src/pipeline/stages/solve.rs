@@ -17,6 +17,7 @@ use crate::algorithms::spacetime::obstacles::Obstacle;
 use crate::algorithms::spacetime::solver::{self, ModelHessian, Settings, Step};
 use crate::algorithms::spacetime::timing::TimingSettings;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
+use crate::pipeline::report::guard_rails::{code, coded};
 use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
 use crate::pipeline::stage_file::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
 use crate::support::budget::Budget;
@@ -160,18 +161,28 @@ pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progre
                     solve_seconds: l.split.solve_seconds,
                 }),
             };
-            if let Some(c) = log.conjugate_gradients.filter(|c| c.capped > 0) {
-                eprintln!(
-                    "blendsim: warning: {} of {} iterative global-step solves stopped at {} CG iterations with a relative residual up to {:.1e} (goal {:.0e}); the result may differ from the direct solve's. Fix: give the direct solver the memory (--max-memory), or use fewer keys or a coarser body",
-                    c.capped, c.solves, c.max_iterations, c.worst_residual, c.tolerance
-                );
-            }
             (solved.trajectory, log)
         }
         Method::MassSpring => super::blend::inbetween(&body, budget, progress)?,
         Method::Fit => unreachable!("handled above"),
     };
+    if let Some(w) = cg_capped(&log) {
+        body.warn(progress, w);
+    }
     Ok(Solution { body, trajectory, log })
+}
+
+/// The `cg-capped` warning: iterative global-step solves that stopped at their iteration cap
+/// with a residual above their goal, so the result may differ from the direct solve's.
+fn cg_capped(log: &SolverLog) -> Option<String> {
+    let c = log.conjugate_gradients.as_ref().filter(|c| c.capped > 0)?;
+    Some(coded(
+        code::CG_CAPPED,
+        format_args!(
+            "{} of {} iterative global-step solves stopped at {} CG iterations with a relative residual up to {:.1e} (goal {:.0e}); the result may differ from the direct solve's (give the direct solver the memory with --max-memory, or use fewer keys or a coarser body)",
+            c.capped, c.solves, c.max_iterations, c.worst_residual, c.tolerance
+        ),
+    ))
 }
 
 /// `fit`: the least-squares cubic Hermite fit of the body's cache on its keys, with the keys'

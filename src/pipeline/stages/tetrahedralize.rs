@@ -42,21 +42,36 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 /// `[embed] surface` far outside the body (`embedded_far_outside`) are warned of.
 pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
     let mut body = simulation_body(keys, budget, progress)?;
-    let rest = match &keys.rest {
-        Shape::Surface(s) => &s.positions,
-        Shape::Volume(v) => &v.positions,
-    };
+    let rest = keys.rest.positions();
     if body.mesh.is_some() {
         if let Some(w) = implausible_size(crate::algorithms::geometry::bbox_diagonal(rest), keys.scene.meters_per_unit(), &keys.rest_source) {
-            progress.warn(&w);
-            body.warnings.push(w);
+            body.warn(progress, w);
         }
     }
-    if let Some(w) = keys.display.as_ref().and_then(|display| embedded_far_outside(&display.positions, keys)) {
-        progress.warn(&w);
-        body.warnings.push(w);
+    if let Some(w) = keys.display.as_ref().and_then(|display| embedded_far_outside(&display.positions, rest, &keys.rest_source)) {
+        body.warn(progress, w);
+    }
+    if let Some(w) = units_conflict(keys) {
+        body.warn(progress, w);
     }
     Ok(body)
+}
+
+/// The warning for a cache whose file states a unit (a USD stage's `metersPerUnit`, glTF's
+/// meters) other than the scene's explicit `units`: the scene's is used, as given.
+fn units_conflict(keys: &Keyframes) -> Option<String> {
+    let file = keys.cache.as_ref()?.meters_per_unit?;
+    let scene = keys.scene.meters_per_unit();
+    // Equal up to the rounding of a unit written as a number (0.01 vs 0.009999999776 as f32).
+    ((file - scene).abs() > 1e-6 * file.max(scene)).then(|| {
+        coded(
+            code::UNITS_CONFLICT,
+            format_args!(
+                "{}: the file states {file:e} m per unit but the scene's units say {scene:e} m; the scene's are used (remove units from the scene to use the file's, or correct it)",
+                keys.rest_source
+            ),
+        )
+    })
 }
 
 /// The body sizes (bounding-box diagonal, meters) the default material is meant for
@@ -78,8 +93,8 @@ fn implausible_size(diagonal: f64, meters_per_unit: f64, source: &str) -> Option
         .iter()
         .find(|&&(_, unit)| unit != meters_per_unit && (low..=high).contains(&(diagonal * unit)))
         .map_or(String::new(), |(name, _)| format!("if the mesh is in {name}, set units = \"{name}\" at the top of the scene; "));
-    Some(crate::pipeline::report::guard_rails::coded(
-        crate::pipeline::report::guard_rails::code::BODY_SIZE,
+    Some(coded(
+        code::BODY_SIZE,
         format_args!(
             "{source}: the body is {diagonal:.3e} units across ({meters:.3e} m at {meters_per_unit:e} m per unit), {side} the {low:e} to {high} m \
          the material is meant for: {fix}otherwise scale [material] to the body (formats/scene.md, \"The default material\")"
@@ -94,20 +109,15 @@ pub const EMBED_FAR: f64 = 0.1;
 
 /// The warning for an `[embed] surface` whose farthest point lies more than [`EMBED_FAR`]
 /// of the body's diagonal outside the body's bounding box (at rest).
-fn embedded_far_outside(display: &[Point], keys: &Keyframes) -> Option<String> {
-    let rest = match &keys.rest {
-        Shape::Surface(s) => &s.positions,
-        Shape::Volume(v) => &v.positions,
-    };
+fn embedded_far_outside(display: &[Point], rest: &[Point], source: &str) -> Option<String> {
     let body = Bounds::of(rest);
     let diagonal = body.diagonal();
     let farthest = display.iter().map(|&p| body.distance(p)).fold(0.0, f64::max);
     (farthest > EMBED_FAR * diagonal).then(|| {
-        crate::pipeline::report::guard_rails::coded(
-            crate::pipeline::report::guard_rails::code::EMBED_FAR,
+        coded(
+            code::EMBED_FAR,
             format_args!(
-            "{}: the [embed] surface reaches {:.2} of this body's bounding-box diagonal outside its box (more than {EMBED_FAR}), and its far points follow the nearest tets' motion extrapolated (give an [embed] surface that lies on or inside the body, in the keys' units and placement)",
-            keys.rest_source,
+            "{source}: the [embed] surface reaches {:.2} of this body's bounding-box diagonal outside its box (more than {EMBED_FAR}), and its far points follow the nearest tets' motion extrapolated (give an [embed] surface that lies on or inside the body, in the keys' units and placement)",
             farthest / diagonal
         ))
     })
@@ -167,6 +177,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                 .poses
                 .par_iter()
                 .map(|pose| {
+                    budget.check_time("tetrahedralization", || "while fitting the keys' interior nodes".into())?;
                     let mut x = mesh.positions.clone();
                     x[..n_surface].copy_from_slice(pose);
                     // The rest pose is its own equilibrium.
@@ -174,9 +185,9 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                         equilibrium.solve(&mut x, tolerance, 2000);
                     }
                     bar.inc(1);
-                    x
+                    Ok(x)
                 })
-                .collect();
+                .collect::<Result<_>>()?;
             bar.finish_and_clear();
             let mut warnings = unhonoured_max_volume(&mesh, scene.tet.max_volume, &keys.rest_source).into_iter().collect::<Vec<_>>();
             warnings.extend(folded_keys(&mesh, &positions, keys));
