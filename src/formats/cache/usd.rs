@@ -39,10 +39,10 @@ const FIX_PXR: &str = "pip install usd-core (or set BLENDSIM_PYTHON to a Python 
 
 /// A folder of temporaries, removed with its owner.
 #[derive(Debug)]
-struct TempDir(PathBuf);
+pub(super) struct TempDir(pub(super) PathBuf);
 
 impl TempDir {
-    fn new(what: &str) -> Result<TempDir> {
+    pub(super) fn new(what: &str) -> Result<TempDir> {
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         let dir = std::env::temp_dir().join(format!("blendsim-{what}-{}-{}", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed)));
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, &e, "create a temporary folder"))?;
