@@ -183,14 +183,19 @@ impl FrameSource for AbcFrames {
     }
 
     fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
-        self.pc2.read_frame(frame, out).map_err(|e| Error { path: Some(self.path.clone()), ..e })?;
-        if let Some(v) = out.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
-            return Err(Error::in_file(
+        // The copy's reader refuses non-finite coordinates; its message places them in the
+        // temporary copy, so it is said again of the Alembic object.
+        self.pc2.read_frame(frame, out).map_err(|e| {
+            if !e.problem.contains(": coordinate ") {
+                return Error { path: Some(self.path.clone()), ..e };
+            }
+            let detail = e.problem.split(" (byte").next().unwrap_or(&e.problem);
+            let detail = detail.strip_prefix(&format!("frame {frame}, ")).unwrap_or(detail);
+            Error::in_file(
                 &self.path,
-                format!("{} has a non-finite position at frame {frame} (vertex {v})", self.object),
+                format!("{} has a non-finite position at frame {frame} ({detail})", self.object),
                 "re-export the cache; check the simulation or rig that wrote it",
-            ));
-        }
-        Ok(())
+            )
+        })
     }
 }
