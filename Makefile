@@ -12,6 +12,8 @@ CHECKERS := tests/checkers
 # apt-get needs root; use sudo when not already root.
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 USD_CORE := usd-core==26.11
+# The Alembic C++ library's Python bindings, for the .abc cache reader (beside usd-core).
+ALEMBIC := alembic3d==1.8.12.1
 # Blender as a Python module, for the Blender checker: bpy 4.2.0 needs exactly Python 3.11, so
 # it lives in a venv of its own under build/ (the system Python is left untouched). The tests
 # find it there, or at $$BLENDSIM_BLENDER_PYTHON.
@@ -23,7 +25,7 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -61,6 +63,14 @@ deps-usd:
 		$(PYTHON) -m pip install --quiet --disable-pip-version-check $(USD_CORE); \
 	fi
 
+deps-alembic:
+	@if $(PYTHON) -c 'import alembic3d' >/dev/null 2>&1; then \
+		echo "==> alembic3d (python Alembic bindings): already installed"; \
+	else \
+		echo "==> installing $(ALEMBIC) (pip)"; \
+		$(PYTHON) -m pip install --quiet --disable-pip-version-check $(ALEMBIC); \
+	fi
+
 deps-chromium:
 	@if [ -x /usr/bin/chromium ]; then \
 		echo "==> chromium: already installed"; \
@@ -94,7 +104,7 @@ deps-blender:
 		$(BLENDER_VENV)/bin/python -c 'import bpy; print("==> bpy", bpy.app.version_string)'; \
 	fi
 
-test-deps: deps-tetgen deps-usd deps-npm deps-chromium deps-blender
+test-deps: deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender
 
 demo: build deps-tetgen
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"

@@ -33,4 +33,5 @@ mod layers;
 mod normals;
 mod paper_scenes;
 mod render_demo;
+mod studio_caches;
 mod texture;

@@ -1,5 +1,5 @@
 //! Vertex caches: frame-by-frame positions of one mesh (OBJ sequences, PC2, MDD, glTF clips,
-//! USD point caches), read one frame at a time so memory stays proportional to a few frames.
+//! USD point caches, Alembic, FBX animations), read one frame at a time so memory stays proportional to a few frames.
 //!
 //! Every reader implements [`FrameSource`], the contract with what consumes a cache (keyframe
 //! selection, the Hermite fit, the error report: [`crate::algorithms::frames`]). [`VertexCache::open`] picks the
@@ -11,7 +11,9 @@
 //! anything sized by the file, and reads one frame per call: memory stays at a few frames
 //! whatever the cache's length.
 
+mod abc;
 mod binary;
+mod fbx;
 #[cfg(test)]
 mod fuzz;
 pub(crate) mod gltf_clip;

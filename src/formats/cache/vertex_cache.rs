@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use super::sequence::SequencePattern;
-use super::{gltf_clip, mdd, pc2, sequence, usd, FrameSource};
+use super::{abc, fbx, gltf_clip, mdd, pc2, sequence, usd, FrameSource};
 use crate::algorithms::frames::{FrameRange, Subrange};
 use crate::algorithms::geometry::TriMesh;
 use crate::formats::mesh::obj;
@@ -24,6 +24,10 @@ pub enum CacheFormat {
     Gltf,
     /// `.usd`, `.usda`, `.usdc`: `points` time samples of a Mesh prim.
     Usd,
+    /// `.abc` (Ogawa): the points of a PolyMesh or SubD, its transforms applied (read only).
+    Alembic,
+    /// `.fbx`: a mesh deformed by skinning and blend shapes over an animation stack (read only).
+    Fbx,
 }
 
 impl CacheFormat {
@@ -39,6 +43,8 @@ impl CacheFormat {
             "mdd" => CacheFormat::Mdd,
             "glb" | "gltf" => CacheFormat::Gltf,
             "usd" | "usda" | "usdc" => CacheFormat::Usd,
+            "abc" => CacheFormat::Alembic,
+            "fbx" => CacheFormat::Fbx,
             _ => return None,
         })
     }
@@ -51,10 +57,12 @@ impl CacheFormat {
             CacheFormat::Mdd => "an MDD cache",
             CacheFormat::Gltf => "a glTF clip",
             CacheFormat::Usd => "a USD point cache",
+            CacheFormat::Alembic => "an Alembic cache",
+            CacheFormat::Fbx => "an FBX animation",
         }
     }
 
-    /// The name used in reports: `obj-sequence`, `pc2`, `mdd`, `gltf`, `usd`.
+    /// The name used in reports: `obj-sequence`, `pc2`, `mdd`, `gltf`, `usd`, `alembic`, `fbx`.
     pub fn name(self) -> &'static str {
         match self {
             CacheFormat::ObjSequence => "obj-sequence",
@@ -62,6 +70,8 @@ impl CacheFormat {
             CacheFormat::Mdd => "mdd",
             CacheFormat::Gltf => "gltf",
             CacheFormat::Usd => "usd",
+            CacheFormat::Alembic => "alembic",
+            CacheFormat::Fbx => "fbx",
         }
     }
 }
@@ -80,6 +90,12 @@ pub struct CacheOptions {
     pub animation: Option<String>,
     /// The USD Mesh prim (default: the only Mesh, or the only animated one).
     pub prim: Option<String>,
+    /// The Alembic or FBX mesh object (default: the only mesh, or the only animated one).
+    pub object: Option<String>,
+    /// The FBX animation stack (default: the only one).
+    pub take: Option<String>,
+    /// Metres per unit to convert an FBX file's lengths to (default: metres); the scene's units.
+    pub meters_per_unit: Option<f64>,
     /// The frames to read.
     pub range: FrameRange,
     /// `--max-time`: bounds the USD reader's process (killed at the deadline).
@@ -184,7 +200,7 @@ impl VertexCache {
             Error::in_file(
                 path,
                 "is not a vertex cache format blendsim reads",
-                "give an OBJ sequence (frames/frame_####.obj), .pc2, .mdd, .glb/.gltf or .usd/.usda/.usdc",
+                "give an OBJ sequence (frames/frame_####.obj), .pc2, .mdd, .glb/.gltf, .usd/.usda/.usdc, .abc or .fbx",
             )
         })?;
         if let Some(fps) = options.fps {
@@ -201,6 +217,12 @@ impl VertexCache {
         }
         if options.prim.is_some() && format != CacheFormat::Usd {
             return Err(unused(path, format, "prim", "only USD stages have prims"));
+        }
+        if options.object.is_some() && !matches!(format, CacheFormat::Alembic | CacheFormat::Fbx) {
+            return Err(unused(path, format, "object", "only Alembic and FBX files name their meshes so"));
+        }
+        if options.take.is_some() && format != CacheFormat::Fbx {
+            return Err(unused(path, format, "take", "only FBX files have takes"));
         }
         let need_fps = |why: &str| {
             options.fps.ok_or_else(|| {
@@ -295,6 +317,28 @@ impl VertexCache {
                     meters_per_unit: opened.meters_per_unit,
                 }
             }
+            CacheFormat::Alembic => {
+                let opened = abc::open(path, options.object.as_deref(), options.range)?;
+                let fps_source = FpsSource::File(format!("the sample times of {}", opened.object));
+                let (mesh, frames) = (opened.mesh, Box::new(opened.frames));
+                VertexCache { format, path: path_buf, mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes }
+            }
+            CacheFormat::Fbx => {
+                let choice =
+                    fbx::FbxChoice { object: options.object.as_deref(), take: options.take.as_deref(), meters_per_unit: options.meters_per_unit };
+                let opened = fbx::open(path, &choice)?;
+                let fps_source = FpsSource::File(format!(
+                    "the frame rate of take \"{}\" (mesh \"{}\", {} m per unit in the file)",
+                    opened.take, opened.object, opened.file_meters_per_unit
+                ));
+                let frames = subrange(path, opened.frames, options.range)?;
+                let mut cache = VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
+                if options.range != FrameRange::ALL {
+                    // The mesh is the first frame of the range.
+                    cache.frames.read_frame(0, &mut cache.mesh.positions)?;
+                }
+                cache
+            }
         };
         Ok(cache)
     }
@@ -331,6 +375,7 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         Some(CacheFormat::Mdd) => mdd::write(path, frames, fps),
         Some(CacheFormat::Gltf) if !gltf_text => gltf_clip::write(path, mesh, frames, fps),
         Some(CacheFormat::Usd) => usd::write(path, mesh, frames, fps),
+        // Alembic and FBX are read only.
         _ => Err(Error::in_file(
             path,
             "is not a vertex cache format blendsim writes",
@@ -431,7 +476,9 @@ mod tests {
             .contains("`animation` was given, but a PC2 cache"));
         assert!(err(&glb, CacheOptions { prim: Some("/x".into()), ..CacheOptions::default() }).contains("`prim` was given, but a glTF clip"));
         assert!(err(&glb, options(Some(-1.0), None)).contains("fps -1 is not a positive number"));
-        assert!(err(&dir.join("a.abc"), CacheOptions::default()).contains("is not a vertex cache format blendsim reads"));
+        assert!(err(&dir.join("a.ma"), CacheOptions::default()).contains("is not a vertex cache format blendsim reads"));
+        assert!(err(&glb, CacheOptions { object: Some("Body".into()), ..CacheOptions::default() }).contains("`object` was given, but a glTF clip"));
+        assert!(err(&glb, CacheOptions { take: Some("Walk".into()), ..CacheOptions::default() }).contains("`take` was given, but a glTF clip"));
         assert!(err(&dir.join("f_####.obj"), CacheOptions::default()).contains("an OBJ sequence needs a frame rate"));
         let s = write(&dir.join("a.gltf"), &mesh, &mut frames, 30.0).unwrap_err().to_string();
         assert!(s.contains("is not a vertex cache format blendsim writes"), "{s}");

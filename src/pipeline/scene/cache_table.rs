@@ -57,6 +57,12 @@ pub struct CacheSpec {
     /// The USD Mesh prim (default: the only animated Mesh).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prim: Option<String>,
+    /// The Alembic or FBX mesh object (default: the only mesh, or the only animated one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<String>,
+    /// The FBX take (animation stack; default: the only one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub take: Option<String>,
     /// For `"auto"`: bytes of cache frames the key selection may hold at once (default
     /// `DEFAULT_WINDOW_BYTES`, 256 MiB). It bounds the selection's memory, not its result
     /// unless a swing between two keys needs more frames than fit (at least 8 always do).

@@ -60,6 +60,15 @@ pub struct CacheRecordOptions {
     pub animation: Option<String>,
     /// The USD prim.
     pub prim: Option<String>,
+    /// The Alembic or FBX object.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<String>,
+    /// The FBX take.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub take: Option<String>,
+    /// Metres per unit an FBX file's lengths are converted to (the scene's units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub meters_per_unit: Option<f64>,
     /// First frame of the range.
     pub start: i64,
     /// Last frame of the range.

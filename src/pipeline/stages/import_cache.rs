@@ -43,6 +43,9 @@ fn reader_options(o: &CacheRecordOptions, budget: &Budget) -> CacheOptions {
         rest: o.rest.as_ref().map(PathBuf::from),
         animation: o.animation.clone(),
         prim: o.prim.clone(),
+        object: o.object.clone(),
+        take: o.take.clone(),
+        meters_per_unit: o.meters_per_unit,
         range: FrameRange { start: o.start, end: o.end },
     }
 }
@@ -128,11 +131,22 @@ fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, Ca
             "remove fps from [cache]: the stage's rate is used",
         ));
     }
+    if matches!(format, Some(CacheFormat::Alembic | CacheFormat::Fbx)) && spec.fps.is_some() {
+        return Err(Error::in_file(
+            &path,
+            "fps is given, but Alembic and FBX files carry their own frame times",
+            "remove fps from [cache]: the file's rate is used",
+        ));
+    }
     let options = CacheRecordOptions {
         fps: spec.fps,
         rest: if topology_mesh { rest_mesh_path.as_ref().map(|p| p.display().to_string()) } else { None },
         animation: spec.animation.clone(),
         prim: spec.prim.clone(),
+        object: spec.object.clone(),
+        take: spec.take.clone(),
+        // FBX lengths arrive in the scene's units (metres when it gives none).
+        meters_per_unit: (format == Some(CacheFormat::Fbx)).then(|| scene_file.scene.meters_per_unit()),
         start: spec.start,
         end: spec.end,
     };

@@ -210,7 +210,7 @@ pub fn check_texture(files: &[&Path], texture: &Path, out_dir: &Path, poses: &[(
 
 /// The Python that has Blender's `bpy`: `$BLENDSIM_BLENDER_PYTHON`, or the venv `make
 /// deps-blender` creates in build/blender-venv.
-fn blender_python() -> PathBuf {
+pub fn blender_python() -> PathBuf {
     std::env::var_os("BLENDSIM_BLENDER_PYTHON")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("build/blender-venv/bin/python"))
