@@ -106,6 +106,10 @@ pub struct Keyframes {
     /// The cache the keys were taken from (`[cache]` scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheRecord>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 /// Keyframe data per tet node: what the solver constrains and starts from.
@@ -171,6 +175,10 @@ pub struct Body {
     /// with inverted or flattened tets; `max-volume`, a `max_volume` TetGen could not honour).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 /// What the solver did.
@@ -338,6 +346,10 @@ pub struct Animation {
     /// The body's warnings ([`Body::warnings`]), for the report.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 /// The two forms of the animation in the files.

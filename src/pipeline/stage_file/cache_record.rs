@@ -43,6 +43,10 @@ pub struct CacheRecord {
     pub tolerance: Option<f64>,
     /// What the automatic selection did (`keyframes = "auto"`).
     pub selection: Option<SelectionStats>,
+    /// When vertices were welded (`[cache] weld`): per input vertex, its welded vertex; every
+    /// later stage reads the cache through it, and `vertices` counts the welded ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<Vec<u32>>,
 }
 
 /// The reader options of a [`CacheRecord`], so a later stage opens the cache the same way.

@@ -134,6 +134,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
             cache,
             cage: None,
             warnings: Vec::new(),
+            input_bytes: keys.input_bytes,
         }),
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
@@ -147,6 +148,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                 cache,
                 cage: None,
                 warnings,
+                input_bytes: keys.input_bytes,
             })
         }
         Shape::Surface(rest) => {
@@ -189,6 +191,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                 cache,
                 cage: None,
                 warnings,
+                input_bytes: keys.input_bytes,
             })
         }
     }
@@ -335,5 +338,6 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         cache: keys.cache.clone(),
         cage: Some(info),
         warnings: Vec::new(),
+        input_bytes: keys.input_bytes,
     })
 }
