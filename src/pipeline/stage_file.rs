@@ -116,6 +116,10 @@ pub struct Keyframes {
     /// The cache the keys were taken from (`[cache]` scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<CacheRecord>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 /// Keyframe data per tet node: what the solver constrains and starts from.
@@ -182,6 +186,10 @@ pub struct Body {
     /// could not honour; `body-size`, `embed-far`, `units-conflict`; `cg-capped` from `solve`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 impl Body {
@@ -358,6 +366,10 @@ pub struct Animation {
     /// The body's warnings ([`Body::warnings`]), for the report.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Bytes of the input as given (the keyframe files, each file once, or the cache), for the
+    /// report's ratios; 0 in stage files written before it was recorded.
+    #[serde(default)]
+    pub input_bytes: u64,
 }
 
 /// The two forms of the animation in the files.

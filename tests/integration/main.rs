@@ -13,6 +13,7 @@ mod blender;
 mod cache_bake;
 mod cache_clip;
 mod cache_fit;
+mod cache_honest;
 mod cli_budget;
 mod cli_cage;
 mod cli_contacts;

@@ -19,7 +19,11 @@
 //! 3. **Calibration.** The fit is usually well inside the tolerance on the model's keys, so
 //!    stages 1 and 2 are rerun with the model's tolerance stretched by the headroom the fit
 //!    left, bisecting between stretches that needed repairs and stretches that did not; the
-//!    round with the fewest keys is kept.
+//!    round with the fewest keys is kept. When the model's keys need repairs at the requested
+//!    tolerance itself, the model is tightened instead (a quarter at a time) until its keys
+//!    need none: repairs split intervals at their middle, off the frames a tighter model
+//!    would have chosen, so without this a looser tolerance could end with more keys than a
+//!    tighter one (a two-target morph clip: 11 keys at 0.005, 8 at 0.001).
 //! 4. **Removal.** Keys of the quietest intervals first: remove the key and refit the two keys
 //!    on each side with the keys beyond them held (a local least-squares problem over a few
 //!    intervals, reading only their frames); keep the removal when that window stays within
@@ -70,7 +74,7 @@ impl Default for AutoSettings {
 const REMOVAL_MARGIN: f64 = 0.9;
 
 /// Rounds of stages 1 and 2 at most (see the calibration in [`select`]).
-const CALIBRATION_ROUNDS: usize = 5;
+const CALIBRATION_ROUNDS: usize = 8;
 
 /// One round of stages 1 and 2.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -145,7 +149,8 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
     // (the slack). A slack whose keys the fit had to repair is too much: the next round
     // bisects (geometrically) between the largest clean slack and the smallest repaired one.
     let mut stats = SelectionStats { frames, rounds: Vec::new(), inserted: 0, removed: 0, frame_reads: 0, window_frames: 0, global_fits: 0 };
-    let (mut slack, mut clean, mut repaired) = (1.0f64, 1.0f64, f64::INFINITY);
+    // `clean`: the largest slack whose keys needed no repair (0: none yet).
+    let (mut slack, mut clean, mut repaired) = (1.0f64, 0.0f64, f64::INFINITY);
     let mut best: Option<(Vec<usize>, Trajectory, CacheDeviation)> = None;
     let mut best_clean = usize::MAX;
     // Outcomes by candidate keys (fitted key count, headroom): the same keys need no new fit.
@@ -181,9 +186,19 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
             }
         } else {
             repaired = slack;
-            slack = (clean * repaired).sqrt();
+            // No clean round yet: the model itself is too loose for this cache (its slopes
+            // miss what the fit can do), and splitting the repaired intervals at their middle
+            // lands keys off the cache's own key frames. Tighten the model until its keys need
+            // no repair, as a tighter tolerance would: a looser tolerance must never end with
+            // more keys than a tighter one.
+            // A tighter model never has fewer candidate keys (feasibility is monotone in the
+            // tolerance), so once they are as many as the best fit's, tightening is done.
+            if clean == 0.0 && best.as_ref().is_some_and(|b| candidates.len() >= b.0.len()) {
+                break;
+            }
+            slack = if clean > 0.0 { (clean * repaired).sqrt() } else { slack / 4.0 };
         }
-        if repaired / clean < 1.15 {
+        if clean > 0.0 && repaired / clean < 1.15 {
             break;
         }
     }

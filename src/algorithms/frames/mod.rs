@@ -11,6 +11,7 @@ pub mod deviation;
 pub mod fit;
 pub mod keyframes;
 mod range;
+pub mod weld;
 
 pub use range::{FrameRange, Subrange};
 
@@ -31,6 +32,21 @@ pub trait FrameSource {
     fn time(&self, frame: usize) -> f64;
     /// Positions of `frame` into `out` (`out.len() == vertex_count()`).
     fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()>;
+}
+
+impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
+    fn vertex_count(&self) -> usize {
+        (**self).vertex_count()
+    }
+    fn frame_count(&self) -> usize {
+        (**self).frame_count()
+    }
+    fn time(&self, frame: usize) -> f64 {
+        (**self).time(frame)
+    }
+    fn read_frame(&mut self, frame: usize, out: &mut [Point]) -> Result<()> {
+        (**self).read_frame(frame, out)
+    }
 }
 
 /// A frame source read through a hook: `before_read(frame, reads)` runs before every read

@@ -194,17 +194,25 @@ impl Trajectory {
     }
 
     /// Frame instants at `fps` covering the key range: frame numbers `f` with
-    /// `start <= f / fps <= end` (within 1e-9 s), and their times in seconds.
+    /// `start <= f / fps <= end` (within f32 rounding, see [`frames_between`]), and their
+    /// times in seconds.
     pub fn frames(&self, fps: f64) -> Vec<(i64, f64)> {
         frames_between(self.start(), self.end(), fps)
     }
 }
 
-/// Frame numbers `f` with `start <= f / fps <= end` (to 1e-9 s), with their times in seconds.
+/// Frame numbers `f` with `start <= f / fps <= end`, with their times in seconds (clamped to
+/// `[start, end]`, so the end frames play the end keys exactly).
+///
+/// Key times often come from f32 (glTF keys, PC2 and MDD headers): `17 / 24` s stored in
+/// f32 is 16.9999995 frames in f64, and flooring it would drop the clip's last frame. A frame
+/// within `1e-6 max(1, |frame|)` frames of the range is in it: f32 rounds a time by at most
+/// 6e-8 of itself, and no frame rate puts two frames that close.
 pub fn frames_between(start: f64, end: f64, fps: f64) -> Vec<(i64, f64)> {
-    let eps = 1e-9 * fps;
-    let first = (start * fps - eps).ceil() as i64;
-    let last = (end * fps + eps).floor() as i64;
+    let slack = |frame: f64| (1e-9 * fps).max(1e-6 * frame.abs().max(1.0));
+    let (a, b) = (start * fps, end * fps);
+    let first = (a - slack(a)).ceil() as i64;
+    let last = (b + slack(b)).floor() as i64;
     (first..=last).map(|f| (f, (f as f64 / fps).clamp(start, end))).collect()
 }
 
@@ -218,6 +226,24 @@ mod tests {
             positions: x.iter().map(|&x| vec![[x, 0.0, 0.0]]).collect(),
             velocities: v.iter().map(|&v| vec![[v, 0.0, 0.0]]).collect(),
         }
+    }
+
+    #[test]
+    fn an_f32_end_just_under_a_frame_keeps_that_frame() {
+        // 17 / 24 s in f32 is 16.9999995 frames at 24 fps; 224 / 30 in f32 is 224.0000076.
+        for (frames, fps) in [(18i64, 24.0), (225, 30.0), (18, 30.0), (2, 60.0), (100_000, 24.0)] {
+            let end = ((frames - 1) as f64 / fps) as f32 as f64;
+            let got = frames_between(0.0, end, fps);
+            assert_eq!(got.len() as i64, frames, "{frames} frames at {fps} fps, end {end}");
+            // The last frame plays the last key (its time clamped to it when the key is under).
+            let last = got[got.len() - 1];
+            assert!(last.0 == frames - 1 && (last.1 - end).abs() < 1e-6 && last.1 <= end, "{frames} frames at {fps} fps: {last:?}, end {end}");
+            let start = (1.0 / fps) as f32 as f64;
+            assert_eq!(frames_between(start, end, fps)[0], (1, start), "{frames} frames at {fps} fps");
+        }
+        // A range between two frames holds none; half a frame is not rounding.
+        assert!(frames_between(0.1 / 24.0, 0.9 / 24.0, 24.0).is_empty());
+        assert_eq!(frames_between(0.0, 2.5 / 24.0, 24.0).len(), 3);
     }
 
     #[test]

@@ -15,6 +15,7 @@ pub mod usd;
 mod usd_attributes;
 pub mod usda;
 pub mod usdc;
+pub mod weld_map;
 
 /// Whether a target moving `moved` of `vertices` vertices is smaller stored sparse (an index of
 /// `index_bytes` plus 12 bytes of offset per moved vertex) than dense (12 bytes per vertex).

@@ -43,7 +43,7 @@ pub fn read(path: &Path) -> Result<Report> {
         .map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }
 
-const COLUMNS: [&str; 21] = [
+const COLUMNS: [&str; 27] = [
     "bake",
     "scene",
     "method",
@@ -61,6 +61,12 @@ const COLUMNS: [&str; 21] = [
     "full_glb_bytes",
     "usda_ratio",
     "glb_ratio",
+    "input_bytes",
+    "usda_input_ratio",
+    "glb_input_ratio",
+    "full_input_bytes",
+    "usda_full_input_ratio",
+    "glb_full_input_ratio",
     "error_max",
     "error_rms",
     "fit_error_max",
@@ -75,7 +81,8 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
             let bytes = |format: Format, kind: OutputKind| {
                 r.outputs.iter().find(|f| f.format == format && f.kind == kind).map_or(String::new(), |f| f.bytes.to_string())
             };
-            let ratio = |format| r.ratios.get(&format).map_or(String::new(), |x| format!("{x:.2}"));
+            let of = |ratios: &std::collections::BTreeMap<Format, f64>, format| ratios.get(&format).map_or(String::new(), |x| format!("{x:.2}"));
+            let ratio = |format| of(&r.ratios, format);
             let (max, rms) = match &r.cache {
                 Some(c) => (c.error.max, c.error.rms),
                 None => (r.error.max, r.error.rms),
@@ -102,6 +109,12 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
                 bytes(Format::Glb, OutputKind::FullFrame),
                 ratio(Format::Usda),
                 ratio(Format::Glb),
+                r.input_bytes.to_string(),
+                of(&r.input_ratios, Format::Usda),
+                of(&r.input_ratios, Format::Glb),
+                r.full_frame_input_bytes.to_string(),
+                of(&r.full_frame_input_ratios, Format::Usda),
+                of(&r.full_frame_input_ratios, Format::Glb),
                 format!("{max:.3e}"),
                 format!("{rms:.3e}"),
                 cache.and_then(|c| c.fit_error.as_ref()).map_or(String::new(), |f| format!("{:.3e}", f.max)),

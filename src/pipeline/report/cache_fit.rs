@@ -25,6 +25,12 @@ pub struct CacheReport {
     pub fps_source: String,
     /// Bytes of the input cache.
     pub bytes: u64,
+    /// Vertices of the input cache.
+    #[serde(default)]
+    pub input_vertices: usize,
+    /// Vertices after welding those equal at every frame (`[cache] weld`): the files' vertices.
+    #[serde(default)]
+    pub vertices: usize,
     /// The key frames (counted from the range's first frame).
     pub keys: Vec<usize>,
     /// The tolerance of `keyframes = "auto"`, else none.
@@ -81,12 +87,14 @@ pub fn cache_ratios(cache_bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format
 pub fn markdown(c: &CacheReport, outputs: &[OutputFile]) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "\n## Cache\n\n{} ({}, {} frames at {}; {} bytes). Keys: {} frames {:?}{}.\n\n",
+        "\n## Cache\n\n{} ({}, {} frames at {}; {} bytes; {} vertices{}). Keys: {} frames {:?}{}.\n\n",
         c.path,
         c.format,
         c.frames,
         c.fps_source,
         c.bytes,
+        c.input_vertices,
+        if c.vertices != c.input_vertices { format!(", {} once welded", c.vertices) } else { String::new() },
         c.keys.len(),
         c.keys,
         c.tolerance.map(|t| format!(", chosen for a tolerance of {t}")).unwrap_or_default()

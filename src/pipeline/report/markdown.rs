@@ -117,8 +117,16 @@ pub fn render(report: &Report) -> String {
     push(
         &mut s,
         format!(
-            "| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames (blendshape vs full-frame) |",
-            report.error.max, report.error.rms, report.error.samples
+            "| fidelity | max {:.2e}, rms {:.2e} of the bbox diagonal over {} frames ({}) |",
+            report.error.max,
+            report.error.rms,
+            report.error.samples,
+            // A cache bake's full-frame files are the cache: its error is in the Cache section.
+            if report.cache.is_some() {
+                "blendshape as stored vs the animation it stores; against the cache: below"
+            } else {
+                "blendshape vs full-frame"
+            }
         ),
     );
     push(
@@ -143,17 +151,33 @@ pub fn render(report: &Report) -> String {
         );
     }
     push(&mut s, String::new());
-    push(&mut s, "| format | full-frame | blendshape | smaller by |".into());
-    push(&mut s, "|---|---:|---:|---:|".into());
-    let mut formats: Vec<Format> = report.outputs.iter().filter(|f| f.kind == OutputKind::FullFrame).map(|f| f.format).collect();
+    // The fair ratio first: the full-frame file in the same format (and compression); then the
+    // input as given, and the input's full-frame version (for a cache: the cache itself).
+    let input = if report.cache.is_some() { "the cache" } else { "the keyframe files" };
+    let full_input = if report.cache.is_some() { "the cache" } else { "full frame as f32 (PC2)" };
+    push(&mut s, format!("| format | blendshape | full-frame, same format | smaller by | {input} | smaller by | {full_input} | smaller by |"));
+    push(&mut s, "|---|---:|---:|---:|---:|---:|---:|---:|".into());
+    let mut formats: Vec<Format> = report.outputs.iter().filter(|f| f.kind == OutputKind::Blendshape).map(|f| f.format).collect();
     formats.sort();
     formats.dedup();
+    // An empty file has no ratio (see `size_ratios`).
+    let ratio = |ratios: &std::collections::BTreeMap<Format, f64>, format| ratios.get(&format).map_or("n/a".to_string(), |r| format!("{r:.1}x"));
     for format in formats {
         let size = |kind| report.outputs.iter().find(|f| f.format == format && f.kind == kind).map(|f| f.bytes);
-        let (Some(full), Some(blend)) = (size(OutputKind::FullFrame), size(OutputKind::Blendshape)) else { continue };
-        // An empty file has no ratio (see `size_ratios`).
-        let ratio = report.ratios.get(&format).map_or("n/a".to_string(), |r| format!("{r:.1}x"));
-        push(&mut s, format!("| {format} | {} | {} | {ratio} |", human_bytes(full), human_bytes(blend)));
+        let Some(blend) = size(OutputKind::Blendshape) else { continue };
+        let full = size(OutputKind::FullFrame).map_or("not written".to_string(), human_bytes);
+        push(
+            &mut s,
+            format!(
+                "| {format} | {} | {full} | {} | {} | {} | {} | {} |",
+                human_bytes(blend),
+                ratio(&report.ratios, format),
+                human_bytes(report.input_bytes),
+                ratio(&report.input_ratios, format),
+                human_bytes(report.full_frame_input_bytes),
+                ratio(&report.full_frame_input_ratios, format)
+            ),
+        );
     }
     push(&mut s, String::new());
     push(&mut s, "| file | kind | bytes |".into());

@@ -56,6 +56,15 @@ pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3
     }
 }
 
+/// Per format: `bytes` / the blendshape file's bytes (none when `bytes` is 0: not recorded).
+pub fn ratios_to(bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
+    outputs
+        .iter()
+        .filter(|f| f.kind == OutputKind::Blendshape && f.bytes > 0 && bytes > 0)
+        .map(|f| (f.format, bytes as f64 / f.bytes as f64))
+        .collect()
+}
+
 /// Per format: full-frame bytes / blendshape bytes, for the formats written both ways.
 pub fn size_ratios(outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
     let mut ratios = BTreeMap::new();

@@ -97,8 +97,25 @@ pub struct Report {
     pub solver: SolverLog,
     /// The files written.
     pub outputs: Vec<OutputFile>,
-    /// Per format: full-frame bytes / blendshape bytes.
+    /// Per format: full-frame bytes / blendshape bytes, the two files written in the same format
+    /// (and compression): the fair ratio. For a cache bake the full-frame files are the cache
+    /// itself, frame for frame.
     pub ratios: BTreeMap<Format, f64>,
+    /// Bytes of the input as given: the keyframe files (each file once), or the cache (0 in
+    /// reports of stage files that did not record it).
+    #[serde(default)]
+    pub input_bytes: u64,
+    /// Per format: `input_bytes` / blendshape bytes.
+    #[serde(default)]
+    pub input_ratios: BTreeMap<Format, f64>,
+    /// Bytes of the full-frame version of the input: for a cache bake, the cache itself; for
+    /// keyframes, the animation at every frame as a plain f32 vertex cache (PC2: 32 + 12 x
+    /// vertices x frames bytes).
+    #[serde(default)]
+    pub full_frame_input_bytes: u64,
+    /// Per format: `full_frame_input_bytes` / blendshape bytes.
+    #[serde(default)]
+    pub full_frame_input_ratios: BTreeMap<Format, f64>,
     /// The blendshape animation (as stored: f32 shapes, f32 weights at every frame) against the
     /// full-frame evaluation of the trajectory at every frame.
     pub error: Deviation,

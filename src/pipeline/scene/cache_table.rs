@@ -68,6 +68,10 @@ pub struct CacheSpec {
     /// unless a swing between two keys needs more frames than fit (at least 8 always do).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_bytes: Option<u64>,
+    /// Merge the vertices that coincide at every frame (default true); `false` keeps the
+    /// input's vertices. Selections and the report keep the input's vertex numbers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<bool>,
 }
 
 /// The default frame window of `keyframes = "auto"`: 256 MiB.
@@ -129,6 +133,11 @@ impl CacheSpec {
     /// The tolerance of `"auto"`.
     pub fn tolerance(&self) -> f64 {
         self.tolerance.unwrap_or(DEFAULT_TOLERANCE)
+    }
+
+    /// Whether to weld the vertices that coincide at every frame (`weld`, default true).
+    pub fn weld(&self) -> bool {
+        self.weld.unwrap_or(true)
     }
 
     /// The frame window of `"auto"`, in bytes.

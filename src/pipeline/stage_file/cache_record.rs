@@ -47,6 +47,10 @@ pub struct CacheRecord {
     /// `metersPerUnit`), or none; the scene's `units` default to it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub meters_per_unit: Option<f64>,
+    /// When vertices were welded (`[cache] weld`): per input vertex, its welded vertex; every
+    /// later stage reads the cache through it, and `vertices` counts the welded ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<Vec<u32>>,
 }
 
 /// The reader options of a [`CacheRecord`], so a later stage opens the cache the same way.

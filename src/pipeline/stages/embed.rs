@@ -32,6 +32,7 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
             cache: body.cache.clone(),
             cage: None,
             warnings: body.warnings.clone(),
+            input_bytes: body.input_bytes,
         });
     };
     let binding = Binding::compute(tets, &body.surface.positions);
@@ -53,5 +54,6 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         cache: body.cache.clone(),
         cage: body.cage.clone(),
         warnings: body.warnings.clone(),
+        input_bytes: body.input_bytes,
     })
 }

@@ -1,7 +1,8 @@
 //! The `export` stage: the animation's blendshape and full-frame files.
 //!
 //! Contract: build the [`BlendShapeClip`] (blendshapes, in the form `[export] weights`
-//! names) and the `FullFrame` (one pose per frame) from the animation, and stage, for each
+//! names) and the `FullFrame` (one pose per frame: the animation sampled at every frame, or
+//! for a cache bake the cache itself, frame for frame), and stage, for each
 //! format in `scene.export.formats`, `NAME.EXT` (blendshapes) and, when `full_frame`,
 //! `NAME.full.EXT` (full-frame). `usda` and `usdc` hold the same USD layer (`export::usd`).
 //! Returns the list of staged files with their sizes. The files (and whatever the caller
@@ -11,12 +12,12 @@
 //! and keeps the report and other scenes' files. The layouts are specified in
 //! `formats/usd.md` and `formats/gltf.md`.
 
-use super::import_cache::error_against;
+use super::import_cache::{error_against, reopen};
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::blendshape::principal::{smallest_rank, Components};
 use crate::algorithms::geometry::{bbox_diagonal, Axis};
-use crate::formats::export::{glb, texture, usd, usda, usdc};
+use crate::formats::export::{glb, texture, usd, usda, usdc, weld_map};
 use crate::pipeline::report::measures::deviation;
 use crate::pipeline::scene::{Basis, Format, GltfInterpolation, Method, Scene, DEFAULT_TOLERANCE};
 use crate::pipeline::stage_file::{Animation, OutputFile, OutputKind, Outputs};
@@ -59,7 +60,15 @@ pub fn export_with(
     let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.meters_per_unit() };
 
     let (clip, rank) = (&clip.0, clip.1);
-    let full = scene.export.full_frame.then(|| FullFrame::from_trajectory(trajectory, scene.fps));
+    // A cache bake's full-frame files are the cache itself, frame for frame: what the
+    // blendshape files replace.
+    let full = match (&animation.cache, scene.export.full_frame) {
+        (_, false) => None,
+        (Some(record), true) => {
+            Some(FullFrame::from_source(reopen(record)?.frames.as_mut(), scene.fps).map_err(|e| e.with_path(std::path::Path::new(&record.path)))?)
+        }
+        (None, true) => Some(FullFrame::from_trajectory(trajectory, scene.fps)),
+    };
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
     let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures), budget)?;
     let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
@@ -91,6 +100,8 @@ pub fn export_with(
             }
         }
     }
+    // A welded cache: every file says which of its vertices each input vertex is.
+    let weld = animation.cache.as_ref().and_then(|c| c.weld.as_deref());
     let forms = forms(scene);
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     let mut files = Vec::new();
@@ -99,8 +110,13 @@ pub fn export_with(
         // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
         // text: only the blendshape form builds its layer.
         let streamed = kind == OutputKind::FullFrame;
-        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)))
-            .then(|| usd::blendshapes(clip, triangles, attributes, &settings));
+        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| {
+            let mut layer = usd::blendshapes(clip, triangles, attributes, &settings);
+            if let Some(map) = weld {
+                weld_map::usd(&mut layer, map);
+            }
+            layer
+        });
         for &format in &formats {
             let name = file_name(&scene.name, kind, format);
             bar.set_message(format!("export: {name}"));
@@ -128,6 +144,10 @@ pub fn export_with(
                             glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
                         }
                         _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
+                    };
+                    let bytes = match weld {
+                        Some(map) => weld_map::gltf(&bytes, map),
+                        None => bytes,
                     };
                     staging.write(&name, &bytes)?;
                 }

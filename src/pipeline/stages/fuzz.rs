@@ -43,6 +43,7 @@ fn seeds() -> (Value, Value, Value, Value) {
         cyclic: false,
         display: None,
         cache: None,
+        input_bytes: 0,
     };
     let progress = Progress::hidden();
     let body = crate::pipeline::stages::tetrahedralize(&keys, &Budget::default(), &progress).unwrap();

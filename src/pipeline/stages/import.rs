@@ -190,6 +190,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
     scene.check_resources(&keys.times, vertices, tets, budget)?;
     // A contact key is duplicated at its own time: the two share the pose and the masks (the
     // solver aliases their positions), not the velocities.
+    let input_bytes = meshes.bytes();
     let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);
     for &k in keys.contact.iter().rev() {
         times.insert(k + 1, times[k]);
@@ -208,6 +209,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         cyclic: keys.cyclic,
         display,
         cache: None,
+        input_bytes,
     })
 }
 
@@ -250,6 +252,14 @@ impl KeyMeshes {
             poses.push(positions);
         }
         Ok(KeyMeshes { cache, paths, first, first_topology, poses })
+    }
+
+    /// Bytes of the key files, each file once (a file used by several keys is read once).
+    fn bytes(&self) -> u64 {
+        let mut paths: Vec<&PathBuf> = self.paths.iter().collect();
+        paths.sort();
+        paths.dedup();
+        paths.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum()
     }
 
     /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came

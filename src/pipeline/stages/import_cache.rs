@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use crate::algorithms::frames::deviation::{cache_diagonal, deviation, CacheDeviation};
 use crate::algorithms::frames::fit::{fit, FitSettings};
 use crate::algorithms::frames::keyframes::{select, AutoSettings};
+use crate::algorithms::frames::weld::{Weld, Welded};
 use crate::algorithms::frames::{FrameRange, FrameSource, Metered};
 use crate::algorithms::geometry::{surface, Point, TriMesh};
 use crate::algorithms::spacetime::trajectory::Trajectory;
@@ -54,7 +55,10 @@ fn reader_options(o: &CacheRecordOptions, budget: &Budget) -> CacheOptions {
 /// bytes, modification time, frames and vertices).
 pub fn reopen(record: &CacheRecord, budget: &Budget) -> Result<VertexCache> {
     let path = Path::new(&record.path);
-    let cache = VertexCache::open(path, &reader_options(&record.options, budget))?;
+    let mut cache = VertexCache::open(path, &reader_options(&record.options, budget))?;
+    if let Some(map) = record.weld.as_ref().filter(|m| m.len() == cache.frames.vertex_count()) {
+        cache = welded(cache, Weld::from_map(map.clone()));
+    }
     let now = (cache.format.name(), cache.bytes, modified_ns(path), cache.frame_count(), cache.frames.vertex_count());
     let then = (record.format.as_str(), record.bytes, record.modified_ns, record.frames, record.vertices);
     if now != then {
@@ -68,6 +72,15 @@ pub fn reopen(record: &CacheRecord, budget: &Budget) -> Result<VertexCache> {
         ));
     }
     Ok(cache)
+}
+
+/// `cache` on the welded vertices of `weld`: its mesh (the same triangles over the welded
+/// vertices, so per-corner attributes stay) and its frames.
+fn welded(mut cache: VertexCache, weld: Weld) -> VertexCache {
+    cache.mesh.positions = weld.pick(&cache.mesh.positions);
+    cache.mesh.triangles = weld.triangles(&cache.mesh.triangles);
+    cache.frames = Box::new(Welded::new(cache.frames, weld));
+    cache
 }
 
 /// The least-squares fit of the cache of `record` on its keys, its `fixed` vertices held on
@@ -165,6 +178,12 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
     let mut cache = VertexCache::open(&path, &reader_options(&options, budget))?;
     let frames = cache.frame_count();
     let vertices = cache.frames.vertex_count();
+    // Vertices equal at every frame are one (a vertex per triangle corner is common in glTF).
+    let weld = if spec.weld() && frames >= 2 {
+        Some(Weld::find(&mut timed(cache.frames.as_mut(), "cache weld", budget))?).filter(|w| !w.is_identity())
+    } else {
+        None
+    };
     if frames < 2 {
         return Err(Error::in_file(
             &path,
@@ -205,6 +224,16 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         }
         _ => {}
     }
+    // Selections number the input's vertices (index files), so they are resolved before welding.
+    let mask = |sel: &Selection| resolve_selection(sel, scene_file, &rest.positions);
+    let (mut fixed, mut fixed_velocity) = (mask(&spec.fixed_for(method))?, mask(spec.fixed_velocity.as_ref().unwrap_or(&Selection::None))?);
+    if let Some(w) = &weld {
+        (fixed, fixed_velocity) = (w.mask(&fixed), w.mask(&fixed_velocity));
+        rest.positions = w.pick(&rest.positions);
+        rest.triangles = w.triangles(&rest.triangles);
+        cache = welded(cache, w.clone());
+    }
+    let vertices = cache.frames.vertex_count();
     surface::orient_outward(&mut rest);
     if method != Method::Fit && surface::compact(&rest).1.len() != vertices {
         return Err(Error::in_file(
@@ -213,9 +242,6 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
             "remove the loose vertices from the cache, or use [solver] method = \"fit\"",
         ));
     }
-    let mask = |sel: &Selection| resolve_selection(sel, scene_file, &rest.positions);
-    let fixed = mask(&spec.fixed_for(method))?;
-    let fixed_velocity = mask(spec.fixed_velocity.as_ref().unwrap_or(&Selection::None))?;
     let diagonal = cache_diagonal(cache.frames.as_mut())?;
     let (keys, selection) = match &spec.keyframes {
         CacheKeys::Auto => {
@@ -262,6 +288,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         tolerance: matches!(spec.keyframes, CacheKeys::Auto).then(|| spec.tolerance()),
         selection,
         meters_per_unit: cache.meters_per_unit,
+        weld: weld.map(|w| w.map),
     };
     let mut scene = scene.clone();
     scene.fps = cache.fps;
@@ -286,6 +313,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         fixed_velocity: per_key(&fixed_velocity),
         cyclic: false,
         display: None,
+        input_bytes: record.bytes,
         cache: Some(record),
     })
 }

@@ -5,7 +5,7 @@ use crate::algorithms::geometry::{bbox_diagonal, surface};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
 use crate::pipeline::report::guard_rails::guard_rails;
-use crate::pipeline::report::measures::{blendshape_error, deviation, size_ratios, volume_range};
+use crate::pipeline::report::measures::{blendshape_error, deviation, ratios_to, size_ratios, volume_range};
 use crate::pipeline::report::{Report, Volume};
 use crate::pipeline::scene::{Basis, Method};
 use crate::pipeline::stage_file::CacheRecord;
@@ -66,6 +66,13 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
         solver: animation.log.clone(),
         outputs: Vec::new(),
         ratios: Default::default(),
+        input_bytes: animation.input_bytes,
+        input_ratios: Default::default(),
+        full_frame_input_bytes: match &animation.cache {
+            Some(record) => record.bytes,
+            None => 32 + 12 * (animation.mesh.positions.len() * frames.len()) as u64,
+        },
+        full_frame_input_ratios: Default::default(),
         error,
         keyframe_deviation,
         volume,
@@ -82,6 +89,8 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
 pub fn with_outputs(mut report: Report, outputs: &Outputs) -> Report {
     report.outputs = outputs.files.clone();
     report.ratios = size_ratios(&outputs.files);
+    report.input_ratios = ratios_to(report.input_bytes, &outputs.files);
+    report.full_frame_input_ratios = ratios_to(report.full_frame_input_bytes, &outputs.files);
     if let Some(cache) = &mut report.cache {
         cache.ratios = cache_ratios(cache.bytes, &outputs.files);
     }
@@ -110,6 +119,8 @@ fn cache_report(animation: &Animation, played: &Trajectory, record: &CacheRecord
         fps: record.fps,
         fps_source: record.fps_note.clone(),
         bytes: record.bytes,
+        input_vertices: record.weld.as_ref().map_or(record.vertices, Vec::len),
+        vertices: record.vertices,
         keys: record.keys.clone(),
         tolerance: record.tolerance,
         ratios: Default::default(),

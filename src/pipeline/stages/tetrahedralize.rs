@@ -144,6 +144,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
             cache,
             cage: None,
             warnings: Vec::new(),
+            input_bytes: keys.input_bytes,
         }),
         Shape::Volume(mesh) => {
             let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
@@ -157,6 +158,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                 cache,
                 cage: None,
                 warnings,
+                input_bytes: keys.input_bytes,
             })
         }
         Shape::Surface(rest) => {
@@ -200,6 +202,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
                 cache,
                 cage: None,
                 warnings,
+                input_bytes: keys.input_bytes,
             })
         }
     }
@@ -346,5 +349,6 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         cache: keys.cache.clone(),
         cage: Some(info),
         warnings: Vec::new(),
+        input_bytes: keys.input_bytes,
     })
 }

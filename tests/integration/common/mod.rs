@@ -92,5 +92,6 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
         cache: None,
         cage: None,
         warnings: Vec::new(),
+        input_bytes: 0,
     }
 }

@@ -202,3 +202,58 @@ fn a_read_error_is_passed_on_not_a_panic() {
     let e = deviation(&mut bad, &Trajectory::with_zero_velocities(vec![0.0, 1.0], vec![rest.clone(), rest.clone()]), 1.0).unwrap_err();
     assert!(e.problem.contains("frame 23"));
 }
+
+/// A two-target morph clip: two shapes blended by C1 weight curves keyed at uneven frames
+/// (what a glTF morph clip with CUBICSPLINE weights holds), exact for a Hermite fit on the
+/// weights' own keys.
+fn two_target_clip() -> MemoryFrames {
+    let rest = grid();
+    let fps = 30.0;
+    let key_frames = [0usize, 9, 23, 31, 52, 60, 77, 90];
+    let times: Vec<f64> = key_frames.iter().map(|&f| f as f64 / fps).collect();
+    let w: Vec<[f64; 2]> = (0..key_frames.len()).map(|k| [((k * 7) % 5) as f64 / 4.0, ((k * 3) % 4) as f64 / 3.0]).collect();
+    let wv: Vec<[f64; 2]> = (0..key_frames.len()).map(|k| [((k * 5) % 3) as f64 - 1.0, 2.0 - ((k * 11) % 5) as f64]).collect();
+    let one = |c: usize| Trajectory {
+        times: times.clone(),
+        positions: w.iter().map(|w| vec![[w[c], 0.0, 0.0]]).collect(),
+        velocities: wv.iter().map(|v| vec![[v[c], 0.0, 0.0]]).collect(),
+    };
+    let (w0, w1) = (one(0), one(1));
+    let target0 = |p: Point| [0.3 * p[1], 0.2 * p[0] * p[2], -0.1];
+    let target1 = |p: Point| [-0.05, 0.25 * p[2] * p[2], 0.15 * p[0]];
+    sampled(91, fps, &rest, |p, t| {
+        let (a, b) = (w0.evaluate(t)[0][0], w1.evaluate(t)[0][0]);
+        let (d0, d1) = (target0(p), target1(p));
+        std::array::from_fn(|d| p[d] + a * d0[d] + b * d1[d])
+    })
+}
+
+/// The sweep meets every tolerance, and from 0.05 down to 0.002 a tighter tolerance never
+/// picks fewer keys (the case: a looser tolerance no longer repairs its way to more
+/// keys than the 8 an exact fit needs). Below, 0.001 still picks 9 keys where 5e-4 finds the
+/// exact 8 (its first clean round leaves 1.2x headroom, under the 1.25x that stretches the
+/// model further): measured, printed, not yet asserted.
+#[test]
+fn a_tighter_tolerance_never_picks_fewer_keys() {
+    let mut cache = two_target_clip();
+    let tolerances = [0.05, 0.02, 0.01, 0.007, 0.005, 0.003, 0.002];
+    let mut previous = 0;
+    for &tolerance in &tolerances {
+        let auto = select(&mut cache, &settings(tolerance)).unwrap();
+        println!(
+            "tolerance {tolerance:.0e}: {} keys {:?}, max error {:.2e}, rounds {:?}",
+            auto.keys.len(),
+            auto.keys,
+            auto.deviation.max,
+            auto.stats.rounds.iter().map(|r| (r.slack, r.candidate_keys, r.fitted_keys)).collect::<Vec<_>>()
+        );
+        assert!(auto.deviation.max <= tolerance, "tolerance {tolerance}: max error {}", auto.deviation.max);
+        assert!(auto.keys.len() >= previous, "tolerance {tolerance}: {} keys, fewer than the {previous} of a looser tolerance", auto.keys.len());
+        previous = auto.keys.len();
+    }
+    for tolerance in [0.001, 5e-4, 2e-4, 1e-4, 1e-5] {
+        let auto = select(&mut cache, &settings(tolerance)).unwrap();
+        println!("tolerance {tolerance:.0e}: {} keys, max error {:.2e}", auto.keys.len(), auto.deviation.max);
+        assert!(auto.deviation.max <= tolerance, "tolerance {tolerance}: max error {}", auto.deviation.max);
+    }
+}
