@@ -282,6 +282,7 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
                 surface,
                 "x",
                 blendsim::formats::export::glb::Placement { z_up: false, meters_per_unit: 1.0 },
+                blendsim::formats::export::glb::Encoding::FLOAT,
             )
             .len() as f64
                 / 1000.0
