@@ -130,7 +130,7 @@ pub fn export_with(animation: &Animation, clip: &(BlendShapeClip, Option<usize>)
                     staging.write(&name, &bytes)?;
                     // What the file plays at every frame against what it was given, read back.
                     let expected = |t: f64| if kind == OutputKind::FullFrame { trajectory.evaluate(t) } else { clip.points_at(t) };
-                    quantization_error = glb::readback::played_error(&bytes, &frame_times, &expected, placement, diagonal)?;
+                    quantization_error = glb::readback::played_error(&bytes, (&frame_times, scene.fps), &expected, placement, diagonal)?;
                 }
             }
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format, quantization_error });

@@ -62,11 +62,17 @@ pub fn decode_meshopt(bytes: &[u8]) -> std::result::Result<Vec<u8>, String> {
     Ok(glb(&serde_json::to_vec(&json).expect("JSON serializes"), &data))
 }
 
-/// The largest distance, over `times`, between the points the glb `bytes` plays (read back by
+/// The largest distance, over `times` (frames at `fps`), between the points the glb `bytes` plays (read back by
 /// the clip reader, in glTF's y-up meters) and `expected(t)` placed the same way, relative to
 /// `diagonal` (scene units). Only the first `expected(t).len()` vertices are compared (seam
 /// copies follow them and show the same points). `None` for a file with no animation.
-pub fn played_error(bytes: &[u8], times: &[f64], expected: &dyn Fn(f64) -> Vec<Point>, placement: Placement, diagonal: f64) -> Result<Option<f64>> {
+pub fn played_error(
+    bytes: &[u8],
+    (times, fps): (&[f64], f64),
+    expected: &dyn Fn(f64) -> Vec<Point>,
+    placement: Placement,
+    diagonal: f64,
+) -> Result<Option<f64>> {
     let fail =
         |problem: String| Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer");
     let (json, _) = chunks(bytes).ok_or_else(|| fail("not a GLB".into()))?;
@@ -85,7 +91,8 @@ pub fn played_error(bytes: &[u8], times: &[f64], expected: &dyn Fn(f64) -> Vec<P
     let path = std::env::temp_dir().join(format!("blendsim-readback-{}-{serial}.glb", std::process::id()));
     std::fs::write(&path, bytes).map_err(|e| fail(format!("{}: {e}", path.display())))?;
     let result = (|| {
-        let mut clip = gltf_clip::open(&path, None, None)?;
+        // The rate given: CUBICSPLINE keys need not be evenly spaced.
+        let mut clip = gltf_clip::open(&path, None, Some(fps))?;
         let mut got = clip.mesh.positions.clone();
         let m = placement.meters_per_unit;
         let mut worst = 0.0f64;
