@@ -132,7 +132,9 @@ fn with_weights(
     encoding: Encoding,
 ) -> Vec<u8> {
     let largest = clip.targets.iter().flat_map(|t| t.offsets.iter().flatten()).fold(0.0f32, |m, x| m.max(x.abs()));
-    let mut file = File::new(name, surface, &clip.base, placement, grid(encoding, &clip.base, largest, weight_sum));
+    // A static clip (no animation) stays f32: there is no played error to read back and state.
+    let grid = grid(encoding, &clip.base, largest, weight_sum).filter(|_| !clip.targets.is_empty());
+    let mut file = File::new(name, surface, &clip.base, placement, grid);
     let n = clip.vertex_count();
     let mut targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)> =
         clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets), None)).collect();
