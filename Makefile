@@ -79,7 +79,7 @@ deps-chromium:
 		$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; \
 	fi
 
-# The npm checkers (gltf-validator, three, playwright-core), pinned by package-lock.json;
+# The npm checkers (gltf-validator, three, Babylon.js, gltfpack, playwright-core), pinned by package-lock.json;
 # reinstalled only when the lock file changes.
 deps-npm: $(CHECKERS)/node_modules/.installed
 $(CHECKERS)/node_modules/.installed: $(CHECKERS)/package.json $(CHECKERS)/package-lock.json

@@ -131,9 +131,9 @@ fn run(name: &str, cache: &BarCache) {
         times: frames.times.clone(),
         points: frames.frames.iter().map(|f| f.iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect()).collect(),
     };
-    let bs_glb = glb::blendshapes(&clip, glb::Surface::plain(triangles), name, placement).len();
+    let bs_glb = glb::blendshapes(&clip, glb::Surface::plain(triangles), name, placement, glb::Encoding::FLOAT).len();
     let bs_usda = usda::blendshapes(&clip, triangles, None, &usd).len();
-    let ff_glb = glb::full_frame(&full, glb::Surface::plain(triangles), name, placement).len();
+    let ff_glb = glb::full_frame(&full, glb::Surface::plain(triangles), name, placement, glb::Encoding::FLOAT).len();
     let ff_usda = usda::full_frame(&full, triangles, None, &usd).len();
     let ff_f32 = 12 * frames.frame_count() * frames.vertex_count();
     let (rank, pca_bytes, pca_max) = pca_baseline(&frames, diagonal);

@@ -325,6 +325,8 @@ pub struct Export {
     pub weights: Weights,
     /// How the blendshape glTF animates its weights.
     pub gltf_interpolation: GltfInterpolation,
+    /// How every glb stores its data: quantized (default), quantized + meshopt, or f32.
+    pub gltf_compression: crate::formats::export::glb::Compression,
     /// Give the blendshape glTF's morph targets NORMAL deltas (each target's recomputed
     /// normals minus the base's), for renderers that shade a morphed mesh with the file's
     /// normals (three.js, engines); Blender recomputes them. Off by default: it adds about as
@@ -406,7 +408,8 @@ impl Default for Export {
             up_axis: Axis::Y,
             meters_per_unit: 1.0,
             weights: Weights::Bernstein,
-            gltf_interpolation: GltfInterpolation::Cubicspline,
+            gltf_interpolation: GltfInterpolation::Linear,
+            gltf_compression: Default::default(),
             gltf_morph_normals: false,
             basis: None,
             rank: None,
@@ -1171,7 +1174,8 @@ times = [0.0, 0.5]
         assert_eq!(s.solver.method, Method::Spacetime);
         assert_eq!(s.export.formats, vec![Format::Usda, Format::Glb]);
         assert!(s.export.full_frame);
-        assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Cubicspline));
+        assert_eq!((s.export.weights, s.export.gltf_interpolation), (Weights::Bernstein, GltfInterpolation::Linear));
+        assert_eq!(s.export.gltf_compression, crate::formats::export::glb::Compression::Quantize);
         assert_eq!(s.keyframes.as_ref().unwrap().rest, Rest::Key(0));
     }
 
@@ -1242,8 +1246,13 @@ full_frame = true
 "#;
         let s = Scene::parse(text).unwrap();
         assert_eq!(s.solver.method, Method::Hermite);
-        let e = Scene::parse(&(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"linear\"\n")).unwrap().export;
-        assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Linear));
+        let e = Scene::parse(
+            &(MINIMAL.to_string() + "[export]\nweights = \"signed\"\ngltf_interpolation = \"cubicspline\"\ngltf_compression = \"meshopt\"\n"),
+        )
+        .unwrap()
+        .export;
+        assert_eq!((e.weights, e.gltf_interpolation), (Weights::Signed, GltfInterpolation::Cubicspline));
+        assert_eq!(e.gltf_compression, crate::formats::export::glb::Compression::Meshopt);
         assert_eq!(s.keyframes.as_ref().unwrap().fixed, Some(vec![Selection::All, Selection::File { file: "top.txt".into(), invert: false }]));
     }
 
@@ -1415,6 +1424,7 @@ fixed = ["all", "none", "ends.txt", { file = "tail.dmat", invert = true }, [{ ax
             (MINIMAL.to_string() + "[export]\nformats = [\"fbx\"]\n", "unknown variant `fbx`"),
             (MINIMAL.to_string() + "[export]\nweights = \"positive\"\n", "unknown variant `positive`"),
             (MINIMAL.to_string() + "[export]\ngltf_interpolation = \"step\"\n", "unknown variant `step`"),
+            (MINIMAL.to_string() + "[export]\ngltf_compression = \"draco\"\n", "unknown variant `draco`"),
         ];
         for (text, expect) in cases {
             let e = Scene::parse(&text).unwrap_err().to_string();

@@ -393,6 +393,11 @@ pub struct OutputFile {
     pub format: Format,
     /// Its size.
     pub bytes: u64,
+    /// A glb's largest distance at any frame between what it plays (read back from the file)
+    /// and the animation it holds, relative to the rest bounding-box diagonal: its quantization
+    /// error (`formats/gltf.md`, "Quantization"). `None` for USD files and static glbs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantization_error: Option<f64>,
 }
 
 /// Output of `export` (beside the files): what was written.

@@ -7,6 +7,7 @@ import { readFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 
 const require = createRequire(import.meta.url);
 const validator = require('gltf-validator');
@@ -44,7 +45,10 @@ export async function validate(bytes, file, summary) {
  *  URIs (no fetch in Node). Plain Node cannot decode images (no DOM): textures load as empty
  *  placeholders; the validator checks the embedded images and texture_check.mjs renders them. */
 export function parse(bytes, file) {
-  const loader = new GLTFLoader().register(() => ({ name: 'blendsim_no_image_decoding', loadTexture: () => Promise.resolve(new THREE.Texture()) }));
+  // EXT_meshopt_compression files need three's meshopt decoder (WebAssembly, runs in Node).
+  const loader = new GLTFLoader()
+    .setMeshoptDecoder(MeshoptDecoder)
+    .register(() => ({ name: 'blendsim_no_image_decoding', loadTexture: () => Promise.resolve(new THREE.Texture()) }));
   if (new TextDecoder().decode(bytes.subarray(0, 4)) !== 'glTF') {
     const json = JSON.parse(new TextDecoder().decode(bytes));
     for (const b of json.buffers ?? []) {

@@ -75,6 +75,8 @@ method = "hermite"
 
 [export]
 formats = ["usda", "usdc", "glb"]
+# The UV, normal and texture checks read the glb's f32 accessors by hand (`Glb::floats`).
+gltf_compression = "none"
 "#;
 
 /// usd-core's view of a file's mesh: st (interpolation, indexed, per-corner values in face

@@ -379,8 +379,9 @@ fn a_cubicspline_morph_clip_is_a_cache_too() {
     let cache = bar(&BarSettings { duration: 1.0, ..BarSettings::default() });
     let dir = TempDir::new("cache-cubicspline");
     write_cache(&dir.path, &cache, "bar.pc2");
-    std::fs::write(dir.join("scene.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.002"))
-        .unwrap();
+    let cubic = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 0.002")
+        + "gltf_interpolation = \"cubicspline\"\n";
+    std::fs::write(dir.join("scene.toml"), cubic).unwrap();
     run(&dir.path, &["bake", "scene.toml", "--out", "first", "--quiet"]).success();
     let glb: Value = {
         let bytes = std::fs::read(dir.join("first/bar.glb")).unwrap();

@@ -14,7 +14,7 @@ use blendsim::pipeline::stage_file::{Animation, OutputKind, Outputs};
 use blendsim::pipeline::stages::export;
 use blendsim::support::output::Staging;
 
-use crate::common::checkers::{render_glb, try_check_glb, try_check_usd, Expected};
+use crate::common::checkers::{check_babylon, render_glb, try_check_glb, try_check_usd, Expected};
 use crate::common::{animation, sample_motion, scratch};
 
 /// A twist about the box's vertical (y) axis: the angle grows with height above `from` (a
@@ -105,13 +105,50 @@ fn twisting_box_in_every_format() {
     );
 }
 
-/// The other forms: signed weights, and weights sampled per frame in a LINEAR glTF.
+/// The other forms: signed weights, CUBICSPLINE weight keys, meshopt and f32 glTF.
 #[test]
 fn signed_weights_and_linear_gltf_in_every_format() {
-    for export in ["weights = \"signed\"", "gltf_interpolation = \"linear\"", "weights = \"signed\"\ngltf_interpolation = \"linear\""] {
+    for export in [
+        "weights = \"signed\"",
+        "gltf_interpolation = \"cubicspline\"",
+        "weights = \"signed\"\ngltf_interpolation = \"cubicspline\"",
+        "gltf_compression = \"meshopt\"",
+        "gltf_compression = \"meshopt\"\ngltf_interpolation = \"cubicspline\"",
+        "gltf_compression = \"none\"",
+    ] {
         let anim = cyclic_box(&format!("[\"usda\", \"usdc\", \"glb\"]\n{export}"));
         let (_, outputs) = export_and_check(&anim);
         assert_eq!(outputs.files.len(), 6, "{export}");
+    }
+}
+
+/// The default glb (LINEAR weights per frame, `KHR_mesh_quantization`) and its full-frame file
+/// play in Babylon.js within the quantization error the export states for them (read back from
+/// the file), z up in centimetres: the quantization grid composes with the placement. The
+/// tolerance is a tenth of 0.005 of the diagonal, and the files meet it.
+#[test]
+fn default_glb_plays_in_babylon_within_its_stated_error() {
+    use crate::common::verify::{frames_and_midpoints, sampled_points};
+    let anim = cyclic_box("[\"glb\"]");
+    let (dir, outputs) = export_and_check(&anim);
+    let fps = anim.scene.fps;
+    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
+    let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);
+    for f in &outputs.files {
+        let bytes = std::fs::read(dir.join(&f.path)).unwrap();
+        assert!(bytes.windows(21).any(|w| w == b"KHR_mesh_quantization"), "{}: quantized by default", f.path);
+        let stated = f.quantization_error.unwrap();
+        assert!(stated > 0.0 && stated <= 0.1 * 0.005 * 1.001, "{}: quantization error {stated:e}", f.path);
+        let mut e = match f.kind {
+            OutputKind::FullFrame => Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t)),
+            OutputKind::Blendshape => Expected::at(&frames_and_midpoints(&frames), fps, |t| sampled_points(&clip, &frames, t)),
+        };
+        e.up_axis = Some("z".into());
+        e.meters_per_unit = Some(anim.scene.export.meters_per_unit);
+        e.tolerance += stated * 1.001;
+        let summary = check_babylon(&dir.join(&f.path), &e);
+        eprintln!("{}: stated {stated:.2e}, Babylon.js {summary}", f.path);
+        assert_eq!(summary["ok"], true, "{}: {summary}", f.path);
     }
 }
 
@@ -277,7 +314,7 @@ fn format_documents_show_real_output() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let usd_doc = std::fs::read_to_string(root.join("formats/usd.md")).unwrap();
     let gltf_doc = std::fs::read_to_string(root.join("formats/gltf.md")).unwrap();
-    let (dir, outputs) = export_and_check(&tetra(""));
+    let (dir, outputs) = export_and_check(&tetra("gltf_interpolation = \"cubicspline\"\ngltf_compression = \"none\""));
     let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
     for name in ["tetra.usda", "tetra.full.usda"] {
         let text = String::from_utf8(read(name)).unwrap();

@@ -282,6 +282,7 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
                 surface,
                 "x",
                 blendsim::formats::export::glb::Placement { z_up: false, meters_per_unit: 1.0 },
+                blendsim::formats::export::glb::Encoding::FLOAT,
             )
             .len() as f64
                 / 1000.0
@@ -300,7 +301,7 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
 fn gltf_check_agrees_exactly_with_the_stored_clip_and_sees_a_perturbed_weight() {
     use crate::common::checkers::{try_check_glb, Expected};
     let dir = TempDir::new("normals-exact");
-    crate::texture::textured_prism(&dir.path, "gltf_morph_normals = true");
+    crate::texture::textured_prism(&dir.path, "gltf_morph_normals = true\ngltf_interpolation = \"cubicspline\"");
     run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
     let anim = library_animation(&dir.join("scene.toml"));
     let clip = BlendShapeClip::new(&anim.trajectory, anim.scene.export.weights);

@@ -34,6 +34,8 @@ pub mod code {
     pub const TIMES_LOOK_LIKE_FRAMES: &str = "times-look-like-frames";
     /// A blendshape file larger than the full-frame file or the cache it replaces.
     pub const OUTPUT_LARGER: &str = "output-larger";
+    /// A glb whose quantization error, read back from the file, exceeds the scene's tolerance.
+    pub const QUANTIZATION_ERROR: &str = "quantization-error";
 }
 
 /// `code: message`, the form of every warning line.
@@ -119,6 +121,18 @@ pub fn guard_rails(report: &Report) -> Vec<String> {
         ));
     }
     out.extend(larger_outputs(report));
+    let tolerance = report.cache.as_ref().and_then(|c| c.tolerance).unwrap_or(crate::pipeline::scene::DEFAULT_TOLERANCE);
+    for f in &report.outputs {
+        if let Some(e) = f.quantization_error.filter(|e| e.is_nan() || *e > tolerance) {
+            out.push(coded(
+                code::QUANTIZATION_ERROR,
+                format!(
+                    "{} plays up to {e:.2e} of the bounding-box diagonal away from the animation it holds, over the tolerance {tolerance:e} (write it unquantized: [export] gltf_compression = \"none\")",
+                    f.path
+                ),
+            ));
+        }
+    }
     out
 }
 

@@ -129,6 +129,10 @@ pub fn render(report: &Report) -> String {
             }
         ),
     );
+    let quantized: Vec<String> = report.outputs.iter().filter_map(|f| f.quantization_error.map(|e| format!("{} {e:.2e}", f.path))).collect();
+    if !quantized.is_empty() {
+        push(&mut s, format!("| glb quantization | max {} of the bbox diagonal (read back from the files) |", quantized.join(", ")));
+    }
     push(
         &mut s,
         format!(

@@ -58,6 +58,10 @@ pub fn export_with(
         meters_per_unit: scene.meters_per_unit(),
     };
     let placement = glb::Placement { z_up: scene.export.up_axis == Axis::Z, meters_per_unit: scene.meters_per_unit() };
+    let diagonal = bbox_diagonal(&animation.mesh.positions);
+    let tolerance = animation.cache.as_ref().and_then(|c| c.tolerance).unwrap_or(DEFAULT_TOLERANCE);
+    let encoding = glb::Encoding { compression: scene.export.gltf_compression, max_error: QUANTIZATION_SHARE * tolerance * diagonal };
+    let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
 
     let (clip, rank) = (&clip.0, clip.1);
     // A cache bake's full-frame files are the cache itself, frame for frame: what the
@@ -120,6 +124,7 @@ pub fn export_with(
         for &format in &formats {
             let name = file_name(&scene.name, kind, format);
             bar.set_message(format!("export: {name}"));
+            let mut quantization_error = None;
             match format {
                 Format::Usda => match &full {
                     Some(full) if streamed => {
@@ -138,21 +143,23 @@ pub fn export_with(
                 }
                 Format::Glb => {
                     let bytes = match (&kind, &full) {
-                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement),
+                        (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement, encoding),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
-                            let frame_times: Vec<f64> = trajectory.frames(scene.fps).iter().map(|f| f.1).collect();
-                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement)
+                            glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement, encoding)
                         }
-                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement),
+                        _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement, encoding),
                     };
                     let bytes = match weld {
                         Some(map) => weld_map::gltf(&bytes, map),
                         None => bytes,
                     };
                     staging.write(&name, &bytes)?;
+                    // What the file plays at every frame against what it was given, read back.
+                    let expected = |t: f64| if kind == OutputKind::FullFrame { trajectory.evaluate(t) } else { clip.points_at(t) };
+                    quantization_error = glb::readback::played_error(&bytes, (&frame_times, scene.fps), &expected, placement, diagonal)?;
                 }
             }
-            files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format });
+            files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format, quantization_error });
             bar.inc(1);
         }
     }
@@ -185,6 +192,10 @@ pub fn file_names(scene: &Scene) -> Vec<String> {
 pub fn outputs_list_name(scene: &Scene) -> String {
     format!("{}.outputs.json", scene.name)
 }
+
+/// The share of the scene's tolerance (`[cache] tolerance`, or its default) a glb's quantization
+/// may add, of the bounding-box diagonal (`formats/gltf.md`, "Quantization").
+pub const QUANTIZATION_SHARE: f64 = 0.1;
 
 /// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
 /// the trajectory to f32 precision, of the bounding-box diagonal.

@@ -165,6 +165,15 @@ pub fn try_check_glb(file: &Path, expected: &Expected) -> Result<Value, String> 
     summary(&format!("gltf_check.mjs {}", file.display()), output)
 }
 
+/// `babylon_check.mjs`: Babylon.js (NullEngine, in Node) plays the glb within
+/// `expected.tolerance` of the expected points, in scene units through the node transform.
+pub fn check_babylon(file: &Path, expected: &Expected) -> Value {
+    require_node_modules(&["@babylonjs/core", "@babylonjs/loaders"]);
+    let json = write_expected(file, expected);
+    let output = Command::new("node").arg(checkers_dir().join("babylon_check.mjs")).arg(file).arg(&json).output().expect("run babylon_check.mjs");
+    summary(&format!("babylon_check.mjs {}", file.display()), output).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// `render_check.mjs`: three.js in headless Chromium renders the file at two animation times
 /// (`times`, or the start and middle of the animation), writes both PNGs to `out_dir`, and
 /// checks that the mesh is visible and moves.

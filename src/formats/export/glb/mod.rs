@@ -1,5 +1,10 @@
 //! Binary glTF writers. Layout in `formats/gltf.md`.
 //!
+//! - this file: the files' structure (node, mesh, targets, animation) and the GLB container;
+//! - [`quantize`]: `KHR_mesh_quantization`, the integer grid chosen from the error budget;
+//! - [`meshopt`]: `EXT_meshopt_compression` of the buffer views;
+//! - [`readback`]: the error a written file plays with, measured on its bytes.
+//!
 //! The JSON is built with `gltf-json`; the GLB container is ours (12-byte header, a JSON chunk
 //! padded with spaces, a BIN chunk padded with zeros). Every block of binary data starts on a
 //! 4-byte boundary, so every accessor is aligned whatever its component type.
@@ -12,12 +17,45 @@ use json::validation::{Checked::Valid, USize64};
 use json::Index;
 use serde_json::{json as value, Value};
 
-use super::sparse_is_smaller;
 use super::texture::Texture;
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::{split_at_seams, CornerAttributes};
 use crate::algorithms::geometry::Bounds;
+use quantize::Grid;
+
+pub mod meshopt;
+pub mod quantize;
+pub mod readback;
+
+/// How a glb stores its data (`[export] gltf_compression`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Compression {
+    /// `KHR_mesh_quantization` (integer positions, offsets, normals; UVs in shorts): read by
+    /// Blender, three.js, Babylon.js. Falls back to f32 when shorts cannot meet the budget.
+    #[default]
+    Quantize,
+    /// Quantized, then `EXT_meshopt_compression` (required): three.js and Babyl.js with their
+    /// meshopt decoders; Blender 4.2 to 5.0 refuse it.
+    Meshopt,
+    /// f32 everywhere, no extension.
+    None,
+}
+
+/// How a writer stores the data: the compression and the error it may add.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Encoding {
+    /// See [`Compression`].
+    pub compression: Compression,
+    /// The largest distance (scene units) a played point may move by quantization.
+    pub max_error: f64,
+}
+
+impl Encoding {
+    /// f32, no extension: the bytes as before compression existed.
+    pub const FLOAT: Encoding = Encoding { compression: Compression::None, max_error: 0.0 };
+}
 
 /// How the node maps scene units to glTF's y-up meters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,6 +64,18 @@ pub struct Placement {
     pub z_up: bool,
     /// Scene units in meters (the node is scaled by it).
     pub meters_per_unit: f64,
+}
+
+impl Placement {
+    /// A scene point's direction in glTF's y-up frame (units not applied): `(x, z, -y)` for a
+    /// z-up scene.
+    pub fn place(&self, p: [f64; 3]) -> [f64; 3] {
+        if self.z_up {
+            [p[0], p[2], -p[1]]
+        } else {
+            p
+        }
+    }
 }
 
 /// Morph targets + CUBICSPLINE weight animation reproducing the Hermite trajectory exactly.
@@ -37,7 +87,7 @@ pub struct Placement {
 /// at UV and normal seams, see `File::new`); without them the file is as before. `textures`
 /// (per material group, `texture::load`; may be empty) are embedded and become the groups'
 /// `baseColorTexture` when the surface has UVs.
-pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
+pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Vec<u8> {
     let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
     let curves = &clip.curves;
     let mut output = Vec::with_capacity(3 * times.len() * curves.len());
@@ -46,28 +96,45 @@ pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placemen
         output.extend(curves.iter().map(|c| c.values[k]));
         output.extend(curves.iter().map(|c| c.out_tangents[k]));
     }
-    with_weights(clip, surface, name, placement, &times, &output, Interpolation::CubicSpline)
+    // The weights between keys too: 8 samples per interval bound what is played.
+    let sums = clip.times.windows(2).flat_map(|w| (0..8).map(move |i| w[0] + (w[1] - w[0]) * i as f64 / 8.0)).chain(clip.times.last().copied());
+    let weight_sum = sums.map(|t| clip.weights_at(t).iter().map(|w| w.abs()).sum::<f64>()).fold(0.0, f64::max);
+    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::CubicSpline), weight_sum, encoding)
 }
 
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
 /// frames, the linear blend of two frames in between, and nothing an importer could drop
 /// (Blender's glTF importer ignores CUBICSPLINE tangents).
-pub fn blendshapes_sampled(clip: &BlendShapeClip, frame_times: &[f64], surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
+pub fn blendshapes_sampled(
+    clip: &BlendShapeClip,
+    frame_times: &[f64],
+    surface: Surface,
+    name: &str,
+    placement: Placement,
+    encoding: Encoding,
+) -> Vec<u8> {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
-    with_weights(clip, surface, name, placement, &times, &output, Interpolation::Linear)
+    let weight_sum = output.chunks(clip.targets.len().max(1)).map(|w| w.iter().map(|x| x.abs() as f64).sum::<f64>()).fold(0.0, f64::max);
+    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::Linear), weight_sum, encoding)
 }
+
+/// The weights animation: input times, output values, interpolation.
+type Sampler<'a> = (&'a [f32], &'a [f32], Interpolation);
 
 fn with_weights(
     clip: &BlendShapeClip,
     surface: Surface,
     name: &str,
     placement: Placement,
-    times: &[f32],
-    output: &[f32],
-    interpolation: Interpolation,
+    (times, output, interpolation): Sampler,
+    weight_sum: f64,
+    encoding: Encoding,
 ) -> Vec<u8> {
-    let mut file = File::new(name, surface, &clip.base, placement);
+    let largest = clip.targets.iter().flat_map(|t| t.offsets.iter().flatten()).fold(0.0f32, |m, x| m.max(x.abs()));
+    // A static clip (no animation) stays f32: there is no played error to read back and state.
+    let grid = grid(encoding, &clip.base, largest, weight_sum).filter(|_| !clip.targets.is_empty());
+    let mut file = File::new(name, surface, &clip.base, placement, grid);
     let n = clip.vertex_count();
     let mut targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)> =
         clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets), None)).collect();
@@ -86,9 +153,12 @@ fn with_weights(
 
 /// One morph target per frame (the offset of that frame from frame 0) with one-hot LINEAR
 /// weights: what a vertex cache looks like in glTF.
-pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: Placement) -> Vec<u8> {
+pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Vec<u8> {
     let base = &frames.points[0];
-    let mut file = File::new(name, surface, base, placement);
+    let largest =
+        frames.points.iter().flat_map(|f| f.iter().zip(base).flat_map(|(p, b)| (0..3).map(move |a| (p[a] - b[a]).abs()))).fold(0.0f32, f32::max);
+    // One-hot weights: a played frame is the base plus one target.
+    let mut file = File::new(name, surface, base, placement, grid(encoding, base, largest, 1.0));
     let mut targets = Vec::with_capacity(frames.frames.len());
     for (frame, points) in frames.frames.iter().zip(&frames.points) {
         let (mut indices, mut offsets) = (Vec::new(), Vec::new());
@@ -109,6 +179,14 @@ pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: P
     }
     file.morph(targets, &times, &output, Interpolation::Linear);
     file.finish()
+}
+
+/// The grid of a quantized file (with its compression), or `None` for f32.
+fn grid(encoding: Encoding, base: &[[f32; 3]], largest_offset: f32, weight_sum: f64) -> Option<(Grid, Compression)> {
+    match encoding.compression {
+        Compression::None => None,
+        c => Grid::for_budget(base, largest_offset, weight_sum, encoding.max_error).map(|g| (g, c)),
+    }
 }
 
 /// Area-weighted unit normals of the glTF vertices (`sources[j]`: the point vertex `j` shows;
@@ -174,10 +252,15 @@ enum Block {
     SparseIndices,
     SparseValues,
     Animation,
-    /// TEXCOORD_0 (vec2 f32, stride 8); last, so files without UVs keep their layout.
-    Texcoords,
+    /// Elements of 8 bytes: TEXCOORD_0 (vec2 f32), quantized positions and dense targets (vec3
+    /// i16 + padding); after the others, so files without UVs keep their layout.
+    Stride8,
+    /// Elements of 4 bytes: quantized normals and byte targets (vec3 i8 + padding), UVs (vec2 u16).
+    Stride4,
 }
-const BLOCKS: usize = 6;
+const BLOCKS: usize = 7;
+const KINDS: [Block; BLOCKS] =
+    [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation, Block::Stride8, Block::Stride4];
 
 /// A material group's primitive: its name, triangles (over glTF vertices) and texture.
 type Group<'t> = (String, Vec<[u32; 3]>, Option<&'t Texture>);
@@ -217,6 +300,10 @@ struct File {
     images: Vec<Vec<u8>>,
     /// The triangles over glTF vertices (split at seams), kept when morph normals are asked.
     normal_triangles: Option<Vec<[u32; 3]>>,
+    /// Quantized (`KHR_mesh_quantization`) on this grid, and how the views are compressed.
+    grid: Option<(Grid, Compression)>,
+    /// glTF vertices and primitives, for the index codec.
+    vertex_count: usize,
 }
 
 fn f32x3_value(v: [f32; 3]) -> Value {
@@ -286,7 +373,7 @@ impl File {
     /// normals, vertices are split where a point's corners differ (`split_at_seams`): the first
     /// `base.len()` glTF vertices are the points in order, the seam copies follow, and
     /// `extras.seamSources` lists the point each copy shows.
-    fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement) -> File {
+    fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement, grid: Option<(Grid, Compression)>) -> File {
         let Surface { triangles, attributes, textures, morph_normals } = surface;
         let mut f = File {
             root: json::Root::default(),
@@ -295,6 +382,8 @@ impl File {
             target_names: Vec::new(),
             images: Vec::new(),
             normal_triangles: None,
+            grid,
+            vertex_count: 0,
         };
         f.root.asset = json::Asset {
             copyright: None,
@@ -309,7 +398,7 @@ impl File {
         if let Some(s) = &split {
             f.sources = Some(s.sources.clone());
         }
-        let position = f.positions(base);
+        let position = f.positions(base, false);
         let mut attributes_json = vec![(Valid(json::mesh::Semantic::Positions), position)];
         if morph_normals {
             f.normal_triangles = Some(triangles.to_vec());
@@ -330,24 +419,35 @@ impl File {
                     }
                 })
                 .collect();
-            let offset = f.push(Block::Vertices, &vec3_bytes(unit.into_iter()));
             let count = normals.len();
-            attributes_json.push((
-                Valid(json::mesh::Semantic::Normals),
-                f.root.push(accessor(Some((Block::Vertices, offset)), count, ComponentType::F32, Type::Vec3)),
-            ));
+            let a = if f.grid.is_some() {
+                let offset = f.push(Block::Stride4, &quantize::normal_bytes(&unit));
+                json::Accessor { normalized: true, ..accessor(Some((Block::Stride4, offset)), count, ComponentType::I8, Type::Vec3) }
+            } else {
+                let offset = f.push(Block::Vertices, &vec3_bytes(unit.into_iter()));
+                accessor(Some((Block::Vertices, offset)), count, ComponentType::F32, Type::Vec3)
+            };
+            attributes_json.push((Valid(json::mesh::Semantic::Normals), f.root.push(a)));
         }
         if let Some(uvs) = split.as_ref().and_then(|s| s.uvs.as_ref()) {
             // glTF's v runs down the image, OBJ's up.
-            let bytes: Vec<u8> = uvs.iter().flat_map(|&[u, v]| [u as f32, (1.0 - v) as f32]).flat_map(f32::to_le_bytes).collect();
-            let offset = f.push(Block::Texcoords, &bytes);
-            attributes_json.push((
-                Valid(json::mesh::Semantic::TexCoords(0)),
-                f.root.push(accessor(Some((Block::Texcoords, offset)), uvs.len(), ComponentType::F32, Type::Vec2)),
-            ));
+            let flipped: Vec<[f32; 2]> = uvs.iter().map(|&[u, v]| [u as f32, (1.0 - v) as f32]).collect();
+            let a = match quantize::uv_bytes(&flipped).filter(|_| f.grid.is_some()) {
+                Some(bytes) => {
+                    let offset = f.push(Block::Stride4, &bytes);
+                    json::Accessor { normalized: true, ..accessor(Some((Block::Stride4, offset)), uvs.len(), ComponentType::U16, Type::Vec2) }
+                }
+                None => {
+                    let bytes: Vec<u8> = flipped.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+                    let offset = f.push(Block::Stride8, &bytes);
+                    accessor(Some((Block::Stride8, offset)), uvs.len(), ComponentType::F32, Type::Vec2)
+                }
+            };
+            attributes_json.push((Valid(json::mesh::Semantic::TexCoords(0)), f.root.push(a)));
         }
         let has_uvs = split.as_ref().is_some_and(|s| s.uvs.is_some());
         let vertex_count = split.as_ref().map_or(base.len(), |s| s.sources.len());
+        f.vertex_count = vertex_count;
         let (component, size) = index_type(vertex_count, false);
         // One primitive per material group, its triangles in surface order.
         let groups: Vec<Group> = match attributes.filter(|a| !a.groups.is_empty()) {
@@ -397,15 +497,24 @@ impl File {
             });
         }
         let mesh = f.root.push(json::Mesh { extensions: None, extras: None, name: Some(name.into()), primitives, weights: None });
-        let s = placement.meters_per_unit as f32;
+        // The placement, after the grid's dequantization: `m R (step q + center)`.
+        let m = placement.meters_per_unit;
+        let (step, center) = f.grid.map_or((1.0, [0.0; 3]), |(g, _)| (g.step as f64, g.center.map(f64::from)));
+        let s = (m * step) as f32;
+        let placed = placement.place(center).map(|x| (m * x) as f32);
         let half = std::f32::consts::FRAC_1_SQRT_2;
         let node = f.root.push(json::Node {
             mesh: Some(mesh),
             name: Some(name.into()),
             rotation: placement.z_up.then_some(json::scene::UnitQuaternion([-half, 0.0, 0.0, half])),
             scale: (s != 1.0).then_some([s; 3]),
+            translation: (placed != [0.0; 3]).then_some(placed),
             ..Default::default()
         });
+        if f.grid.is_some() {
+            f.root.extensions_used.push("KHR_mesh_quantization".into());
+            f.root.extensions_required.push("KHR_mesh_quantization".into());
+        }
         let scene = f.root.push(json::Scene { extensions: None, extras: None, name: Some(name.into()), nodes: vec![node] });
         f.root.scene = Some(scene);
         f
@@ -435,8 +544,9 @@ impl File {
         offset
     }
 
-    /// A dense vec3 accessor with the min/max that POSITION accessors require.
-    fn positions(&mut self, points: &[[f32; 3]]) -> Index<json::Accessor> {
+    /// A dense vec3 accessor with the min/max that POSITION accessors require: points (the base),
+    /// or with `offsets` a dense target; on the grid when quantized.
+    fn positions(&mut self, points: &[[f32; 3]], offsets: bool) -> Index<json::Accessor> {
         let expanded: Vec<[f32; 3]>;
         let points = match &self.sources {
             Some(sources) if sources.len() != points.len() => {
@@ -445,6 +555,16 @@ impl File {
             }
             _ => points,
         };
+        if let Some((grid, _)) = self.grid {
+            let q: Vec<[i32; 3]> = points.iter().map(|&p| if offsets { grid.offset(p) } else { grid.point(p) }).collect();
+            let (component, size) = quantize::component(&q);
+            let block = if size == 1 { Block::Stride4 } else { Block::Stride8 };
+            let offset = self.push(block, &quantize::vec3_bytes(&q, size, true));
+            let (lo, hi) = quantize::int_bounds(&q);
+            let mut a = accessor(Some((block, offset)), q.len(), component, Type::Vec3);
+            (a.min, a.max) = (Some(value!(lo)), Some(value!(hi)));
+            return self.root.push(a);
+        }
         let offset = self.push(Block::Vertices, &vec3_bytes(points.iter().copied()));
         let (lo, hi) = bounds(points);
         let mut a = accessor(Some((Block::Vertices, offset)), points.len(), ComponentType::F32, Type::Vec3);
@@ -472,23 +592,44 @@ impl File {
             _ => (vertices, indices, offsets),
         };
         let (component, size) = index_type(vertices, true);
-        if !indices.is_empty() && !sparse_is_smaller(indices.len(), vertices, size) {
+        let quantized: Option<Vec<[i32; 3]>> = self.grid.map(|(g, _)| offsets.iter().map(|&d| g.offset(d)).collect());
+        // Quantized, a target's offsets take 3 or 6 bytes instead of 12; meshopt compresses
+        // dense zeros to almost nothing (and cannot encode sparse views).
+        // Sparse: an index and a packed value per moved vertex; dense: a padded value per vertex.
+        let (value_size, dense_size) = match &quantized {
+            Some(q) if quantize::component(q).1 == 1 => (3, 4),
+            Some(_) => (6, 8),
+            None => (12, 12),
+        };
+        let meshopt = matches!(self.grid, Some((_, Compression::Meshopt)));
+        let sparse_smaller = indices.len() * (size + value_size) < vertices * dense_size;
+        if !indices.is_empty() && (meshopt || !sparse_smaller) {
             let mut dense = vec![[0.0f32; 3]; vertices];
             for (&i, o) in indices.iter().zip(offsets) {
                 dense[i as usize] = *o;
             }
-            return self.positions(&dense);
+            return self.positions(&dense, true);
         }
-        let mut a = accessor(None, vertices, ComponentType::F32, Type::Vec3);
-        let (mut lo, mut hi) = bounds(offsets);
+        let (value_component, value_bytes, (mut lo, mut hi)) = match &quantized {
+            Some(q) => {
+                let (c, s) = quantize::component(q);
+                let (lo, hi) = quantize::int_bounds(q);
+                (c, quantize::vec3_bytes(q, s, false), (lo.map(|x| x as f32), hi.map(|x| x as f32)))
+            }
+            None => (ComponentType::F32, vec3_bytes(offsets.iter().copied()), bounds(offsets)),
+        };
+        let mut a = accessor(None, vertices, if indices.is_empty() { ComponentType::F32 } else { value_component }, Type::Vec3);
         if indices.len() < vertices {
             // The vertices not listed are zeros.
             (lo, hi) = (lo.map(|x| x.min(0.0)), hi.map(|x| x.max(0.0)));
         }
-        (a.min, a.max) = (Some(f32x3_value(lo)), Some(f32x3_value(hi)));
+        (a.min, a.max) = match &quantized {
+            Some(_) if !indices.is_empty() => (Some(value!(lo.map(|x| x as i32))), Some(value!(hi.map(|x| x as i32)))),
+            _ => (Some(f32x3_value(lo)), Some(f32x3_value(hi))),
+        };
         if !indices.is_empty() {
             let index_offset = self.push(Block::SparseIndices, &index_bytes(indices.iter().copied(), size));
-            let value_offset = self.push(Block::SparseValues, &vec3_bytes(offsets.iter().copied()));
+            let value_offset = self.push(Block::SparseValues, &value_bytes);
             a.sparse = Some(sparse::Sparse {
                 count: USize64(indices.len() as u64),
                 indices: sparse::Indices {
@@ -574,17 +715,31 @@ impl File {
         }
         let mut bin = Vec::new();
         let mut view_of = [None; BLOCKS];
-        let kinds = [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation, Block::Texcoords];
-        for (block, data) in kinds.into_iter().zip(&self.blocks) {
+        // Per view, its meshopt encoding (meshopt files), else `None`: stored as is.
+        let mut encoded: Vec<Option<meshopt::Encoded>> = Vec::new();
+        let meshopt = matches!(self.grid, Some((_, Compression::Meshopt)));
+        let index_size = index_type(self.vertex_count, false).1;
+        let primitives = self.root.meshes.first().map_or(0, |m| m.primitives.len());
+        for (block, data) in KINDS.into_iter().zip(&self.blocks) {
             if data.is_empty() {
                 continue;
             }
             let (target, stride) = match block {
                 Block::Indices => (Some(ViewTarget::ElementArrayBuffer), None),
                 Block::Vertices => (Some(ViewTarget::ArrayBuffer), Some(Stride(12))),
-                Block::Texcoords => (Some(ViewTarget::ArrayBuffer), Some(Stride(8))),
+                Block::Stride8 => (Some(ViewTarget::ArrayBuffer), Some(Stride(8))),
+                Block::Stride4 => (Some(ViewTarget::ArrayBuffer), Some(Stride(4))),
                 _ => (None, None),
             };
+            encoded.push(
+                meshopt
+                    .then(|| match block {
+                        Block::Indices => Some(meshopt::indices(data, index_size, self.vertex_count, primitives == 1)),
+                        Block::Animation => Some(meshopt::attributes(data, 4)),
+                        _ => stride.map(|s| meshopt::attributes(data, s.0)),
+                    })
+                    .flatten(),
+            );
             view_of[block as usize] = Some(self.root.push(json::buffer::View {
                 buffer: Index::new(0),
                 byte_length: USize64(data.len() as u64),
@@ -624,9 +779,51 @@ impl File {
                 s.values.buffer_view = view(s.values.buffer_view);
             }
         }
-        self.root.push(json::Buffer { byte_length: USize64(bin.len() as u64), name: None, uri: None, extensions: None, extras: None });
-        glb(&self.root.to_vec().expect("glTF JSON serializes"), &bin)
+        if !meshopt {
+            self.root.push(json::Buffer { byte_length: USize64(bin.len() as u64), name: None, uri: None, extensions: None, extras: None });
+            return glb(&self.root.to_vec().expect("glTF JSON serializes"), &bin);
+        }
+        compress_views(self.root, &bin, encoded)
     }
+}
+
+/// The meshopt form of a laid-out file: buffer 0 (the BIN chunk) holds each view's compressed
+/// bytes (or, for a view the codecs do not take, its bytes as they are); buffer 1 is the
+/// extension's fallback buffer, with no data: the decoded views live there, at the offsets
+/// they had in `bin`. `encoded` lists the views in order (images excluded: stored as they are).
+fn compress_views(mut root: json::Root, bin: &[u8], encoded: Vec<Option<meshopt::Encoded>>) -> Vec<u8> {
+    const EXT: &str = "EXT_meshopt_compression";
+    root.extensions_used.push(EXT.into());
+    root.extensions_required.push(EXT.into());
+    let mut out = Vec::new();
+    let mut extensions = Vec::new();
+    for (i, view) in root.buffer_views.iter_mut().enumerate() {
+        let start = view.byte_offset.map_or(0, |o| o.0) as usize;
+        let data = &bin[start..start + view.byte_length.0 as usize];
+        match encoded.get(i).and_then(Option::as_ref) {
+            Some(e) => {
+                extensions.push(Some(e.extension(out.len())));
+                view.buffer = Index::new(1);
+                out.extend_from_slice(&e.bytes);
+            }
+            None => {
+                extensions.push(None);
+                view.byte_offset = (!out.is_empty()).then_some(USize64(out.len() as u64));
+                out.extend_from_slice(data);
+            }
+        }
+        out.resize(out.len().next_multiple_of(4), 0);
+    }
+    root.push(json::Buffer { byte_length: USize64(out.len() as u64), name: None, uri: None, extensions: None, extras: None });
+    root.push(json::Buffer { byte_length: USize64(bin.len() as u64), name: None, uri: None, extensions: None, extras: None });
+    let mut tree = serde_json::to_value(&root).expect("glTF JSON serializes");
+    for (view, extension) in tree["bufferViews"].as_array_mut().expect("views").iter_mut().zip(extensions) {
+        if let Some(e) = extension {
+            view["extensions"] = value!({ EXT: e });
+        }
+    }
+    tree["buffers"][1]["extensions"] = value!({ EXT: { "fallback": true } });
+    glb(&serde_json::to_vec(&tree).expect("glTF JSON serializes"), &out)
 }
 
 /// The GLB container: header, JSON chunk (space padded), BIN chunk (zero padded).
@@ -655,6 +852,7 @@ fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
 mod tests {
     use super::*;
     use crate::algorithms::blendshape::clip::{Target, WeightCurve};
+    use crate::formats::export::sparse_is_smaller;
 
     const Y_UP: Placement = Placement { z_up: false, meters_per_unit: 1.0 };
 
@@ -707,7 +905,7 @@ mod tests {
     #[test]
     fn glb_chunks_and_accessors_are_aligned() {
         // 3 triangles = 9 u16 indices = 18 bytes: the next block must still start aligned.
-        let glb = blendshapes(&clip(), Surface::plain(&[[0, 1, 2], [2, 1, 3], [3, 4, 5]]), "box", Y_UP);
+        let glb = blendshapes(&clip(), Surface::plain(&[[0, 1, 2], [2, 1, 3], [3, 4, 5]]), "box", Y_UP, Encoding::FLOAT);
         let (root, _) = chunks(&glb);
         assert!(matches!(root.accessors[1].component_type, Valid(GenericComponentType(ComponentType::U16))));
         for v in &root.buffer_views {
@@ -729,7 +927,7 @@ mod tests {
 
     #[test]
     fn cubicspline_output_groups_in_tangents_values_out_tangents_per_key() {
-        let (root, bin) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::CubicSpline));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.5, 1.25]);
@@ -748,7 +946,7 @@ mod tests {
     fn linear_output_is_the_weights_at_every_frame() {
         let c = clip();
         let frames = [0.0, 0.25, 0.5, 1.0];
-        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
+        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::Linear));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.25, 0.5, 1.0]);
@@ -765,7 +963,7 @@ mod tests {
         assert!(!sparse_is_smaller(75, 100, 4));
         assert!(sparse_is_smaller(85, 100, 2));
         assert!(!sparse_is_smaller(86, 100, 2));
-        let (root, _) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         let one = &root.accessors[targets[0].positions.unwrap().value()];
         let s = one.sparse.as_ref().expect("a target moving 1 of 100 vertices is sparse");
@@ -785,7 +983,8 @@ mod tests {
             times: vec![0.0, 0.5, 1.0],
             points: vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[1.0; 3], [1.0; 3]]],
         };
-        let (root, bin) = chunks(&full_frame(&ff, Surface::plain(&[[0, 1, 1]]), "ff", Placement { z_up: true, meters_per_unit: 0.01 }));
+        let (root, bin) =
+            chunks(&full_frame(&ff, Surface::plain(&[[0, 1, 1]]), "ff", Placement { z_up: true, meters_per_unit: 0.01 }, Encoding::FLOAT));
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         assert_eq!(targets.len(), 3);
         let frame0 = &root.accessors[targets[0].positions.unwrap().value()];
@@ -803,7 +1002,7 @@ mod tests {
         let mut c = clip();
         c.targets.clear();
         c.curves.clear();
-        let (root, _) = chunks(&blendshapes(&c, Surface::plain(&[[0, 1, 2]]), "box", Y_UP));
+        let (root, _) = chunks(&blendshapes(&c, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
         assert!(root.animations.is_empty());
         assert!(root.meshes[0].weights.is_none() && root.meshes[0].primitives[0].targets.is_none());
     }
