@@ -19,10 +19,10 @@ use std::process::{Command, Stdio};
 
 use super::binary::require_regular;
 use super::pc2::{self, Pc2Frames};
-use crate::formats::work_dir::WorkDir;
 use super::FrameSource;
 use crate::algorithms::frames::{rate_of, FrameRange};
 use crate::algorithms::geometry::{Point, TriMesh};
+use crate::formats::work_dir::WorkDir;
 use crate::support::error::{Error, Result};
 
 const SCRIPT: &str = include_str!("abc_cache.py");

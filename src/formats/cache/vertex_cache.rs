@@ -321,7 +321,8 @@ impl VertexCache {
                 let opened = abc::open(path, options.object.as_deref(), options.range)?;
                 let fps_source = FpsSource::File(format!("the sample times of {}", opened.object));
                 let (mesh, frames) = (opened.mesh, Box::new(opened.frames));
-                VertexCache { format, path: path_buf, mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes }
+                // Alembic states no unit.
+                VertexCache { format, path: path_buf, mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes, meters_per_unit: None }
             }
             CacheFormat::Fbx => {
                 let choice =
@@ -332,7 +333,18 @@ impl VertexCache {
                     opened.take, opened.object, opened.file_meters_per_unit
                 ));
                 let frames = subrange(path, opened.frames, options.range)?;
-                let mut cache = VertexCache { format, path: path_buf, mesh: opened.mesh, frames, fps: opened.fps, fps_source, bytes: opened.bytes };
+                // The reader converted the file's lengths to the scene's units, or to metres.
+                let meters_per_unit = Some(options.meters_per_unit.unwrap_or(1.0));
+                let mut cache = VertexCache {
+                    format,
+                    path: path_buf,
+                    mesh: opened.mesh,
+                    frames,
+                    fps: opened.fps,
+                    fps_source,
+                    bytes: opened.bytes,
+                    meters_per_unit,
+                };
                 if options.range != FrameRange::ALL {
                     // The mesh is the first frame of the range.
                     cache.frames.read_frame(0, &mut cache.mesh.positions)?;

@@ -68,9 +68,10 @@ pub fn export_with(
     // blendshape files replace.
     let full = match (&animation.cache, scene.export.full_frame) {
         (_, false) => None,
-        (Some(record), true) => {
-            Some(FullFrame::from_source(reopen(record)?.frames.as_mut(), scene.fps).map_err(|e| e.with_path(std::path::Path::new(&record.path)))?)
-        }
+        (Some(record), true) => Some(
+            FullFrame::from_source(reopen(record, budget)?.frames.as_mut(), scene.fps)
+                .map_err(|e| e.with_path(std::path::Path::new(&record.path)))?,
+        ),
         (None, true) => Some(FullFrame::from_trajectory(trajectory, scene.fps)),
     };
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
