@@ -1022,7 +1022,7 @@ mod tests {
             Committed {
                 removed: vec!["old.glb".into(), "old.usda".into(), "summary.md".into()],
                 kept: vec!["notes.txt".into(), "renders".into()],
-                written: vec![]
+                written: vec!["new.glb".into(), "report.md".into(), "shared.png".into()]
             }
         );
         assert_eq!(
