@@ -195,7 +195,8 @@ pub fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
 /// no unit or `B` is bytes. More than 2^64 bytes is refused, not wrapped.
 pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim();
-    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+    // The unit is the trailing run of letters (`1e3M` is a number with an exponent, then `M`).
+    let split = t.trim_end_matches(|c: char| c.is_ascii_alphabetic()).len();
     let (number, unit) = (t[..split].trim(), t[split..].to_ascii_uppercase());
     let scale: f64 = match unit.as_str() {
         "" | "B" => 1.0,

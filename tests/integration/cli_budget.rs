@@ -287,11 +287,14 @@ fn max_time_stops_the_cache_fit_its_key_selection_and_its_error_measure() {
     use crate::cache_bake::{scene, write_cache};
     let dir = TempDir::new("budget-cache");
     write_cache(&dir.path, &crate::common::bar::bar(&Default::default()), "bar.pc2");
-    let extra = "fps = 60\nrest = \"rest.obj\"\n";
+    // Welding reads every frame first and checks the budget too (the first case); without it
+    // nothing else checks the budget on the way (no TetGen, no solver): the fit must, at its
+    // first frame.
+    std::fs::write(dir.join("welded.toml"), scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = [0, 60, 120, 180]\n")).unwrap();
+    out_of_time(&dir, &["bake", "welded.toml", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache weld, after reading ");
+    let extra = "fps = 60\nrest = \"rest.obj\"\nweld = false\n";
     std::fs::write(dir.join("listed.toml"), scene("bar.pc2", extra, "fit", "keyframes = [0, 60, 120, 180]\n")).unwrap();
     std::fs::write(dir.join("auto.toml"), scene("bar.pc2", extra, "fit", "keyframes = \"auto\"\n")).unwrap();
-    // Nothing else checks the budget on the way (no TetGen, no solver): the fit must, at its
-    // first frame.
     out_of_time(&dir, &["bake", "listed.toml", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache fit, after reading 0 cache frames");
     out_of_time(&dir, &["bake", "auto.toml", "--out", "never", "--max-time", "1e-9"], "bar.pc2", "in the cache key selection, after reading ");
     // A generous budget changes nothing.

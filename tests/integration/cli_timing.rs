@@ -351,6 +351,8 @@ keep_duration = true
 tolerance = 1e-6
 [export]
 formats = ["usda", "glb"]
+# CUBICSPLINE: the glTF sampler's input is then the key times themselves.
+gltf_interpolation = "cubicspline"
 "#;
     std::fs::write(dir.join("scene.toml"), scene).unwrap();
     // Every file, opened by usd-core, the glTF validator and three.js, plays the animation
@@ -435,6 +437,8 @@ optimize_timing = true
 fixed_times = [0]
 {FLOOR}[export]
 formats = ["usda", "glb"]
+# CUBICSPLINE: the glTF sampler's input is then the key times themselves.
+gltf_interpolation = "cubicspline"
 "#
     );
     std::fs::write(dir.join("scene.toml"), scene).unwrap();

@@ -180,7 +180,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
     let vertices = cache.frames.vertex_count();
     // Vertices equal at every frame are one (a vertex per triangle corner is common in glTF).
     let weld = if spec.weld() && frames >= 2 {
-        Some(Weld::find(&mut timed(cache.frames.as_mut(), "cache weld", budget))?).filter(|w| !w.is_identity())
+        Some(Weld::find(&mut timed(cache.frames.as_mut(), "cache weld", budget)).map_err(|e| e.with_path(&path))?).filter(|w| !w.is_identity())
     } else {
         None
     };

@@ -141,9 +141,13 @@ fn with_weights(
     if let Some(triangles) = file.normal_triangles.clone() {
         let deltas = morph_normal_deltas(clip, &triangles, file.sources.as_deref());
         let vertices = file.sources.as_ref().map_or(n, Vec::len);
+        // Normal deltas stay f32: the position grid is not theirs, and glTF takes a quantized
+        // NORMAL target only as normalized integers.
+        let grid = file.grid.take();
         for (target, (indices, offsets)) in targets.iter_mut().zip(deltas) {
             target.2 = Some(file.morph_target(vertices, &indices, &offsets));
         }
+        file.grid = grid;
     }
     if !targets.is_empty() {
         file.morph(targets, times, output, interpolation);
