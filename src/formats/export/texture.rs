@@ -150,7 +150,7 @@ fn check_memory(path: &Path, budget: &Budget) -> Result<()> {
 }
 
 /// Read every group's texture (`None` for groups without one), each first checked against the
-/// memory `budget` ([`check_memory`]). Errors name the image file.
+/// memory `budget` (`check_memory`). Errors name the image file.
 pub fn load(textures: &[Option<String>], budget: &Budget) -> Result<Vec<Option<Texture>>> {
     let names = file_names(textures);
     textures
