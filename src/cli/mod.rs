@@ -7,10 +7,12 @@
 
 mod bake;
 mod blend;
+mod commit;
 mod embed;
 mod export;
 mod generate;
 mod import;
+mod inputs;
 mod report;
 mod solve;
 mod tetrahedralize;
@@ -74,6 +76,12 @@ enum Command {
     /// Write shell completions or the man pages (generated from these definitions).
     #[command(hide = true)]
     Generate(generate::Args),
+    /// List the files each scene's bake reads, as JSON lines (for the cluster driver).
+    #[command(hide = true)]
+    Inputs(inputs::Args),
+    /// Commit a bake's output folder made elsewhere into --out (for the cluster driver).
+    #[command(hide = true)]
+    Commit(commit::Args),
 }
 
 impl Command {
@@ -89,6 +97,8 @@ impl Command {
             Command::Bake(_) => "bake",
             Command::Blend(_) => "blend",
             Command::Generate(_) => "generate",
+            Command::Inputs(_) => "inputs",
+            Command::Commit(_) => "commit",
         }
     }
 }
@@ -268,6 +278,8 @@ pub fn main() -> ExitCode {
         Command::Bake(a) => a.input(),
         Command::Blend(a) => a.input(),
         Command::Generate(a) => a.input(),
+        Command::Inputs(a) => a.input(),
+        Command::Commit(a) => a.input(),
     }
     .to_path_buf();
     let result = match cli.command {
@@ -280,6 +292,8 @@ pub fn main() -> ExitCode {
         Command::Bake(a) => bake::run(a, &progress, cli.quiet),
         Command::Blend(a) => blend::run(a, &progress, cli.quiet),
         Command::Generate(a) => generate::run(a, Cli::command()),
+        Command::Inputs(a) => inputs::run(a),
+        Command::Commit(a) => commit::run(a, cli.quiet),
     };
     // Stopped by a signal: its cleanup ends the process, with the signal's status.
     blendsim::support::interrupt::settle();
