@@ -21,11 +21,17 @@ BPY := bpy==4.2.0
 PYTHON311 ?= python3.11
 BLENDER_VENV := build/blender-venv
 
+# Ray (PyPI `ray`) for the cluster driver in cluster/ (`blendsim-ray`, docs/cluster.md): ray and
+# the driver (editable) in a Python 3.11 venv of their own under build/.
+RAY_VERSION := 2.60.0
+RAY := ray==$(RAY_VERSION)
+RAY_VENV := build/ray-venv
+
 # `make batch SCENES=folder`: bake every *.toml of a folder (works with -j).
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -38,6 +44,8 @@ help:
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
+	@echo "make batch-ray  the same scenes as make batch, one bake per Ray task on the cluster at RAY_ADDRESS (or a local one): docs/cluster.md"
+	@echo "make test-ray   the cluster tests alone (part of make test): a local Ray head and worker node of their own"
 	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
 	@echo "make completions  shell completions (bash, zsh, fish) and man pages into build/share"
 	@echo "make install  the binary, completions and man pages under PREFIX=$(PREFIX)"
@@ -104,7 +112,23 @@ deps-blender:
 		$(BLENDER_VENV)/bin/python -c 'import bpy; print("==> bpy", bpy.app.version_string)'; \
 	fi
 
-test-deps: deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender
+deps-ray:
+	@if $(RAY_VENV)/bin/python -c 'import ray, blendsim_ray, sys; sys.exit(ray.__version__ != "$(RAY_VERSION)")' >/dev/null 2>&1; then \
+		echo "==> $(RAY) and blendsim-ray (cluster/): already installed in $(RAY_VENV)"; \
+	else \
+		if ! command -v $(PYTHON311) >/dev/null 2>&1 || ! $(PYTHON311) -c 'import ensurepip, venv' >/dev/null 2>&1; then \
+			echo "==> installing Python 3.11 with venv (apt-get)"; \
+			$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3.11 python3.11-venv; \
+		fi; \
+		echo "==> installing $(RAY) (pip, about 285 MB) and blendsim-ray (cluster/, editable) into the venv $(RAY_VENV)"; \
+		rm -rf $(RAY_VENV); \
+		$(PYTHON311) -m venv $(RAY_VENV); \
+		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check $(RAY); \
+		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e cluster; \
+		$(RAY_VENV)/bin/python -c 'import ray; print("==> ray", ray.__version__)'; \
+	fi
+
+test-deps: deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender deps-ray
 
 demo: build deps-tetgen
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"
@@ -132,7 +156,13 @@ lint: deps-rust-tools
 # repeatable and CI cannot turn red on a case no earlier run drew; `make fuzz` (and a plain
 # `cargo test`) draw a new seed every run. TEST_SEED=N runs the suite on another seed.
 TEST_SEED ?= 20261202
-test: test-deps lint
+# The cluster tests (cluster/tests): a local Ray cluster of their own (a head and worker nodes on
+# free ports, under a temp dir; stopped by process id, never by `ray stop`). About 2 minutes.
+test-ray: build deps-ray deps-tetgen
+	@echo "==> the Ray cluster tests (blendsim-ray on a local head and worker node started by the tests)"
+	BLENDSIM=$(CURDIR)/$(BIN) $(RAY_VENV)/bin/python -m unittest discover -s cluster/tests -v
+
+test: test-deps lint test-ray
 	@echo "==> running the test suite (release build; property tests seeded with $(TEST_SEED))"
 	PROPTEST_RNG_SEED=$(TEST_SEED) $(CARGO) test --release --locked
 	@echo "==> checking the API documentation builds without warnings (cargo doc)"
@@ -191,6 +221,13 @@ batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
 	for d in $$baked; do echo "$${d}report.md"; done; \
 	$(BIN) report --batch $$baked -o $(BATCH_OUT); \
 	echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
+
+# The same bakes as `make batch`, one Ray task per scene (cluster/, docs/cluster.md): on the
+# cluster at RAY_ADDRESS, or on one this machine runs (`ray start --head`), or else on a Ray
+# started for this batch alone. BATCH_RAY_FLAGS passes more options (--max-time 10m ...).
+BATCH_RAY_FLAGS ?=
+batch-ray: build deps-ray
+	$(RAY_VENV)/bin/blendsim-ray batch $(wildcard $(SCENES)/*.toml) --out $(BATCH_OUT) --blendsim $(BIN) $(BATCH_RAY_FLAGS)
 
 # The simulated test caches (rapier3d bar, 2 and 1 Hz, every cache format) baked and summarized.
 batch-caches: deps-usd

@@ -1,0 +1,3 @@
+from blendsim_ray.cli import main
+
+raise SystemExit(main())
