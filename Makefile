@@ -31,7 +31,7 @@ RAY_VENV := build/ray-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: deps-ray batch-ray test-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -46,6 +46,7 @@ help:
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
 	@echo "make batch-ray  the same scenes as make batch, one bake per Ray task on the cluster at RAY_ADDRESS (or a local one): docs/cluster.md"
 	@echo "make test-ray   the cluster tests alone (part of make test): a local Ray head and worker node of their own"
+	@echo "make bench-ray  make -j2 batch against blendsim-ray on a local 2-node cluster (21 scenes): batch times, per-task overhead and bytes"
 	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
 	@echo "make completions  shell completions (bash, zsh, fish) and man pages into build/share"
 	@echo "make install  the binary, completions and man pages under PREFIX=$(PREFIX)"
@@ -228,6 +229,13 @@ batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
 BATCH_RAY_FLAGS ?=
 batch-ray: build deps-ray
 	$(RAY_VENV)/bin/blendsim-ray batch $(wildcard $(SCENES)/*.toml) --out $(BATCH_OUT) --blendsim $(BIN) $(BATCH_RAY_FLAGS)
+
+# The same 21 scenes (the paper's, variations of the demo) through `make -j2 batch` and through
+# blendsim-ray on a local cluster of two 1-CPU nodes: whole-batch times, per-task overhead and
+# bytes moved (docs/cluster.md). BENCH_RAY_SCENES=N for another count.
+bench-ray: build deps-ray deps-tetgen
+	@echo "==> cluster benchmark: make -j2 batch against blendsim-ray on 2 local nodes (mind the load average printed with it)"
+	$(RAY_VENV)/bin/python cluster/bench/bench_ray.py
 
 # The simulated test caches (rapier3d bar, 2 and 1 Hz, every cache format) baked and summarized.
 batch-caches: deps-usd
