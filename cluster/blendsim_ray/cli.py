@@ -183,7 +183,12 @@ def batch(args):
             while todo and len(in_flight) < window:
                 scene = todo.popleft()
                 name = os.path.splitext(os.path.basename(scene))[0]
-                data, job_cwd, scene_arg = pack.pack_inputs(scene, listed[scene][0], cwd)
+                try:
+                    data, job_cwd, scene_arg = pack.pack_inputs(scene, listed[scene][0], cwd)
+                except OSError as e:
+                    # Moved or made unreadable since it was listed.
+                    fail(scene, f"{e.filename}: cannot be read to send it to the cluster: {e.strerror} (fix: check the file and run again)", ran=False)
+                    continue
                 job = {"name": name, "sha": sha, "cwd": job_cwd, "scene": scene_arg, "inputs": data,
                        "cpus": args.cpus_per_task, "max_time": args.max_time, "max_memory": args.max_memory, "strict": args.strict}
                 in_flight[remote.options(**options).remote(job, [binary_ref])] = (scene, name, len(data), time.time())

@@ -16,6 +16,7 @@ mod cache_fit;
 mod cache_honest;
 mod cli_budget;
 mod cli_cage;
+mod cli_cluster;
 mod cli_contacts;
 mod cli_conventions;
 mod cli_degenerate;
