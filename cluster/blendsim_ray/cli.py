@@ -141,7 +141,11 @@ def batch(args):
     import ray
 
     connecting = time.time()
-    ray.init(address=args.address, logging_level="ERROR", log_to_driver=False, configure_logging=True)
+    # The driver's own package goes to the workers with the job (Ray's py_modules): a node
+    # needs Ray and Python, not this package.
+    package = os.path.dirname(os.path.abspath(pack.__file__))
+    ray.init(address=args.address, logging_level="ERROR", log_to_driver=False, configure_logging=True,
+             runtime_env={"py_modules": [package]})
     connect_seconds = time.time() - connecting
     from blendsim_ray import worker
 

@@ -39,7 +39,7 @@ cluster = None
 
 def setUpModule():
     global cluster
-    cluster = LocalCluster(nodes=2, env={"PYTHONPATH": os.path.join(REPO, "cluster")}).start()
+    cluster = LocalCluster(nodes=2).start()
 
 
 def tearDownModule():
@@ -47,9 +47,14 @@ def tearDownModule():
         cluster.stop()
 
 
+def driver_env():
+    # The driver imports this checkout's package; the workers get it from the driver (py_modules).
+    return dict(cluster.env, PYTHONPATH=os.path.join(REPO, "cluster"))
+
+
 def driver(args, cwd=REPO, **kwargs):
     return subprocess.run(DRIVER + ["batch", *args, "--address", cluster.address, "--blendsim", BIN],
-                          cwd=cwd, env=cluster.env, capture_output=True, text=True, timeout=300, **kwargs)
+                          cwd=cwd, env=driver_env(), capture_output=True, text=True, timeout=300, **kwargs)
 
 
 def without_timings(report):
@@ -236,7 +241,7 @@ class Cluster(unittest.TestCase):
         scenes = demo_variations(self.tmp, 4, max_volume="0.001")
         out = os.path.join(self.tmp, "out")
         process = subprocess.Popen(DRIVER + ["batch", *scenes, "--out", out, "--address", cluster.address, "--blendsim", BIN, "--json"],
-                                   cwd=REPO, env=cluster.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                   cwd=REPO, env=driver_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             deadline = time.time() + 120
             while time.time() < deadline and not bakes_under(extra.process.pid) and process.poll() is None:
@@ -273,7 +278,7 @@ class Cluster(unittest.TestCase):
         before = folder_bytes(os.path.join(out, "var-05"))
         os.remove(os.path.join(out, "summary.md"))
         process = subprocess.Popen(DRIVER + ["batch", *scenes, "--out", out, "--address", cluster.address, "--blendsim", BIN],
-                                   cwd=REPO, env=cluster.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                   cwd=REPO, env=driver_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             deadline = time.time() + 120
             while time.time() < deadline and not all_bakes() and process.poll() is None:
