@@ -114,19 +114,25 @@ deps-blender:
 	fi
 
 deps-ray:
-	@if $(RAY_VENV)/bin/python -c 'import ray, blendsim_ray, sys; sys.exit(ray.__version__ != "$(RAY_VERSION)")' >/dev/null 2>&1; then \
-		echo "==> $(RAY) and blendsim-ray (cluster/): already installed in $(RAY_VENV)"; \
+	@if $(RAY_VENV)/bin/python -c 'import ray, sys; sys.exit(ray.__version__ != "$(RAY_VERSION)")' >/dev/null 2>&1; then \
+		echo "==> $(RAY): already installed in $(RAY_VENV)"; \
 	else \
 		if ! command -v $(PYTHON311) >/dev/null 2>&1 || ! $(PYTHON311) -c 'import ensurepip, venv' >/dev/null 2>&1; then \
 			echo "==> installing Python 3.11 with venv (apt-get)"; \
 			$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3.11 python3.11-venv; \
 		fi; \
-		echo "==> installing $(RAY) (pip, about 285 MB) and blendsim-ray (cluster/, editable) into the venv $(RAY_VENV)"; \
+		echo "==> installing $(RAY) (pip, about 285 MB) into the venv $(RAY_VENV)"; \
 		rm -rf $(RAY_VENV); \
 		$(PYTHON311) -m venv $(RAY_VENV); \
 		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check $(RAY); \
-		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e cluster; \
 		$(RAY_VENV)/bin/python -c 'import ray; print("==> ray", ray.__version__)'; \
+	fi
+	@# The driver, editable from this checkout (a venv copied from another one points there).
+	@if [ "$$($(RAY_VENV)/bin/python -c 'import blendsim_ray, os; print(os.path.dirname(os.path.dirname(blendsim_ray.__file__)))' 2>/dev/null)" = "$(CURDIR)/cluster" ]; then \
+		echo "==> blendsim-ray (cluster/, editable): already installed in $(RAY_VENV)"; \
+	else \
+		echo "==> installing blendsim-ray (cluster/, editable; pip fetches setuptools to build it) into the venv $(RAY_VENV)"; \
+		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e cluster; \
 	fi
 
 test-deps: deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender deps-ray

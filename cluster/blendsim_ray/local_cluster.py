@@ -157,10 +157,15 @@ class LocalCluster:
         raise RuntimeError(f"the local ray cluster did not reach {count} nodes in {timeout} s (logs in {self.temp_dir})")
 
     def start(self):
-        self._start_node(head=True)
-        for _ in range(self.nodes_wanted - 1):
-            self._start_node(head=False)
-        self._wait_for_nodes(self.nodes_wanted)
+        """Start the nodes and wait for them; on a failure, stop what was started (and its temp dir)."""
+        try:
+            self._start_node(head=True)
+            for _ in range(self.nodes_wanted - 1):
+                self._start_node(head=False)
+            self._wait_for_nodes(self.nodes_wanted)
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def stop(self):
@@ -171,11 +176,7 @@ class LocalCluster:
             shutil.rmtree(self.temp_dir, ignore_errors=True)
 
     def __enter__(self):
-        try:
-            return self.start()
-        except BaseException:
-            self.stop()
-            raise
+        return self.start()
 
     def __exit__(self, *exc):
         self.stop()

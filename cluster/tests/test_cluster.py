@@ -8,8 +8,9 @@ ports and a temp dir of their own; stopped by process id, never by `ray stop`).
 - a bad scene: its one-line error (the local bake's) in one failure line, the others complete;
 - the driver interrupted (SIGINT): the running bakes end, no folder is half-written.
 
-The paper scenes read ../shared/assets beside the clone: with CI=true a missing asset fails the
-test; elsewhere those scenes are left out with a note. `python -m unittest discover -s
+Ray (the version cluster/pyproject.toml pins), the binary and TetGen are required: a missing
+one fails the run, CI or not. The paper scenes read ../shared/assets beside the clone: with
+CI=true a missing asset fails the test; elsewhere those scenes are left out with a note. `python -m unittest discover -s
 cluster/tests` from the repository (make test-ray)."""
 
 import json
@@ -26,7 +27,7 @@ import unittest
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.join(REPO, "cluster"))
 
-from blendsim_ray.local_cluster import LocalCluster, descendants  # noqa: E402
+from blendsim_ray.local_cluster import LocalCluster, descendants, ray_executable  # noqa: E402
 
 BIN = os.environ.get("BLENDSIM", os.path.join(REPO, "target", "release", "blendsim"))
 DRIVER = [sys.executable, "-m", "blendsim_ray"]
@@ -37,8 +38,29 @@ TIMINGS = ("seconds", "precompute_seconds", "iteration_seconds")
 cluster = None
 
 
+def require_tools():
+    """Ray (the pinned version, in this Python), the binary and TetGen: a missing one fails the
+    run, with CI=true or not (as the Rust suite's checkers): a test that passes by skipping its
+    cluster proves nothing."""
+    fix = "(fix: make deps-ray, then run the tests with build/ray-venv/bin/python: make test-ray)"
+    try:
+        import ray
+    except ImportError:
+        raise AssertionError(f"Ray is not installed in {sys.executable} {fix}") from None
+    pinned = re.search(r'"ray==([^"]+)"', read_text(os.path.join(REPO, "cluster", "pyproject.toml"))).group(1)
+    if ray.__version__ != pinned:
+        raise AssertionError(f"Ray {ray.__version__} in {sys.executable}, the driver pins {pinned} {fix}")
+    if not os.access(ray_executable(), os.X_OK):
+        raise AssertionError(f"{ray_executable()} (Ray's command line, beside this Python) is missing {fix}")
+    if not os.access(BIN, os.X_OK):
+        raise AssertionError(f"the blendsim binary {BIN} is missing (fix: make build, or set BLENDSIM)")
+    if not shutil.which(os.environ.get("BLENDSIM_TETGEN") or "tetgen"):
+        raise AssertionError("TetGen is missing: `tetgen` is not on PATH nor BLENDSIM_TETGEN set (fix: make deps-tetgen)")
+
+
 def setUpModule():
     global cluster
+    require_tools()
     cluster = LocalCluster(nodes=2).start()
 
 
