@@ -164,7 +164,7 @@ lint: deps-rust-tools
 # `cargo test`) draw a new seed every run. TEST_SEED=N runs the suite on another seed.
 TEST_SEED ?= 20261202
 # The cluster tests (cluster/tests): a local Ray cluster of their own (a head and worker nodes on
-# free ports, under a temp dir; stopped by process id, never by `ray stop`). About 2 minutes.
+# free ports, under a temp dir; stopped by process id, never by `ray stop`). 2 to 3 minutes on 2 cores.
 test-ray: build deps-ray deps-tetgen
 	@echo "==> the Ray cluster tests (blendsim-ray on a local head and worker node started by the tests)"
 	BLENDSIM=$(CURDIR)/$(BIN) $(RAY_VENV)/bin/python -m unittest discover -s cluster/tests -v
