@@ -22,19 +22,39 @@ def cache_dir():
     return os.environ.get("BLENDSIM_RAY_CACHE") or os.path.join(tempfile.gettempdir(), f"blendsim-ray-{os.getuid()}")
 
 
+# A cached binary no task used for this long is removed when another one is cached: each
+# rebuild ships a new one (12 MB), and a node would otherwise keep them all.
+UNUSED_SECONDS = 24 * 3600
+
+
 def ensure_binary(sha, binary_ref):
     """The blendsim binary of hash `sha` on this node, fetched from the object store once."""
     folder = os.path.join(cache_dir(), "bin", sha)
     path = os.path.join(folder, "blendsim")
-    if not os.path.isfile(path):
-        data = ray.get(binary_ref)
-        os.makedirs(folder, exist_ok=True)
-        tmp = f"{path}.tmp-{os.getpid()}"
-        with open(tmp, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o755)
-        os.replace(tmp, path)
+    if os.path.isfile(path):
+        os.utime(folder)  # in use: kept by the clean-up below
+        return path
+    data = ray.get(binary_ref)
+    os.makedirs(folder, exist_ok=True)
+    tmp = f"{path}.tmp-{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(data)
+    os.chmod(tmp, 0o755)
+    os.replace(tmp, path)
+    remove_unused_binaries(os.path.dirname(folder), keep=sha)
     return path
+
+
+def remove_unused_binaries(bin_dir, keep, now=None):
+    """Remove the cached binaries (their SHA folders) that no task used for UNUSED_SECONDS."""
+    now = time.time() if now is None else now
+    for entry in os.listdir(bin_dir):
+        folder = os.path.join(bin_dir, entry)
+        try:
+            if entry != keep and now - os.stat(folder).st_mtime > UNUSED_SECONDS:
+                shutil.rmtree(folder)
+        except OSError:
+            pass  # removed by another task meanwhile
 
 
 def _die_with_parent():
