@@ -9,6 +9,7 @@ this stops only the process groups it started. The tests and the benchmark use i
 """
 
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -102,6 +103,14 @@ class LocalCluster:
         self.env["TMPDIR"] = os.path.join(self.temp_dir, "work")
         os.makedirs(self.env["TMPDIR"], exist_ok=True)
         self.env.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+        # A token of its own for every node, worker and driver of this cluster. Left to Ray, a
+        # head turns token authentication on when ~/.ray/auth_token exists (a local `ray.init()`
+        # writes one) while the other nodes do not, and they fail to join.
+        token_path = os.path.join(self.temp_dir, "auth_token")
+        with open(os.open(token_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w") as f:
+            f.write(secrets.token_hex(32))
+        self.env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN_PATH=token_path)
+        self.env.pop("RAY_AUTH_TOKEN", None)
         self.nodes = []
         self.address = None
 
@@ -142,7 +151,11 @@ class LocalCluster:
         while time.monotonic() < deadline:
             for node in self.nodes:
                 if node.process.poll() is not None:
-                    raise RuntimeError(f"a ray node exited with {node.process.returncode}: see {node.log.name}")
+                    # Its log's last lines: the temp dir goes with the failed cluster.
+                    node.log.flush()
+                    with open(node.log.name, "rb") as f:
+                        tail = f.read().decode(errors="replace").strip().splitlines()[-15:]
+                    raise RuntimeError(f"a ray node exited with {node.process.returncode}; the end of its log:\n" + "\n".join(tail))
             try:
                 out = subprocess.run(
                     [sys.executable, "-c",
