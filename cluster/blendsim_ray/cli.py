@@ -91,11 +91,20 @@ def shipped_binary(blendsim, strip):
     if strip and shutil.which("strip"):
         with tempfile.TemporaryDirectory() as tmp:
             stripped = os.path.join(tmp, "blendsim")
-            if subprocess.run(["strip", "-o", stripped, blendsim], capture_output=True).returncode == 0:
+            done = subprocess.run(["strip", "-o", stripped, blendsim], capture_output=True, text=True)
+            if done.returncode == 0:
                 with open(stripped, "rb") as f:
                     return f.read()
+            reason = f"`strip` failed: {one_line(done.stderr)}"
+    elif strip:
+        reason = "`strip` is not on the PATH (binutils)"
     with open(blendsim, "rb") as f:
-        return f.read()
+        data = f.read()
+    if strip:
+        # Correct either way, only more bytes to every node: a note, not a warning.
+        print(f"blendsim-ray: note: {reason}; the workers get the binary as built "
+              f"({len(data) / 1e6:.0f} MB) (fix: install binutils, or pass --no-strip)", file=sys.stderr)
+    return data
 
 
 def list_inputs(blendsim, scenes):
