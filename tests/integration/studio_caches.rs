@@ -6,12 +6,14 @@
 //! mesh Blender evaluates at every frame. Each file is read by `blendsim import --cache-out`
 //! and compared with Blender's mesh after the documented conversion (Blender `(x, y, z)` is
 //! `(x, z, -y)`; Alembic in Blender units, FBX in metres), then baked through `[cache]` with
-//! `method = "fit"`. The test fails (never skips) when Blender is missing.
+//! `method = "fit"`, and three of its frames are taken as keys by `[keyframes] clip`. The test fails (never skips) when Blender is missing.
 
 use std::path::Path;
 
 use blendsim::algorithms::geometry::{bbox_diagonal, Point};
 use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::pipeline::stage_file::{self, Keyframes};
+use blendsim::support::budget::Budget;
 use serde_json::Value;
 
 use crate::common::checkers::blender_python;
@@ -106,6 +108,22 @@ fn blender_alembic_and_fbx_read_as_blender_evaluates_them_and_bake() {
         assert_eq!((c["format"].as_str(), c["frames"].as_u64()), (Some(format), Some(frames as u64)), "{c}");
         assert!(c["error"]["max"].as_f64().unwrap() <= 0.005, "{file}: {}", c["error"]);
         println!("{file}: baked with {} keys, error max {}", c["keys"].as_array().unwrap().len(), c["error"]["max"]);
+        // Keys from the clip: its frames 0, 6 and 23 as keyframes are Blender's poses there,
+        // at the clip's frame times.
+        let picked = [0usize, 6, frames - 1];
+        let keys = format!("name = \"body\"\n[keyframes]\nclip = \"{file}\"\nframes = [0, 6, {}]\n[solver]\nmethod = \"hermite\"\n", frames - 1);
+        std::fs::write(dir.join("keys.toml"), keys).unwrap();
+        run(&dir.path, &["import", "keys.toml", "-o", "keys.json"]).success();
+        let k: Keyframes = stage_file::read(&dir.join("keys.json"), &Budget::default()).unwrap();
+        assert_eq!(k.poses.len(), picked.len(), "{file}");
+        for (key, &f) in picked.iter().enumerate() {
+            let since = k.times[key] - k.times[0];
+            assert!((since - f as f64 / 24.0).abs() < 1e-6, "{file}: key {key} at {since} s after the first");
+            let worst =
+                k.poses[key].iter().zip(&expected[f]).map(|(p, q)| (0..3).map(|d| (p[d] - q[d]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+            assert!(worst <= 1e-5 * diagonal, "{file}: key {key} is {:.2e} of the diagonal from Blender's frame {f}", worst / diagonal);
+        }
+        println!("{file}: frames {picked:?} as keyframes are Blender's poses");
     }
 }
 
