@@ -6,18 +6,22 @@
 //! mesh Blender evaluates at every frame. Each file is read by `blendsim import --cache-out`
 //! and compared with Blender's mesh after the documented conversion (Blender `(x, y, z)` is
 //! `(x, z, -y)`; Alembic in Blender units, FBX in metres), then baked through `[cache]` with
-//! `method = "fit"`, and three of its frames are taken as keys by `[keyframes] clip`. The test fails (never skips) when Blender is missing.
+//! `method = "fit"`, and three of its frames are taken as keys by `[keyframes] clip`. The FBX
+//! is also baked with `method = "spacetime"` and its files played back in Blender. The tests
+//! fail (never skip) when Blender is missing.
 
 use std::path::Path;
 
 use blendsim::algorithms::geometry::{bbox_diagonal, Point};
 use blendsim::formats::cache::{CacheOptions, VertexCache};
-use blendsim::pipeline::stage_file::{self, Keyframes};
+use blendsim::pipeline::scene::{Axis, Format};
+use blendsim::pipeline::stage_file::{self, Keyframes, OutputKind};
 use blendsim::support::budget::Budget;
 use serde_json::Value;
 
-use crate::common::checkers::blender_python;
+use crate::common::checkers::{blender_python, check_blender, Expected};
 use crate::common::cli::{read_json, run, TempDir};
+use crate::common::verify::{library_animation, output_files};
 
 /// Run the Blender script into `dir`: the exports and Blender's evaluated frames.
 fn blender_exports(dir: &Path, frames: usize) -> Value {
@@ -202,4 +206,50 @@ fn alembic_from_the_library_reads_and_damage_is_named() {
     let grow = VertexCache::open(&dir.join("grow.abc"), &CacheOptions::default()).unwrap_err().to_string();
     assert!(grow.contains("grow.abc: the topology of /Sheet/SheetShape changes at frame 4") && !grow.contains('\n'), "{grow}");
     println!("{nan}\n{grow}");
+}
+
+/// Blender's FBX export baked with `method = "spacetime"` through `[cache]`, and the files
+/// played back in Blender (its own importers, default settings): the usda and the default
+/// (quantized LINEAR) glb play our trajectory at every frame within 1e-5 of the bbox diagonal
+/// (the glb plus the quantization error its report states), and the keys are the cache's frames.
+#[test]
+fn fbx_spacetime_bake_plays_in_blender() {
+    let dir = TempDir::new("studio-spacetime");
+    blender_exports(&dir.path, 24);
+    let text = scene("body.fbx", "").replace("method = \"fit\"", "method = \"spacetime\"");
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let c = &report["cache"];
+    assert_eq!((c["format"].as_str(), c["frames"].as_u64()), (Some("fbx"), Some(24)), "{c}");
+    // Spacetime is physics between the keys, not a fit: the report states how far from the
+    // cache it goes; at the keys it is the cache.
+    let error = c["error"]["max"].as_f64().unwrap();
+    let per_frame = c["error"]["per_frame"].as_array().unwrap();
+    for key in c["keys"].as_array().unwrap() {
+        let at = per_frame[key.as_u64().unwrap() as usize].as_f64().unwrap();
+        assert!(at <= 1e-6, "key frame {key}: {at} from the cache");
+    }
+    // What the files must play: the library's trajectory of the same scene at every frame.
+    let anim = library_animation(&dir.join("scene.toml"));
+    let fps = anim.scene.fps;
+    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
+    let mut expected = Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t));
+    expected.fps = Some(fps);
+    expected.up_axis = Some(if anim.scene.export.up_axis == Axis::Z { "z" } else { "y" }.into());
+    expected.meters_per_unit = Some(anim.scene.export.meters_per_unit);
+    let outputs = output_files(&report["outputs"]);
+    let glb = outputs.iter().find(|f| f.kind == OutputKind::Blendshape && f.format == Format::Glb).expect("a blendshape glb");
+    let mut expected_glb = expected.clone();
+    expected_glb.tolerance += glb.quantization_error.unwrap_or(0.0) * 1.001;
+    let (usda, glb) = (dir.join("out/body.usda"), dir.join("out").join(&glb.path));
+    let summary = check_blender(&[(usda.as_path(), &expected), (glb.as_path(), &expected_glb)]);
+    for (f, e) in summary["files"].as_array().unwrap().iter().zip([&expected, &expected_glb]) {
+        println!(
+            "blender {}: max error {} of the bbox diagonal (allowed {:.2e}), {} shape keys",
+            f["file"], f["max_error"], e.tolerance, f["shape_keys"]
+        );
+        assert_eq!(f["ok"], true, "Blender must play {}: {f}", f["file"]);
+    }
+    println!("body.fbx spacetime: {} keys, cache error max {error}", c["keys"].as_array().unwrap().len());
 }
