@@ -14,7 +14,7 @@ use crate::formats::mesh::obj;
 use crate::support::error::Result;
 
 /// The files a bake of `scene` reads, in the order first met, each once: the scene, the
-/// keyframe meshes (or the cache: every frame of an OBJ sequence), the rest and embedded
+/// keyframe meshes or clip (or the cache: every frame of an OBJ sequence), the rest and embedded
 /// surfaces, selection files, and the `.mtl` files and textures of the OBJ files among them.
 /// Files that do not exist are left out (the bake itself reports them).
 pub fn inputs(scene_file: &SceneFile) -> Result<Vec<PathBuf>> {
@@ -39,9 +39,19 @@ pub fn inputs(scene_file: &SceneFile) -> Result<Vec<PathBuf>> {
         Rest::Mesh(m) => Some(scene_file.resolve(m)),
         Rest::Key(_) => None,
     };
+    // A cache or clip: its file, or every frame of an OBJ sequence.
+    let animated = |path: PathBuf| match SequencePattern::parse(&path) {
+        Ok(pattern) if SequencePattern::is_pattern(&path) => pattern.scan(&path).unwrap_or_default().into_iter().map(|n| pattern.path(n)).collect(),
+        _ => vec![path],
+    };
     if let Some(keys) = &scene.keyframes {
         for mesh in &keys.meshes {
             add(scene_file.resolve(mesh.path()))?;
+        }
+        if let Some(clip) = &keys.clip {
+            for file in animated(scene_file.resolve(clip)) {
+                add(file)?;
+            }
         }
         if let Some(m) = rest_mesh(&keys.rest) {
             add(m)?;
@@ -53,14 +63,8 @@ pub fn inputs(scene_file: &SceneFile) -> Result<Vec<PathBuf>> {
         }
     }
     if let Some(cache) = &scene.cache {
-        let path = scene_file.resolve(&cache.path);
-        match SequencePattern::parse(&path) {
-            Ok(pattern) if SequencePattern::is_pattern(&path) => {
-                for number in pattern.scan(&path).unwrap_or_default() {
-                    add(pattern.path(number))?;
-                }
-            }
-            _ => add(path)?,
+        for file in animated(scene_file.resolve(&cache.path)) {
+            add(file)?;
         }
         if let Some(m) = cache.rest.as_ref().and_then(rest_mesh) {
             add(m)?;

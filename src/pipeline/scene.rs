@@ -17,6 +17,7 @@ use crate::support::budget::Budget;
 use crate::support::error::{number, Error, Result};
 
 mod cache_table;
+mod keyframe_clip;
 pub use cache_table::{CacheKeys, CacheSpec, DEFAULT_TOLERANCE};
 
 /// A parsed, validated scene and the folder its relative paths resolve against.
@@ -145,10 +146,35 @@ fn default_fps() -> f64 {
 #[serde(deny_unknown_fields)]
 pub struct KeyframeSpec {
     /// One mesh per key: a path, or `{ mesh = PATH, twist = {...} }` for a procedurally
-    /// deformed copy.
+    /// deformed copy (empty with `clip`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub meshes: Vec<KeyMesh>,
-    /// Key times in seconds, strictly increasing.
+    /// Key times in seconds, strictly increasing: one per mesh, or with `clip` the clip's
+    /// frames to take (instead of `frames`).
+    #[serde(default)]
     pub times: Vec<f64>,
+    /// An animated file (any vertex cache format blendsim reads) whose frames give the keys,
+    /// at `frames` or `times`, instead of `meshes` (`formats/scene.md`, "Keys from a clip").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip: Option<String>,
+    /// With `clip`: the clip's frames to take (0-based, file order, strictly increasing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<Vec<usize>>,
+    /// With `clip`: its frames per second, for the formats that carry none (OBJ sequence, PC2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// With a glTF `clip`: the animation to evaluate (default: the only one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub animation: Option<String>,
+    /// With a USD `clip`: the Mesh prim (default: the only animated Mesh).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prim: Option<String>,
+    /// With an Alembic or FBX `clip`: the mesh object (default: the only animated one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<String>,
+    /// With an FBX `clip`: the take (animation stack; default: the only one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub take: Option<String>,
     /// Per key, the vertices whose position is prescribed (default: "all" at every key).
     #[serde(default)]
     pub fixed: Option<Vec<Selection>>,
@@ -786,7 +812,7 @@ impl Scene {
         self.tet.validate()?;
         self.material.validate()?;
         // A cache's key count is known only after the selection: fixed_times is checked then.
-        self.solver.validate(self.keyframes.as_ref().map(|k| k.meshes.len()))?;
+        self.solver.validate(self.keyframes.as_ref().map(KeyframeSpec::key_count))?;
         self.mass_spring.validate()?;
         self.export.validate()?;
         validate_obstacles(&self.obstacles)
@@ -840,12 +866,15 @@ fn check_selections(k: &KeyframeSpec) -> Result<()> {
 
 impl KeyframeSpec {
     fn validate(&self) -> Result<()> {
-        let n = self.meshes.len();
-        if n < 2 {
-            return invalid(format!("[keyframes] has {n} mesh(es)"), "give at least two keyframe meshes");
-        }
-        if self.times.len() != n {
-            return invalid(format!("[keyframes] has {n} meshes but {} times", self.times.len()), "give one time per mesh");
+        self.validate_clip()?;
+        let n = self.key_count();
+        if self.clip.is_none() {
+            if n < 2 {
+                return invalid(format!("[keyframes] has {n} mesh(es)"), "give at least two keyframe meshes, or clip = \"anim.fbx\" and its frames");
+            }
+            if self.times.len() != n {
+                return invalid(format!("[keyframes] has {n} meshes but {} times", self.times.len()), "give one time per mesh");
+            }
         }
         if let Some(i) = self.times.iter().position(|t| !t.is_finite()) {
             return invalid(format!("[keyframes] times[{i}] is not a number"), "use seconds, e.g. 0.5");
@@ -866,7 +895,8 @@ impl KeyframeSpec {
                 );
             }
         }
-        for i in 1..n {
+        // (With a clip's frames, times is empty.)
+        for i in 1..self.times.len() {
             if self.times[i] < self.times[i - 1] {
                 return invalid(
                     format!("[keyframes] times decrease at key {i} ({} after {})", number(self.times[i]), number(self.times[i - 1])),

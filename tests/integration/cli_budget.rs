@@ -210,34 +210,41 @@ fn hanging_python(dir: &TempDir) -> PathBuf {
     path
 }
 
-/// The `blendsim-usd-read-*` folders in `tmp`.
-fn usd_work_dirs(tmp: &Path) -> Vec<String> {
+/// The `blendsim-{usd,abc}-read-*` folders in `tmp`.
+fn reader_work_dirs(tmp: &Path) -> Vec<String> {
     let names = std::fs::read_dir(tmp).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned());
-    names.filter(|n| n.starts_with("blendsim-usd-read-")).collect()
+    names.filter(|n| n.starts_with("blendsim-usd-read-") || n.starts_with("blendsim-abc-read-")).collect()
 }
 
+/// Both Python readers (usd-core's and the Alembic library's) run under the same runner: a
+/// hanging one is killed at the deadline, with a one-line error naming the file and its folder gone.
 #[test]
-fn max_time_kills_a_hanging_usd_reader_and_leaves_no_folder() {
+fn max_time_kills_a_hanging_python_reader_and_leaves_no_folder() {
     let dir = TempDir::new("budget-usd");
     let tmp = dir.join("tmp");
     std::fs::create_dir_all(&tmp).unwrap();
     std::fs::write(dir.join("bar.usda"), "#usda 1.0\n").unwrap();
-    std::fs::write(dir.join("scene.toml"), "name = \"bar\"\n[cache]\npath = \"bar.usda\"\nkeyframes = [0, 1]\n[solver]\nmethod = \"fit\"\n").unwrap();
+    // Not HDF5, so it goes to the Alembic library's reader.
+    std::fs::write(dir.join("bar.abc"), "Ogawa and the rest of an archive").unwrap();
     // A folder left by a killed run (its process is gone): the next reader removes it.
     let stale = tmp.join("blendsim-usd-read-4194999-0");
     std::fs::create_dir_all(&stale).unwrap();
     std::fs::write(stale.join("frames.pc2"), "partial").unwrap();
     let python = hanging_python(&dir);
     let env = [("TMPDIR", tmp.as_os_str()), ("BLENDSIM_PYTHON", python.as_os_str())];
-    let start = std::time::Instant::now();
-    let r = crate::common::cli::run_timeout(&dir.path, &["bake", "scene.toml", "--out", "never", "--max-time", "2"], &env, 300.0);
-    assert_eq!(r.code, Some(1), "{r}");
-    assert_eq!(r.stderr.lines().count(), 1, "{r}");
-    assert!(r.stderr.contains("bar.usda: blendsim ran past its --max-time budget") && r.stderr.contains("if the reader hangs"), "{r}");
-    assert!(r.stderr.contains("--max-time budget of 2 s") && r.stderr.contains("in the cache reading, usd-core's reader stopped after "), "{r}");
-    assert!(start.elapsed().as_secs_f64() < 250.0, "stopped by the budget, not by the reader's end");
-    assert_eq!(usd_work_dirs(&tmp), Vec::<String>::new(), "the killed reader's folder and the stale one are gone");
-    assert!(!dir.join("never").exists());
+    for (file, reader) in [("bar.usda", "usd-core's reader"), ("bar.abc", "the Alembic library's reader")] {
+        let scene = format!("name = \"bar\"\n[cache]\npath = \"{file}\"\nkeyframes = [0, 1]\n[solver]\nmethod = \"fit\"\n");
+        std::fs::write(dir.join("scene.toml"), scene).unwrap();
+        let start = std::time::Instant::now();
+        let r = crate::common::cli::run_timeout(&dir.path, &["bake", "scene.toml", "--out", "never", "--max-time", "2"], &env, 300.0);
+        assert_eq!(r.code, Some(1), "{r}");
+        assert_eq!(r.stderr.lines().count(), 1, "{r}");
+        assert!(r.stderr.contains(&format!("{file}: blendsim ran past its --max-time budget")) && r.stderr.contains("if the reader hangs"), "{r}");
+        assert!(r.stderr.contains("--max-time budget of 2 s") && r.stderr.contains(&format!("in the cache reading, {reader} stopped after ")), "{r}");
+        assert!(start.elapsed().as_secs_f64() < 250.0, "stopped by the budget, not by the reader's end");
+        assert_eq!(reader_work_dirs(&tmp), Vec::<String>::new(), "the killed reader's folder and the stale one are gone");
+        assert!(!dir.join("never").exists());
+    }
 }
 
 #[test]

@@ -31,6 +31,7 @@ mod cli_timing;
 mod cli_warnings;
 mod export_formats;
 mod fixtures;
+mod keyframe_clip;
 mod layers;
 mod normals;
 mod paper_scenes;

@@ -6,16 +6,22 @@
 //! mesh Blender evaluates at every frame. Each file is read by `blendsim import --cache-out`
 //! and compared with Blender's mesh after the documented conversion (Blender `(x, y, z)` is
 //! `(x, z, -y)`; Alembic in Blender units, FBX in metres), then baked through `[cache]` with
-//! `method = "fit"`. The test fails (never skips) when Blender is missing.
+//! `method = "fit"`, and three of its frames are taken as keys by `[keyframes] clip`. The FBX
+//! is also baked with `method = "spacetime"` and its files played back in Blender. The tests
+//! fail (never skip) when Blender is missing.
 
 use std::path::Path;
 
 use blendsim::algorithms::geometry::{bbox_diagonal, Point};
 use blendsim::formats::cache::{CacheOptions, VertexCache};
+use blendsim::pipeline::scene::{Axis, Format};
+use blendsim::pipeline::stage_file::{self, Keyframes, OutputKind};
+use blendsim::support::budget::Budget;
 use serde_json::Value;
 
-use crate::common::checkers::blender_python;
+use crate::common::checkers::{blender_python, check_blender, Expected};
 use crate::common::cli::{read_json, run, TempDir};
+use crate::common::verify::{library_animation, output_files};
 
 /// Run the Blender script into `dir`: the exports and Blender's evaluated frames.
 fn blender_exports(dir: &Path, frames: usize) -> Value {
@@ -106,6 +112,22 @@ fn blender_alembic_and_fbx_read_as_blender_evaluates_them_and_bake() {
         assert_eq!((c["format"].as_str(), c["frames"].as_u64()), (Some(format), Some(frames as u64)), "{c}");
         assert!(c["error"]["max"].as_f64().unwrap() <= 0.005, "{file}: {}", c["error"]);
         println!("{file}: baked with {} keys, error max {}", c["keys"].as_array().unwrap().len(), c["error"]["max"]);
+        // Keys from the clip: its frames 0, 6 and 23 as keyframes are Blender's poses there,
+        // at the clip's frame times.
+        let picked = [0usize, 6, frames - 1];
+        let keys = format!("name = \"body\"\n[keyframes]\nclip = \"{file}\"\nframes = [0, 6, {}]\n[solver]\nmethod = \"hermite\"\n", frames - 1);
+        std::fs::write(dir.join("keys.toml"), keys).unwrap();
+        run(&dir.path, &["import", "keys.toml", "-o", "keys.json"]).success();
+        let k: Keyframes = stage_file::read(&dir.join("keys.json"), &Budget::default()).unwrap();
+        assert_eq!(k.poses.len(), picked.len(), "{file}");
+        for (key, &f) in picked.iter().enumerate() {
+            let since = k.times[key] - k.times[0];
+            assert!((since - f as f64 / 24.0).abs() < 1e-6, "{file}: key {key} at {since} s after the first");
+            let worst =
+                k.poses[key].iter().zip(&expected[f]).map(|(p, q)| (0..3).map(|d| (p[d] - q[d]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+            assert!(worst <= 1e-5 * diagonal, "{file}: key {key} is {:.2e} of the diagonal from Blender's frame {f}", worst / diagonal);
+        }
+        println!("{file}: frames {picked:?} as keyframes are Blender's poses");
     }
 }
 
@@ -184,4 +206,55 @@ fn alembic_from_the_library_reads_and_damage_is_named() {
     let grow = VertexCache::open(&dir.join("grow.abc"), &CacheOptions::default()).unwrap_err().to_string();
     assert!(grow.contains("grow.abc: the topology of /Sheet/SheetShape changes at frame 4") && !grow.contains('\n'), "{grow}");
     println!("{nan}\n{grow}");
+}
+
+/// Blender's FBX export baked with `method = "spacetime"` through `[cache]`, and the files
+/// played back in Blender (its own importers, default settings): the usda and the default
+/// (quantized LINEAR) glb play our trajectory at every frame within 1e-5 of the bbox diagonal
+/// (the glb plus the quantization error its report states), and the keys are the cache's frames.
+#[test]
+fn fbx_spacetime_bake_plays_in_blender() {
+    let dir = TempDir::new("studio-spacetime");
+    blender_exports(&dir.path, 24);
+    let text = scene("body.fbx", "").replace("method = \"fit\"", "method = \"spacetime\"");
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let c = &report["cache"];
+    assert_eq!((c["format"].as_str(), c["frames"].as_u64()), (Some("fbx"), Some(24)), "{c}");
+    // Spacetime is physics between the keys, not a fit: the report states how far from the
+    // cache it goes; at the keys it is the cache.
+    let error = c["error"]["max"].as_f64().unwrap();
+    let per_frame = c["error"]["per_frame"].as_array().unwrap();
+    for key in c["keys"].as_array().unwrap() {
+        let at = per_frame[key.as_u64().unwrap() as usize].as_f64().unwrap();
+        assert!(at <= 1e-6, "key frame {key}: {at} from the cache");
+    }
+    // What the files must play: the library's trajectory of the same scene at every frame.
+    let anim = library_animation(&dir.join("scene.toml"));
+    let fps = anim.scene.fps;
+    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
+    let mut expected = Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t));
+    expected.fps = Some(fps);
+    expected.up_axis = Some(if anim.scene.export.up_axis == Axis::Z { "z" } else { "y" }.into());
+    expected.meters_per_unit = Some(anim.scene.export.meters_per_unit);
+    let outputs = output_files(&report["outputs"]);
+    // The full-frame glb holds the cache, and its stated error is measured against the cache
+    // (not the trajectory, 0.24 of the diagonal away): within its share of the tolerance.
+    let full = outputs.iter().find(|f| f.kind == OutputKind::FullFrame && f.format == Format::Glb).expect("a full-frame glb");
+    assert!(full.quantization_error.unwrap() <= 0.1 * 0.005 * 1.001, "{}: {:?}", full.path, full.quantization_error);
+    assert!(!report["warnings"].to_string().contains("quantization-error"), "{}", report["warnings"]);
+    let glb = outputs.iter().find(|f| f.kind == OutputKind::Blendshape && f.format == Format::Glb).expect("a blendshape glb");
+    let mut expected_glb = expected.clone();
+    expected_glb.tolerance += glb.quantization_error.unwrap_or(0.0) * 1.001;
+    let (usda, glb) = (dir.join("out/body.usda"), dir.join("out").join(&glb.path));
+    let summary = check_blender(&[(usda.as_path(), &expected), (glb.as_path(), &expected_glb)]);
+    for (f, e) in summary["files"].as_array().unwrap().iter().zip([&expected, &expected_glb]) {
+        println!(
+            "blender {}: max error {} of the bbox diagonal (allowed {:.2e}), {} shape keys",
+            f["file"], f["max_error"], e.tolerance, f["shape_keys"]
+        );
+        assert_eq!(f["ok"], true, "Blender must play {}: {f}", f["file"]);
+    }
+    println!("body.fbx spacetime: {} keys, cache error max {error}", c["keys"].as_array().unwrap().len());
 }

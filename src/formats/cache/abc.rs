@@ -13,22 +13,33 @@
 //! writer. Positions are in the file's units and axes (Alembic is y-up by convention and has
 //! no unit). The Python executable is `$BLENDSIM_PYTHON`, or `python3`.
 
-use std::ffi::{OsStr, OsString};
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 
 use super::binary::require_regular;
 use super::pc2::{self, Pc2Frames};
 use super::FrameSource;
 use crate::algorithms::frames::{rate_of, FrameRange};
 use crate::algorithms::geometry::{Point, TriMesh};
+use crate::formats::child_script::ChildScript;
 use crate::formats::work_dir::WorkDir;
+use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 const SCRIPT: &str = include_str!("abc_cache.py");
-const NO_BINDINGS: i32 = 3;
-const USER_ERROR: i32 = 4;
 const FIX_BINDINGS: &str = "pip install alembic3d (or make deps-alembic, or set BLENDSIM_PYTHON to a Python that has it)";
+
+/// `abc_cache.py` under the shared runner (killed at the `--max-time` deadline).
+const READER: ChildScript = ChildScript {
+    source: SCRIPT,
+    purpose: "to read Alembic",
+    library: "the Alembic library",
+    module: "the Alembic bindings",
+    install: FIX_BINDINGS,
+    tag: "blendsim-abc: ",
+    check: "check that the file is a complete Ogawa Alembic archive (abcls lists it)",
+    env: &[],
+};
 
 /// The first bytes of an HDF5 file: the Alembic flavour before Ogawa (Alembic 1.5).
 const HDF5_MAGIC: &[u8] = b"\x89HDF\r\n\x1a\n";
@@ -69,39 +80,9 @@ pub struct OpenedAbc {
     pub bytes: u64,
 }
 
-fn run_script(path: &Path, args: &[&OsStr]) -> Result<()> {
-    let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
-    let py = python.to_string_lossy().into_owned();
-    let cannot_run = |e: std::io::Error| Error::in_file(path, format!("cannot run {py} to read Alembic: {e}"), FIX_BINDINGS);
-    // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
-    let child = crate::support::interrupt::spawn(
-        Command::new(&python).arg("-c").arg(SCRIPT).args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()),
-    )
-    .map_err(cannot_run)?;
-    let output = child.wait_with_output().map_err(cannot_run)?;
-    if output.status.success() {
-        return Ok(());
-    }
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no message").trim();
-    Err(match output.status.code() {
-        Some(NO_BINDINGS) => Error::in_file(path, format!("{py} cannot import the Alembic bindings ({last})"), FIX_BINDINGS),
-        Some(USER_ERROR) => {
-            let message = stderr.lines().rev().find_map(|l| l.strip_prefix("blendsim-abc: ")).unwrap_or(last);
-            let (problem, fix) = message.split_once(" | ").unwrap_or((message, "check the file with the Alembic tools (abcls)"));
-            Error::in_file(path, problem, fix)
-        }
-        _ => Error::in_file(
-            path,
-            format!("the Alembic library failed ({}: {last})", output.status),
-            "check that the file is a complete Ogawa Alembic archive",
-        ),
-    })
-}
-
 /// Open the positions of `object` (its full name or its name; default: the only mesh, or the
-/// only animated one).
-pub fn open(path: &Path, object: Option<&str>, range: FrameRange) -> Result<OpenedAbc> {
+/// only animated one). The reader is killed at the `--max-time` deadline of `budget`.
+pub fn open(path: &Path, object: Option<&str>, range: FrameRange, budget: &Budget) -> Result<OpenedAbc> {
     let bytes = require_regular(path, "Alembic file")?;
     let mut head = [0u8; 8];
     let got = std::io::Read::read(&mut std::fs::File::open(path).map_err(|e| Error::io(path, &e, "open the Alembic file"))?, &mut head)
@@ -119,7 +100,7 @@ pub fn open(path: &Path, object: Option<&str>, range: FrameRange) -> Result<Open
     let temp = WorkDir::create("abc-read").map_err(|e| Error::io(std::env::temp_dir(), &e, "create a private folder for the Alembic reader"))?;
     let (start, end) = (range.start.to_string(), range.end.to_string());
     let args = [OsStr::new("read"), path.as_os_str(), OsStr::new(object.unwrap_or("-")), start.as_ref(), end.as_ref(), temp.path.as_os_str()];
-    run_script(path, &args)?;
+    READER.run(path, &args, budget)?;
     let info_path = temp.path.join("info.json");
     let text = std::fs::read(&info_path).map_err(|e| Error::io(&info_path, &e, "read what the Alembic library found"))?;
     let info: ReadInfo = serde_json::from_slice(&text)

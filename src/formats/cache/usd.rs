@@ -16,17 +16,16 @@
 //! ([`crate::formats::export::usd::sampled_points`], the layout of `formats/usd.md`'s full-frame file).
 //! The Python executable that reads is `$BLENDSIM_PYTHON`, or `python3`.
 
-use std::ffi::OsString;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
-use std::process::{Command, Stdio};
 
 use super::binary::require_regular;
 use super::pc2::{self, Pc2Frames};
 use super::{check_writable, FrameSource};
 use crate::algorithms::frames::FrameRange;
 use crate::algorithms::geometry::{Point, TriMesh};
+use crate::formats::child_script::ChildScript;
 use crate::formats::export::layer::Value;
 use crate::formats::export::usda::{extent, header, prim_name, push_topology, push_vec3s, UsdSettings};
 use crate::formats::work_dir::WorkDir;
@@ -34,73 +33,21 @@ use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
 const SCRIPT: &str = include_str!("usd_cache.py");
-const NO_PXR: i32 = 3;
-const USER_ERROR: i32 = 4;
 const FIX_PXR: &str = "pip install usd-core (or set BLENDSIM_PYTHON to a Python that has it)";
 
-/// Run `usd_cache.py` with `args`; its one-line errors become errors about `path`. Under a
-/// `--max-time` budget the process is killed (with its process group) once the budget is
-/// spent: a hanging reader stops the bake at the deadline with the budget's error.
-fn run_script(path: &Path, args: &[&std::ffi::OsStr], budget: &Budget) -> Result<()> {
-    let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| OsString::from("python3"));
-    let py = python.to_string_lossy().into_owned();
-    let cannot_run = |e: std::io::Error| Error::in_file(path, format!("cannot run {py} to read or write USD: {e}"), FIX_PXR);
-    // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
-    let mut child = crate::support::interrupt::spawn(
-        Command::new(&python)
-            // usd-core maps .usdc files into memory by default, so every sample read stays
-            // resident; pread keeps the reader at one sample.
-            .env("USDC_USE_PREAD", "1")
-            .arg("-c")
-            .arg(SCRIPT)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped()),
-    )
-    .map_err(cannot_run)?;
-    let output = match budget.time_left() {
-        None => child.wait_with_output().map_err(cannot_run)?,
-        Some(_) => {
-            let started = std::time::Instant::now();
-            // Poll: the reader takes half a second to start Python, so 20 ms is nothing, and
-            // the pipes are drained by `wait_with_output` once it has exited (its summary goes
-            // to a file, its stdout and stderr carry a line or two).
-            while child.child().try_wait().map_err(cannot_run)?.is_none() {
-                if budget.time_left().is_some_and(|left| left <= 0.0) {
-                    // Dropping the guard kills the reader's process group.
-                    drop(child);
-                    let spent =
-                        budget.time_spent("cache reading", &format!("usd-core's reader stopped after {:.2} s", started.elapsed().as_secs_f64()));
-                    return Err(Error {
-                        fix: "raise --max-time; if the reader hangs, check that usd-core opens the file (python3 -c \"from pxr import Usd; Usd.Stage.Open('FILE')\")".into(),
-                        ..spent.with_path(path)
-                    });
-                }
-                std::thread::sleep(std::time::Duration::from_millis(20));
-            }
-            child.wait_with_output().map_err(cannot_run)?
-        }
-    };
-    if output.status.success() {
-        return Ok(());
-    }
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no message").trim();
-    Err(match output.status.code() {
-        Some(NO_PXR) => Error::in_file(path, format!("{py} cannot import usd-core's pxr module ({last})"), FIX_PXR),
-        Some(USER_ERROR) => {
-            let message = stderr.lines().rev().find_map(|l| l.strip_prefix("blendsim-usd: ")).unwrap_or(last);
-            let (problem, fix) = message.split_once(" | ").unwrap_or((message, "check the file with usd-core"));
-            Error::in_file(path, problem, fix)
-        }
-        _ => Error::in_file(
-            path,
-            format!("usd-core failed ({}: {last})", output.status),
-            "check that usd-core opens the file (python3 -c \"from pxr import Usd; Usd.Stage.Open('FILE')\")",
-        ),
-    })
-}
+/// `usd_cache.py` under the shared runner (killed at the `--max-time` deadline).
+const READER: ChildScript = ChildScript {
+    source: SCRIPT,
+    purpose: "to read USD",
+    library: "usd-core",
+    module: "usd-core's pxr module",
+    install: FIX_PXR,
+    tag: "blendsim-usd: ",
+    check: "check that usd-core opens the file (python3 -c \"from pxr import Usd; Usd.Stage.Open('FILE')\")",
+    // usd-core maps .usdc files into memory by default, so every sample read stays resident;
+    // pread keeps the reader at one sample.
+    env: &[("USDC_USE_PREAD", "1")],
+};
 
 #[derive(serde::Deserialize)]
 struct ReadInfo {
@@ -154,7 +101,7 @@ pub fn open(path: &Path, prim: Option<&str>, range: FrameRange, budget: &Budget)
         end.as_ref(),
         temp.path.as_os_str(),
     ];
-    run_script(path, &args, budget)?;
+    READER.run(path, &args, budget)?;
     let info_path = temp.path.join("info.json");
     let text = std::fs::read(&info_path).map_err(|e| Error::io(&info_path, &e, "read what usd-core found"))?;
     let info: ReadInfo =
@@ -337,6 +284,9 @@ fn write_usda(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::ffi::OsString;
+    use std::process::Command;
+
     use crate::formats::cache::tests::{assert_frames_equal, scratch, wave, wave_mesh};
 
     #[test]

@@ -98,7 +98,7 @@ pub struct CacheOptions {
     pub meters_per_unit: Option<f64>,
     /// The frames to read.
     pub range: FrameRange,
-    /// `--max-time`: bounds the USD reader's process (killed at the deadline).
+    /// `--max-time`: bounds the USD and Alembic readers' processes (killed at the deadline).
     pub budget: Budget,
 }
 
@@ -156,7 +156,7 @@ fn unused(path: &Path, format: CacheFormat, field: &str, used_by: &str) -> Error
     Error::in_file(
         path,
         format!("`{field}` was given, but {} does not use it ({used_by})", format.described()),
-        format!("remove `{field}` from the [cache] table"),
+        format!("remove `{field}` from the scene's [cache] or [keyframes] table"),
     )
 }
 
@@ -318,7 +318,7 @@ impl VertexCache {
                 }
             }
             CacheFormat::Alembic => {
-                let opened = abc::open(path, options.object.as_deref(), options.range)?;
+                let opened = abc::open(path, options.object.as_deref(), options.range, &options.budget)?;
                 let fps_source = FpsSource::File(format!("the sample times of {}", opened.object));
                 let (mesh, frames) = (opened.mesh, Box::new(opened.frames));
                 // Alembic states no unit.

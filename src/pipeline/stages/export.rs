@@ -155,9 +155,19 @@ pub fn export_with(
                         None => bytes,
                     };
                     staging.write(&name, &bytes)?;
-                    // What the file plays at every frame against what it was given, read back.
-                    let expected = |t: f64| if kind == OutputKind::FullFrame { trajectory.evaluate(t) } else { clip.points_at(t) };
-                    quantization_error = glb::readback::played_error(&bytes, (&frame_times, scene.fps), &expected, placement, diagonal)?;
+                    // What the file plays at every frame against what it was given, read back:
+                    // a full-frame file holds `full` (a cache bake's is the cache, not the
+                    // trajectory), at its own times.
+                    quantization_error = match (&kind, &full) {
+                        (OutputKind::FullFrame, Some(full)) => {
+                            let held = |t: f64| {
+                                let frame = full.times.partition_point(|&x| x < t).min(full.times.len() - 1);
+                                full.points[frame].iter().map(|p| p.map(f64::from)).collect()
+                            };
+                            glb::readback::played_error(&bytes, (&full.times, scene.fps), &held, placement, diagonal)?
+                        }
+                        _ => glb::readback::played_error(&bytes, (&frame_times, scene.fps), &|t| clip.points_at(t), placement, diagonal)?,
+                    };
                 }
             }
             files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format, quantization_error });

@@ -24,7 +24,7 @@ const IMPORT_TIME_FIX: &str =
 
 /// Meshes read once per path (scenes often repeat the rest mesh).
 #[derive(Default)]
-struct MeshCache(HashMap<PathBuf, MeshFile>);
+pub(super) struct MeshCache(pub(super) HashMap<PathBuf, MeshFile>);
 
 impl MeshCache {
     fn get(&mut self, path: &Path) -> Result<&MeshFile> {
@@ -52,13 +52,13 @@ impl MeshCache {
 /// Topology of a keyframe file, compared between keys. Tets are compared as vertex sets,
 /// since readers may reorder a tet's vertices to orient it.
 #[derive(PartialEq)]
-enum Topology {
+pub(super) enum Topology {
     Surface(Vec<[u32; 3]>),
     Volume(Vec<[u32; 4]>),
 }
 
 impl Topology {
-    fn of(m: &MeshFile) -> Topology {
+    pub(super) fn of(m: &MeshFile) -> Topology {
         match m {
             MeshFile::Surface(s) => Topology::Surface(s.triangles.clone()),
             MeshFile::Volume(v) => Topology::Volume(
@@ -146,7 +146,12 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         (None, Some(cache)) => return super::import_cache::import(scene_file, cache, budget),
         (None, None) => return Err(Error::general("the scene has neither [keyframes] nor [cache]", "add one of them (formats/scene.md)")),
     };
-    let mut meshes = KeyMeshes::read(scene_file, budget)?;
+    let mut meshes = match &keys.clip {
+        Some(_) => super::import_clip::read(scene_file, keys, budget)?,
+        None => KeyMeshes::read(scene_file, budget)?,
+    };
+    // A clip's keys are at its frames' own times.
+    let key_times = meshes.times.take().unwrap_or_else(|| keys.times.clone());
     let (rest, rest_source) = meshes.rest_shape(scene_file)?;
     let rest_points = rest.positions();
     // One selection per key, usually the same one at every key: each distinct one is resolved
@@ -187,11 +192,11 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         Shape::Volume(v) => (v.positions.len(), v.tets.len()),
     };
     let vertices = display.as_ref().map_or(vertices, |d| d.positions.len());
-    scene.check_resources(&keys.times, vertices, tets, budget)?;
+    scene.check_resources(&key_times, vertices, tets, budget)?;
     // A contact key is duplicated at its own time: the two share the pose and the masks (the
     // solver aliases their positions), not the velocities.
     let input_bytes = meshes.bytes();
-    let (mut times, mut poses, mut fixed, mut fixed_velocity) = (keys.times.clone(), meshes.poses, fixed, fixed_velocity);
+    let (mut times, mut poses, mut fixed, mut fixed_velocity) = (key_times, meshes.poses, fixed, fixed_velocity);
     for &k in keys.contact.iter().rev() {
         times.insert(k + 1, times[k]);
         poses.insert(k + 1, poses[k].clone());
@@ -214,14 +219,17 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
 }
 
 /// The keyframe meshes of a scene, read and checked against the first.
-struct KeyMeshes {
-    cache: MeshCache,
-    /// Resolved path of every key's mesh.
-    paths: Vec<PathBuf>,
-    first: MeshFile,
-    first_topology: Topology,
+pub(super) struct KeyMeshes {
+    pub(super) cache: MeshCache,
+    /// Resolved path of every key's mesh (the clip's, for every key of a clip).
+    pub(super) paths: Vec<PathBuf>,
+    pub(super) first: MeshFile,
+    pub(super) first_topology: Topology,
     /// `poses[key][vertex]`, after any procedural deformation.
-    poses: Vec<Vec<Point>>,
+    pub(super) poses: Vec<Vec<Point>>,
+    /// A clip's: the key times (its frames' times) and the bytes of the clip.
+    pub(super) times: Option<Vec<f64>>,
+    pub(super) clip_bytes: Option<u64>,
 }
 
 impl KeyMeshes {
@@ -251,11 +259,14 @@ impl KeyMeshes {
             }
             poses.push(positions);
         }
-        Ok(KeyMeshes { cache, paths, first, first_topology, poses })
+        Ok(KeyMeshes { cache, paths, first, first_topology, poses, times: None, clip_bytes: None })
     }
 
     /// Bytes of the key files, each file once (a file used by several keys is read once).
     fn bytes(&self) -> u64 {
+        if let Some(bytes) = self.clip_bytes {
+            return bytes;
+        }
         let mut paths: Vec<&PathBuf> = self.paths.iter().collect();
         paths.sort();
         paths.dedup();

@@ -27,6 +27,7 @@ pub mod embed;
 pub mod export;
 pub mod import;
 pub mod import_cache;
+mod import_clip;
 pub mod report;
 pub mod solve;
 pub mod tetrahedralize;

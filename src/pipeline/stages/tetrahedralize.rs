@@ -243,7 +243,7 @@ fn unhonoured_max_volume(mesh: &TetMesh, max_volume: f64, source: &str) -> Optio
 /// the in-betweens back towards the rest shape; only a folded rest mesh is an error (import).
 fn folded_keys(mesh: &TetMesh, positions: &[Vec<Point>], keys: &Keyframes) -> Vec<String> {
     // The scene's mesh of every key (a contact key's duplicate shares it, as in import).
-    let mut names: Vec<String> = keys.scene.keyframes.as_ref().map_or(Vec::new(), |k| k.meshes.iter().map(|m| m.path().to_string()).collect());
+    let mut names: Vec<String> = keys.scene.keyframes.as_ref().map_or(Vec::new(), |k| k.key_names());
     for &k in keys.scene.keyframes.as_ref().map_or(&[][..], |k| &k.contact[..]).iter().rev() {
         if k < names.len() {
             names.insert(k + 1, names[k].clone());
