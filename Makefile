@@ -25,7 +25,7 @@ BLENDER_VENV := build/blender-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -35,6 +35,7 @@ help:
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-demo   print where the demo bake's time goes: the process, each phase, one solver iteration, Python's start-up"
+	@echo "make bench-warm   print cold against warm re-bakes (bake --from): unchanged inputs and one edited key, the demo and DINO"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
@@ -169,6 +170,11 @@ bench: build deps-tetgen
 bench-demo: build deps-tetgen deps-usd
 	@echo "==> demo benchmark: where the bake's time goes (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench demo
+
+# Warm re-bakes (`bake --from`) against cold bakes: the demo and, with the paper's assets, DINO.
+bench-warm: build deps-tetgen
+	@echo "==> warm re-bake benchmark: cold against --from (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench warm
 
 # The scaling table (issue 11): production-size bakes through the CLI, one process per row
 # (prism series, 20 keys, CHEB-style volume, 25k and 100k cages); peak memory by GNU time
