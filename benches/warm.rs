@@ -59,8 +59,8 @@ struct Case {
     restore: Box<dyn Fn(&Path)>,
 }
 
-/// The demo, its left key twisted 100 degrees instead of 120 (by the demo's own generator).
-fn demo(root: &Path, dir: PathBuf) -> Case {
+/// The demo, its left key twisted `degrees` instead of 120 (by the demo's own generator).
+fn demo(root: &Path, dir: PathBuf, degrees: f64, name: &'static str) -> Case {
     std::fs::create_dir_all(&dir).unwrap();
     for entry in std::fs::read_dir(root.join("fixtures/demo")).unwrap() {
         let path = entry.unwrap().path();
@@ -74,7 +74,7 @@ fn demo(root: &Path, dir: PathBuf) -> Case {
             std::fs::write(dir.join("prism_left.obj"), obj::write(&m)).unwrap();
         }
     };
-    Case { name: "demo (left key 120 -> 100 degrees)", dir, scene: "twist.toml", edit: Box::new(left(100.0)), restore: Box::new(left(120.0)) }
+    Case { name, dir, scene: "twist.toml", edit: Box::new(left(degrees)), restore: Box::new(left(120.0)) }
 }
 
 /// DINO's walk, its fifth key moved a tenth of the way towards the fourth (a Medit mesh:
@@ -126,7 +126,11 @@ fn main() {
     let bin = root.join("target/release/blendsim");
     assert!(bin.is_file(), "{} missing: `cargo build --release` first", bin.display());
     let scratch = std::env::temp_dir().join(format!("blendsim-bench-warm-{}", std::process::id()));
-    let mut cases = vec![demo(root, scratch.join("demo"))];
+    // A large edit (a sixth of the key's twist) and a touch-up.
+    let mut cases = vec![
+        demo(root, scratch.join("demo"), 100.0, "demo (left key 120 -> 100 degrees)"),
+        demo(root, scratch.join("demo-touch"), 115.0, "demo (left key 120 -> 115 degrees)"),
+    ];
     match dino(root, scratch.join("dino")) {
         Some(case) => cases.push(case),
         None => println!("(DINO skipped: the paper's assets are not in ../shared/assets)"),
