@@ -31,7 +31,7 @@ RAY_VENV := build/ray-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -41,6 +41,8 @@ help:
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-demo   print where the demo bake's time goes: the process, each phase, one solver iteration, Python's start-up"
+	@echo "make bench-warm   print cold against warm re-bakes (bake --from): unchanged inputs and one edited key, the demo and DINO"
+	@echo "make bench-writers print the full-frame writers' MB/s (usda, usdc, glb) beside the disk's"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
@@ -206,6 +208,16 @@ bench: build deps-tetgen
 bench-demo: build deps-tetgen deps-usd
 	@echo "==> demo benchmark: where the bake's time goes (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench demo
+
+# Warm re-bakes (`bake --from`) against cold bakes: the demo and, with the paper's assets, DINO.
+bench-warm: build deps-tetgen
+	@echo "==> warm re-bake benchmark: cold against --from (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench warm
+
+# The full-frame writers' speed beside the disk's sequential write speed.
+bench-writers: build
+	@echo "==> writers benchmark: MB/s per format and the disk's (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench writers
 
 # The scaling table (issue 11): production-size bakes through the CLI, one process per row
 # (prism series, 20 keys, CHEB-style volume, 25k and 100k cages); peak memory by GNU time

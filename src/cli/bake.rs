@@ -3,6 +3,7 @@ use std::time::Instant;
 
 use blendsim::pipeline::scene::SceneFile;
 use blendsim::pipeline::stages;
+use blendsim::pipeline::stages::bake_cache::{self, BakeCache};
 use blendsim::support::output::{LockWait, Staging};
 use blendsim::support::progress::Progress;
 use blendsim::Result;
@@ -23,6 +24,14 @@ pub struct Args {
     /// Output folder (created if missing).
     #[arg(short = 'o', long, alias = "output", value_name = "DIR")]
     out: PathBuf,
+    /// Reuse an earlier bake's work, kept in its bake.cache: the stages whose inputs (files,
+    /// settings, the blendsim binary) are the same bytes are not run again (TetGen, the solve),
+    /// and when only key poses moved the solve starts from that bake's solution. DIR is that
+    /// bake's --out; this bake keeps its own bake.cache in --out for the next, so the loop is
+    /// `bake SCENE --out DIR --from DIR` (the first bake into DIR runs cold). A damaged or
+    /// older cache is a warning and a cold bake; a DIR that is no bake's output, an error.
+    #[arg(long, value_name = "DIR")]
+    from: Option<PathBuf>,
     /// Override the scene's [solver] method.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
@@ -52,16 +61,33 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     let budget = args.budget.budget();
     let start = Instant::now();
     let scene = SceneFile::load(&args.scene)?;
+    let previous = match &args.from {
+        // A first bake into its own --out has nothing to reuse yet.
+        Some(from) if from == &args.out && !from.exists() => None,
+        Some(from) => match BakeCache::load(from)? {
+            Ok(cache) => Some(cache),
+            Err(why) => {
+                eprintln!("blendsim: warning: --from: {why}; baking cold");
+                None
+            }
+        },
+        None => None,
+    };
     // Check the output location before the work, not after.
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     // A bake is the folder's whole blendsim content: an earlier bake's files go, whatever
     // scene wrote them (a renamed scene's too); files blendsim did not write stay.
     staging.replace_every_group();
     // A user's file or folder at one of the names is refused before the work, not after.
-    staging.claim(&stages::bake::file_names(&scene))?;
+    let mut names = stages::bake::file_names(&scene);
+    if args.from.is_some() {
+        names.push(bake_cache::FILE.into());
+    }
+    staging.claim(&names)?;
     // Under --strict the warnings are printed once, as errors, if the bake gets that far.
     let progress = if args.strict { progress.without_warnings() } else { progress.clone() };
-    let r = stages::Bake::new(&scene, &progress).method(args.method.map(Into::into)).budget(budget).files(&mut staging)?;
+    let bake = stages::Bake::new(&scene, &progress).method(args.method.map(Into::into)).budget(budget).reusing(previous.as_ref());
+    let (r, reused) = if args.from.is_some() { bake.files_reusing(&mut staging)? } else { (bake.files(&mut staging)?, Default::default()) };
     if args.strict {
         // Before the commit: the staged files go with `staging`, --out stays as it was.
         super::refuse_warnings(&r.warnings)?;
@@ -77,6 +103,10 @@ pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     if !quiet {
         for line in committed.messages(&args.out, "bake") {
             eprintln!("blendsim: {line}");
+        }
+        if let Some(from) = &args.from {
+            let what = if previous.is_some() { reused.describe() } else { "nothing to reuse, every stage ran".into() };
+            eprintln!("blendsim: from {}: {what}", from.display());
         }
         let best = r.ratios.iter().map(|(f, x)| format!("{f} {x:.1}x")).collect::<Vec<_>>().join(", ");
         eprintln!(

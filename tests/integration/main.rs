@@ -38,3 +38,4 @@ mod paper_scenes;
 mod render_demo;
 mod studio_caches;
 mod texture;
+mod warm_rebake;

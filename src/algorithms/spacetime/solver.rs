@@ -512,7 +512,7 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     // not counted): its iteration k is the whole solve's `n + k - 1`.
     let fine_settings = Settings { max_iterations: settings.max_iterations.saturating_sub(n), ..settings.clone() };
     let label = format!("{n} coarse iterations at {samples} samples per interval, then ");
-    let warm = Warm { trajectory: &coarse.trajectory, label, factors };
+    let warm = Warm { trajectory: &coarse.trajectory, label, factors: Some(factors) };
     let (fine, warm, _) = solve_from(elastic, keys, &fine_settings, Some(warm), &|k, w, floor| {
         if k > 0 {
             on_iteration(n + k - 1, w, floor);
@@ -537,14 +537,39 @@ pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_i
     Ok(Solved { trajectory: fine.trajectory, log })
 }
 
-/// Where a fine solve may start: the coarse phase's result, the words that say so in the stop
-/// reason, and the coarse phase's factorized matrices, the fine quasi-Newton phase's
-/// preconditioner (any positive definite model serves there; the curvature pairs learn the
-/// rest, and W's line search keeps every step a descent).
+/// [`solve`] from `start` instead of the first guess when W is lower there: an earlier
+/// solution of the same body whose keys have since moved (`blendsim bake --from`), with the
+/// prescribed values already the new keys'. The solve then goes straight to the quasi-Newton
+/// phase and stops by the same rule, so its result is a cold solve's within the stopping
+/// tolerance. Not with obstacles, moving key times or a coarse phase (a cold solve then).
+pub fn solve_starting(
+    elastic: &Elastic,
+    keys: &KeyConstraints,
+    settings: &Settings,
+    start: &Trajectory,
+    on_iteration: &dyn Fn(usize, f64, f64),
+) -> Result<Solved> {
+    let fits =
+        start.times == keys.times && start.positions.len() == keys.times.len() && start.positions.iter().all(|p| p.len() == elastic.node_count());
+    if !fits || settings.coarse_phase().is_some() || settings.timing.is_some() || settings.contacts.is_some() {
+        return solve(elastic, keys, settings, on_iteration);
+    }
+    let label = "the previous bake's solution with the keys' edits, then ".to_string();
+    let (mut solved, warm, _) = solve_from(elastic, keys, settings, Some(Warm { trajectory: start, label, factors: None }), on_iteration)?;
+    if !warm {
+        solved.log.stop_reason += "; the previous bake's solution was not below the first guess, so the solve started from the first guess";
+    }
+    Ok(solved)
+}
+
+/// Where a solve may start: the coarse phase's result or an earlier bake's solution, the words
+/// that say so in the stop reason, and the coarse phase's factorized matrices, the fine
+/// quasi-Newton phase's preconditioner (any positive definite model serves there; the
+/// curvature pairs learn the rest, and W's line search keeps every step a descent).
 struct Warm<'t> {
     trajectory: &'t Trajectory,
     label: String,
-    factors: Factors,
+    factors: Option<Factors>,
 }
 
 /// The factorized matrices of a solve: the global step and the tangent model Hessian.
@@ -576,7 +601,7 @@ fn solve_from(
         let (e0, e1) = (at(&guess, 0)?, at(warm.trajectory, 1)?);
         if e1.value < e0.value {
             first = Some((e0, Some((warm.trajectory.clone(), e1, warm.label))));
-            reused = Some(warm.factors);
+            reused = warm.factors;
         } else {
             first = Some((e0, None));
         }

@@ -9,23 +9,31 @@ use crate::support::error::Result;
 use crate::support::output::Staging;
 use crate::support::progress::Progress;
 
+use super::bake_cache::{tetgen_key, BakeCache, Reused, SolveKeys};
 use super::export::blendshape_clip;
 use super::report::{measure, with_outputs};
-use super::{embed, export_with, import, solve_within, tetrahedralize};
+use super::{embed, export_with, import, solve_starting, tetrahedralize_with};
 
-/// A scene to bake, with the options the CLI gives (`--method`).
+/// A scene to bake, with the options the CLI gives (`--method`, `--from`).
 #[derive(Debug, Clone)]
 pub struct Bake<'a> {
     scene: &'a SceneFile,
     method: Option<Method>,
     budget: Budget,
     progress: &'a Progress,
+    previous: Option<&'a BakeCache>,
 }
 
 impl<'a> Bake<'a> {
     /// The chain for `scene`, reporting progress to `progress`.
     pub fn new(scene: &'a SceneFile, progress: &'a Progress) -> Bake<'a> {
-        Bake { scene, method: None, budget: Budget::default(), progress }
+        Bake { scene, method: None, budget: Budget::default(), progress, previous: None }
+    }
+
+    /// Reuse what `previous` (an earlier bake's `bake.cache`) kept for the same inputs
+    /// ([`super::bake_cache`]).
+    pub fn reusing(self, previous: Option<&'a BakeCache>) -> Bake<'a> {
+        Bake { previous, ..self }
     }
 
     /// Solve with `method` instead of the scene's `[solver] method` (when given).
@@ -42,6 +50,12 @@ impl<'a> Bake<'a> {
     /// `import`, `tetrahedralize`: the simulation body. The method is known from the start, so
     /// `fit` skips TetGen and a cache's default `fixed` follows the method.
     pub fn body(&self) -> Result<Body> {
+        self.body_kept(None, &mut Reused::default())
+    }
+
+    /// [`Bake::body`], TetGen's mesh taken from the previous bake when it has it for the same
+    /// inputs, and kept in `cache` when given.
+    fn body_kept(&self, mut cache: Option<&mut BakeCache>, reused: &mut Reused) -> Result<Body> {
         let mut scene = self.scene.clone();
         if let Some(m) = self.method {
             scene.scene.solver.method = m;
@@ -49,15 +63,49 @@ impl<'a> Bake<'a> {
         let bar = self.progress.stage("import");
         let keys = import(&scene, &self.budget)?;
         bar.finish_and_clear();
-        tetrahedralize(&keys, &self.budget, self.progress)
+        tetrahedralize_with(&keys, &self.budget, self.progress, &mut |surface, options, source, budget| {
+            let key = (self.previous.is_some() || cache.is_some()).then(|| tetgen_key(surface, options));
+            let mesh = match self.previous.zip(key.as_deref()).and_then(|(p, key)| p.tetgen(key)) {
+                Some(mesh) => {
+                    reused.tetgen = true;
+                    mesh
+                }
+                None => crate::formats::tetgen::run_within(surface, options, source, budget)?,
+            };
+            if let (Some(cache), Some(key)) = (cache.as_deref_mut(), key) {
+                cache.keep_tetgen(key, &mesh);
+            }
+            Ok(mesh)
+        })
     }
 
     /// ... `solve`, `embed`: the exported surface's animation.
     pub fn animation(&self) -> Result<Animation> {
-        let body = self.body()?;
+        self.animation_kept(None, &mut Reused::default())
+    }
+
+    /// [`Bake::animation`], the solve taken from the previous bake or started from its
+    /// solution when it has them for the same inputs, and kept in `cache` when given.
+    fn animation_kept(&self, mut cache: Option<&mut BakeCache>, reused: &mut Reused) -> Result<Animation> {
+        let body = self.body_kept(cache.as_deref_mut(), reused)?;
         // The interruption tests stop here, between TetGen and the solver.
         crate::support::interrupt::pause_point("solve", "");
-        let solution = solve_within(&body, self.method, &self.budget, self.progress)?;
+        let keys = (self.previous.is_some() || cache.is_some()).then(|| SolveKeys::of(&body, self.budget.max_memory()));
+        let previous = self.previous.zip(keys.as_ref());
+        let solution = match previous.and_then(|(p, keys)| p.solution(&body, keys)) {
+            Some(solution) => {
+                reused.solve = true;
+                super::solve::reused(solution, self.progress)
+            }
+            None => {
+                let start = previous.and_then(|(p, keys)| p.warm_start(&body, keys));
+                reused.warm_start = start.is_some();
+                solve_starting(&body, self.method, &self.budget, self.progress, start.as_ref())?
+            }
+        };
+        if let (Some(cache), Some(keys)) = (cache, keys) {
+            cache.keep_solution(&solution, keys);
+        }
         // The binding's searches run in parallel.
         let (tets, points) = (solution.body.mesh.as_ref().map_or(0, |m| m.tets.len()), solution.body.surface.positions.len());
         let bar = self
@@ -71,7 +119,20 @@ impl<'a> Bake<'a> {
     /// ... `export`, `report`: every file staged in `staging` (the caller commits it), and the
     /// report.
     pub fn files(&self, staging: &mut Staging) -> Result<Report> {
-        let animation = self.animation()?;
+        Ok(self.files_kept(staging, None)?.0)
+    }
+
+    /// [`Bake::files`], with `bake.cache` (what the next bake can reuse, [`super::bake_cache`])
+    /// staged with them (`blendsim bake --from`); and what was reused from the previous bake
+    /// ([`Bake::reusing`]).
+    pub fn files_reusing(&self, staging: &mut Staging) -> Result<(Report, Reused)> {
+        self.files_kept(staging, Some(BakeCache::new()?))
+    }
+
+    /// [`Bake::files`], filling and staging `cache` when given.
+    fn files_kept(&self, staging: &mut Staging, mut cache: Option<BakeCache>) -> Result<(Report, Reused)> {
+        let mut reused = Reused::default();
+        let animation = self.animation_kept(cache.as_mut(), &mut reused)?;
         // The report's measures need no file: they run on a second thread while the files are
         // written, each computed as alone, so the same numbers. Export's error comes first, as when they ran one after the other.
         let clip = blendshape_clip(&animation, None, &self.budget)?;
@@ -88,7 +149,11 @@ impl<'a> Bake<'a> {
         // The stages warned as they went; the guard rails' warnings come after theirs.
         report.warnings[animation.warnings.len()..].iter().for_each(|w| self.progress.warn(w));
         report.write(staging)?;
-        Ok(report)
+        if let Some(cache) = cache {
+            staging.set_group("bake");
+            staging.write(super::bake_cache::FILE, &cache.to_json())?;
+        }
+        Ok((report, reused))
     }
 }
 

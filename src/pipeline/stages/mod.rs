@@ -22,6 +22,7 @@
 //! or the stage files.
 
 pub mod bake;
+pub mod bake_cache;
 pub mod blend;
 pub mod embed;
 pub mod export;
@@ -41,8 +42,8 @@ pub use embed::embed;
 pub use export::{blendshape_clip, export, export_with};
 pub use import::import;
 pub use report::report;
-pub use solve::{solve, solve_within};
-pub use tetrahedralize::tetrahedralize;
+pub use solve::{solve, solve_starting, solve_within};
+pub use tetrahedralize::{tetrahedralize, tetrahedralize_with};
 
 use crate::algorithms::physics::elastic;
 use crate::pipeline::scene;

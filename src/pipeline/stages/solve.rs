@@ -16,6 +16,7 @@ use crate::algorithms::spacetime::global_step::Method as GlobalMethod;
 use crate::algorithms::spacetime::obstacles::Obstacle;
 use crate::algorithms::spacetime::solver::{self, ModelHessian, Settings, Step};
 use crate::algorithms::spacetime::timing::TimingSettings;
+use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
 use crate::pipeline::report::guard_rails::{code, coded};
 use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
@@ -33,6 +34,12 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
 /// [`solve`] within `budget` (the CLI's `--max-memory` and `--max-time`). Past its memory the
 /// global step is solved iteratively, to the same solution within the solver's tolerance.
 pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progress: &Progress) -> Result<Solution> {
+    solve_starting(body, method, budget, progress, None)
+}
+
+/// [`solve_within`], a spacetime solve starting from `start` when given (an earlier bake's
+/// solution moved with the keys' edits, [`solver::solve_starting`]).
+pub fn solve_starting(body: &Body, method: Option<Method>, budget: &Budget, progress: &Progress, start: Option<&Trajectory>) -> Result<Solution> {
     let mut body = body.clone();
     if let Some(m) = method {
         body.scene.solver.method = m;
@@ -104,7 +111,7 @@ pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progre
             // instead of each handing itself over from this thread and putting it to sleep (two
             // context switches apiece; the same bytes).
             let solved = rayon::scope(|_| {
-                solver::solve(&elastic, &keys, &settings, &|k, w, floor| {
+                let on_iteration = |k, w, floor| {
                     let mut guard = estimate.lock().unwrap_or_else(|e| e.into_inner());
                     let (running, scales) = &mut *guard;
                     scales.truncate(k);
@@ -117,7 +124,11 @@ pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progre
                     }
                     bar.set_position(k as u64);
                     bar.set_message(format!("solve: spacetime W = {w:.4e}"));
-                })
+                };
+                match start {
+                    Some(start) => solver::solve_starting(&elastic, &keys, &settings, start, &on_iteration),
+                    None => solver::solve(&elastic, &keys, &settings, &on_iteration),
+                }
             })?;
             bar.finish_and_clear();
             let l = solved.log;
@@ -170,6 +181,15 @@ pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progre
         body.warn(progress, w);
     }
     Ok(Solution { body, trajectory, log })
+}
+
+/// An earlier bake's `solution` of the same body and settings, taken as this one's: the
+/// solve's warnings said again.
+pub fn reused(mut solution: Solution, progress: &Progress) -> Solution {
+    if let Some(w) = cg_capped(&solution.log) {
+        solution.body.warn(progress, w);
+    }
+    solution
 }
 
 /// The `cg-capped` warning: iterative global-step solves that stopped at their iteration cap

@@ -41,7 +41,16 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
 /// to export; a body whose size is far from the material's (`implausible_size`) and an
 /// `[embed] surface` far outside the body (`embedded_far_outside`) are warned of.
 pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
-    let mut body = simulation_body(keys, budget, progress)?;
+    tetrahedralize_with(keys, budget, progress, &mut tetgen::run_within)
+}
+
+/// TetGen's mesh of a rest surface with options (`source` names the surface in errors):
+/// [`tetgen::run_within`], or a mesh an earlier bake kept for the same inputs.
+pub type Tetgen<'a> = dyn FnMut(&TriMesh, &TetgenOptions, &Path, &Budget) -> Result<TetMesh> + 'a;
+
+/// [`tetrahedralize`], TetGen's meshes made by `tetgen` (`blendsim bake --from` reuses one).
+pub fn tetrahedralize_with(keys: &Keyframes, budget: &Budget, progress: &Progress, tetgen: &mut Tetgen) -> Result<Body> {
+    let mut body = simulation_body(keys, budget, progress, tetgen)?;
     let rest = keys.rest.positions();
     if body.mesh.is_some() {
         if let Some(w) = implausible_size(crate::algorithms::geometry::bbox_diagonal(rest), keys.scene.meters_per_unit(), &keys.rest_source) {
@@ -124,7 +133,7 @@ fn embedded_far_outside(display: &[Point], rest: &[Point], source: &str) -> Opti
 }
 
 /// The body of `keys`, before its size is judged ([`tetrahedralize`]).
-fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Result<Body> {
+fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetgen: &mut Tetgen) -> Result<Body> {
     let scene = &keys.scene;
     let key_poses = |positions: Vec<Vec<Point>>| KeyPoses {
         times: keys.times.clone(),
@@ -167,7 +176,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress) -> Re
             }
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.predicted("tetrahedralize: TetGen", tetgen::predicted_seconds(rest, &options));
-            let mesh: TetMesh = tetgen::run_within(rest, &options, std::path::Path::new(&keys.rest_source), budget)?;
+            let mesh: TetMesh = tetgen(rest, &options, Path::new(&keys.rest_source), budget)?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();
