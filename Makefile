@@ -37,8 +37,8 @@ help:
 	@echo "make bench-demo   print where the demo bake's time goes: the process, each phase, one solver iteration, Python's start-up"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
-	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
-	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
+	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.html/.md/.csv"
+	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.html/.md/.csv"
 	@echo "make completions  shell completions (bash, zsh, fish) and man pages into build/share"
 	@echo "make install  the binary, completions and man pages under PREFIX=$(PREFIX)"
 	@echo "make test-deps / build / clean"
@@ -111,6 +111,7 @@ demo: build deps-tetgen
 	$(BIN) bake fixtures/demo/twist.toml --out build/demo
 	@echo
 	@cat build/demo/report.md
+	@echo "plots and a player: build/demo/report.html (open it in a browser)"
 
 # Style and lints, as the suite runs them: rustfmt (rustfmt.toml) and clippy with the lint set
 # of Cargo.toml's [lints], warnings as errors.
@@ -190,7 +191,7 @@ batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
 	if [ -z "$$baked" ]; then echo "==> nothing baked (every scene was skipped)"; exit 0; fi; \
 	for d in $$baked; do echo "$${d}report.md"; done; \
 	$(BIN) report --batch $$baked -o $(BATCH_OUT); \
-	echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
+	echo "summary: $(BATCH_OUT)/summary.html, $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
 
 # The simulated test caches (rapier3d bar, 2 and 1 Hz, every cache format) baked and summarized.
 batch-caches: deps-usd
