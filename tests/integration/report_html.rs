@@ -1,8 +1,9 @@
 //! `report.html` and `summary.html` as a user opens them: from `file://` in the output folder,
 //! in headless Chromium (tests/checkers/report_check.mjs), with no network. The demo's page:
 //! its plots with labelled axes, the player's two views in agreement at several frames and
-//! apart between two, the scrubber, valid HTML, under the stated size; a cache bake's player
-//! against the cache; a batch's summary linking each report and sorting by its columns.
+//! apart between two, the scrubber, valid HTML, under the stated size; a bake of many frames
+//! decimated, and saying so; a cache bake's player against the cache; a batch's summary
+//! linking each report and sorting by its columns.
 
 use std::path::Path;
 
@@ -68,6 +69,39 @@ fn the_demo_report_html_plots_and_plays_offline_in_chromium() {
     // The same bake again: the same page but the wall-clock row.
     run(&dir.path, &["bake", "-q", scene.to_str().unwrap(), "--out", "again"]).success();
     assert_eq!(without_time(&html), without_time(&dir.join("again/report.html")));
+}
+
+/// The demo at 1200 fps (2401 frames): the player's data would pass its budget, so the page
+/// shows every n-th frame, says so, stays under the stated size, and still plays in agreement.
+#[test]
+fn a_bake_with_many_frames_shows_every_nth_frame_and_says_so() {
+    let dir = TempDir::new("report-html-decimated");
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
+    for entry in std::fs::read_dir(&demo).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+    }
+    let scene = std::fs::read_to_string(dir.join("twist.toml")).unwrap();
+    assert!(scene.contains("\nfps = 60\n"));
+    std::fs::write(dir.join("twist.toml"), scene.replace("\nfps = 60\n", "\nfps = 1200\n")).unwrap();
+    run(&dir.path, &["bake", "-q", "twist.toml", "--out", "out"]).success();
+    let html = dir.join("out/report.html");
+    let summary = check_report_html(&html, None);
+    eprintln!("{summary}");
+    assert_eq!(summary["ok"], true, "{summary}");
+    let bytes = std::fs::metadata(&html).unwrap().len() as usize;
+    assert!(bytes < HTML_LIMIT, "report.html is {bytes} bytes, over the stated {HTML_LIMIT}");
+    let r = read_json(&dir.join("out/report.json"));
+    assert_eq!(r["frames"], 2401);
+    // Every n-th frame, n the smallest that fits: the page names it and shows that many.
+    let shown = summary["frames"].as_u64().unwrap();
+    let stride = 2401u64.div_ceil(shown);
+    assert!(stride > 1 && 2400 / stride + 1 == shown, "{shown} frames shown of 2401");
+    let text = std::fs::read_to_string(&html).unwrap();
+    let note = text.lines().find(|l| l.contains("id=\"decimated\"")).expect("the page says it is decimated");
+    assert!(note.contains(&format!("of 2401 ({shown} shown)")) && !note.contains("vertex"), "{note}");
+    // report.json keeps every frame: only the player is decimated.
+    assert_eq!(numbers(&r["series"]["error"]["max"]).len(), 2401);
 }
 
 #[test]
