@@ -2,8 +2,8 @@
 //! in headless Chromium (tests/checkers/report_check.mjs), with no network. The demo's page:
 //! its plots with labelled axes, the player's two views in agreement at several frames and
 //! apart between two, the scrubber, valid HTML, under the stated size; a bake of many frames
-//! decimated, and saying so; a cache bake's player against the cache; a batch's summary
-//! linking each report and sorting by its columns.
+//! decimated, and saying so; a hermite bake without a W plot; a cache bake's player against
+//! the cache; a batch's summary linking each report and sorting by its columns.
 
 use std::path::Path;
 
@@ -73,8 +73,9 @@ fn the_demo_report_html_plots_and_plays_offline_in_chromium() {
 
 /// The demo at 1200 fps (2401 frames): the player's data would pass its budget, so the page
 /// shows every n-th frame, says so, stays under the stated size, and still plays in agreement.
+/// At 60 fps by hermite: no W plot, and why.
 #[test]
-fn a_bake_with_many_frames_shows_every_nth_frame_and_says_so() {
+fn a_bake_with_many_frames_shows_every_nth_frame_and_a_hermite_bake_no_w_plot() {
     let dir = TempDir::new("report-html-decimated");
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
     for entry in std::fs::read_dir(&demo).unwrap() {
@@ -102,6 +103,16 @@ fn a_bake_with_many_frames_shows_every_nth_frame_and_says_so() {
     assert!(note.contains(&format!("of 2401 ({shown} shown)")) && !note.contains("vertex"), "{note}");
     // report.json keeps every frame: only the player is decimated.
     assert_eq!(numbers(&r["series"]["error"]["max"]).len(), 2401);
+
+    // The same scene by hermite: one W, no iterations to plot, and the page says so.
+    assert!(scene.contains("method = \"spacetime\""));
+    std::fs::write(dir.join("hermite.toml"), scene.replace("method = \"spacetime\"", "method = \"hermite\"")).unwrap();
+    run(&dir.path, &["bake", "-q", "hermite.toml", "--out", "hermite"]).success();
+    let summary = check_report_html(&dir.join("hermite/report.html"), None);
+    assert_eq!(summary["ok"], true, "{summary}");
+    let ids: Vec<&str> = summary["plots"].as_array().unwrap().iter().map(|p| p["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["plot-volume", "plot-error", "plot-bytes"]);
+    assert!(std::fs::read_to_string(dir.join("hermite/report.html")).unwrap().contains("<p>No plot of W: hermite does not iterate (W = "));
 }
 
 #[test]

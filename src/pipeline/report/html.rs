@@ -104,8 +104,9 @@ pub fn plots(report: &Report) -> Vec<(String, String)> {
     let sv = &report.solver;
     let series = report.series.as_ref();
     let phases = series.map_or(&[][..], |s| &s.energy_phases[..]);
-    // `fit` solves exactly, without iterations: no W to plot (the page says so).
-    if !sv.energy.is_empty() {
+    // `fit` solves exactly, and `hermite` and `mass-spring` have one W at most: no iterations to
+    // plot (the page says so).
+    if sv.energy.len() > 1 {
         let energy = LinePlot {
             id: "plot-energy".into(),
             title: "W per iteration".into(),
@@ -331,8 +332,11 @@ pub fn render(report: &Report) -> String {
     s.push_str("<section id=\"numbers\">\n");
     s.push_str(&markdown_to_html(&super::markdown::render(report)));
     s.push_str("</section>\n<section id=\"plots\">\n<h2>Plots</h2>\n");
-    if report.solver.energy.is_empty() {
-        let _ = writeln!(s, "<p>No plot of W: {} does not iterate ({}).</p>", report.solver.method, escape(&report.solver.stop_reason));
+    let (method, why) = (&report.solver.method, escape(&report.solver.stop_reason));
+    match report.solver.energy[..] {
+        [] => _ = writeln!(s, "<p>No plot of W: {method} does not iterate ({why}).</p>"),
+        [w] => _ = writeln!(s, "<p>No plot of W: {method} does not iterate (W = {w:.4e}; {why}).</p>"),
+        _ => {}
     }
     for (svg, caption) in plots(report) {
         let _ = writeln!(s, "<figure>{svg}<figcaption>{}</figcaption></figure>", escape(&caption));
