@@ -2,11 +2,15 @@
 //! in headless Chromium (tests/checkers/report_check.mjs), with no network. The demo's page:
 //! its plots with labelled axes, the player's two views in agreement at several frames and
 //! apart between two, the scrubber, valid HTML, under the stated size; a bake of many frames
-//! decimated, and saying so; a hermite bake without a W plot; a cache bake's player against
-//! the cache; a batch's summary linking each report and sorting by its columns.
+//! decimated, and saying so; a big surface drawn as points; a hermite bake without a W plot;
+//! a cache bake's player against the cache; a batch's summary linking each report and sorting
+//! by its columns.
 
 use std::path::Path;
 
+use blendsim::algorithms::geometry::TriMesh;
+use blendsim::algorithms::procedural::icosphere;
+use blendsim::formats::mesh::obj;
 use blendsim::pipeline::report::html::HTML_LIMIT;
 use serde_json::Value;
 
@@ -113,6 +117,32 @@ fn a_bake_with_many_frames_shows_every_nth_frame_and_a_hermite_bake_no_w_plot() 
     let ids: Vec<&str> = summary["plots"].as_array().unwrap().iter().map(|p| p["id"].as_str().unwrap()).collect();
     assert_eq!(ids, ["plot-volume", "plot-error", "plot-bytes"]);
     assert!(std::fs::read_to_string(dir.join("hermite/report.html")).unwrap().contains("<p>No plot of W: hermite does not iterate (W = "));
+}
+
+/// A surface of 10 242 vertices: its shapes alone would pass the player's budget, so the page
+/// draws every n-th vertex as points, yet every frame of the second (the fewest it keeps).
+#[test]
+fn a_big_surface_is_drawn_as_every_nth_vertex_and_every_frame() {
+    let dir = TempDir::new("report-html-points");
+    let ball = icosphere(5);
+    let squashed: Vec<_> = ball.positions.iter().map(|p| [1.2 * p[0], 0.7 * p[1], 1.2 * p[2]]).collect();
+    std::fs::write(dir.join("rest.obj"), obj::write(&ball)).unwrap();
+    std::fs::write(dir.join("squash.obj"), obj::write(&TriMesh { positions: squashed, triangles: ball.triangles.clone(), attributes: None }))
+        .unwrap();
+    let scene = "name = \"ball\"\nfps = 60\n[keyframes]\nmeshes = [\"rest.obj\", \"squash.obj\", \"rest.obj\"]\ntimes = [0.0, 0.5, 1.0]\n\
+[tet]\nmax_volume = 0.05\n[solver]\nmethod = \"hermite\"\n[export]\nformats = [\"glb\"]\n";
+    std::fs::write(dir.join("ball.toml"), scene).unwrap();
+    run(&dir.path, &["bake", "-q", "ball.toml", "--out", "out"]).success();
+    let html = dir.join("out/report.html");
+    let summary = check_report_html(&html, None);
+    eprintln!("{summary}");
+    assert_eq!(summary["ok"], true, "{summary}");
+    assert_eq!(summary["frames"], 61, "every frame of the second");
+    let bytes = std::fs::metadata(&html).unwrap().len() as usize;
+    assert!(bytes < HTML_LIMIT, "report.html is {bytes} bytes, over the stated {HTML_LIMIT}");
+    let text = std::fs::read_to_string(&html).unwrap();
+    let note = text.lines().find(|l| l.contains("id=\"decimated\"")).expect("the page says it is decimated");
+    assert!(note.contains("vertex of 10242 drawn as points") && !note.contains("frame of"), "{note}");
 }
 
 #[test]

@@ -278,20 +278,16 @@ Both at the same time, drawn from the same viewpoint. Colour: each vertex's dist
 from blue (0) to red ({:.3e} scene units, the largest): where the physics moved things.</p>",
         p.hermite_distance.iter().flatten().copied().fold(0.0f32, f32::max)
     );
-    if p.frame_stride > 1 || p.vertex_stride > 1 {
-        let _ = writeln!(
-            s,
-            "<p class=\"note\" id=\"decimated\">Decimated to keep this page under {} MB: every {} frame of {} ({} shown){}.</p>",
-            HTML_LIMIT / 1_000_000,
-            ordinal(p.frame_stride),
-            p.total_frames,
-            p.times.len(),
-            if p.vertex_stride > 1 {
-                format!(", every {} vertex of {} drawn as points ({} shown)", ordinal(p.vertex_stride), p.total_vertices, p.base.len())
-            } else {
-                String::new()
-            }
-        );
+    let mut thinned = Vec::new();
+    if p.frame_stride > 1 {
+        thinned.push(format!("every {} frame of {} ({} shown)", ordinal(p.frame_stride), p.total_frames, p.times.len()));
+    }
+    if p.vertex_stride > 1 {
+        thinned.push(format!("every {} vertex of {} drawn as points ({} shown)", ordinal(p.vertex_stride), p.total_vertices, p.base.len()));
+    }
+    if !thinned.is_empty() {
+        let limit = HTML_LIMIT / 1_000_000;
+        let _ = writeln!(s, "<p class=\"note\" id=\"decimated\">Decimated to keep this page under {limit} MB: {}.</p>", thinned.join(", "));
     }
     s.push_str(
         "<div class=\"views\">\n<figure class=\"view\"><canvas id=\"view-blendshape\" width=\"400\" height=\"360\"></canvas><figcaption>blendshape</figcaption></figure>\n",

@@ -2,7 +2,7 @@
 //! every shown frame) and the reference's positions at those frames, with each vertex's
 //! distance from the hermite baseline. The page cannot read the glb (browsers refuse to fetch
 //! `file://`), so it holds what it draws, within [`PLAYER_BYTES`]: bigger bakes show every
-//! n-th frame, and every n-th vertex as points, and the page says so.
+//! n-th frame, or every n-th vertex as points, and the page says so.
 
 use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::geometry::{norm, sub, Point};
@@ -46,18 +46,24 @@ pub struct Player {
     pub diagonal: f64,
 }
 
-/// The strides that keep the player within [`PLAYER_BYTES`]: `(vertex, frame)`.
+/// About the fewest frames the player shows (every frame of a shorter bake): a second at 60 fps.
+/// Below that the surface is thinned instead, as smooth motion tells more than every vertex.
+pub const MIN_FRAMES: usize = 60;
+
+/// The strides that keep the player within [`PLAYER_BYTES`]: `(vertex, frame)`. Vertices are
+/// thinned until the fixed part fits in half the budget and [`MIN_FRAMES`] fit in the rest;
+/// then frames, to fit them all.
 pub fn strides(vertices: usize, triangles: usize, shape_entries: usize, shapes: usize, frames: usize) -> (usize, usize) {
-    // Fixed part: base (12 B a vertex), shapes (16 B an entry), triangles (12 B); per frame:
-    // reference (6 B a vertex, int16), hermite distance (1 B), weights (4 B a shape).
-    let mut vertex_stride = 1;
+    // Fixed part: base (12 B a vertex), shapes (16 B an entry), triangles (12 B; thinned
+    // vertices are drawn as points); per frame: reference (6 B a vertex, int16), hermite
+    // distance (1 B), weights (4 B a shape), its time and error as JSON text (under 48 B).
     let fixed = |s: usize| (12 * vertices + 16 * shape_entries) / s + if s == 1 { 12 * triangles } else { 0 };
-    while fixed(vertex_stride) > PLAYER_BYTES / 2 {
+    let room = |s: usize| PLAYER_BYTES.saturating_sub(fixed(s)) / (7 * vertices.div_ceil(s) + 4 * shapes + 48);
+    let mut vertex_stride = 1;
+    while (fixed(vertex_stride) > PLAYER_BYTES / 2 || room(vertex_stride) < frames.min(MIN_FRAMES)) && vertex_stride < vertices {
         vertex_stride += 1;
     }
-    let per_frame = 7 * vertices.div_ceil(vertex_stride) + 4 * shapes;
-    let room = (PLAYER_BYTES - fixed(vertex_stride)) / per_frame.max(1);
-    (vertex_stride, frames.div_ceil(room.max(2)).max(1))
+    (vertex_stride, frames.div_ceil(room(vertex_stride).max(2)).max(1))
 }
 
 /// The player of `clip` (the files' shapes) against the reference frames at `times` (read by
@@ -124,6 +130,12 @@ mod tests {
         let (vs, fs) = strides(20_000, 40_000, 200_000, 20, 1000);
         assert!(vs > 1 && fs > 1);
         let kept = 20_000usize.div_ceil(vs);
-        assert!((12 * 20_000 + 16 * 200_000) / vs + (7 * kept + 80) * 1000usize.div_ceil(fs) <= PLAYER_BYTES);
+        assert!((12 * 20_000 + 16 * 200_000) / vs + (7 * kept + 80 + 48) * 1000usize.div_ceil(fs) <= PLAYER_BYTES);
+        // Room for a second at 60 fps; the whole-number stride shows a little fewer.
+        assert!(1000usize.div_ceil(fs) >= 50, "{vs} {fs}");
+        // Many frames of a small surface: every vertex, every n-th frame.
+        let (vs, fs) = strides(128, 252, 1000, 9, 2401);
+        assert_eq!(vs, 1);
+        assert!(fs > 1 && 2401usize.div_ceil(fs) * (7 * 128 + 36 + 48) <= PLAYER_BYTES);
     }
 }

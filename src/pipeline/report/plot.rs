@@ -127,6 +127,27 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo, hi)
 }
 
+/// At most two points per pixel column of `pts` (in pixels, x increasing): the lowest and the
+/// highest, in their order, so a peak of one frame stays while a plot of thousands of frames or
+/// iterations keeps a bounded size.
+fn thin(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut k = 0;
+    while k < pts.len() {
+        let column = pts[k].0.floor();
+        let end = k + pts[k..].iter().take_while(|p| p.0.floor() == column).count();
+        let group = &pts[k..end];
+        let lowest = (0..group.len()).min_by(|&a, &b| group[a].1.total_cmp(&group[b].1)).unwrap_or(0);
+        let highest = (0..group.len()).max_by(|&a, &b| group[a].1.total_cmp(&group[b].1)).unwrap_or(0);
+        out.push(group[lowest.min(highest)]);
+        if lowest != highest {
+            out.push(group[lowest.max(highest)]);
+        }
+        k = end;
+    }
+    out
+}
+
 /// A y axis: maps values to pixels, with its ticks.
 struct Axis {
     log: bool,
@@ -275,6 +296,7 @@ impl LinePlot {
             let c = COLOURS[i % COLOURS.len()];
             let pts: Vec<(f64, f64)> =
                 line.points.iter().filter_map(|&(px, py)| Some((x.at(px, LEFT, LEFT + w)?, y.at(py, TOP + h, TOP)?))).collect();
+            let pts = if line.dots { pts } else { thin(&pts) };
             if line.dots || pts.len() == 1 {
                 for (px, py) in &pts {
                     let _ = write!(out, "<circle cx=\"{}\" cy=\"{}\" r=\"3.5\" fill=\"{c}\"/>", num(*px), num(*py));
@@ -370,6 +392,20 @@ mod tests {
         let svg = bars.svg();
         assert_eq!(svg.matches("<rect class=\"bar\"").count(), 3);
         assert!(svg.contains(">format</text>") && svg.contains(">bytes (log scale)</text>") && svg.contains(">usda</text>"));
+    }
+
+    #[test]
+    fn thinning_keeps_peaks_and_bounds_the_points() {
+        // 100 000 frames over 438 px, one spike.
+        let pts: Vec<(f64, f64)> =
+            (0..100_000).map(|i| (72.0 + 438.0 * i as f64 / 100_000.0, if i == 51_234 { 40.0 } else { 200.0 + (i % 7) as f64 })).collect();
+        let thinned = thin(&pts);
+        assert!(thinned.len() <= 2 * 439, "{}", thinned.len());
+        assert!(thinned.contains(&pts[51_234]), "the spike stays");
+        assert!(thinned.windows(2).all(|w| w[0].0 <= w[1].0), "in order");
+        // Few points: all of them.
+        let few = [(72.0, 1.0), (80.5, 2.0), (90.0, 3.0)];
+        assert_eq!(thin(&few), few);
     }
 
     #[test]
