@@ -45,11 +45,11 @@ help:
 	@echo "make bench-writers print the full-frame writers' MB/s (usda, usdc, glb) beside the disk's"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
-	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.md/.csv"
+	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.html/.md/.csv"
 	@echo "make batch-ray  the same scenes as make batch, one bake per Ray task on the cluster at RAY_ADDRESS (or a local one): docs/cluster.md"
 	@echo "make test-ray   the cluster tests alone (part of make test): a local Ray head and worker node of their own"
 	@echo "make bench-ray  make -j2 batch against blendsim-ray on a local 2-node cluster (21 scenes): batch times, per-task overhead and bytes"
-	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.md/.csv"
+	@echo "make batch-caches  bake the simulated test caches in every format into build/batch-caches, with summary.html/.md/.csv"
 	@echo "make completions  shell completions (bash, zsh, fish) and man pages into build/share"
 	@echo "make install  the binary, completions and man pages under PREFIX=$(PREFIX)"
 	@echo "make test-deps / build / clean"
@@ -144,6 +144,7 @@ demo: build deps-tetgen
 	$(BIN) bake fixtures/demo/twist.toml --out build/demo
 	@echo
 	@cat build/demo/report.md
+	@echo "plots and a player: build/demo/report.html (open it in a browser)"
 
 # Style and lints, as the suite runs them: rustfmt (rustfmt.toml) and clippy with the lint set
 # of Cargo.toml's [lints], warnings as errors.
@@ -239,7 +240,7 @@ batch: $(foreach n,$(SCENE_NAMES),$(BATCH_OUT)/$(n)/report.json)
 	if [ -z "$$baked" ]; then echo "==> nothing baked (every scene was skipped)"; exit 0; fi; \
 	for d in $$baked; do echo "$${d}report.md"; done; \
 	$(BIN) report --batch $$baked -o $(BATCH_OUT); \
-	echo "summary: $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
+	echo "summary: $(BATCH_OUT)/summary.html, $(BATCH_OUT)/summary.md, $(BATCH_OUT)/summary.csv"
 
 # The same bakes as `make batch`, one Ray task per scene (cluster/, docs/cluster.md): on the
 # cluster at RAY_ADDRESS, or on one this machine runs (`ray start --head`), or else on a Ray

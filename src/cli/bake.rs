@@ -13,7 +13,7 @@ use super::{MethodArg, Summary};
 /// Bake a scene: import, tetrahedralize, solve, embed, export and report in one process.
 ///
 /// Writes NAME.usda / NAME.glb (and the other formats of [export]), their full-frame
-/// versions NAME.full.EXT, report.json and report.md into --out. Nothing is written unless
+/// versions NAME.full.EXT, report.json, report.md and report.html into --out. Nothing is written unless
 /// the whole bake succeeds; the folder is then replaced in one step, keeping files that are
 /// not blendsim's and removing those an earlier run wrote that this one does not (whatever
 /// scene they were of), and says on stderr which it removed and which it kept.

@@ -9,25 +9,30 @@ use blendsim::Result;
 
 use super::{refuse_warnings, Summary};
 
-/// Write report.json and report.md into --out; or, with --batch, summary.csv and summary.md of
-/// many bakes.
+/// Write report.json, report.md and report.html into --out; or, with --batch, summary.csv,
+/// summary.md and summary.html of many bakes.
 ///
 /// Sizes of the blendshape and full-frame files side by side, fidelity against the full-frame
 /// evaluation, keyframe deviation, volume, the solver's history, and for a cache the error
 /// against its frames (see formats/report.md). `--batch DIR...` reads the report.json of each
 /// DIR (or of each subfolder of DIR) and writes one row per bake.
 #[derive(clap::Args)]
+#[command(
+    override_usage = "blendsim report [OPTIONS] --out <DIR> <ANIMATION> --outputs <NAME.outputs.json>\n       blendsim report [OPTIONS] --out <DIR> --batch <DIR>..."
+)]
 pub struct Args {
     /// The animation stage file from `blendsim embed`.
     #[arg(required_unless_present = "batch", conflicts_with = "batch")]
     animation: Option<PathBuf>,
-    /// The NAME.outputs.json written by `blendsim export` (required without --batch).
-    #[arg(long, required_unless_present = "batch", conflicts_with = "batch")]
+    /// The NAME.outputs.json written by `blendsim export`: required with ANIMATION (without
+    /// --batch).
+    #[arg(long, value_name = "NAME.outputs.json", required_unless_present = "batch", conflicts_with = "batch")]
     outputs: Option<PathBuf>,
     /// Bake output folders (or folders of them) to summarize.
-    #[arg(long, num_args = 1..)]
+    #[arg(long, num_args = 1.., value_name = "DIR")]
     batch: Vec<PathBuf>,
-    /// Output folder for report.json and report.md (summary.csv and summary.md with --batch).
+    /// Output folder for report.json, report.md and report.html (summary.csv, summary.md and
+    /// summary.html with --batch).
     #[arg(short = 'o', long, alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Fail at once if another blendsim is writing into --out (by default: wait for it).
@@ -52,10 +57,11 @@ pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {
         let reports = batch::find_reports(&args.batch)?.into_iter().map(|p| batch::read(&p).map(|r| (p, r))).collect::<Result<Vec<_>>>()?;
-        let (csv, md) = batch::summarize(&reports);
+        let (csv, md, html) = batch::summarize(&reports, &args.out);
         staging.set_group("summary");
         staging.write("summary.csv", csv.as_bytes())?;
         staging.write("summary.md", md.as_bytes())?;
+        staging.write("summary.html", html.as_bytes())?;
         let committed = staging.commit_with_summary()?;
         return Ok(Summary::folder(&args.out, &committed));
     }

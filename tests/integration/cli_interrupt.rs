@@ -98,6 +98,10 @@ fn normalized(folder: &Path) -> Contents {
         let text = String::from_utf8(bytes.clone()).unwrap();
         *bytes = text.lines().filter(|l| !l.starts_with("| time |")).collect::<Vec<_>>().join("\n").into_bytes();
     }
+    if let Some(Some(bytes)) = s.get_mut("report.html") {
+        let text = String::from_utf8(bytes.clone()).unwrap();
+        *bytes = text.lines().filter(|l| !l.starts_with("<tr><td>time</td>")).collect::<Vec<_>>().join("\n").into_bytes();
+    }
     s
 }
 

@@ -59,9 +59,9 @@ fn a_rebake_with_fewer_formats_removes_its_stale_files_and_keeps_the_users() {
     run(&dir.path, &["bake", "in/glb.toml", "--out", "out", "-q"]).success();
     assert_eq!(
         names(&out),
-        set(&[".blendsim-manifest.json", "box.fbx", "box.full.glb", "box.glb", "notes.txt", "renders", "report.json", "report.md"])
+        set(&[".blendsim-manifest.json", "box.fbx", "box.full.glb", "box.glb", "notes.txt", "renders", "report.html", "report.json", "report.md"])
     );
-    assert_eq!(manifest_files(&out), ["box.full.glb", "box.glb", "report.json", "report.md"]);
+    assert_eq!(manifest_files(&out), ["box.full.glb", "box.glb", "report.html", "report.json", "report.md"]);
     assert_eq!([inode("notes.txt"), inode("renders/frames/0001.png"), inode("box.fbx")], before, "the same files, untouched");
     let report = read_json(&out.join("report.json"));
     let listed: Vec<&str> = report["outputs"].as_array().unwrap().iter().map(|f| f["path"].as_str().unwrap()).collect();
@@ -92,8 +92,8 @@ fn a_bake_replaces_an_earlier_bake_of_another_scene_and_says_so() {
     assert!(snapshot(&out) == first, "an interrupted bake leaves the previous one, complete and alone");
 
     let r = run(&dir.path, &["bake", "in/crate.toml", "--out", "out"]).success();
-    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "crate.full.glb", "crate.glb", "notes.txt", "report.json", "report.md"]));
-    assert_eq!(manifest_files(&out), ["crate.full.glb", "crate.glb", "report.json", "report.md"]);
+    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "crate.full.glb", "crate.glb", "notes.txt", "report.html", "report.json", "report.md"]));
+    assert_eq!(manifest_files(&out), ["crate.full.glb", "crate.glb", "report.html", "report.json", "report.md"]);
     assert_eq!(std::fs::metadata(out.join("notes.txt")).unwrap().ino(), notes, "the user's file, untouched");
     let lines: Vec<&str> = r.stderr.lines().collect();
     assert_eq!(
@@ -123,7 +123,17 @@ fn export_and_report_share_a_folder_and_each_replaces_only_its_own_files() {
     run(d, &["export", "animation.json", "--out", "out"]).success();
     run(d, &["report", "animation.json", "--outputs", "out/box.outputs.json", "--out", "out"]).success();
     let out = dir.join("out");
-    let all = [".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.outputs.json", "box.usda", "report.json", "report.md"];
+    let all = [
+        ".blendsim-manifest.json",
+        "box.full.glb",
+        "box.full.usda",
+        "box.glb",
+        "box.outputs.json",
+        "box.usda",
+        "report.html",
+        "report.json",
+        "report.md",
+    ];
     assert_eq!(names(&out), set(&all), "report kept the export's files");
     // Export again with fewer formats (the animation file edited to ask for glb only): the
     // report stays, the usda files go.
@@ -131,10 +141,16 @@ fn export_and_report_share_a_folder_and_each_replaces_only_its_own_files() {
     animation["data"]["scene"]["export"]["formats"] = serde_json::json!(["glb"]);
     std::fs::write(dir.join("animation.json"), serde_json::to_vec(&animation).unwrap()).unwrap();
     run(d, &["export", "animation.json", "--out", "out"]).success();
-    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "box.outputs.json", "report.json", "report.md"]));
+    assert_eq!(
+        names(&out),
+        set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "box.outputs.json", "report.html", "report.json", "report.md"])
+    );
     // A bake owns both groups: the export's list goes too.
     run(d, &["bake", "in/all.toml", "--out", "out", "-q"]).success();
-    assert_eq!(names(&out), set(&[".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.usda", "report.json", "report.md"]));
+    assert_eq!(
+        names(&out),
+        set(&[".blendsim-manifest.json", "box.full.glb", "box.full.usda", "box.glb", "box.usda", "report.html", "report.json", "report.md"])
+    );
 }
 
 /// The first bake holds the folder (paused by the test hook); the second waits and says so,
@@ -170,7 +186,7 @@ fn a_second_bake_into_a_busy_folder_waits_or_fails_clearly() {
     let status = second.wait_timeout(600.0).expect("the second bake finishes");
     let r = second.finish(status);
     assert_eq!(r.code, Some(0), "{r}");
-    assert_eq!(manifest_files(&dir.join("out")), ["box.full.glb", "box.glb", "report.json", "report.md"]);
+    assert_eq!(manifest_files(&dir.join("out")), ["box.full.glb", "box.glb", "report.html", "report.json", "report.md"]);
     assert_eq!(names(&dir.path), set(&["in", "out"]));
 }
 
@@ -181,8 +197,8 @@ fn concurrent_bakes_into_one_folder_never_mix() {
     let dir = TempDir::new("output-race");
     scene(&dir.path, "usda.toml", "[\"usda\"]");
     scene(&dir.path, "glb.toml", "[\"glb\"]");
-    let usda = set(&[".blendsim-manifest.json", "box.full.usda", "box.usda", "report.json", "report.md"]);
-    let glb = set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "report.json", "report.md"]);
+    let usda = set(&[".blendsim-manifest.json", "box.full.usda", "box.usda", "report.html", "report.json", "report.md"]);
+    let glb = set(&[".blendsim-manifest.json", "box.full.glb", "box.glb", "report.html", "report.json", "report.md"]);
     let mut waited = 0;
     for round in 0..4 {
         let a = Spawned::start(&dir.path, &["bake", "in/usda.toml", "--out", "out"], &[]);

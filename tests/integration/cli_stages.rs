@@ -119,7 +119,7 @@ fn chained_stages_give_the_bytes_of_bake_and_bakes_are_deterministic() {
     // Each folder holds exactly the animation files and the report (the chain's also the
     // export's list of files).
     let mut expected: std::collections::BTreeSet<String> = files.iter().map(|f| f.to_string()).collect();
-    expected.extend(["report.json".to_string(), "report.md".to_string(), ".blendsim-manifest.json".to_string()]);
+    expected.extend(["report.json".to_string(), "report.md".to_string(), "report.html".to_string(), ".blendsim-manifest.json".to_string()]);
     for d in [&bake1, &bake2, &bake3] {
         assert_eq!(names(d), expected, "{}", d.display());
     }

@@ -24,6 +24,8 @@ fn same_bytes_on_1_2_3_threads(dir: &Path, scene: &str) {
     names.sort();
     assert!(names.iter().any(|n| n.ends_with(".usdc")) && names.iter().any(|n| n.ends_with(".glb")), "{names:?}");
     let md = |path: &Path| std::fs::read_to_string(path).unwrap().lines().filter(|l| !l.starts_with("| time |")).collect::<Vec<_>>().join("\n");
+    let html =
+        |path: &Path| std::fs::read_to_string(path).unwrap().lines().filter(|l| !l.starts_with("<tr><td>time</td>")).collect::<Vec<_>>().join("\n");
     for threads in [2, 3] {
         let other = bake(threads);
         let mut other_names: Vec<String> =
@@ -35,6 +37,8 @@ fn same_bytes_on_1_2_3_threads(dir: &Path, scene: &str) {
             match name.as_str() {
                 "report.json" => assert_eq!(without_timings(read_json(&a)), without_timings(read_json(&b)), "{scene}, {threads} threads: {name}"),
                 "report.md" => assert_eq!(md(&a), md(&b), "{scene}, {threads} threads: {name}"),
+                // The same numbers but the wall-clock row, and the same player.
+                "report.html" => assert_eq!(html(&a), html(&b), "{scene}, {threads} threads: {name}"),
                 _ => assert!(
                     std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
                     "{scene}, {threads} threads: {name} differs from the one-thread bake's"

@@ -36,6 +36,7 @@ mod layers;
 mod normals;
 mod paper_scenes;
 mod render_demo;
+mod report_html;
 mod studio_caches;
 mod texture;
 mod warm_rebake;

@@ -52,7 +52,7 @@ fn bake_and_check(dir: &TempDir, scene: &Path, expect_name: &str) -> (Value, Ani
 
     let outputs = output_files(&report["outputs"]);
     let mut expected: std::collections::BTreeSet<String> = outputs.iter().map(|f| f.path.clone()).collect();
-    expected.extend(["report.json".into(), "report.md".into(), ".blendsim-manifest.json".into()]);
+    expected.extend(["report.json".into(), "report.md".into(), "report.html".into(), ".blendsim-manifest.json".into()]);
     assert_eq!(names(&out), expected, "the output folder holds the listed files and the report");
     for kind in [OutputKind::Blendshape, OutputKind::FullFrame] {
         assert!(outputs.iter().filter(|f| f.kind == kind).count() >= 2, "usda and glb of each kind: {outputs:?}");

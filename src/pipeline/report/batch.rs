@@ -1,5 +1,5 @@
-//! `blendsim report --batch`: the `report.json` of many bakes in one table, `summary.csv` and
-//! `summary.md`, one row per bake.
+//! `blendsim report --batch`: the `report.json` of many bakes in one table, `summary.csv`,
+//! `summary.md` and `summary.html`, one row per bake.
 
 use std::path::{Path, PathBuf};
 
@@ -43,7 +43,7 @@ pub fn read(path: &Path) -> Result<Report> {
         .map_err(|e| Error::in_file(path, format!("is not a blendsim report ({e})"), "pass the report.json written by blendsim bake or report"))
 }
 
-const COLUMNS: [&str; 27] = [
+const COLUMNS: [&str; 36] = [
     "bake",
     "scene",
     "method",
@@ -57,9 +57,12 @@ const COLUMNS: [&str; 27] = [
     "cache_bytes",
     "usda_bytes",
     "full_usda_bytes",
+    "usdc_bytes",
+    "full_usdc_bytes",
     "glb_bytes",
     "full_glb_bytes",
     "usda_ratio",
+    "usdc_ratio",
     "glb_ratio",
     "input_bytes",
     "usda_input_ratio",
@@ -69,6 +72,12 @@ const COLUMNS: [&str; 27] = [
     "glb_full_input_ratio",
     "error_max",
     "error_rms",
+    "converged",
+    "iterations",
+    "seconds",
+    "key_movement",
+    "volume_loss",
+    "hermite_volume_loss",
     "fit_error_max",
     "warnings",
 ];
@@ -105,9 +114,12 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
                 cache.map_or(String::new(), |c| c.bytes.to_string()),
                 bytes(Format::Usda, OutputKind::Blendshape),
                 bytes(Format::Usda, OutputKind::FullFrame),
+                bytes(Format::Usdc, OutputKind::Blendshape),
+                bytes(Format::Usdc, OutputKind::FullFrame),
                 bytes(Format::Glb, OutputKind::Blendshape),
                 bytes(Format::Glb, OutputKind::FullFrame),
                 ratio(Format::Usda),
+                ratio(Format::Usdc),
                 ratio(Format::Glb),
                 r.input_bytes.to_string(),
                 of(&r.input_ratios, Format::Usda),
@@ -117,6 +129,12 @@ fn rows(reports: &[(PathBuf, Report)]) -> Vec<Vec<String>> {
                 of(&r.full_frame_input_ratios, Format::Glb),
                 format!("{max:.3e}"),
                 format!("{rms:.3e}"),
+                r.solver.converged.to_string(),
+                r.solver.iterations.to_string(),
+                format!("{:.3}", r.solver.seconds),
+                format!("{:.3e}", r.keyframe_deviation.max),
+                r.volume.as_ref().map_or(String::new(), |v| format!("{:.4}", v.animation.in_between_loss)),
+                r.volume.as_ref().map_or(String::new(), |v| format!("{:.4}", v.hermite.in_between_loss)),
                 cache.and_then(|c| c.fit_error.as_ref()).map_or(String::new(), |f| format!("{:.3e}", f.max)),
                 // The codes, one per warning (the lines are in the bake's report).
                 r.warnings.iter().map(|w| code_of(w)).collect::<Vec<_>>().join(" "),
@@ -133,9 +151,15 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// `summary.csv` and `summary.md` of the reports (each with the path it was read from).
-/// `error_max`/`error_rms` are against the cache for a cache bake, else the storage error.
-pub fn summarize(reports: &[(PathBuf, Report)]) -> (String, String) {
+/// The columns `summary.html` sorts by.
+const SORTABLE: [&str; 10] =
+    ["usda_ratio", "usdc_ratio", "glb_ratio", "error_max", "error_rms", "seconds", "iterations", "key_movement", "volume_loss", "warnings"];
+
+/// `summary.csv`, `summary.md` and `summary.html` of the reports (each with the path it was
+/// read from), the last linking each bake's `report.html` relative to `out`, the folder the
+/// summary is written to. `error_max`/`error_rms` are against the cache for a cache bake, else
+/// the storage error.
+pub fn summarize(reports: &[(PathBuf, Report)], out: &Path) -> (String, String, String) {
     let rows = rows(reports);
     let mut csv = COLUMNS.join(",") + "\n";
     let mut md = format!(
@@ -148,5 +172,37 @@ pub fn summarize(reports: &[(PathBuf, Report)]) -> (String, String) {
         csv += &(row.iter().map(|f| csv_field(f)).collect::<Vec<_>>().join(",") + "\n");
         md += &format!("| {} |\n", row.join(" | "));
     }
-    (csv, md)
+    let links: Vec<String> = reports.iter().map(|(path, _)| link(out, &path.with_file_name("report.html"))).collect();
+    let html = super::html::summary(&COLUMNS, &rows, &links, &SORTABLE);
+    (csv, md, html)
+}
+
+/// A link from a page in folder `from` to the file `to`: relative when both resolve (so the
+/// folders can move together), else a `file://` URL; percent-encoded.
+fn link(from: &Path, to: &Path) -> String {
+    let absolute = |p: &Path| std::path::absolute(p).ok().map(|a| a.components().collect::<PathBuf>());
+    let (Some(a), Some(b)) = (absolute(from), absolute(to)) else { return encode(&to.display().to_string()) };
+    let common = a.components().zip(b.components()).take_while(|(x, y)| x == y).count();
+    if common == 0 {
+        return format!("file://{}", encode(&b.display().to_string()));
+    }
+    let mut rel: Vec<String> = a.components().skip(common).map(|_| "..".to_string()).collect();
+    rel.extend(b.components().skip(common).map(|c| c.as_os_str().to_string_lossy().into_owned()));
+    encode(&rel.join("/"))
+}
+
+/// Percent-encode what a URL path may not hold as is.
+fn encode(path: &str) -> String {
+    path.bytes().map(|b| if b.is_ascii_alphanumeric() || b"-._~/".contains(&b) { (b as char).to_string() } else { format!("%{b:02X}") }).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn links_are_relative() {
+        assert_eq!(link(Path::new("/a/summary"), Path::new("/a/bakes/one x/report.html")), "../bakes/one%20x/report.html");
+        assert_eq!(link(Path::new("/a"), Path::new("/a/report.html")), "report.html");
+    }
 }

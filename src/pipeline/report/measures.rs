@@ -33,26 +33,39 @@ pub fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal
 }
 
 /// The blendshape `clip` of `tr` as the files store it (f32 shapes, f32 weights sampled at
-/// `frames`) against the trajectory itself at those frames.
-pub fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> Deviation {
+/// `frames`) against the trajectory itself at those frames, and per frame the largest and the
+/// rms distance (relative to `diagonal`, as the deviation).
+pub fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> (Deviation, Vec<f64>, Vec<f64>) {
     // As USD stores it: f32 weights sampled at frames.
     let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
-    deviation(frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))), diagonal)
+    let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
+    let (mut per_frame, mut per_frame_rms) = (Vec::with_capacity(frames.len()), Vec::with_capacity(frames.len()));
+    let poses: Vec<(Vec<Point>, Vec<Point>)> = frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))).collect();
+    for (a, b) in &poses {
+        let d: Vec<f64> = a.iter().zip(b).map(|(p, q)| norm(sub(*p, *q))).collect();
+        per_frame.push(d.iter().copied().fold(0.0, f64::max) / scale);
+        per_frame_rms.push(if d.is_empty() { 0.0 } else { (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt() / scale });
+    }
+    (deviation(poses.into_iter(), diagonal), per_frame, per_frame_rms)
+}
+
+/// Enclosed volume of the surface `triangles` moving on `tr` at each of `frames`.
+pub fn volume_series(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]]) -> Vec<f64> {
+    frames.iter().map(|&(_, t)| surface::enclosed_volume(&tr.evaluate(t), triangles)).collect()
 }
 
 /// Enclosed volume of the surface `triangles` moving on `tr`, over `frames`, relative to
-/// `rest` (see [`VolumeRange`]).
-pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64) -> VolumeRange {
-    let volumes: Vec<(f64, f64)> = frames.iter().map(|&(_, t)| (t, surface::enclosed_volume(&tr.evaluate(t), triangles))).collect();
+/// `rest` (see [`VolumeRange`]); `series` is [`volume_series`] of the same (in volume units).
+pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, series: &[f64]) -> VolumeRange {
     let key_volumes: Vec<f64> = tr.positions.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
     let blend = |t: f64| {
         let (i, theta) = tr.locate(t);
         (1.0 - theta) * key_volumes[i] + theta * key_volumes[i + 1]
     };
     VolumeRange {
-        min: volumes.iter().map(|v| v.1 / rest).fold(f64::INFINITY, f64::min),
-        max: volumes.iter().map(|v| v.1 / rest).fold(f64::NEG_INFINITY, f64::max),
-        in_between_loss: volumes.iter().map(|&(t, v)| 1.0 - v / blend(t)).fold(0.0, f64::max),
+        min: series.iter().map(|v| v / rest).fold(f64::INFINITY, f64::min),
+        max: series.iter().map(|v| v / rest).fold(f64::NEG_INFINITY, f64::max),
+        in_between_loss: frames.iter().zip(series).map(|(&(_, t), v)| 1.0 - v / blend(t)).fold(0.0, f64::max),
     }
 }
 

@@ -1,18 +1,23 @@
 //! The report of a bake: file sizes side by side, fidelity of the blendshape animation against
 //! the full-frame evaluation, deviation from the input keyframes, volume, and the solver's
-//! history. Written as `report.json` (specified in `formats/report.md`) and `report.md`.
+//! history. Written as `report.json` (specified in `formats/report.md`), `report.md` and
+//! `report.html`: one model, three renderers.
 //!
-//! - this file: the model and its JSON form, and writing both files;
-//! - [`measures`]: how the numbers are measured;
-//! - [`markdown`]: the table a person reads.
+//! - this file: the model and its JSON form, and writing the files;
+//! - [`measures`]: how the numbers are measured; [`series`]: the per-frame series;
+//! - [`markdown`]: the table a person reads; [`html`]: the page with [`plot`]s and a [`player`].
 //!
 //! The `report` stage (`crate::pipeline::stages::report`) fills the model from an animation and its files.
 
 pub mod batch;
 pub mod cache_fit;
 pub mod guard_rails;
+pub mod html;
 pub mod markdown;
 pub mod measures;
+pub mod player;
+pub mod plot;
+pub mod series;
 
 use std::collections::BTreeMap;
 
@@ -24,7 +29,7 @@ use crate::support::error::Result;
 use crate::support::output::Staging;
 
 /// The files [`Report::write`] stages.
-pub const FILES: [&str; 2] = ["report.json", "report.md"];
+pub const FILES: [&str; 3] = ["report.json", "report.md", "report.html"];
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -143,6 +148,13 @@ pub struct Report {
     /// times that look like frames, an output larger than what it replaces).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// The per-frame and per-iteration series the plots draw (absent in reports written before
+    /// it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub series: Option<series::Series>,
+    /// The player's data: in `report.html` only, not in `report.json` (too big for it).
+    #[serde(skip)]
+    pub player: Option<player::Player>,
 }
 
 impl Report {
@@ -153,12 +165,13 @@ impl Report {
         bytes
     }
 
-    /// Stage `report.json` and `report.md`, in the staging group `report` (a commit replaces
-    /// the report an earlier run wrote, and keeps an export's files beside it).
+    /// Stage `report.json`, `report.md` and `report.html`, in the staging group `report` (a
+    /// commit replaces the report an earlier run wrote, and keeps an export's files beside it).
     pub fn write(&self, staging: &mut Staging) -> Result<()> {
-        let [json, md] = FILES;
+        let [json, md, html] = FILES;
         staging.set_group("report");
         staging.write(json, &self.to_json())?;
-        staging.write(md, markdown::render(self).as_bytes())
+        staging.write(md, markdown::render(self).as_bytes())?;
+        staging.write(html, html::render(self).as_bytes())
     }
 }

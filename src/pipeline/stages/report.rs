@@ -5,8 +5,9 @@ use crate::algorithms::geometry::{bbox_diagonal, surface};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
 use crate::pipeline::report::guard_rails::guard_rails;
-use crate::pipeline::report::measures::{blendshape_error, deviation, ratios_to, size_ratios, volume_range};
-use crate::pipeline::report::{Report, Volume};
+use crate::pipeline::report::measures::{blendshape_error, deviation, ratios_to, size_ratios, volume_range, volume_series};
+use crate::pipeline::report::series::{energy_phases, ErrorSeries, KeyVolume, Series, VolumeSeries};
+use crate::pipeline::report::{player, Report, Volume};
 use crate::pipeline::scene::{Basis, Method};
 use crate::pipeline::stage_file::CacheRecord;
 use crate::pipeline::stage_file::{Animation, Outputs};
@@ -31,7 +32,7 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     let diagonal = bbox_diagonal(&animation.mesh.positions);
     // The clip the blendshape files hold (a principal one at the rank export chose).
     let (clip, rank) = (&clip.0, clip.1);
-    let error = blendshape_error(clip, tr, &frames, diagonal);
+    let (error, per_frame, per_frame_rms) = blendshape_error(clip, tr, &frames, diagonal);
     // The input keys: every key of the trajectory, or every `stride`-th when it also holds
     // in-betweens (mass-spring: `inbetweens + 1`).
     let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
@@ -40,17 +41,72 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     let triangles = &animation.mesh.triangles;
     let closed = !triangles.is_empty() && surface::open_edges(&animation.mesh).is_empty();
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
-    let volume = (closed && rest_volume > 0.0).then(|| {
-        let hermite = Trajectory::with_zero_velocities(key_times, animation.input_keys.clone());
-        Volume {
+    let hermite = Trajectory::with_zero_velocities(key_times.clone(), animation.input_keys.clone());
+    let volumes = (closed && rest_volume > 0.0).then(|| {
+        let (a, h) = (volume_series(tr, &frames, triangles), volume_series(&hermite, &frames, triangles));
+        let volume = Volume {
             rest: rest_volume,
-            animation: volume_range(tr, &frames, triangles, rest_volume),
-            hermite: volume_range(&hermite, &frames, triangles, rest_volume),
-        }
+            animation: volume_range(tr, &frames, triangles, rest_volume, &a),
+            hermite: volume_range(&hermite, &frames, triangles, rest_volume, &h),
+        };
+        let keys = key_times
+            .iter()
+            .zip(tr.positions.iter().step_by(stride).zip(&animation.input_keys))
+            .map(|(&time, (a, i))| KeyVolume {
+                time,
+                animation: surface::enclosed_volume(a, triangles) / rest_volume,
+                input: surface::enclosed_volume(i, triangles) / rest_volume,
+            })
+            .collect();
+        let ratio = |v: Vec<f64>| v.into_iter().map(|x| x / rest_volume).collect();
+        (volume, VolumeSeries { animation: ratio(a), hermite: ratio(h), keys })
     });
+    let (volume, volume_series) = volumes.unzip();
     // A principal clip plays its own trajectory: that is what the files hold.
     let played = rank.map(|_| clip.played(&tr.times));
-    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played.as_ref().unwrap_or(tr), record, budget)).transpose()?;
+    let played_tr = played.as_ref().unwrap_or(tr);
+    let cache = animation.cache.as_ref().map(|record| cache_report(animation, played_tr, record, budget)).transpose()?;
+    let frame_times: Vec<f64> = frames.iter().map(|f| f.1).collect();
+    // The player and the error series against the reference: the cache's frames for a cache
+    // bake, else the full-frame evaluation.
+    let (error_series, player) = match (&animation.cache, &cache) {
+        (Some(record), Some(c)) => {
+            let mut source = super::import_cache::reopen(record, budget)?;
+            let times: Vec<f64> = (0..source.frames.frame_count()).map(|f| source.frames.time(f)).collect();
+            let mut buffer = vec![[0.0; 3]; source.frames.vertex_count()];
+            let player = player::build(
+                "cache",
+                clip,
+                triangles,
+                &times,
+                |f| {
+                    source.frames.read_frame(f, &mut buffer)?;
+                    Ok(buffer.clone())
+                },
+                played_tr,
+                &hermite,
+                &key_times,
+                c.error.diagonal,
+            )?;
+            let series = ErrorSeries { reference: "cache".into(), times, max: c.error.per_frame.clone(), rms: c.error.per_frame_rms.clone() };
+            (series, player)
+        }
+        _ => {
+            let player = player::build(
+                "full-frame",
+                clip,
+                triangles,
+                &frame_times,
+                |f| Ok(tr.evaluate(frame_times[f])),
+                played_tr,
+                &hermite,
+                &key_times,
+                if diagonal > 0.0 { diagonal } else { 1.0 },
+            )?;
+            (ErrorSeries { reference: "full-frame".into(), times: frame_times.clone(), max: per_frame, rms: per_frame_rms }, player)
+        }
+    };
+    let series = Series { frame_times, volume: volume_series, error: error_series, energy_phases: energy_phases(&animation.log) };
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
@@ -81,6 +137,8 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
         basis: if rank.is_some() { Basis::Principal } else { Basis::Keys },
         rank,
         warnings: animation.warnings.clone(),
+        series: Some(series),
+        player: Some(player),
     })
 }
 

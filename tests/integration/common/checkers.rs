@@ -257,3 +257,23 @@ pub fn check_blender(files: &[(&Path, &Expected)]) -> Value {
     summary["exit"] = output.status.code().map_or_else(|| Value::from(output.status.to_string()), Value::from);
     summary
 }
+
+/// `report_check.mjs`: a bake's `report.html` (or a batch's `summary.html`) opened from
+/// `file://` in headless Chromium, refusing every other request; its plots, player and
+/// scrubber (or links and sorting) checked, and html-validate's recommended rules. With
+/// `screenshot`, the page is saved there. Returns the summary whatever the verdict.
+pub fn check_report_html(file: &Path, screenshot: Option<&Path>) -> Value {
+    require_node_modules(&["playwright-core", "html-validate"]);
+    assert!(Path::new("/usr/bin/chromium").is_file(), "/usr/bin/chromium is missing: run `make test-deps` (apt-get install chromium)");
+    let mut cmd = Command::new("node");
+    cmd.arg(checkers_dir().join("report_check.mjs")).arg(file);
+    if let Some(s) = screenshot {
+        cmd.arg(s);
+    }
+    let output = cmd.output().expect("run report_check.mjs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let last = stdout.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| {
+        panic!("report_check.mjs {}: summary is not JSON ({e}):\n{stdout}\n{}", file.display(), String::from_utf8_lossy(&output.stderr))
+    })
+}
