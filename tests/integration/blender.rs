@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use blendsim::algorithms::blendshape::clip::{BlendShapeClip, Weights};
 use blendsim::algorithms::geometry::Point;
-use blendsim::pipeline::scene::{Axis, Format, SceneFile};
+use blendsim::pipeline::scene::{Format, SceneFile};
 use blendsim::pipeline::stage_file::{Animation, OutputFile, OutputKind};
 use blendsim::support::output::Staging;
 use serde_json::Value;
@@ -118,17 +118,6 @@ fn print_sizes(name: &str, forms: &[(&str, PathBuf, Vec<OutputFile>)]) -> BTreeM
     table
 }
 
-/// The trajectory at every frame: what the full-frame files hold, and what Blender must play.
-fn every_frame(anim: &Animation) -> Expected {
-    let fps = anim.scene.fps;
-    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
-    let mut e = Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t));
-    e.fps = Some(fps);
-    e.up_axis = Some(if anim.scene.export.up_axis == Axis::Z { "z" } else { "y" }.into());
-    e.meters_per_unit = Some(anim.scene.export.meters_per_unit);
-    e
-}
-
 fn file(forms: &[(&str, PathBuf, Vec<OutputFile>)], form: &str, name: &str) -> PathBuf {
     forms.iter().find(|f| f.0 == form).unwrap().1.join(name)
 }
@@ -149,7 +138,7 @@ fn plays_in_blender(scene: &Path, stem: &str) -> Value {
         check_outputs(out, &anim, &blendshapes);
     }
 
-    let expected = every_frame(&anim);
+    let expected = Expected::every_frame(&anim);
     // The default glb plays within its stated quantization error (report.json).
     let default_glb = forms[1].2.iter().find(|f| f.kind == OutputKind::Blendshape && f.format == Format::Glb).unwrap();
     let stated = default_glb.quantization_error.expect("the default glb states its quantization error");
@@ -287,7 +276,7 @@ fn up_axis_and_units_arrive_in_blender() {
         let mut staging = Staging::new(&dir.join(name)).unwrap();
         let outputs = blendsim::pipeline::stages::export(&anim, &blendsim::support::budget::Budget::default(), &mut staging).unwrap();
         staging.commit().unwrap();
-        let expected = every_frame(&anim);
+        let expected = Expected::every_frame(&anim);
         for ext in ["usda", "glb"] {
             let file = format!("{name}.{ext}");
             // The quantized glb (its grid composed with the placement) within its stated error.
@@ -324,7 +313,7 @@ fn uvs_and_material_slots_arrive_in_blender() {
     let anim = library_animation(&dir.join("scene.toml"));
     let obj = blendsim::formats::mesh::obj::parse(&std::fs::read_to_string(dir.join("rest.obj")).unwrap()).unwrap();
     let a = obj.attributes.as_ref().unwrap();
-    let mut expected = every_frame(&anim);
+    let mut expected = Expected::every_frame(&anim);
     expected.corners = Some(
         obj.triangles.iter().zip(&a.uv_corners).map(|(t, c)| [0, 1, 2].map(|k| (t[k], a.uvs[c[k] as usize][0], a.uvs[c[k] as usize][1]))).collect(),
     );

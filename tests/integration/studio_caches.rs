@@ -14,7 +14,7 @@ use std::path::Path;
 
 use blendsim::algorithms::geometry::{bbox_diagonal, Point};
 use blendsim::formats::cache::{CacheOptions, VertexCache};
-use blendsim::pipeline::scene::{Axis, Format};
+use blendsim::pipeline::scene::Format;
 use blendsim::pipeline::stage_file::{self, Keyframes, OutputKind};
 use blendsim::support::budget::Budget;
 use serde_json::Value;
@@ -231,13 +231,7 @@ fn fbx_spacetime_bake_plays_in_blender() {
         assert!(at <= 1e-6, "key frame {key}: {at} from the cache");
     }
     // What the files must play: the library's trajectory of the same scene at every frame.
-    let anim = library_animation(&dir.join("scene.toml"));
-    let fps = anim.scene.fps;
-    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
-    let mut expected = Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t));
-    expected.fps = Some(fps);
-    expected.up_axis = Some(if anim.scene.export.up_axis == Axis::Z { "z" } else { "y" }.into());
-    expected.meters_per_unit = Some(anim.scene.export.meters_per_unit);
+    let expected = Expected::every_frame(&library_animation(&dir.join("scene.toml")));
     let outputs = output_files(&report["outputs"]);
     // The full-frame glb holds the cache, and its stated error is measured against the cache
     // (not the trajectory, 0.24 of the diagonal away): within its share of the tolerance.

@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use blendsim::algorithms::geometry::Point;
+use blendsim::pipeline::scene::Axis;
+use blendsim::pipeline::stage_file::Animation;
 use serde::Serialize;
 use serde_json::Value;
 
@@ -62,6 +64,18 @@ impl Expected {
             triangle_materials: None,
             map_vertices: None,
         }
+    }
+
+    /// An animation's trajectory at every frame, with its stage's fps, up axis and units: what
+    /// the full-frame files hold, and what a consumer must play.
+    pub fn every_frame(anim: &Animation) -> Expected {
+        let fps = anim.scene.fps;
+        let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
+        let mut e = Expected::at(&frames, fps, |t| anim.trajectory.evaluate(t));
+        e.fps = Some(fps);
+        e.up_axis = Some(if anim.scene.export.up_axis == Axis::Z { "z" } else { "y" }.into());
+        e.meters_per_unit = Some(anim.scene.export.meters_per_unit);
+        e
     }
 }
 
