@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use blendsim::algorithms::geometry::Point;
 use serde_json::Value;
 
-use crate::common::cli::{read_json, run, TempDir};
+use crate::common::cli::{copy_demo, read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
 /// A surface of quads: rings of `n` points, consecutive rings joined.
@@ -113,11 +113,7 @@ fn teapot_scene(dir: &Path, tables: &str) -> PathBuf {
 /// The bundled demo (a twisted prism, 128 vertices, ends held) copied to `dir` with extra
 /// `[tet]` lines.
 fn demo_scene(dir: &Path, tet_lines: &str) -> PathBuf {
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
-    for e in std::fs::read_dir(&demo).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), dir.join(e.file_name())).unwrap();
-    }
+    copy_demo(dir);
     let scene = dir.join("twist.toml");
     let text = std::fs::read_to_string(&scene).unwrap().replace("[tet]\n", &format!("[tet]\n{tet_lines}\n"));
     std::fs::write(&scene, text).unwrap();

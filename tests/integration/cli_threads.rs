@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use crate::cli_physics::cube_medit;
-use crate::common::cli::{read_json, run_env, without_timings, TempDir};
+use crate::common::cli::{copy_demo, read_json, run_env, without_timings, TempDir};
 
 /// Bake `scene` in `dir` into `out-N` with N threads for N = 1, 2, 3, and check that every
 /// output is the same bytes as the one-thread bake's (report.json without its timings,
@@ -55,11 +55,7 @@ fn same_bytes_on_1_2_3_threads(dir: &Path, scene: &str) {
 #[test]
 fn the_demo_bakes_the_same_bytes_on_one_two_and_three_threads() {
     let dir = TempDir::new("threads-demo");
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
-    for entry in std::fs::read_dir(&demo).unwrap() {
-        let path = entry.unwrap().path();
-        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
-    }
+    copy_demo(&dir.path);
     let scene = std::fs::read_to_string(dir.join("twist.toml")).unwrap();
     for global_step in ["auto", "direct", "iterative"] {
         let name = format!("twist-{global_step}.toml");

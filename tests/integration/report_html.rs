@@ -17,7 +17,7 @@ use serde_json::Value;
 use crate::cache_bake::{scene as cache_scene, write_cache};
 use crate::common::bar::{bar, BarSettings};
 use crate::common::checkers::check_report_html;
-use crate::common::cli::{read_json, run, TempDir};
+use crate::common::cli::{copy_demo, read_json, run, TempDir};
 
 /// The page without its wall-clock row (the only bytes that differ between runs).
 fn without_time(path: &Path) -> String {
@@ -81,11 +81,7 @@ fn the_demo_report_html_plots_and_plays_offline_in_chromium() {
 #[test]
 fn a_bake_with_many_frames_shows_every_nth_frame_and_a_hermite_bake_no_w_plot() {
     let dir = TempDir::new("report-html-decimated");
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
-    for entry in std::fs::read_dir(&demo).unwrap() {
-        let path = entry.unwrap().path();
-        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
-    }
+    copy_demo(&dir.path);
     let scene = std::fs::read_to_string(dir.join("twist.toml")).unwrap();
     assert!(scene.contains("\nfps = 60\n"));
     std::fs::write(dir.join("twist.toml"), scene.replace("\nfps = 60\n", "\nfps = 1200\n")).unwrap();

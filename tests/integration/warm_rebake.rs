@@ -9,16 +9,7 @@ use blendsim::algorithms::procedural::{prism, twist, Twist};
 use blendsim::formats::mesh::obj;
 use serde_json::Value;
 
-use crate::common::cli::{energies, names, read_json, run, TempDir};
-
-/// A copy of the bundled demo in `dir`.
-fn demo(dir: &Path) {
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
-    for entry in std::fs::read_dir(&demo).unwrap() {
-        let path = entry.unwrap().path();
-        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
-    }
-}
+use crate::common::cli::{copy_demo, energies, names, read_json, run, TempDir};
 
 /// The demo's left key twisted by `degrees` instead of its 120 (the demo's own generator).
 fn edit_left_key(dir: &Path, degrees: f64) {
@@ -75,7 +66,7 @@ fn trajectory(dir: &Path) -> (Vec<f64>, Vec<f64>) {
 #[test]
 fn unchanged_inputs_rebake_to_the_same_bytes_without_tetgen_or_the_solve() {
     let dir = TempDir::new("warm-unchanged");
-    demo(&dir.path);
+    copy_demo(&dir.path);
     // The first bake into its own --out has nothing to reuse, and keeps a cache.
     let first = run(&dir.path, &["bake", "twist.toml", "--out", "cold", "--from", "cold"]).success();
     assert_eq!(reuse_line(&first.stderr), "blendsim: from cold: nothing to reuse, every stage ran", "{first}");
@@ -93,7 +84,7 @@ fn unchanged_inputs_rebake_to_the_same_bytes_without_tetgen_or_the_solve() {
 #[test]
 fn one_moved_key_starts_from_the_previous_solution_and_lands_on_the_cold_result() {
     let dir = TempDir::new("warm-key");
-    demo(&dir.path);
+    copy_demo(&dir.path);
     run(&dir.path, &["bake", "twist.toml", "--out", "before", "--from", "before"]).success();
     edit_left_key(&dir.path, 100.0);
     run(&dir.path, &["bake", "twist.toml", "--out", "cold", "--from", "cold"]).success();
@@ -125,7 +116,7 @@ fn one_moved_key_starts_from_the_previous_solution_and_lands_on_the_cold_result(
 #[test]
 fn changed_settings_or_mesh_run_their_stages_again() {
     let dir = TempDir::new("warm-changed");
-    demo(&dir.path);
+    copy_demo(&dir.path);
     run(&dir.path, &["bake", "twist.toml", "--out", "before", "--from", "before"]).success();
     // A material setting: TetGen's inputs are the same, the solve's are not.
     let scene = std::fs::read_to_string(dir.join("twist.toml")).unwrap();
@@ -149,7 +140,7 @@ fn changed_settings_or_mesh_run_their_stages_again() {
 #[test]
 fn a_damaged_cache_is_a_warning_and_a_folder_that_is_no_bake_an_error() {
     let dir = TempDir::new("warm-damaged");
-    demo(&dir.path);
+    copy_demo(&dir.path);
     run(&dir.path, &["bake", "twist.toml", "--out", "cold", "--from", "cold"]).success();
     // A bake without --from keeps no cache: a later --from it bakes cold.
     run(&dir.path, &["bake", "twist.toml", "--out", "plain"]).success();

@@ -311,6 +311,11 @@ pub fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Option<Vec<u8>
     out
 }
 
+/// A copy of the bundled demo scene (`fixtures/demo`) in `to`.
+pub fn copy_demo(to: &Path) {
+    copy_tree(&Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo"), to);
+}
+
 /// Copy a folder tree (files and folders only).
 pub fn copy_tree(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
