@@ -18,7 +18,7 @@
 //! or zero-area triangles) are diagnosed before TetGen runs, because TetGen either says
 //! nothing about them (a hole gives zero tets) or aborts with a bare C++ exception.
 
-use std::ffi::OsStr;
+use std::ffi::{OsStr, OsString};
 use std::io::Read;
 use std::path::Path;
 use std::process::{Command, ExitStatus, Stdio};
@@ -68,8 +68,12 @@ pub fn run(surface: &TriMesh, options: &TetgenOptions, source: &Path) -> Result<
 
 /// [`run`], TetGen given at most the time left of `budget` (when less than its timeout).
 pub fn run_within(surface: &TriMesh, options: &TetgenOptions, source: &Path, budget: &Budget) -> Result<TetMesh> {
-    let program = std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into());
-    run_with(&program, surface, options, source, budget)
+    run_with(&program(), surface, options, source, budget)
+}
+
+/// The TetGen binary a run starts: `$BLENDSIM_TETGEN` when set, else `tetgen` (on `PATH`).
+pub fn program() -> OsString {
+    std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into())
 }
 
 /// [`run_within`] with an explicit TetGen binary (tests use it instead of the variable).

@@ -18,7 +18,7 @@
 //! written) and is written with the bake's other files, in its one commit.
 
 use std::hash::{DefaultHasher, Hasher};
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
 use crate::algorithms::spacetime::trajectory::Trajectory;
-use crate::formats::tetgen::TetgenOptions;
+use crate::formats::tetgen::{self, TetgenOptions};
 use crate::pipeline::stage_file::{Body, KeyPoses, Solution, SolverLog};
 use crate::support::error::{Error, Result};
 
@@ -239,10 +239,10 @@ pub fn tetgen_key(surface: &TriMesh, options: &TetgenOptions) -> String {
     })
 }
 
-/// The TetGen program a bake runs (`BLENDSIM_TETGEN`, else `tetgen` on `PATH`) as a path with
-/// its size and modification time: another TetGen makes another key.
+/// The TetGen program a bake runs ([`tetgen::program`], found on `PATH`) as a path with its
+/// size and modification time: another TetGen makes another key.
 fn tetgen_program() -> String {
-    let program = std::env::var_os("BLENDSIM_TETGEN").filter(|p| !p.is_empty()).unwrap_or_else(|| "tetgen".into());
+    let program = tetgen::program();
     let program = Path::new(&program);
     let found = if program.components().count() > 1 {
         Some(program.to_path_buf())
@@ -262,16 +262,10 @@ fn binary() -> Result<&'static String> {
     static BINARY: OnceLock<std::result::Result<String, String>> = OnceLock::new();
     let hashed = BINARY.get_or_init(|| {
         let exe = std::env::current_exe().map_err(|e| format!("cannot find the running blendsim ({e})"))?;
-        let mut file = std::fs::File::open(&exe).map_err(|e| format!("cannot read {} ({e})", exe.display()))?;
         let mut d = Digest::default();
-        let mut buffer = vec![0u8; 1 << 20];
-        loop {
-            match file.read(&mut buffer) {
-                Ok(0) => break,
-                Ok(n) => d.add(&buffer[..n]),
-                Err(e) => return Err(format!("cannot read {} ({e})", exe.display())),
-            }
-        }
+        std::fs::File::open(&exe)
+            .and_then(|mut file| std::io::copy(&mut file, &mut d))
+            .map_err(|e| format!("cannot read {} ({e})", exe.display()))?;
         Ok(d.hex())
     });
     hashed.as_ref().map_err(|e| Error::general(format!("the bake cache needs the binary's hash: {e}"), "run blendsim from a readable file"))
