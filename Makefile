@@ -31,7 +31,7 @@ RAY_VENV := build/ray-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-fbx-samples deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -64,6 +64,15 @@ deps-tetgen:
 	else \
 		echo "==> installing tetgen (apt-get)"; \
 		$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq tetgen; \
+	fi
+
+# The Assimp project's test files (FBX written by other tools), read by the studio cache tests.
+deps-fbx-samples:
+	@if [ -d /usr/share/assimp/models/FBX ]; then \
+		echo "==> assimp-testmodels: already installed"; \
+	else \
+		echo "==> installing assimp-testmodels (apt-get): FBX files written by other tools, for the tests"; \
+		$(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq assimp-testmodels; \
 	fi
 
 deps-usd:
@@ -137,7 +146,7 @@ deps-ray:
 		$(RAY_VENV)/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e cluster; \
 	fi
 
-test-deps: deps-tetgen deps-usd deps-alembic deps-npm deps-chromium deps-blender deps-ray
+test-deps: deps-tetgen deps-fbx-samples deps-usd deps-alembic deps-npm deps-chromium deps-blender deps-ray
 
 demo: build deps-tetgen
 	@echo "==> baking fixtures/demo/twist.toml into build/demo"

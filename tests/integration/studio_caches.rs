@@ -208,6 +208,73 @@ fn alembic_from_the_library_reads_and_damage_is_named() {
     println!("{nan}\n{grow}");
 }
 
+/// Where Debian's `assimp-testmodels` (the Assimp project's test files) keeps its FBX files.
+const ASSIMP_FBX: &str = "/usr/share/assimp/models/FBX";
+
+/// FBX files that this project did not write: the Assimp project's test files (Debian
+/// `assimp-testmodels`). Two skinned, animated files written by other Blender exporters
+/// (2.90 and 2.79) read as Blender 4.2's own FBX importer plays them (1e-5 of the diagonal;
+/// measured ~3e-7, float32), in metres y up; an ASCII file of the FBX SDK 2018 whose take
+/// animates only renderer settings is refused as static; a file whose header is damaged
+/// (its zero bytes turned to spaces) is a one-line error naming it.
+#[test]
+fn fbx_from_other_writers_reads_as_blender_imports_them() {
+    let samples = Path::new(ASSIMP_FBX);
+    assert!(samples.is_dir(), "{ASSIMP_FBX} is missing: run `make deps-fbx-samples` (or `make test-deps`): Debian's assimp-testmodels");
+    let dir = TempDir::new("studio-fbx-others");
+    let python = blender_python();
+    assert!(python.exists(), "{} is missing: run `make deps-blender` (or `make test-deps`)", python.display());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/blender_fbx_import.py");
+    // (file, its writer, vertices, frames)
+    for (file, writer, vertices, frames) in [("animation_with_skeleton.fbx", "Blender 2.90", 1058, 21), ("huesitos.fbx", "Blender 2.79", 62, 40)] {
+        let path = samples.join(file);
+        let creator = std::fs::read(&path).unwrap();
+        let version = writer.replace("Blender ", "");
+        assert!(creator.windows(version.len()).any(|w| w == version.as_bytes()), "{file} names its writer, {writer}");
+        let stem = file.trim_end_matches(".fbx");
+        let blender = dir.join(stem);
+        std::fs::create_dir_all(&blender).unwrap();
+        let out = std::process::Command::new(&python).arg(&script).arg(&path).arg(&blender).output().unwrap();
+        assert!(out.status.success(), "Blender failed on {file}: {}", String::from_utf8_lossy(&out.stderr));
+        let info = read_json(&blender.join("info.json"));
+        assert_eq!((info["vertices"].as_u64(), info["frames"].as_u64()), (Some(vertices), Some(frames)), "{file}: {info}");
+        let expected = blender_frames(&blender.join("frames.f32"), vertices as usize, 1.0);
+        let diagonal = bbox_diagonal(&expected.concat());
+
+        let toml = format!("name = \"{stem}\"\n[cache]\npath = \"{}\"\n", path.display());
+        std::fs::write(dir.join(format!("{stem}.toml")), toml).unwrap();
+        let glb = format!("{stem}.glb");
+        run(&dir.path, &["import", &format!("{stem}.toml"), "--cache-out", &glb, "-o", &format!("{stem}.json")]).success();
+        let mut cache = VertexCache::open(&dir.join(&glb), &CacheOptions::default()).unwrap();
+        assert_eq!(Some(cache.fps), info["fps"].as_f64(), "{file}: the file's frame rate");
+        let d = farthest(&mut cache, &expected) / diagonal;
+        let moved = expected
+            .iter()
+            .map(|f| f.iter().zip(&expected[0]).map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max)).fold(0.0, f64::max))
+            .fold(0.0, f64::max);
+        println!(
+            "{file} ({writer}): {frames} frames of {vertices} vertices, farthest point {d:.2e} of the diagonal {diagonal:.3} m from Blender 4.2's import (the mesh moves {:.3} of it)",
+            moved / diagonal
+        );
+        assert!(moved > 0.02 * diagonal, "{file}: the mesh really moves");
+        assert!(d <= 1e-5, "{file}: {d:.3e} of the diagonal from Blender's import");
+    }
+    // The FBX SDK's ASCII file (Blender cannot import ASCII FBX): its take animates only a
+    // renderer's settings, so the box does not move.
+    let fails = |file: &str, message: &str| {
+        let toml = format!("name = \"x\"\n[cache]\npath = \"{}\"\n", samples.join(file).display());
+        std::fs::write(dir.join("x.toml"), toml).unwrap();
+        let r = run(&dir.path, &["import", "x.toml", "--cache-out", "x.glb"]);
+        assert_eq!(r.code, Some(1), "{file}: {r}");
+        let line = r.stderr.trim();
+        assert!(line.contains(file) && line.contains(message) && line.contains(" (fix: ") && !line.contains('\n'), "{file}: {line}");
+        assert!(!dir.join("x.glb").exists(), "{file}: nothing written");
+        println!("{line}");
+    };
+    fails("box_orphant_embedded_texture.fbx", "mesh \"Box\" does not move in take \"Take 001\"");
+    fails("transparentTest.fbx", "ufbx cannot read the FBX file: Not an FBX file");
+}
+
 /// Blender's FBX export baked with `method = "spacetime"` through `[cache]`, and the files
 /// played back in Blender (its own importers, default settings): the usda and the default
 /// (quantized LINEAR) glb play our trajectory at every frame within 1e-5 of the bbox diagonal

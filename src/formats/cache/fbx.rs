@@ -75,9 +75,35 @@ fn names<'a>(list: impl Iterator<Item = &'a str>) -> String {
     shown.join(", ") + if all.len() > 8 { ", ..." } else { "" }
 }
 
-/// The elements an animation stack animates (by element id).
+/// The properties that move points when animated: a node's transform (with its pivots and
+/// geometric offset) and a blend channel's weight. A take that animates only others (a
+/// material's, a renderer's settings) leaves the mesh where it is.
+const MOVING_PROPERTIES: [&str; 14] = [
+    "Lcl Translation",
+    "Lcl Rotation",
+    "Lcl Scaling",
+    "PreRotation",
+    "PostRotation",
+    "RotationOffset",
+    "RotationPivot",
+    "ScalingOffset",
+    "ScalingPivot",
+    "GeometricTranslation",
+    "GeometricRotation",
+    "GeometricScaling",
+    "RotationOrder",
+    "DeformPercent",
+];
+
+/// The elements an animation stack animates in a way that moves points (by element id).
 fn animated_elements(stack: &ufbx::AnimStack) -> HashSet<u32> {
-    stack.layers.iter().flat_map(|layer| layer.anim_props.iter().map(|p| p.element.element_id)).collect()
+    stack
+        .layers
+        .iter()
+        .flat_map(|layer| layer.anim_props.iter())
+        .filter(|p| MOVING_PROPERTIES.contains(&&*p.prop_name))
+        .map(|p| p.element.element_id)
+        .collect()
 }
 
 /// Whether `node`'s mesh moves in `stack`: its node or an ancestor, a bone of its skin (or the
@@ -114,7 +140,11 @@ pub fn open(path: &Path, choice: &FbxChoice) -> Result<OpenedFbx> {
     let scene = ufbx::load_file(name, opts).map_err(|e| {
         Error::in_file(
             path,
-            format!("ufbx cannot read the FBX file: {}", e.description.trim()),
+            // ufbx's `info` says where (e.g. which node or which byte), when it knows.
+            match e.info().trim() {
+                "" => format!("ufbx cannot read the FBX file: {}", e.description.trim()),
+                info => format!("ufbx cannot read the FBX file: {} ({info})", e.description.trim()),
+            },
             "check that the file is a complete FBX (binary or ASCII)",
         )
     })?;
