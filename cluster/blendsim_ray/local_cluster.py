@@ -8,6 +8,7 @@ this stops only the process groups it started. The tests and the benchmark use i
         subprocess.run(["blendsim-ray", "batch", ..., "--address", cluster.address])
 """
 
+import atexit
 import os
 import secrets
 import shutil
@@ -16,6 +17,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 # Node death is noticed within about 1.5 s instead of the default 15 s (the kill test waits
@@ -179,10 +181,31 @@ class LocalCluster:
         except BaseException:
             self.stop()
             raise
+        self._stop_on_exit()
         return self
 
+    def _stop_on_exit(self):
+        """The nodes run in sessions of their own, so nothing else ends them: stop them when this
+        process exits without calling `stop` (a test module whose teardown never ran) or is
+        told to end by SIGTERM or SIGHUP (an interrupted `make test`), then end as the signal
+        asks."""
+        atexit.register(self.stop)
+        if threading.current_thread() is not threading.main_thread():
+            return
+
+        def stop_and_end(signum, _frame):
+            self.stop()
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+
+        for signum in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(signum) == signal.SIG_DFL:
+                signal.signal(signum, stop_and_end)
+
     def stop(self):
-        for node in reversed(self.nodes):
+        """Stop every node started here and remove the temp dir; a second call does nothing."""
+        nodes, self.nodes = self.nodes, []
+        for node in reversed(nodes):
             node.stop()
             node.log.close()
         if self.own_temp:
