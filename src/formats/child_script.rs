@@ -54,17 +54,24 @@ impl ChildScript<'_> {
         let cannot_run = |e: std::io::Error| Error::in_file(path, format!("cannot run {py} {}: {e}", self.purpose), self.install);
         let mut command = Command::new(&python);
         command.envs(self.env.iter().copied()).arg("-c").arg(self.source).args(args);
-        // Started so that it dies with us (signal or kill), see `interrupt::spawn`.
+        // Started so that it dies with us (signal or kill), see `interrupt::spawn`. Its stdout
+        // is unused (results go to files); its stderr is drained by a thread while it runs, so
+        // a script (or its library) that writes more than a pipe buffer never blocks on it.
         let mut child =
-            crate::support::interrupt::spawn(command.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped())).map_err(cannot_run)?;
+            crate::support::interrupt::spawn(command.stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped())).map_err(cannot_run)?;
+        let mut pipe = child.child().stderr.take().expect("stderr is piped");
+        let drain = std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            // A read error ends the message early; the exit status still tells what happened.
+            let _ = std::io::Read::read_to_end(&mut pipe, &mut bytes);
+            bytes
+        });
         if budget.time_left().is_some() {
             let started = std::time::Instant::now();
-            // Poll: a reader takes half a second to start Python, so 20 ms is nothing, and the
-            // pipes are drained by `wait_with_output` once it has exited (its results go to
-            // files, its stdout and stderr carry a line or two).
+            // Poll: a reader takes half a second to start Python, so 20 ms is nothing.
             while child.child().try_wait().map_err(cannot_run)?.is_none() {
                 if budget.time_left().is_some_and(|left| left <= 0.0) {
-                    // Dropping the guard kills the reader's process group.
+                    // Dropping the guard kills the reader's process group (the drain then ends).
                     drop(child);
                     let reached = format!("{}'s reader stopped after {:.2} s", self.library, started.elapsed().as_secs_f64());
                     let spent = budget.time_spent("cache reading", &reached);
@@ -73,7 +80,9 @@ impl ChildScript<'_> {
                 std::thread::sleep(std::time::Duration::from_millis(20));
             }
         }
-        let output = child.wait_with_output().map_err(cannot_run)?;
+        let status = child.wait_with_output().map_err(cannot_run)?.status;
+        let stderr = drain.join().unwrap_or_default();
+        let output = std::process::Output { status, stdout: Vec::new(), stderr };
         if output.status.success() {
             return Ok(());
         }
@@ -88,5 +97,37 @@ impl ChildScript<'_> {
             }
             _ => Error::in_file(path, format!("{} failed ({}: {last})", self.library, output.status), self.check),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A script that writes `bytes` of noise to stderr, then a problem of the file.
+    const NOISY: &str =
+        "import sys\nsys.stderr.write('x' * int(sys.argv[1]) + '\\n')\nsys.stderr.write('test-tag: the file is bad | fix it\\n')\nsys.exit(4)\n";
+
+    fn noisy() -> ChildScript<'static> {
+        ChildScript {
+            source: NOISY,
+            purpose: "to test",
+            library: "the test library",
+            module: "sys",
+            install: "install python3",
+            tag: "test-tag: ",
+            check: "check the test",
+            env: &[],
+        }
+    }
+
+    /// More than a pipe buffer (64 KiB) on stderr, under a `--max-time` budget: the child is
+    /// not blocked on its pipe until the deadline (whose error would be the budget's), and its
+    /// last line becomes the error.
+    #[test]
+    fn a_child_that_writes_much_to_stderr_ends_and_its_problem_is_read() {
+        let budget = Budget::new(None, Some(30.0));
+        let err = noisy().run(Path::new("bad.abc"), &[OsStr::new("1000000")], &budget).unwrap_err();
+        assert_eq!((err.problem.as_str(), err.fix.as_str()), ("the file is bad", "fix it"), "{err}");
     }
 }
