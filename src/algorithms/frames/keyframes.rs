@@ -23,7 +23,11 @@
 //!    tolerance itself, the model is tightened instead (a quarter at a time) until its keys
 //!    need none: repairs split intervals at their middle, off the frames a tighter model
 //!    would have chosen, so without this a looser tolerance could end with more keys than a
-//!    tighter one (a two-target morph clip: 11 keys at 0.005, 8 at 0.001).
+//!    tighter one (a two-target morph clip: 11 keys at 0.005, 8 at 0.001). A first clean
+//!    round with little headroom (under 1.25) is probed once at twice the slack, kept when
+//!    clean: stretching by the headroom would barely move the model, while a looser model can
+//!    land on frames that fit far closer (the same clip: 9 keys at 8.3e-4 for 0.001, where
+//!    0.002 finds its 8 exact keys). Of rounds with as many keys, the closest fit is kept.
 //! 4. **Removal.** Keys of the quietest intervals first: remove the key and refit the two keys
 //!    on each side with the keys beyond them held (a local least-squares problem over a few
 //!    intervals, reading only their frames); keep the removal when that window stays within
@@ -75,6 +79,10 @@ const REMOVAL_MARGIN: f64 = 0.9;
 
 /// Rounds of stages 1 and 2 at most (see the calibration in [`select`]).
 const CALIBRATION_ROUNDS: usize = 8;
+
+/// Below this headroom (tolerance over the fit's error) stretching the model by the headroom
+/// would barely move it: calibration probes twice the slack once instead.
+const PROBE_HEADROOM: f64 = 1.25;
 
 /// One round of stages 1 and 2.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -155,6 +163,8 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
     let mut best_clean = usize::MAX;
     // Outcomes by candidate keys (fitted key count, headroom): the same keys need no new fit.
     let mut seen: Vec<(Vec<usize>, usize, f64)> = Vec::new();
+    // Whether this round is the probe at twice a clean slack with little headroom.
+    let mut probing = false;
     for _ in 0..CALIBRATION_ROUNDS {
         let (candidates, window_frames) = shortest_path(&mut source, eps * slack, max_window)?;
         stats.window_frames = stats.window_frames.max(window_frames);
@@ -165,7 +175,9 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
                 let (trajectory, dev) = repair(&mut source, &mut keys, settings, diagonal, &mut stats)?;
                 let headroom = if dev.max > 0.0 { settings.tolerance / dev.max } else { f64::INFINITY };
                 let fitted = keys.len();
-                if best.as_ref().is_none_or(|b| fitted < b.0.len()) {
+                // Fewest keys; of as many, the smallest error (a looser model's keys can fit
+                // closer than a tighter one's).
+                if best.as_ref().is_none_or(|b| fitted < b.0.len() || (fitted == b.0.len() && dev.max < b.2.max)) {
                     best = Some((keys, trajectory, dev));
                 }
                 seen.push((candidates.clone(), fitted, headroom));
@@ -180,12 +192,23 @@ pub fn select<S: FrameSource + ?Sized>(source: &mut S, settings: &AutoSettings) 
             }
             best_clean = fitted;
             clean = slack;
-            slack = if repaired.is_finite() { (clean * repaired).sqrt() } else { slack * headroom.min(16.0) };
-            if repaired.is_infinite() && headroom < 1.25 {
-                break;
-            }
+            probing = false;
+            slack = if repaired.is_finite() {
+                (clean * repaired).sqrt()
+            } else if headroom < PROBE_HEADROOM {
+                // The fit barely meets the tolerance on these keys, but a looser model may
+                // land on other frames that fit closer (a morph clip's own key frames, which
+                // fit exactly): one round at twice the slack, kept only if it needs no repair.
+                probing = true;
+                slack * 2.0
+            } else {
+                slack * headroom.min(16.0)
+            };
         } else {
             repaired = slack;
+            if probing {
+                break;
+            }
             // No clean round yet: the model itself is too loose for this cache (its slopes
             // miss what the fit can do), and splitting the repaired intervals at their middle
             // lands keys off the cache's own key frames. Tighten the model until its keys need
