@@ -31,7 +31,7 @@ RAY_VENV := build/ray-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: deps-ray batch-ray test-ray bench-ray help build demo test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-fbx-samples deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray bench-ray help build demo readme-image test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-fbx-samples deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -154,6 +154,13 @@ demo: build deps-tetgen
 	@echo
 	@cat build/demo/report.md
 	@echo "plots and a player: build/demo/report.html (open it in a browser)"
+
+# The README's picture: the volume plot of the demo's report.html, as a standalone SVG.
+readme-image: demo
+	@echo "==> docs/images/demo-volume.svg from build/demo/report.html"
+	@python3 -c 'import re; s = open("build/demo/report.html").read(); \
+		m = re.search(r"<svg[^>]*id=\"plot-volume\".*?</svg>", s, re.S); \
+		open("docs/images/demo-volume.svg", "w").write(m.group(0) + "\n")'
 
 # Style and lints, as the suite runs them: rustfmt (rustfmt.toml) and clippy with the lint set
 # of Cargo.toml's [lints], warnings as errors.
