@@ -315,7 +315,8 @@ fn usdc_needs_no_python_and_has_the_same_bytes_every_run() {
 /// on the solve's own W and force-scale history (report.json), whatever lines were printed.
 #[test]
 fn progress_estimates_every_phase() {
-    use blendsim::algorithms::spacetime::solver::{IterationEstimate, NEGLIGIBLE};
+    use blendsim::algorithms::spacetime::settings::NEGLIGIBLE;
+    use blendsim::algorithms::spacetime::solver::IterationEstimate;
     let dir = TempDir::new("progress-estimates");
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo");
     let input = dir.join("in");

@@ -285,7 +285,8 @@ mod tests {
         assert_eq!(f.next(2e-5), Forcing::MAX);
     }
 
-    use super::super::solver::{apply_step, objective, Settings};
+    use super::super::settings::Settings;
+    use super::super::solver::{apply_step, objective};
     use super::super::tests::{bottom, keys, material, settings, wobbly, Nodes};
     use super::super::trajectory::Trajectory;
     use crate::algorithms::physics::elastic::Elastic;
@@ -428,7 +429,8 @@ mod tests {
     /// with gravity); `Auto` and moving key times keep L-BFGS.
     #[test]
     fn gauss_newton_steps_lower_w_to_the_quasi_newton_minimum() {
-        use super::super::solver::{solve, Step};
+        use super::super::settings::Step;
+        use super::super::solver::solve;
         let mesh = cube_mesh(2);
         let el = Elastic::new(&mesh, &material()).unwrap();
         let tr = wobbly(&mesh.positions, false);

@@ -27,7 +27,7 @@ use crate::pipeline::stage_file::{CacheRecord, CacheRecordOptions, Keyframes, Sh
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
-use super::import::resolve_selection;
+use super::key_meshes::resolve_selection;
 
 /// Modification time of a regular file in ns since the epoch (none for a sequence pattern or
 /// a file system without times).
