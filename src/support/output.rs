@@ -46,7 +46,8 @@
 //! stops at `staged` (the first file is staged), `commit-staged` (the new folder is complete,
 //! before the swap), `commit-moved-aside` (fallback only: `DIR` renamed away) and
 //! `commit-swapped` (after the swap, before the old folder is removed);
-//! `BLENDSIM_TEST_NO_EXCHANGE=1` forces the two-rename fallback.
+//! `BLENDSIM_TEST_NO_EXCHANGE=1` forces the two-rename fallback. Both only in a build with
+//! `--features test-hooks` (`make test`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{File, OpenOptions};
@@ -648,7 +649,7 @@ impl Staging {
     /// old folder is now at the staging path); `Ok(Some(old))`: the two-rename fallback, the
     /// old folder moved to `old`.
     fn exchange(&self) -> Result<Option<PathBuf>> {
-        let forced_fallback = std::env::var_os("BLENDSIM_TEST_NO_EXCHANGE").is_some_and(|v| v == "1");
+        let forced_fallback = cfg!(feature = "test-hooks") && std::env::var_os("BLENDSIM_TEST_NO_EXCHANGE").is_some_and(|v| v == "1");
         if !forced_fallback {
             match exchange_dirs(&self.dir, &self.folder) {
                 Ok(()) => return Ok(None),
