@@ -717,7 +717,7 @@ impl Scene {
     /// The memory the scene needs for the frames it exports (`vertices` exported vertices over
     /// the key times at the scene's fps) and the samples it solves (`tets`, or a lower bound
     /// before TetGen), checked against `budget` before anything that size is allocated.
-    pub fn check_resources(&self, times: &[f64], vertices: usize, tets: usize, budget: &Budget) -> Result<()> {
+    pub(crate) fn check_resources(&self, times: &[f64], vertices: usize, tets: usize, budget: &Budget) -> Result<()> {
         if let (Some(start), Some(end)) = (times.first(), times.last()) {
             budget.check_frames(*start, *end, self.fps, vertices)?;
         }
@@ -982,15 +982,15 @@ impl Tet {
 /// unit: a body in nanometres has density 1e27), narrow enough that the solve's matrices keep
 /// their digits (a stiffness of 1e308 overflows; a density of 1e-300 leaves the body's motion
 /// without cost, and the bake would fail later as a "singular" system).
-pub const MATERIAL_RANGE: (f64, f64) = (1e-30, 1e30);
+pub(crate) const MATERIAL_RANGE: (f64, f64) = (1e-30, 1e30);
 
 /// The range of `damping` (per second, whatever the length unit; it may also be 0).
-pub const DAMPING_RANGE: (f64, f64) = (1e-9, 1e12);
+pub(crate) const DAMPING_RANGE: (f64, f64) = (1e-9, 1e12);
 
 /// The range of `[export] meters_per_unit`: micrometres to 1000 km. The glTF node scale is
 /// written as a 32-bit float, which holds it exactly enough (1e300 would be written as null,
 /// 1e-300 as 0).
-pub const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
+pub(crate) const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
 
 impl Material {
     fn validate(&self) -> Result<()> {

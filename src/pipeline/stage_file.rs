@@ -42,7 +42,7 @@ impl VertexSet {
     }
 
     /// A mask over `n` vertices.
-    pub fn to_mask(&self, n: usize) -> Vec<bool> {
+    pub(crate) fn to_mask(&self, n: usize) -> Vec<bool> {
         let mut m = vec![false; n];
         for &i in &self.0 {
             m[i as usize] = true;
@@ -848,7 +848,7 @@ impl Check<'_> {
 }
 
 /// Stage file format version; bumped when a stage type changes incompatibly.
-pub const FORMAT_VERSION: u32 = 1;
+pub(crate) const FORMAT_VERSION: u32 = 1;
 
 #[derive(Serialize)]
 struct HeaderOut<'a, T> {
@@ -968,7 +968,7 @@ fn relative_to(from: &Path, path: &Path) -> PathBuf {
 
 /// Parse and validate the bytes of a stage file (the memory of the stages after it within
 /// `budget`); `path` is named in errors.
-pub fn from_json<T: StageData>(bytes: &[u8], path: &Path, budget: &Budget) -> Result<T> {
+pub(crate) fn from_json<T: StageData>(bytes: &[u8], path: &Path, budget: &Budget) -> Result<T> {
     let wrong = |what: String| Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER));
     let header: HeaderIn = serde_json::from_slice(bytes).map_err(|e| wrong(format!("is not a blendsim stage file ({e})")))?;
     match (header.blendsim, header.stage.as_deref()) {

@@ -83,7 +83,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// `fill` runs and stays locked until it is renamed, so a run in another PID namespace never
 /// takes it for a leftover; temporaries of dead processes are swept first. `path` must not be
 /// a device, FIFO or folder (the rename would replace it: `-o /dev/null` as root).
-pub fn write_atomic_with(path: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+pub(crate) fn write_atomic_with(path: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -442,7 +442,7 @@ impl Staging {
     }
 
     /// The final path of a file once committed.
-    pub fn final_path(&self, name: &str) -> PathBuf {
+    pub(crate) fn final_path(&self, name: &str) -> PathBuf {
         self.target.join(contained(name))
     }
 

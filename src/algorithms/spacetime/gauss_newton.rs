@@ -45,7 +45,7 @@ impl Objective<'_> {
 
     /// `δf_s = ∂f_s/∂u · v` at sample `s` (projection Jacobians `jac`) for the per-slot
     /// direction `v` (`[slot][node]`): `M δa + K_s δx`, zero at supports.
-    pub fn residual_derivative(&self, s: &Sample, jac: &[JacobianBatch], v: &[Vec<Point>]) -> Vec<Point> {
+    pub(crate) fn residual_derivative(&self, s: &Sample, jac: &[JacobianBatch], v: &[Vec<Point>]) -> Vec<Point> {
         let el = self.elastic;
         let n = el.node_count();
         let (c, l) = self.coefficients(s);
@@ -75,7 +75,7 @@ impl Objective<'_> {
     /// The Gauss-Newton product `H v = Σ_s dτ_s J_sᵀ M⁻¹ J_s v` per slot (fixed entries
     /// included: callers mask them), with the projection Jacobians of `p` (module
     /// documentation). Sums in sample order: the same bytes for any thread count.
-    pub fn gauss_newton_product(&self, p: &Projections, v: &[Vec<Point>]) -> Vec<Vec<Point>> {
+    pub(crate) fn gauss_newton_product(&self, p: &Projections, v: &[Vec<Point>]) -> Vec<Vec<Point>> {
         let jacobians = p.jacobians.as_ref().expect("the Gauss-Newton product needs the projection Jacobians");
         let el = self.elastic;
         let n = el.node_count();

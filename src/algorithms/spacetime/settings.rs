@@ -72,7 +72,7 @@ pub enum Step {
 }
 
 /// The default of [`Settings::step`].
-pub const DEFAULT_STEP: Step = Step::Auto;
+pub(crate) const DEFAULT_STEP: Step = Step::Auto;
 
 /// CG iterations (products with the Gauss-Newton Hessian) per Gauss-Newton step at most.
 pub const GAUSS_NEWTON_CG: usize = 20;
@@ -163,7 +163,7 @@ impl Settings {
 }
 
 /// The default of [`Settings::coarse_samples`] (measured: see `formats/scene.md`).
-pub const DEFAULT_COARSE_SAMPLES: usize = 0;
+pub(crate) const DEFAULT_COARSE_SAMPLES: usize = 0;
 /// The default of [`Settings::coarse_tolerance`].
 pub const DEFAULT_COARSE_TOLERANCE: f64 = 1e-3;
 
@@ -172,7 +172,7 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-3;
 /// The default of [`Settings::negligible`] (the solver's module documentation).
 pub const NEGLIGIBLE: f64 = 1e-3;
 /// The default of [`Settings::max_iterations`].
-pub const DEFAULT_MAX_ITERATIONS: usize = 1000;
+pub(crate) const DEFAULT_MAX_ITERATIONS: usize = 1000;
 /// Iterations over which the stopping rule measures the decrease of W.
 pub const WINDOW: usize = 10;
 /// Relative change of an interval since the last factorization that triggers a refactorization.

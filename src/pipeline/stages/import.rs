@@ -95,7 +95,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
 }
 
 /// A key's tet at this fraction of its rest volume or below is flattened (a `folded-key` warning).
-pub const FLAT_TET_RATIO: f64 = 1e-3;
+pub(crate) const FLAT_TET_RATIO: f64 = 1e-3;
 
 /// How far from the origin, in rest bounding-box diagonals, a key's coordinates may lie: the
 /// files keep positions as 32-bit floats, whose spacing there is 2^13 * 2^-23 = 2^-10 (about
