@@ -189,8 +189,8 @@ test-ray: build deps-ray deps-tetgen
 	BLENDSIM=$(CURDIR)/$(BIN) $(RAY_VENV)/bin/python -m unittest discover -s cluster/tests -v
 
 test: test-deps lint test-ray
-	@echo "==> running the test suite (release build; property tests seeded with $(TEST_SEED))"
-	PROPTEST_RNG_SEED=$(TEST_SEED) $(CARGO) test --release --locked
+	@echo "==> running the test suite (release build with the test hooks; property tests seeded with $(TEST_SEED))"
+	PROPTEST_RNG_SEED=$(TEST_SEED) $(CARGO) test --release --locked --features test-hooks
 	@echo "==> checking the API documentation builds without warnings (cargo doc)"
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --locked
 
@@ -200,7 +200,7 @@ test: test-deps lint test-ray
 # phase of a bake -> the state of the output folder, the child process, the leftovers).
 tables: test-deps
 	@echo "==> the bad-input corpus, the bad stage files, the kill tests (tables on stderr)"
-	$(CARGO) test --release --locked --test integration -- --nocapture --test-threads=1 --exact \
+	$(CARGO) test --release --locked --features test-hooks --test integration -- --nocapture --test-threads=1 --exact \
 		cli_errors::corpus_of_bad_inputs cli_errors::corpus_of_bad_stage_files \
 		cli_interrupt::sigint_at_every_phase cli_interrupt::sigterm_at_every_phase cli_interrupt::sigkill_at_every_phase
 

@@ -14,7 +14,8 @@
 
 use std::time::Instant;
 
-use blendsim::algorithms::spacetime::solver::{solve, ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::algorithms::spacetime::settings::{ModelHessian, Settings, Step, DEFAULT_COARSE_TOLERANCE, DEFAULT_TOLERANCE, NEGLIGIBLE};
+use blendsim::algorithms::spacetime::solver::solve;
 use blendsim::pipeline::stage_file::Body;
 use blendsim::pipeline::stages::solve::solver_inputs;
 

@@ -29,8 +29,9 @@ use std::time::Instant;
 
 use blendsim::algorithms::physics::elastic::Elastic;
 use blendsim::algorithms::spacetime::global_step::{GlobalStats, GlobalStep};
-use blendsim::algorithms::spacetime::solver::{apply_step, initial_trajectory, objective, solve, Settings};
-use blendsim::algorithms::spacetime::timing::{ProjectionMode, Timing, TimingSettings};
+use blendsim::algorithms::spacetime::settings::{Settings, TimingSettings};
+use blendsim::algorithms::spacetime::solver::{apply_step, initial_trajectory, objective, solve};
+use blendsim::algorithms::spacetime::timing::{ProjectionMode, Timing};
 use blendsim::algorithms::spacetime::trajectory::Trajectory;
 use blendsim::algorithms::spacetime::unknowns::{KeyConstraints, Unknowns};
 use blendsim::pipeline::stage_file::Body;

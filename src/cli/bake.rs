@@ -18,7 +18,7 @@ use super::{MethodArg, Summary};
 /// not blendsim's and removing those an earlier run wrote that this one does not (whatever
 /// scene they were of), and says on stderr which it removed and which it kept.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The scene file (TOML; see formats/scene.md).
     scene: PathBuf,
     /// Output folder (created if missing).
@@ -52,12 +52,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.scene
     }
 }
 
-pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     let budget = args.budget.budget();
     let start = Instant::now();
     let scene = SceneFile::load(&args.scene)?;

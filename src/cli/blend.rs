@@ -20,7 +20,7 @@ use super::Summary;
 /// written on error.
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
-pub struct Args {
+pub(crate) struct Args {
     /// The target meshes (OBJ), at least two; the first is the rest of the spring network.
     #[arg(long, num_args = 2.., required = true)]
     targets: Vec<PathBuf>,
@@ -59,12 +59,12 @@ pub struct Args {
 
 impl Args {
     /// The weights file, or the first target (the spring network's rest).
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         self.weights_file.as_deref().unwrap_or(&self.targets[0])
     }
 }
 
-pub fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress, quiet: bool) -> Result<Summary> {
     let budget = args.budget.budget();
     let job = BlendJob {
         targets: args.targets,

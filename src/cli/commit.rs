@@ -11,7 +11,7 @@ use super::Summary;
 /// step (formats/stages.md). The cluster driver (cluster/) commits the folders its workers
 /// send back this way; FROM is left as it was.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// A bake's output folder (holding .blendsim-manifest.json).
     from: PathBuf,
     /// Output folder (created if missing).
@@ -23,7 +23,7 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.from
     }
 }
@@ -33,7 +33,7 @@ struct Manifest {
     files: BTreeMap<String, String>,
 }
 
-pub fn run(args: Args, quiet: bool) -> Result<Summary> {
+pub(crate) fn run(args: Args, quiet: bool) -> Result<Summary> {
     let manifest_path = args.from.join(MANIFEST);
     let text = std::fs::read_to_string(&manifest_path).map_err(|e| Error::io(&manifest_path, &e, "read the bake's manifest"))?;
     let manifest: Manifest = serde_json::from_str(&text)

@@ -13,7 +13,7 @@ use super::Summary;
 /// The surface is bound to the rest tet mesh by barycentric coordinates (the closest tet for
 /// points outside it). The binding is linear, so the Hermite trajectory stays exact.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The solution stage file from `blendsim solve`.
     solution: PathBuf,
     /// Where to write the animation stage file (JSON).
@@ -28,12 +28,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.solution
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, _progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let solution: Solution = stage_file::read(&args.solution, &budget)?;
     let animation = stages::embed(&solution)?;

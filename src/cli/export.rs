@@ -18,7 +18,7 @@ use super::Summary;
 /// replaced in one step, keeping files that are not blendsim's and removing the files an
 /// earlier export of the same scene wrote that this one does not.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The animation stage file from `blendsim embed`.
     animation: PathBuf,
     /// Output folder (created if missing).
@@ -36,12 +36,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.animation
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let animation: Animation = stage_file::read(&args.animation, &budget)?;
     if args.strict {

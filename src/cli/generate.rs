@@ -13,7 +13,7 @@ use super::Summary;
 ///   blendsim generate man -o build/share/man/man1
 #[derive(clap::Args)]
 #[command(verbatim_doc_comment)]
-pub struct Args {
+pub(crate) struct Args {
     #[command(subcommand)]
     what: What,
     /// Output folder (created if missing).
@@ -34,12 +34,12 @@ enum What {
 }
 
 impl Args {
-    pub fn input(&self) -> &Path {
+    pub(crate) fn input(&self) -> &Path {
         &self.out
     }
 }
 
-pub fn run(args: Args, mut cli: clap::Command) -> Result<Summary> {
+pub(crate) fn run(args: Args, mut cli: clap::Command) -> Result<Summary> {
     let mut written = Vec::new();
     let mut write = |name: String, bytes: Vec<u8>| -> Result<()> {
         std::fs::create_dir_all(&args.out).map_err(|e| Error::io(&args.out, &e, "create the output folder"))?;

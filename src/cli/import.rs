@@ -16,7 +16,7 @@ use super::Summary;
 /// With a [cache], chooses its keys. `--cache-out PATH` writes the [cache] (its range) in the
 /// format PATH names: an OBJ sequence (a #### pattern), .pc2, .mdd, .glb, .usda, .usdc or .usd.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The scene file (TOML; see formats/scene.md).
     scene: PathBuf,
     /// Where to write the keyframes stage file (JSON).
@@ -30,12 +30,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.scene
     }
 }
 
-pub fn run(args: Args, _progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, _progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let scene = SceneFile::load(&args.scene)?;
     if let Some(out) = &args.cache_out {

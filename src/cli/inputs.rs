@@ -11,19 +11,19 @@ use super::Summary;
 /// message the bake would print). The cluster driver (cluster/) ships these files to its
 /// workers.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The scene files (TOML; see formats/scene.md).
     #[arg(required = true)]
     scenes: Vec<PathBuf>,
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.scenes[0]
     }
 }
 
-pub fn run(args: Args) -> Result<Summary> {
+pub(crate) fn run(args: Args) -> Result<Summary> {
     for scene in &args.scenes {
         // Each scene's own error, so one bad scene does not hide the others' inputs.
         let line = match SceneFile::load(scene).and_then(|s| depfile::inputs(&s)) {

@@ -105,25 +105,25 @@ impl Command {
 
 /// What a subcommand did, for `--json`.
 #[derive(Debug, Default, serde::Serialize)]
-pub struct Summary {
+pub(crate) struct Summary {
     /// Every file written, as the user named its place (`-o` joined with the file's name).
-    pub outputs: Vec<PathBuf>,
+    pub(crate) outputs: Vec<PathBuf>,
     /// Bytes of the full-frame file over bytes of the blendshape file, per format (bake and
     /// report only).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
-    pub ratios: BTreeMap<String, f64>,
+    pub(crate) ratios: BTreeMap<String, f64>,
     /// The run's warnings (also on stderr and in the reports).
-    pub warnings: Vec<String>,
+    pub(crate) warnings: Vec<String>,
 }
 
 impl Summary {
     /// A run that wrote `outputs` and had no warnings.
-    pub fn wrote(outputs: impl IntoIterator<Item = PathBuf>) -> Summary {
+    pub(crate) fn wrote(outputs: impl IntoIterator<Item = PathBuf>) -> Summary {
         Summary { outputs: outputs.into_iter().collect(), ..Summary::default() }
     }
 
     /// The files of a committed output folder.
-    pub fn folder(out: &Path, committed: &blendsim::support::output::Committed) -> Summary {
+    pub(crate) fn folder(out: &Path, committed: &blendsim::support::output::Committed) -> Summary {
         Summary::wrote(committed.written.iter().map(|n| out.join(n)))
     }
 }
@@ -144,7 +144,7 @@ struct JsonLine<'a> {
 
 /// `--method`, for `solve` and `bake`: overrides the scene's `[solver] method`.
 #[derive(Clone, Copy, clap::ValueEnum)]
-pub enum MethodArg {
+pub(crate) enum MethodArg {
     Hermite,
     Spacetime,
     MassSpring,
@@ -165,7 +165,7 @@ impl From<MethodArg> for Method {
 /// `--max-memory` and `--max-time`, the same on every subcommand: the budget every stage
 /// checks before it allocates or runs long (`blendsim::support::budget`).
 #[derive(clap::Args)]
-pub struct BudgetArgs {
+pub(crate) struct BudgetArgs {
     /// Memory the command may use (e.g. 4G, 512M): every large allocation (frames, solver
     /// samples, textures: their file and decoded size from the header) is estimated first and
     /// refused past it, and the solve's global step is solved
@@ -186,13 +186,13 @@ pub struct BudgetArgs {
 
 impl BudgetArgs {
     /// The budget, its clock started now.
-    pub fn budget(&self) -> Budget {
+    pub(crate) fn budget(&self) -> Budget {
         Budget::new(self.max_memory, self.max_time)
     }
 }
 
 /// `--strict`: an error (exit code 3) when there are `warnings`.
-pub fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
+pub(crate) fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
     if warnings.is_empty() {
         Ok(())
     } else {
@@ -203,7 +203,7 @@ pub fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
 /// A byte count as `--max-memory` takes it: a number with an optional unit. `K`, `M`, `G`, `T`
 /// and `KiB`..`TiB` are powers of 1024 (`4G`, `2GiB`); `KB`..`TB` are powers of 1000 (`512MB`);
 /// no unit or `B` is bytes. More than 2^64 bytes is refused, not wrapped.
-pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
+pub(crate) fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim();
     // The unit is the trailing run of letters (`1e3M` is a number with an exponent, then `M`).
     let split = t.trim_end_matches(|c: char| c.is_ascii_alphabetic()).len();
@@ -234,10 +234,10 @@ pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
 
 /// The longest `--max-time`, in seconds (about 31.7 years): far beyond any bake, and small
 /// enough that a deadline computed from it stays a valid `Duration` and `Instant`.
-pub const MAX_SECONDS: f64 = 1e9;
+pub(crate) const MAX_SECONDS: f64 = 1e9;
 
 /// `--max-time`: seconds, or a number with `s`, `m` or `h`.
-pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
+pub(crate) fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
     let t = text.trim();
     let (number, scale) = match t.chars().last() {
         Some('s') => (&t[..t.len() - 1], 1.0),
@@ -254,7 +254,7 @@ pub fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
     }
 }
 
-pub fn main() -> ExitCode {
+pub(crate) fn main() -> ExitCode {
     // Before any thread starts, so every thread inherits the blocked signals.
     blendsim::support::interrupt::install();
     let start = Instant::now();

@@ -20,7 +20,7 @@ use super::{refuse_warnings, Summary};
 #[command(
     override_usage = "blendsim report [OPTIONS] --out <DIR> <ANIMATION> --outputs <NAME.outputs.json>\n       blendsim report [OPTIONS] --out <DIR> --batch <DIR>..."
 )]
-pub struct Args {
+pub(crate) struct Args {
     /// The animation stage file from `blendsim embed`.
     #[arg(required_unless_present = "batch", conflicts_with = "batch")]
     animation: Option<PathBuf>,
@@ -47,12 +47,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         self.animation.as_deref().or(self.batch.first().map(PathBuf::as_path)).unwrap_or(&self.out)
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let mut staging = Staging::open(&args.out, if args.no_wait { LockWait::Fail } else { LockWait::Wait })?;
     if !args.batch.is_empty() {

@@ -15,7 +15,7 @@ use super::{MethodArg, Summary};
 /// shapes by Ma et al. 2012's mass-spring blendshapes ([mass_spring] in the scene); `fit`
 /// (a [cache] scene) fits Hermite keys, positions and velocities, to the cache's frames.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The body stage file from `blendsim tetrahedralize`.
     body: PathBuf,
     /// Where to write the solution stage file (JSON).
@@ -33,12 +33,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.body
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let body: Body = stage_file::read(&args.body, &budget)?;
     let progress = if args.strict { progress.without_warnings() } else { progress.clone() };

@@ -12,7 +12,7 @@ use super::Summary;
 /// Surface keyframes are tetrahedralized by TetGen (`apt-get install tetgen`); the interior
 /// nodes get a quasi-static pose per key. Tet-mesh keyframes pass through.
 #[derive(clap::Args)]
-pub struct Args {
+pub(crate) struct Args {
     /// The keyframes stage file from `blendsim import`.
     keyframes: PathBuf,
     /// Where to write the body stage file (JSON).
@@ -27,12 +27,12 @@ pub struct Args {
 }
 
 impl Args {
-    pub fn input(&self) -> &std::path::Path {
+    pub(crate) fn input(&self) -> &std::path::Path {
         &self.keyframes
     }
 }
 
-pub fn run(args: Args, progress: &Progress) -> Result<Summary> {
+pub(crate) fn run(args: Args, progress: &Progress) -> Result<Summary> {
     let budget = args.budget.budget();
     let keys: Keyframes = stage_file::read(&args.keyframes, &budget)?;
     let body = if args.strict {

@@ -282,7 +282,7 @@ pub struct Solver {
     /// With `optimize_timing`: the shortest interval (seconds).
     pub min_interval: f64,
     /// The quasi-Newton phase's model Hessian: `"auto"`, `"projective"` or `"tangent"`
-    /// (see `spacetime::solver::ModelHessian`).
+    /// (see `spacetime::settings::ModelHessian`).
     pub model_hessian: String,
     /// How the global step is inverted: `"auto"` (the cheapest predicted within the memory
     /// budget), `"direct"`, `"modal"` or `"iterative"` (see `spacetime::global_step::Method`).
@@ -292,7 +292,7 @@ pub struct Solver {
     /// `samples`; see `spacetime::solver`, "Coarse to fine").
     pub coarse_samples: usize,
     /// The quasi-Newton phase's step: `"auto"`, `"quasi-newton"` (L-BFGS) or `"gauss-newton"`
-    /// (truncated CG on the Gauss-Newton Hessian; see `spacetime::solver::Step`).
+    /// (truncated CG on the Gauss-Newton Hessian; see `spacetime::settings::Step`).
     pub step: String,
 }
 
@@ -410,8 +410,8 @@ impl Default for Solver {
         Solver {
             method: Method::Spacetime,
             samples: 10,
-            max_iterations: crate::algorithms::spacetime::solver::DEFAULT_MAX_ITERATIONS,
-            tolerance: crate::algorithms::spacetime::solver::DEFAULT_TOLERANCE,
+            max_iterations: crate::algorithms::spacetime::settings::DEFAULT_MAX_ITERATIONS,
+            tolerance: crate::algorithms::spacetime::settings::DEFAULT_TOLERANCE,
             regularization: 0.1,
             contact_samples: 20,
             optimize_timing: false,
@@ -420,7 +420,7 @@ impl Default for Solver {
             min_interval: 1e-3,
             model_hessian: "auto".to_string(),
             global_step: "auto".to_string(),
-            coarse_samples: crate::algorithms::spacetime::solver::DEFAULT_COARSE_SAMPLES,
+            coarse_samples: crate::algorithms::spacetime::settings::DEFAULT_COARSE_SAMPLES,
             step: "auto".to_string(),
         }
     }
@@ -717,7 +717,7 @@ impl Scene {
     /// The memory the scene needs for the frames it exports (`vertices` exported vertices over
     /// the key times at the scene's fps) and the samples it solves (`tets`, or a lower bound
     /// before TetGen), checked against `budget` before anything that size is allocated.
-    pub fn check_resources(&self, times: &[f64], vertices: usize, tets: usize, budget: &Budget) -> Result<()> {
+    pub(crate) fn check_resources(&self, times: &[f64], vertices: usize, tets: usize, budget: &Budget) -> Result<()> {
         if let (Some(start), Some(end)) = (times.first(), times.last()) {
             budget.check_frames(*start, *end, self.fps, vertices)?;
         }
@@ -982,15 +982,15 @@ impl Tet {
 /// unit: a body in nanometres has density 1e27), narrow enough that the solve's matrices keep
 /// their digits (a stiffness of 1e308 overflows; a density of 1e-300 leaves the body's motion
 /// without cost, and the bake would fail later as a "singular" system).
-pub const MATERIAL_RANGE: (f64, f64) = (1e-30, 1e30);
+pub(crate) const MATERIAL_RANGE: (f64, f64) = (1e-30, 1e30);
 
 /// The range of `damping` (per second, whatever the length unit; it may also be 0).
-pub const DAMPING_RANGE: (f64, f64) = (1e-9, 1e12);
+pub(crate) const DAMPING_RANGE: (f64, f64) = (1e-9, 1e12);
 
 /// The range of `[export] meters_per_unit`: micrometres to 1000 km. The glTF node scale is
 /// written as a 32-bit float, which holds it exactly enough (1e300 would be written as null,
 /// 1e-300 as 0).
-pub const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
+pub(crate) const METERS_PER_UNIT_RANGE: (f64, f64) = (1e-6, 1e6);
 
 impl Material {
     fn validate(&self) -> Result<()> {
@@ -1241,7 +1241,7 @@ times = [0.0, 0.5]
         let s = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"gauss-newton\"\n")).unwrap();
         assert_eq!(
             crate::pipeline::stages::solve::settings(&s).step,
-            crate::algorithms::spacetime::solver::Step::GaussNewton,
+            crate::algorithms::spacetime::settings::Step::GaussNewton,
             "the key reaches the solver"
         );
         let e = Scene::parse(&(MINIMAL.to_string() + "[solver]\nstep = \"newton\"\n")).unwrap_err().to_string();

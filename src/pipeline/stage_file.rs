@@ -16,6 +16,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
+use crate::algorithms::spacetime::solver;
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::scene::{Format, Method, Scene};
 use crate::support::budget::Budget;
@@ -41,7 +42,7 @@ impl VertexSet {
     }
 
     /// A mask over `n` vertices.
-    pub fn to_mask(&self, n: usize) -> Vec<bool> {
+    pub(crate) fn to_mask(&self, n: usize) -> Vec<bool> {
         let mut m = vec![false; n];
         for &i in &self.0 {
             m[i as usize] = true;
@@ -241,7 +242,7 @@ pub struct SolverLog {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_scale: Option<f64>,
     /// The force scale S at each iterate of `energy` (spacetime only; the last is
-    /// `force_scale`): the stopping rule's floor is `solver::NEGLIGIBLE` S at each iteration.
+    /// `force_scale`): the stopping rule's floor is `settings::NEGLIGIBLE` S at each iteration.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub force_scales: Vec<f64>,
     /// The key times given to the solver.
@@ -277,6 +278,87 @@ pub struct SolverLog {
     /// Where the spacetime iterations' time went: W's evaluations and the global step's solves.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iteration_split: Option<IterationSplit>,
+}
+
+impl SolverLog {
+    /// The log of a method that does not iterate the spacetime solver (`hermite`, `fit`, and
+    /// `mass-spring`, which then sets its own iteration counts): W when it is evaluated, the
+    /// wall time, the free unknowns and why it stopped; the key `times` are kept as given.
+    pub fn closed_form(method: Method, energy: Vec<f64>, seconds: f64, unknowns: usize, stop_reason: String, times: Vec<f64>) -> SolverLog {
+        SolverLog {
+            method,
+            iterations: 0,
+            energy,
+            seconds,
+            precompute_seconds: 0.0,
+            iteration_seconds: 0.0,
+            unknowns,
+            halvings: 0,
+            converged: true,
+            stop_reason,
+            linear_solver: String::new(),
+            last_decrease: 0.0,
+            predicted_remaining: None,
+            force_scale: None,
+            force_scales: Vec::new(),
+            input_times: times.clone(),
+            times,
+            timing_iterations: 0,
+            refactorizations: 0,
+            active_contacts: 0,
+            clearance: None,
+            conjugate_gradients: None,
+            coarse_iterations: 0,
+            coarse_samples: 0,
+            iteration_split: None,
+        }
+    }
+
+    /// The log of a spacetime solve: the solver's own `log`, the key times given to it and
+    /// those of its solution, and the force scale S at each iterate (the progress callback's).
+    pub fn spacetime(log: solver::Log, input_times: Vec<f64>, times: Vec<f64>, force_scales: Vec<f64>) -> SolverLog {
+        let split = &log.split;
+        SolverLog {
+            method: Method::Spacetime,
+            iterations: log.iterations,
+            seconds: log.seconds,
+            precompute_seconds: log.precompute_seconds,
+            iteration_seconds: log.iteration_seconds,
+            unknowns: log.unknowns,
+            halvings: log.halvings,
+            converged: log.converged,
+            linear_solver: log.linear_solver,
+            last_decrease: log.last_decrease,
+            predicted_remaining: log.predicted_remaining,
+            force_scale: Some(log.force_scale),
+            force_scales,
+            input_times,
+            times,
+            timing_iterations: log.timing_iterations,
+            refactorizations: log.refactorizations,
+            active_contacts: log.active_contacts,
+            clearance: log.clearance,
+            conjugate_gradients: log.conjugate_gradients.map(|c| CgSummary {
+                solves: c.solves,
+                iterations: c.iterations,
+                capped: c.capped,
+                max_iterations: c.max_iterations,
+                tolerance: c.tolerance,
+                worst_residual: c.worst_residual,
+            }),
+            coarse_iterations: log.coarse_iterations,
+            coarse_samples: log.coarse_samples,
+            iteration_split: Some(IterationSplit {
+                evaluations: split.evaluations,
+                exact_evaluations: split.exact_evaluations,
+                evaluation_seconds: split.evaluation_seconds,
+                solves: split.solves,
+                solve_seconds: split.solve_seconds,
+            }),
+            stop_reason: log.stop_reason,
+            energy: log.energy,
+        }
+    }
 }
 
 /// Where a spacetime solve's iterations spent their time (wall seconds summed over the solve;
@@ -766,7 +848,7 @@ impl Check<'_> {
 }
 
 /// Stage file format version; bumped when a stage type changes incompatibly.
-pub const FORMAT_VERSION: u32 = 1;
+pub(crate) const FORMAT_VERSION: u32 = 1;
 
 #[derive(Serialize)]
 struct HeaderOut<'a, T> {
@@ -886,7 +968,7 @@ fn relative_to(from: &Path, path: &Path) -> PathBuf {
 
 /// Parse and validate the bytes of a stage file (the memory of the stages after it within
 /// `budget`); `path` is named in errors.
-pub fn from_json<T: StageData>(bytes: &[u8], path: &Path, budget: &Budget) -> Result<T> {
+pub(crate) fn from_json<T: StageData>(bytes: &[u8], path: &Path, budget: &Budget) -> Result<T> {
     let wrong = |what: String| Error::in_file(path, what, format!("pass the {} file written by `{}`", T::STAGE, T::WRITER));
     let header: HeaderIn = serde_json::from_slice(bytes).map_err(|e| wrong(format!("is not a blendsim stage file ({e})")))?;
     match (header.blendsim, header.stage.as_deref()) {

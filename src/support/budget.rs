@@ -52,7 +52,7 @@ impl Budget {
     }
 
     /// The same budget with its memory set to `bytes`.
-    pub fn with_max_memory(self, bytes: u64) -> Budget {
+    pub(crate) fn with_max_memory(self, bytes: u64) -> Budget {
         Budget { max_memory: Some(bytes), ..self }
     }
 
@@ -94,7 +94,7 @@ impl Budget {
     }
 
     /// The frames an export or a report evaluates: `frames x vertices`.
-    pub fn check_frames(&self, start: f64, end: f64, fps: f64, vertices: usize) -> Result<()> {
+    pub(crate) fn check_frames(&self, start: f64, end: f64, fps: f64, vertices: usize) -> Result<()> {
         let frames = frame_count(start, end, fps);
         let bytes = frames * (BYTES_PER_FRAME + BYTES_PER_FRAME_VERTEX * vertices as f64);
         self.check(
@@ -105,7 +105,7 @@ impl Budget {
     }
 
     /// The spacetime samples the solver keeps: `samples per interval x intervals x tets`.
-    pub fn check_samples(&self, samples: usize, intervals: usize, tets: usize) -> Result<()> {
+    pub(crate) fn check_samples(&self, samples: usize, intervals: usize, tets: usize) -> Result<()> {
         let bytes = samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET;
         self.check(bytes, &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"), "lower [solver] samples (10 is typical)")
     }
@@ -120,7 +120,7 @@ impl Budget {
     }
 
     /// [`Budget::check_time`] with a phase's own `fix` instead of the solve's advice.
-    pub fn check_time_to(&self, phase: &str, reached: impl FnOnce() -> String, fix: &str) -> Result<()> {
+    pub(crate) fn check_time_to(&self, phase: &str, reached: impl FnOnce() -> String, fix: &str) -> Result<()> {
         self.check_time(phase, reached).map_err(|e| Error { fix: fix.into(), ..e })
     }
 
@@ -132,14 +132,14 @@ impl Budget {
 
     /// [`Budget::check_time`]'s error, for a caller that stopped the work itself when
     /// [`Budget::time_left`] ran out (a killed TetGen).
-    pub fn time_spent(&self, phase: &str, reached: &str) -> Error {
+    pub(crate) fn time_spent(&self, phase: &str, reached: &str) -> Error {
         let (elapsed, seconds) = self.max_time.map_or((0.0, 0.0), |(start, seconds)| (start.elapsed().as_secs_f64(), seconds));
         Error::general(format!("blendsim ran past its --max-time budget of {seconds} s ({}) in the {phase}, {reached}", duration(elapsed)), TIME_FIX)
     }
 
     /// Err when `what` is predicted to take more than the time left of `--max-time` (before
     /// it starts; a budget already spent is [`Budget::check_time`]'s error).
-    pub fn check_predicted_time(&self, predicted_seconds: f64, what: &str) -> Result<()> {
+    pub(crate) fn check_predicted_time(&self, predicted_seconds: f64, what: &str) -> Result<()> {
         self.check_time("solve", || "before its global step was built".into())?;
         match self.time_left() {
             Some(left) if predicted_seconds > left => Err(Error::general(
@@ -167,7 +167,7 @@ fn duration(seconds: f64) -> String {
 
 /// `MemAvailable` of `/proc/meminfo`, in bytes. (Four lines: a system-information crate would
 /// bring a dozen dependencies for this one number.)
-pub fn available_memory() -> Option<f64> {
+pub(crate) fn available_memory() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;

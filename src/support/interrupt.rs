@@ -312,6 +312,8 @@ pub(crate) fn spawn(command: &mut Command) -> std::io::Result<ChildGuard> {
 /// names), say `blendsim: test hook: paused at POINT DETAIL` on stderr and wait until a signal
 /// asks the process to stop, then carry on (the signal's cleanup, or the commit's own check of
 /// [`requested`], decides what happens next). Lets tests interrupt a run at a known step.
+/// Only in a build with `--features test-hooks` (`make test`); elsewhere it does nothing.
+#[cfg(feature = "test-hooks")]
 pub(crate) fn pause_point(point: &str, detail: &str) {
     let Some(list) = std::env::var_os("BLENDSIM_TEST_PAUSE") else { return };
     if !list.to_string_lossy().split(',').any(|p| p.trim() == point) {
@@ -322,6 +324,11 @@ pub(crate) fn pause_point(point: &str, detail: &str) {
         std::thread::sleep(Duration::from_millis(5));
     }
 }
+
+/// The test hook compiled out: a build without `--features test-hooks` never pauses.
+#[cfg(not(feature = "test-hooks"))]
+#[inline(always)]
+pub(crate) fn pause_point(_point: &str, _detail: &str) {}
 
 /// Whether a process with this id exists (a zombie counts as gone).
 pub(crate) fn process_alive(pid: u32) -> bool {

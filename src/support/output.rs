@@ -46,7 +46,8 @@
 //! stops at `staged` (the first file is staged), `commit-staged` (the new folder is complete,
 //! before the swap), `commit-moved-aside` (fallback only: `DIR` renamed away) and
 //! `commit-swapped` (after the swap, before the old folder is removed);
-//! `BLENDSIM_TEST_NO_EXCHANGE=1` forces the two-rename fallback.
+//! `BLENDSIM_TEST_NO_EXCHANGE=1` forces the two-rename fallback. Both only in a build with
+//! `--features test-hooks` (`make test`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{File, OpenOptions};
@@ -82,7 +83,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// `fill` runs and stays locked until it is renamed, so a run in another PID namespace never
 /// takes it for a leftover; temporaries of dead processes are swept first. `path` must not be
 /// a device, FIFO or folder (the rename would replace it: `-o /dev/null` as root).
-pub fn write_atomic_with(path: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+pub(crate) fn write_atomic_with(path: &Path, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -441,7 +442,7 @@ impl Staging {
     }
 
     /// The final path of a file once committed.
-    pub fn final_path(&self, name: &str) -> PathBuf {
+    pub(crate) fn final_path(&self, name: &str) -> PathBuf {
         self.target.join(contained(name))
     }
 
@@ -648,7 +649,7 @@ impl Staging {
     /// old folder is now at the staging path); `Ok(Some(old))`: the two-rename fallback, the
     /// old folder moved to `old`.
     fn exchange(&self) -> Result<Option<PathBuf>> {
-        let forced_fallback = std::env::var_os("BLENDSIM_TEST_NO_EXCHANGE").is_some_and(|v| v == "1");
+        let forced_fallback = cfg!(feature = "test-hooks") && std::env::var_os("BLENDSIM_TEST_NO_EXCHANGE").is_some_and(|v| v == "1");
         if !forced_fallback {
             match exchange_dirs(&self.dir, &self.folder) {
                 Ok(()) => return Ok(None),

@@ -227,7 +227,7 @@ impl Bar {
     }
 
     /// Finish and take the bar off the terminal.
-    pub fn finish_and_clear(&self) {
+    pub(crate) fn finish_and_clear(&self) {
         self.bar.finish_and_clear();
         self.done_line();
     }

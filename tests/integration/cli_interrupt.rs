@@ -248,16 +248,19 @@ fn every_phase(signal: i32) {
 }
 
 #[test]
+#[cfg_attr(not(feature = "test-hooks"), ignore = "needs the test hooks: cargo test --features test-hooks (make test)")]
 fn sigint_at_every_phase() {
     every_phase(libc::SIGINT);
 }
 
 #[test]
+#[cfg_attr(not(feature = "test-hooks"), ignore = "needs the test hooks: cargo test --features test-hooks (make test)")]
 fn sigterm_at_every_phase() {
     every_phase(libc::SIGTERM);
 }
 
 #[test]
+#[cfg_attr(not(feature = "test-hooks"), ignore = "needs the test hooks: cargo test --features test-hooks (make test)")]
 fn sigkill_at_every_phase() {
     every_phase(libc::SIGKILL);
 }

@@ -20,7 +20,7 @@ pub struct FullFrame {
 
 impl FullFrame {
     /// Sample `trajectory` at every frame of its key range (`Trajectory::frames`).
-    pub fn from_trajectory(trajectory: &Trajectory, fps: f64) -> FullFrame {
+    pub(crate) fn from_trajectory(trajectory: &Trajectory, fps: f64) -> FullFrame {
         let frames = trajectory.frames(fps);
         let mut buffer = vec![[0.0; 3]; trajectory.vertex_count()];
         let points = frames
@@ -37,7 +37,7 @@ impl FullFrame {
     /// cache bake written per frame. Frame numbers are the times at `fps`, rounded (a cache
     /// sampled off the frame grid, or unevenly, keeps its times; the numbers only label
     /// USD's time codes and stay increasing).
-    pub fn from_source(source: &mut dyn FrameSource, fps: f64) -> Result<FullFrame> {
+    pub(crate) fn from_source(source: &mut dyn FrameSource, fps: f64) -> Result<FullFrame> {
         let count = source.frame_count();
         let mut buffer = vec![[0.0; 3]; source.vertex_count()];
         let (mut frames, mut times, mut points) = (Vec::with_capacity(count), Vec::with_capacity(count), Vec::with_capacity(count));

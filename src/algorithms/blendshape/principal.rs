@@ -261,7 +261,11 @@ impl BlendShapeClip {
 
 /// The smallest rank whose clip `meets` a criterion (the scene's tolerance), trying 1, 2, ...;
 /// all components when none smaller does. `meets` may fail (it reads a cache).
-pub fn smallest_rank<E>(components: &Components, weights: Weights, mut meets: impl FnMut(&BlendShapeClip) -> Result<bool, E>) -> Result<usize, E> {
+pub(crate) fn smallest_rank<E>(
+    components: &Components,
+    weights: Weights,
+    mut meets: impl FnMut(&BlendShapeClip) -> Result<bool, E>,
+) -> Result<usize, E> {
     for rank in 1..components.len() {
         if meets(&components.clip(rank, weights))? {
             return Ok(rank);

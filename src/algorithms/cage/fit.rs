@@ -175,7 +175,7 @@ fn bound_weight(cage: &TetMesh, binding: &Binding) -> Vec<f64> {
 }
 
 /// The cage nodes a fine-vertex mask holds (the rule of the module documentation).
-pub fn carry_mask(cage: &TetMesh, binding: &Binding, fine_mask: &[bool]) -> Vec<bool> {
+pub(crate) fn carry_mask(cage: &TetMesh, binding: &Binding, fine_mask: &[bool]) -> Vec<bool> {
     let n = cage.positions.len();
     let (mut held, mut total) = (vec![0.0; n], vec![0.0; n]);
     for (v, (t, w)) in binding.tets.iter().zip(&binding.weights).enumerate() {

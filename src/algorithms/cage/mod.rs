@@ -39,7 +39,7 @@ use tree::TriangleTree;
 
 /// What is wrong with a surface for direct tetrahedralization.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Defects {
+pub(crate) struct Defects {
     /// Edges used by one triangle.
     pub open_edges: usize,
     /// Edges used by more than two triangles.

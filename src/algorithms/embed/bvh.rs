@@ -95,7 +95,7 @@ impl Bvh {
 
     /// Call `visit(item)` for every item whose box contains `p`, descending only into nodes
     /// whose box contains `p`. Order: depth first, left before right.
-    pub fn for_each_containing(&self, p: Point, scratch: &mut Scratch, mut visit: impl FnMut(u32)) {
+    pub(crate) fn for_each_containing(&self, p: Point, scratch: &mut Scratch, mut visit: impl FnMut(u32)) {
         let stack = &mut scratch.stack;
         stack.clear();
         if let Some(root) = self.root() {
@@ -127,7 +127,7 @@ impl Bvh {
     /// radius and returns the new radius (initially infinite; it must never grow). The search
     /// ends when the nearest unexpanded box is farther than the radius, so every item whose
     /// box distance is at most the final radius has been visited.
-    pub fn nearest_search(&self, p: Point, scratch: &mut Scratch, mut visit: impl FnMut(u32) -> f64) {
+    pub(crate) fn nearest_search(&self, p: Point, scratch: &mut Scratch, mut visit: impl FnMut(u32) -> f64) {
         let queue = &mut scratch.queue;
         queue.clear();
         let Some(root) = self.root() else { return };

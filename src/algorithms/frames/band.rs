@@ -9,7 +9,7 @@
 /// `i - w <= j <= i`, is stored at `i * (w + 1) + (j + w - i)`. Entries outside the band are
 /// zero by invariant.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Band {
+pub(crate) struct Band {
     n: usize,
     w: usize,
     data: Vec<f64>,
@@ -63,12 +63,12 @@ impl Band {
     }
 
     /// `self += other` (same shape).
-    pub fn add_band(&mut self, other: &Band) {
+    pub(crate) fn add_band(&mut self, other: &Band) {
         assert!(self.n == other.n && self.w == other.w, "band shapes differ");
         self.data.iter_mut().zip(&other.data).for_each(|(a, b)| *a += b);
     }
 
-    pub fn any_nonzero(&self) -> bool {
+    pub(crate) fn any_nonzero(&self) -> bool {
         self.data.iter().any(|&x| x != 0.0)
     }
 
@@ -91,7 +91,7 @@ impl Band {
     }
 
     /// `y += A x` for `cols` right-hand sides stored row-major (`x[i * cols + c]`).
-    pub fn mul_add_rows(&self, x: &[f64], y: &mut [f64], cols: usize) {
+    pub(crate) fn mul_add_rows(&self, x: &[f64], y: &mut [f64], cols: usize) {
         assert!(x.len() == self.n * cols && y.len() == self.n * cols);
         for i in 0..self.n {
             for j in i.saturating_sub(self.w)..=i {
@@ -146,14 +146,14 @@ pub(crate) fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
 
 /// `L` of `A = L Lᵀ`, banded like `A`.
 #[derive(Debug, Clone)]
-pub struct BandCholesky {
+pub(crate) struct BandCholesky {
     l: Band,
 }
 
 impl BandCholesky {
     /// Solve `A X = B` in place for `cols` right-hand sides stored row-major (`b[i * cols + c]`):
     /// each row operation is one contiguous `axpy` over all columns.
-    pub fn solve_rows(&self, b: &mut [f64], cols: usize) {
+    pub(crate) fn solve_rows(&self, b: &mut [f64], cols: usize) {
         let (n, w) = (self.l.n, self.l.w);
         assert_eq!(b.len(), n * cols);
         if cols == 0 {

@@ -53,7 +53,7 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
 /// (`reads`: the frames read through it so far) and can refuse it, and the reads are counted.
 /// The key selection's read statistics, the stages' `--max-time` check at every frame, and
 /// the tests' damaged caches.
-pub struct Metered<'a, S: ?Sized, F> {
+pub(crate) struct Metered<'a, S: ?Sized, F> {
     inner: &'a mut S,
     before_read: F,
     /// Frames read through it.

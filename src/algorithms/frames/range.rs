@@ -24,7 +24,7 @@ impl Default for FrameRange {
 
 impl FrameRange {
     /// Every frame.
-    pub const ALL: FrameRange = FrameRange { start: 0, end: -1 };
+    pub(crate) const ALL: FrameRange = FrameRange { start: 0, end: -1 };
 
     /// The first selected frame and how many there are, out of `available` frames; on failure
     /// the problem and its fix, for the caller to attach to the cache file.

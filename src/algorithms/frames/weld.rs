@@ -31,7 +31,7 @@ fn key(p: &Point) -> [u64; 3] {
 
 impl Weld {
     /// The weld of `map` (per input vertex, its welded vertex, numbered as [`Weld`] says).
-    pub fn from_map(map: Vec<u32>) -> Weld {
+    pub(crate) fn from_map(map: Vec<u32>) -> Weld {
         let mut first = Vec::new();
         for (v, &w) in map.iter().enumerate() {
             if w as usize == first.len() {
@@ -103,7 +103,7 @@ impl Weld {
     }
 
     /// Whether no two input vertices were merged.
-    pub fn is_identity(&self) -> bool {
+    pub(crate) fn is_identity(&self) -> bool {
         self.first.len() == self.map.len()
     }
 
@@ -129,7 +129,7 @@ impl Weld {
 }
 
 /// A frame source read through a [`Weld`]: the welded vertices' positions.
-pub struct Welded<S> {
+pub(crate) struct Welded<S> {
     inner: S,
     weld: Weld,
     buffer: Vec<Point>,

@@ -85,7 +85,7 @@ impl CornerAttributes {
 
     /// Whether one UV per vertex describes the UVs (no seam): every corner of a vertex has the
     /// same UV value. `vertices` is the vertex count, `triangles` the surface's triangles.
-    pub fn uvs_per_vertex(&self, triangles: &[[u32; 3]], vertices: usize) -> Option<Vec<[f64; 2]>> {
+    pub(crate) fn uvs_per_vertex(&self, triangles: &[[u32; 3]], vertices: usize) -> Option<Vec<[f64; 2]>> {
         per_vertex(triangles, vertices, &self.uv_corners, &self.uvs)
     }
 
@@ -95,7 +95,7 @@ impl CornerAttributes {
     }
 
     /// Whether one normal per vertex describes the normals (no crease), as for UVs.
-    pub fn normals_per_vertex(&self, triangles: &[[u32; 3]], vertices: usize) -> Option<Vec<Point>> {
+    pub(crate) fn normals_per_vertex(&self, triangles: &[[u32; 3]], vertices: usize) -> Option<Vec<Point>> {
         per_vertex(triangles, vertices, &self.normal_corners, &self.normals)
     }
 }

@@ -23,7 +23,7 @@ impl Bounds {
     }
 
     /// [`Bounds::of`] single-precision points (exact: the bounds of `f32` values are `f32` values).
-    pub fn of_f32(points: &[[f32; 3]]) -> Bounds {
+    pub(crate) fn of_f32(points: &[[f32; 3]]) -> Bounds {
         points.iter().fold(Bounds::EMPTY, |b, p| b.including(p.map(f64::from)))
     }
 

@@ -104,7 +104,7 @@ pub fn norm(a: Point) -> f64 {
 
 /// Signed volume of the tet (a, b, c, d): positive when (b-a, c-a, d-a) is right-handed.
 #[inline]
-pub fn tet_signed_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {
+pub(crate) fn tet_signed_volume(a: Point, b: Point, c: Point, d: Point) -> f64 {
     dot(sub(b, a), cross(sub(c, a), sub(d, a))) / 6.0
 }
 
@@ -137,7 +137,7 @@ impl TetMesh {
     /// A fold of the mesh at rest, whatever the tets' vertex order: two tets sharing a face
     /// with their opposite vertices on the same side of it (they overlap), as `(tet, other
     /// tet, the shared face)`, the first in tet order. A valid tet mesh has none.
-    pub fn first_fold(&self) -> Option<(usize, usize, [u32; 3])> {
+    pub(crate) fn first_fold(&self) -> Option<(usize, usize, [u32; 3])> {
         let mut faces: std::collections::HashMap<[u32; 3], (usize, u32)> = std::collections::HashMap::with_capacity(2 * self.tets.len());
         let p = |v: u32| self.positions[v as usize];
         let mut folds = Vec::new();

@@ -122,7 +122,7 @@ pub fn compact(mesh: &TriMesh) -> (TriMesh, Vec<u32>) {
 /// Edges used by exactly one triangle (a hole's rim), as vertex pairs.
 ///
 /// Each edge is given in the direction its triangle traverses it, ordered by triangle.
-pub fn open_edges(mesh: &TriMesh) -> Vec<[u32; 2]> {
+pub(crate) fn open_edges(mesh: &TriMesh) -> Vec<[u32; 2]> {
     let mut open: Vec<usize> =
         edge_uses(&mesh.triangles).chunk_by(|x, y| x.0 == y.0).filter_map(|group| if let [(_, id)] = group { Some(*id) } else { None }).collect();
     open.sort_unstable();

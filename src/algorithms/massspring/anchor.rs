@@ -12,7 +12,7 @@ use crate::algorithms::geometry::{add, cross, dot, norm, scale, sub, Point};
 
 /// Centre of mass of the solid a closed surface bounds (divergence theorem), or the
 /// area-weighted centroid of the triangles when they enclose no volume (an open surface).
-pub fn centre_of_mass(positions: &[Point], triangles: &[[u32; 3]]) -> Point {
+pub(crate) fn centre_of_mass(positions: &[Point], triangles: &[[u32; 3]]) -> Point {
     let Some(first) = triangles.first() else { return [0.0; 3] };
     // Moments about a vertex of the surface, to limit cancellation.
     let origin = positions[first[0] as usize];
@@ -39,7 +39,7 @@ pub fn centre_of_mass(positions: &[Point], triangles: &[[u32; 3]]) -> Point {
 }
 
 /// A regular tetrahedron of edge `edge` centred at `centre`.
-pub fn tetrahedron_frame(centre: Point, edge: f64) -> Vec<Point> {
+pub(crate) fn tetrahedron_frame(centre: Point, edge: f64) -> Vec<Point> {
     // Alternate corners of a cube of side edge / √2.
     let h = edge / (2.0 * std::f64::consts::SQRT_2);
     [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]].iter().map(|c| add(centre, scale(*c, h))).collect()

@@ -48,14 +48,14 @@ const MIN_LENGTH_FRACTION: f64 = 1e-12;
 
 /// Energy of one spring.
 #[inline]
-pub fn spring_energy(d: Point, rest: f64, k: f64) -> f64 {
+pub(crate) fn spring_energy(d: Point, rest: f64, k: f64) -> f64 {
     let e = norm(d) - rest;
     0.5 * k * e * e
 }
 
 /// `∂E_q/∂x_i` of one spring with `d = x_i - x_j`.
 #[inline]
-pub fn spring_gradient(d: Point, rest: f64, k: f64) -> Point {
+pub(crate) fn spring_gradient(d: Point, rest: f64, k: f64) -> Point {
     let l = norm(d);
     if l == 0.0 {
         // No direction: a spring of rest length 0 has no force, any other one is at a kink.
@@ -67,7 +67,7 @@ pub fn spring_gradient(d: Point, rest: f64, k: f64) -> Point {
 
 /// The block `K_q = ∂²E_q/∂x_i²` of one spring with `d = x_i - x_j` (symmetric).
 #[inline]
-pub fn spring_hessian(d: Point, rest: f64, k: f64, definiteness: Definiteness) -> Mat3 {
+pub(crate) fn spring_hessian(d: Point, rest: f64, k: f64, definiteness: Definiteness) -> Mat3 {
     let l = dot(d, d).sqrt();
     if l <= MIN_LENGTH_FRACTION * rest || l == 0.0 {
         // Rest length 0 (a harmonic system, exactly k I) or a collapsed spring, whose exact

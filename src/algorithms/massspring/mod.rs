@@ -11,7 +11,9 @@
 //! - [`anchor`]: the default anchor and its attachment;
 //! - [`obstacle`]: planes and spheres;
 //! - [`refine`]: splitting long surface edges before the springs are built;
-//! - [`blend`]: the model: targets in, blended shapes (with diagnostics) out.
+//! - [`blend`]: the model: targets in, blended shapes (with diagnostics) out;
+//! - [`inbetween`](mod@inbetween): in-between shapes on every keyframe interval, as keys of a
+//!   node trajectory (`[solver] method = "mass-spring"`).
 //!
 //! The module takes plain inputs (points, triangles, an optional tet mesh, index lists) and
 //! its own settings; it knows nothing of scene or stage files.
@@ -30,6 +32,7 @@
 pub mod anchor;
 pub mod blend;
 pub mod energy;
+pub mod inbetween;
 pub mod newton;
 pub mod obstacle;
 pub mod refine;
@@ -42,5 +45,6 @@ pub(crate) mod testing;
 mod tests;
 
 pub use blend::{check_weights, linear_blend, Blend, Boundary, MassSpring, Settings, Targets};
+pub use inbetween::{inbetween, Inbetweens};
 pub use obstacle::Obstacle;
 pub use springs::Bending;

@@ -390,7 +390,14 @@ impl Newton {
     /// Solve `H d = b` on the free vertices for the stiffness `H` at `x` (exact where it is
     /// positive definite there, else clamped), with `b` given per vertex in `rhs` and replaced
     /// by `d` (fixed vertices get 0). The tangent of a family of equilibria uses this.
-    pub fn linear_solve(&mut self, system: &SpringSystem, x: &[Point], fixed: &[bool], rhs: &mut [Point], tolerance: f64) -> Result<NewtonReport> {
+    pub(crate) fn linear_solve(
+        &mut self,
+        system: &SpringSystem,
+        x: &[Point],
+        fixed: &[bool],
+        rhs: &mut [Point],
+        tolerance: f64,
+    ) -> Result<NewtonReport> {
         let start = std::time::Instant::now();
         let mut report = NewtonReport::default();
         for v in 0..self.vertex_count {

@@ -57,7 +57,7 @@ impl Obstacle {
 
     /// Signed distance to the obstacle's surface: negative inside. (Planes: `normal` must be
     /// unit, as [`Obstacle::validated`] makes it.)
-    pub fn signed_distance(&self, x: Point) -> f64 {
+    pub(crate) fn signed_distance(&self, x: Point) -> f64 {
         match *self {
             Obstacle::Plane { point, normal } => dot(sub(x, point), normal),
             Obstacle::Sphere { center, radius } => norm(sub(x, center)) - radius,

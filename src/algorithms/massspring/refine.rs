@@ -15,7 +15,7 @@ use crate::algorithms::geometry::{add, norm, scale, sub, Point};
 
 /// A refined surface.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Refined {
+pub(crate) struct Refined {
     /// Positions per target: the input's, then one per split.
     pub surface: Vec<Vec<Point>>,
     /// The triangles after splitting, shared by every target.
@@ -25,7 +25,7 @@ pub struct Refined {
 }
 
 /// The median over surface edges of the largest length over the targets.
-pub fn median_edge(surface: &[Vec<Point>], triangles: &[[u32; 3]]) -> f64 {
+pub(crate) fn median_edge(surface: &[Vec<Point>], triangles: &[[u32; 3]]) -> f64 {
     let mut lengths: Vec<f64> = edges(triangles).keys().map(|&e| length(surface, e)).collect();
     if lengths.is_empty() {
         return 0.0;
@@ -36,7 +36,7 @@ pub fn median_edge(surface: &[Vec<Point>], triangles: &[[u32; 3]]) -> f64 {
 
 /// Split every edge longer than `max_ratio` times the median edge (see the module docs).
 /// `max_ratio` must be greater than 1 (a ratio of 1 or less could never be met by halving).
-pub fn split_long_edges(surface: &[Vec<Point>], triangles: &[[u32; 3]], max_ratio: f64) -> Refined {
+pub(crate) fn split_long_edges(surface: &[Vec<Point>], triangles: &[[u32; 3]], max_ratio: f64) -> Refined {
     assert!(max_ratio > 1.0, "max_ratio must exceed 1");
     let mut surface: Vec<Vec<Point>> = surface.to_vec();
     let mut triangles = triangles.to_vec();

@@ -22,7 +22,7 @@ pub struct Quaternion {
 
 impl Quaternion {
     /// The identity rotation.
-    pub const IDENTITY: Quaternion = Quaternion { w: 1.0, v: [0.0; 3] };
+    pub(crate) const IDENTITY: Quaternion = Quaternion { w: 1.0, v: [0.0; 3] };
 
     /// Dot product as 4-vectors: for unit quaternions, `±cos(θ/2)` of the rotation `θ` between
     /// them (negative when `o` is in the opposite hemisphere).
@@ -58,7 +58,7 @@ impl Quaternion {
 
     /// The rotation of a proper rotation matrix (Shepperd's method: the largest of the four
     /// diagonal combinations is the pivot, so no division by a small number).
-    pub fn from_matrix(r: &Mat3) -> Quaternion {
+    pub(crate) fn from_matrix(r: &Mat3) -> Quaternion {
         let trace = r[0][0] + r[1][1] + r[2][2];
         let q = if trace >= r[0][0].max(r[1][1]).max(r[2][2]) {
             let s = 2.0 * (1.0 + trace).sqrt();
@@ -77,7 +77,7 @@ impl Quaternion {
     }
 
     /// The rotation matrix of a unit quaternion (acting on column vectors).
-    pub fn to_matrix(self) -> Mat3 {
+    pub(crate) fn to_matrix(self) -> Mat3 {
         let (w, [x, y, z]) = (self.w, self.v);
         [
             [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
@@ -187,7 +187,7 @@ impl Rigid {
     }
 
     /// A direction mapped back (the inverse rotation, no translation).
-    pub fn rotate_inverse(&self, v: Point) -> Point {
+    pub(crate) fn rotate_inverse(&self, v: Point) -> Point {
         mat_vec(&mat3::transpose(&self.rotation.to_matrix()), v)
     }
 
@@ -195,7 +195,7 @@ impl Rigid {
     /// (Kabsch): the rotation maximizing `Σ (q_i - q̄)ᵀ R (p_i - p̄)`, which is the closest
     /// rotation (polar factor) to `M = Σ (q_i - q̄)(p_i - p̄)ᵀ`, and the translation that maps
     /// `p̄` to `q̄`. `None` when the points lie on a line (the rotation about it is undetermined).
-    pub fn best_fit(from: &[Point], to: &[Point]) -> Option<Rigid> {
+    pub(crate) fn best_fit(from: &[Point], to: &[Point]) -> Option<Rigid> {
         assert_eq!(from.len(), to.len());
         let (p_bar, q_bar) = (centroid(from), centroid(to));
         let mut m = [[0.0; 3]; 3];

@@ -125,7 +125,7 @@ impl Springs {
     /// Add anchor points `first..first + attachments.len()` (they become vertices): each is
     /// tied to the vertices it lists by [`SpringKind::Anchor`] springs, and every pair of anchor
     /// points by an [`SpringKind::AnchorFrame`] spring.
-    pub fn add_anchor(&mut self, attachments: &[Vec<u32>]) {
+    pub(crate) fn add_anchor(&mut self, attachments: &[Vec<u32>]) {
         let first = self.vertex_count as u32;
         self.vertex_count += attachments.len();
         let mut all: Vec<([u32; 2], SpringKind)> = self.ends.iter().copied().zip(self.kinds.iter().copied()).collect();

@@ -21,7 +21,7 @@ pub struct Csr {
 impl Csr {
     /// Build from `(row, col, value)` triplets; duplicates are summed (in a fixed order, so
     /// the result does not depend on anything but the input).
-    pub fn from_triplets(n: usize, mut triplets: Vec<(u32, u32, f64)>) -> Csr {
+    pub(crate) fn from_triplets(n: usize, mut triplets: Vec<(u32, u32, f64)>) -> Csr {
         triplets.sort_by_key(|&(r, c, _)| (r, c));
         let mut row_ptr = vec![0usize; n + 1];
         let mut cols = Vec::with_capacity(triplets.len());
@@ -91,7 +91,7 @@ impl Csr {
     }
 
     /// [`Csr::mul_points_sequential`] of two vectors in one pass over the matrix (the same sums).
-    pub fn mul_points_pair_sequential(&self, x: [&[Point]; 2], out: [&mut [Point]; 2]) {
+    pub(crate) fn mul_points_pair_sequential(&self, x: [&[Point]; 2], out: [&mut [Point]; 2]) {
         let [ox, oy] = out;
         for (i, (o, p)) in ox.iter_mut().zip(oy.iter_mut()).enumerate() {
             let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
@@ -108,7 +108,7 @@ impl Csr {
     }
 
     /// `self * diag(d) * self` for a symmetric `self` (its pattern is the 2-ring of the graph).
-    pub fn sandwich_diagonal(&self, d: &[f64]) -> Csr {
+    pub(crate) fn sandwich_diagonal(&self, d: &[f64]) -> Csr {
         let n = self.n;
         let rows: Vec<(Vec<u32>, Vec<f64>)> = (0..n)
             .into_par_iter()

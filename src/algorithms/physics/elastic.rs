@@ -322,7 +322,7 @@ impl Elastic {
 
     /// [`Elastic::local_step_with_jacobians_sequential`] into `targets` and `jacobians`
     /// (cleared first, their capacity reused). Same bytes.
-    pub fn local_step_with_jacobians_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<ProjectionJacobian>) {
+    pub(crate) fn local_step_with_jacobians_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jacobians: &mut Vec<ProjectionJacobian>) {
         let (share, count) = (self.strain_share(), self.tet_count());
         targets.clear();
         jacobians.clear();
@@ -380,7 +380,7 @@ impl Elastic {
     /// [`Elastic::local_step_sequential_into`] and `jp = J p` of its targets
     /// ([`Elastic::apply_j_sequential`]) in the same pass, as
     /// [`Elastic::local_step_with_jacobian_batches_and_forces_sequential_into`]. The bytes of the two.
-    pub fn local_step_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jp: &mut [Point]) {
+    pub(crate) fn local_step_and_forces_sequential_into(&self, x: &[Point], targets: &mut Vec<Mat3>, jp: &mut [Point]) {
         self.local_step_scattered(x, targets, Some(jp));
     }
 
@@ -417,7 +417,7 @@ impl Elastic {
     /// calling thread: the part of the elastic Hessian product `∇²E u` that the projections
     /// contribute. The bytes of [`Elastic::apply_j_sequential`] of the per-tet products
     /// [`ProjectionJacobian::apply`] (the same sums in the same order; tested).
-    pub fn apply_jacobians_sequential(&self, jacobians: &[JacobianBatch], u: &[Point], out: &mut [Point]) {
+    pub(crate) fn apply_jacobians_sequential(&self, jacobians: &[JacobianBatch], u: &[Point], out: &mut [Point]) {
         out.fill([0.0; 3]);
         let count = self.tet_count();
         let mut df = [[Lanes::splat(0.0); 3]; 3];
@@ -484,7 +484,7 @@ impl Elastic {
     /// `J p(x)` with fresh projections, on the calling thread, without storing the targets:
     /// the bytes of `apply_j_sequential(&local_step_sequential(x))` (the projection and its
     /// node forces in one vectorized kernel, `project_forces`).
-    pub fn projected_forces_sequential(&self, x: &[Point], out: &mut [Point]) {
+    pub(crate) fn projected_forces_sequential(&self, x: &[Point], out: &mut [Point]) {
         out.fill([0.0; 3]);
         let (share, count) = (self.strain_share(), self.tet_count());
         let mut forces = [[Lanes::splat(0.0); 3]; 4];

@@ -26,7 +26,7 @@ use crate::support::error::{Error, Result};
 
 /// Quasi-static equilibria with one set of pinned nodes: the free-free block of `L`,
 /// factorized once and reused for every pose.
-pub struct Equilibrium<'a> {
+pub(crate) struct Equilibrium<'a> {
     elastic: &'a Elastic,
     /// Index among the free nodes, or `None` for pinned nodes.
     free: Vec<Option<usize>>,

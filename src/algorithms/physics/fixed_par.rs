@@ -51,7 +51,7 @@ pub fn self_adjoint_eigen(a: MatRef<'_, f64>) -> Option<(Vec<f64>, Mat<f64>)> {
 
 /// The thin `Q` of `a = Q R` (`a` with at least as many rows as columns): orthonormal columns
 /// spanning `a`'s, with the split of [`par`].
-pub fn thin_q(mut a: Mat<f64>) -> Mat<f64> {
+pub(crate) fn thin_q(mut a: Mat<f64>) -> Mat<f64> {
     let (m, n) = a.shape();
     let par = par();
     let block = qr::recommended_block_size::<f64>(m, n);

@@ -85,7 +85,7 @@ macro_rules! lane_cmp {
 
 impl<const N: usize> Lanes<N> {
     #[inline(always)]
-    pub fn splat(x: f64) -> Self {
+    pub(crate) fn splat(x: f64) -> Self {
         Lanes([x; N])
     }
 
@@ -124,7 +124,7 @@ impl<const N: usize> Lanes<N> {
 
 impl<const N: usize> Mask<N> {
     #[inline(always)]
-    pub fn splat(b: bool) -> Self {
+    pub(crate) fn splat(b: bool) -> Self {
         Mask([b; N])
     }
 

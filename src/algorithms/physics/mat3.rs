@@ -1,10 +1,10 @@
 //! Small dense 3x3 algebra for per-element work (row-major `[[f64; 3]; 3]`).
 
 /// A 3x3 matrix, row-major: `m[row][column]`.
-pub type Mat3 = [[f64; 3]; 3];
+pub(crate) type Mat3 = [[f64; 3]; 3];
 
 /// The identity matrix.
-pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+pub(crate) const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// `a * b`.
 #[inline]
@@ -20,7 +20,7 @@ pub fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
 
 /// `a * bᵀ`.
 #[inline]
-pub fn mul_transpose(a: &Mat3, b: &Mat3) -> Mat3 {
+pub(crate) fn mul_transpose(a: &Mat3, b: &Mat3) -> Mat3 {
     let mut c = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {

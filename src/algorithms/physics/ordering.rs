@@ -64,7 +64,7 @@ impl Graph {
     /// The quotient graph of a symmetric matrix pattern (lower triangle, compressed columns:
     /// `col_ptr`, `row_idx`) whose unknown `i` belongs to block `block_of[i]`: blocks are
     /// adjacent when any of their unknowns are coupled.
-    pub fn of_blocks(col_ptr: &[usize], row_idx: &[usize], block_of: &[u32], blocks: usize) -> Graph {
+    pub(crate) fn of_blocks(col_ptr: &[usize], row_idx: &[usize], block_of: &[u32], blocks: usize) -> Graph {
         // Blocks below each block's columns, found once each with a marker array (`mark[a] == b`
         // once a was found under block b).
         let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); blocks];
@@ -142,7 +142,7 @@ struct Split {
 
 /// Nested dissection order of `graph` (`order[k]` = the node eliminated k-th), from node
 /// coordinates `coords`.
-pub fn nested_dissection(graph: &Graph, coords: &[Point]) -> Vec<u32> {
+pub(crate) fn nested_dissection(graph: &Graph, coords: &[Point]) -> Vec<u32> {
     let n = graph.node_count();
     assert_eq!(coords.len(), n, "one coordinate per node");
     let mut work =
@@ -372,7 +372,7 @@ fn maximum_matching(ptr: &[usize], ys: &[u32], nx: usize, ny: usize) -> (Vec<u32
 }
 
 /// Approximate minimum degree order of `graph` (faer's AMD on the node graph).
-pub fn minimum_degree(graph: &Graph) -> Vec<u32> {
+pub(crate) fn minimum_degree(graph: &Graph) -> Vec<u32> {
     let n = graph.node_count();
     let pattern = lower_pattern(graph, None);
     let (mut perm, mut inv) = (vec![0usize; n], vec![0usize; n]);

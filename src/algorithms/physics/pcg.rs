@@ -35,7 +35,7 @@ impl SymmetricOperator for SymmetricRows {
 /// A symmetric matrix stored by full rows (both triangles), for row-parallel products (the
 /// reference the matrix-free operators are tested against).
 #[cfg(test)]
-pub struct SymmetricRows {
+pub(crate) struct SymmetricRows {
     row_ptr: Vec<usize>,
     cols: Vec<u32>,
     vals: Vec<f64>,
@@ -44,7 +44,7 @@ pub struct SymmetricRows {
 #[cfg(test)]
 impl SymmetricRows {
     /// The full matrix of the symmetric matrix whose lower triangle is `lower`.
-    pub fn from_lower(lower: &SparseColMat<usize, f64>) -> SymmetricRows {
+    pub(crate) fn from_lower(lower: &SparseColMat<usize, f64>) -> SymmetricRows {
         let n = lower.nrows();
         let (cp, ri, v) = (lower.symbolic().col_ptr(), lower.symbolic().row_idx(), lower.val());
         let mut count = vec![0usize; n + 1];

@@ -301,7 +301,7 @@ impl PartialEq for JacobianBatch {
 
 impl JacobianBatch {
     /// Up to [`BATCH`] Jacobians gathered into lanes (the rest zero).
-    pub fn from_jacobians(jacobians: &[ProjectionJacobian]) -> JacobianBatch {
+    pub(crate) fn from_jacobians(jacobians: &[ProjectionJacobian]) -> JacobianBatch {
         let mut j = JacobianBatch::default();
         for (l, jac) in jacobians.iter().enumerate().take(BATCH) {
             for a in 0..3 {
@@ -333,7 +333,7 @@ impl JacobianBatch {
 /// `jacobians.len()` are computed on zeros and dropped), through [`JacobianBatch`]: the bytes of
 /// the scalar products. For callers that hold per-tet Jacobians.
 #[cfg_attr(not(test), allow(dead_code))]
-pub fn apply_jacobians_batch(jacobians: &[ProjectionJacobian], df: &[Mat3; BATCH]) -> [Mat3; BATCH] {
+pub(crate) fn apply_jacobians_batch(jacobians: &[ProjectionJacobian], df: &[Mat3; BATCH]) -> [Mat3; BATCH] {
     let dp = JacobianBatch::from_jacobians(jacobians).apply(&to_lanes(df));
     std::array::from_fn(|l| lane(&dp, l))
 }
@@ -374,7 +374,7 @@ pub fn project_with_jacobian_batch(f: &[Mat3; BATCH], strain_share: f64) -> [(Ma
 
 /// [`project_with_jacobian_batch`] of the first `count` lanes appended to `targets` and
 /// `jacobians` (each read straight out of the lanes into the vectors: no batch-sized copy).
-pub fn project_with_jacobian_extend(
+pub(crate) fn project_with_jacobian_extend(
     f: &[Mat3; BATCH],
     strain_share: f64,
     count: usize,

@@ -111,7 +111,7 @@ fn volume_stretch_derivatives(sigma: &[f64; 3], sp: &[f64; 3], ds: &Mat3, dds: &
 /// [`project`](super::projection::project)) at `f` in direction `g`. The timing derivatives
 /// call [`project_along_batch`]; this entry point is for tests.
 #[cfg(test)]
-pub fn project_along(f: &Mat3, strain_share: f64, g: &Mat3) -> ProjectionPath {
+pub(crate) fn project_along(f: &Mat3, strain_share: f64, g: &Mat3) -> ProjectionPath {
     project_along_svd(&svd3(f), strain_share, g)
 }
 

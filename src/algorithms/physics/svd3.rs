@@ -178,7 +178,7 @@ pub fn svd3(f: &Mat3) -> Svd3 {
 /// kernels (the local step, the timing derivatives) run `svd_lanes` inside themselves; this
 /// entry point is for callers that need the decompositions themselves.
 #[cfg_attr(not(test), allow(dead_code))]
-pub fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
+pub(crate) fn svd3_batch(f: &[Mat3; BATCH]) -> [Svd3; BATCH] {
     let (u, sigma, v) = dispatch_svd(&to_lanes(f));
     std::array::from_fn(|l| Svd3 { u: lane(&u, l), sigma: [sigma[0].0[l], sigma[1].0[l], sigma[2].0[l]], v: lane(&v, l) })
 }

@@ -70,7 +70,13 @@ pub fn natural_vibration(elastic: &Elastic, held: &[bool], stiffness: RestStiffn
 }
 
 /// [`natural_vibration`], solving densely up to `dense_limit` free coordinates.
-pub fn natural_vibration_with(elastic: &Elastic, held: &[bool], stiffness: RestStiffness, count: usize, dense_limit: usize) -> Result<Vibration> {
+pub(crate) fn natural_vibration_with(
+    elastic: &Elastic,
+    held: &[bool],
+    stiffness: RestStiffness,
+    count: usize,
+    dense_limit: usize,
+) -> Result<Vibration> {
     let (k, free) = scaled_stiffness(elastic, held, stiffness);
     let dim = k.n;
     if dim == 0 || count == 0 {
@@ -104,7 +110,7 @@ pub fn natural_vibration_with(elastic: &Elastic, held: &[bool], stiffness: RestS
 /// The rest stiffness `K` of every node's coordinates (node-major, 3 per node, `3a + i`),
 /// full symmetric storage, unscaled. The tangent one is `∇²E` at rest: positive semidefinite,
 /// since the rest shape minimizes every element's energy (zero there).
-pub fn rest_stiffness(el: &Elastic, stiffness: RestStiffness) -> Csr {
+pub(crate) fn rest_stiffness(el: &Elastic, stiffness: RestStiffness) -> Csr {
     let share = el.strain_share();
     let mut triplets = Vec::with_capacity(144 * el.tet_count());
     for (e, tet) in el.tets.iter().enumerate() {

@@ -48,7 +48,7 @@ pub enum RowKind {
 
 impl RowKind {
     /// Whether the row is an inequality (released when its multiplier is negative).
-    pub fn is_inequality(self) -> bool {
+    pub(crate) fn is_inequality(self) -> bool {
         !matches!(self, RowKind::Sum)
     }
 }
@@ -90,7 +90,7 @@ impl Preconditioner<'_> {
 }
 
 /// `r·z` where `z` holds `3 nu` unknown entries and then the times.
-pub fn row_dot(row: &Row, z: &[f64], nu: usize) -> f64 {
+pub(crate) fn row_dot(row: &Row, z: &[f64], nu: usize) -> f64 {
     let mut s = 0.0;
     for &(i, w) in &row.u {
         s += w * (row.normal[0] * z[3 * i] + row.normal[1] * z[3 * i + 1] + row.normal[2] * z[3 * i + 2]);

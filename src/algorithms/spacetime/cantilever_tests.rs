@@ -8,7 +8,8 @@
 //! mode in y half a loop later (held), the loop's end; the clamp held at every key.
 
 use super::objective::{Evaluation, Objective};
-use super::solver::{apply_step, initial_trajectory, objective, Settings};
+use super::settings::Settings;
+use super::solver::{apply_step, initial_trajectory, objective};
 use super::tangent_step::TangentStep;
 use super::trajectory::{hermite_weights, Trajectory};
 use super::unknowns::{KeyConstraints, Unknowns};

@@ -45,7 +45,7 @@ impl Objective<'_> {
 
     /// `δf_s = ∂f_s/∂u · v` at sample `s` (projection Jacobians `jac`) for the per-slot
     /// direction `v` (`[slot][node]`): `M δa + K_s δx`, zero at supports.
-    pub fn residual_derivative(&self, s: &Sample, jac: &[JacobianBatch], v: &[Vec<Point>]) -> Vec<Point> {
+    pub(crate) fn residual_derivative(&self, s: &Sample, jac: &[JacobianBatch], v: &[Vec<Point>]) -> Vec<Point> {
         let el = self.elastic;
         let n = el.node_count();
         let (c, l) = self.coefficients(s);
@@ -75,7 +75,7 @@ impl Objective<'_> {
     /// The Gauss-Newton product `H v = Σ_s dτ_s J_sᵀ M⁻¹ J_s v` per slot (fixed entries
     /// included: callers mask them), with the projection Jacobians of `p` (module
     /// documentation). Sums in sample order: the same bytes for any thread count.
-    pub fn gauss_newton_product(&self, p: &Projections, v: &[Vec<Point>]) -> Vec<Vec<Point>> {
+    pub(crate) fn gauss_newton_product(&self, p: &Projections, v: &[Vec<Point>]) -> Vec<Vec<Point>> {
         let jacobians = p.jacobians.as_ref().expect("the Gauss-Newton product needs the projection Jacobians");
         let el = self.elastic;
         let n = el.node_count();
@@ -285,7 +285,8 @@ mod tests {
         assert_eq!(f.next(2e-5), Forcing::MAX);
     }
 
-    use super::super::solver::{apply_step, objective, Settings};
+    use super::super::settings::Settings;
+    use super::super::solver::{apply_step, objective};
     use super::super::tests::{bottom, keys, material, settings, wobbly, Nodes};
     use super::super::trajectory::Trajectory;
     use crate::algorithms::physics::elastic::Elastic;
@@ -428,7 +429,8 @@ mod tests {
     /// with gravity); `Auto` and moving key times keep L-BFGS.
     #[test]
     fn gauss_newton_steps_lower_w_to_the_quasi_newton_minimum() {
-        use super::super::solver::{solve, Step};
+        use super::super::settings::Step;
+        use super::super::solver::solve;
         let mesh = cube_mesh(2);
         let el = Elastic::new(&mesh, &material()).unwrap();
         let tr = wobbly(&mesh.positions, false);

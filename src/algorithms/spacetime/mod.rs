@@ -15,14 +15,16 @@
 //! - [`quasi_newton`]: L-BFGS preconditioned by the global step or the tangent model;
 //! - [`tangent_step`]: the normal matrix with the rest tangent stiffness (a Newton model for
 //!   small motions about the rest shape);
-//! - [`solver`]: the two phases of the iteration (local/global, then quasi-Newton);
+//! - [`settings`]: the solver's settings and measured defaults (the timing problem reads them too);
+//! - [`solver`]: the two phases of the iteration (local/global, then quasi-Newton), its log,
+//!   and the prediction of the iterations left;
 //! - [`timing`]: W as a function of the key times, its exact derivatives, the timing step;
 //! - [`obstacles`]: planes and spheres the body may not enter;
 //! - [`contact`]: the node-obstacle checks at keys and frames, linearized as constraints;
 //! - [`active_set`]: the constraints held in a step, by projection of the preconditioner.
 //!
 //! Inputs are plain: an [`Elastic`](crate::algorithms::physics::elastic::Elastic) body, the key
-//! constraints and the solver [`Settings`](solver::Settings); the result is the trajectory and
+//! constraints and the solver [`Settings`](settings::Settings); the result is the trajectory and
 //! the solver's own [`Log`](solver::Log). The stage layer translates the scene and stage files.
 
 pub mod active_set;
@@ -34,6 +36,7 @@ pub mod objective;
 pub mod obstacles;
 pub mod quasi_newton;
 pub mod sampling;
+pub mod settings;
 pub mod solver;
 pub mod tangent_step;
 pub mod time_coefficients;

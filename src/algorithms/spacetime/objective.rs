@@ -166,7 +166,7 @@ impl<'a> Objective<'a> {
     /// that keeps one `Projections` allocates none of the projections again: on a small body
     /// (the demo: 40 samples of 777 tets, 10 MB with the Jacobians) fresh buffers cost more in
     /// page faults and heap trimming on the worker threads than the allocation itself.
-    pub fn local_step_into(&self, tr: &Trajectory, with_jacobians: bool, out: &mut Projections) {
+    pub(crate) fn local_step_into(&self, tr: &Trajectory, with_jacobians: bool, out: &mut Projections) {
         out.shape(self.samples.len(), with_jacobians);
         let split_tets = self.split_tets();
         let project = |s: &Sample, p: &mut Vec<Mat3>, j: Option<&mut Vec<JacobianBatch>>| self.project_sample(tr, s, p, j, split_tets);

@@ -82,7 +82,7 @@ impl Lbfgs {
 
     /// Record a step `s` and gradient change `y` (skipped without positive curvature) without
     /// learning `H₀`'s scale from it: for steps that did not come from [`Lbfgs::direction`].
-    pub fn push_pair(&mut self, s: Vec<f64>, y: Vec<f64>) {
+    pub(crate) fn push_pair(&mut self, s: Vec<f64>, y: Vec<f64>) {
         if let Some(sy) = positive_curvature(&s, &y) {
             self.store(s, y, sy);
         }

@@ -69,19 +69,19 @@ impl TimeSlots {
     }
 
     /// Whether slot `s` holds positions (else velocities).
-    pub fn is_position(&self, s: usize) -> bool {
+    pub(crate) fn is_position(&self, s: usize) -> bool {
         self.position.contains(&s)
     }
 
     /// Keys whose position (for a position slot) or velocity uses slot `s`.
-    pub fn keys_of(&self, s: usize) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn keys_of(&self, s: usize) -> impl Iterator<Item = usize> + '_ {
         let list = if self.is_position(s) { &self.position } else { &self.velocity };
         (0..self.keys()).filter(move |&k| list[k] == s)
     }
 }
 
 /// Whether interval `i` of `times` is a contact (zero length).
-pub fn is_contact(times: &[f64], i: usize) -> bool {
+pub(crate) fn is_contact(times: &[f64], i: usize) -> bool {
     times[i + 1] == times[i]
 }
 

@@ -164,7 +164,8 @@ fn assemble(
 mod tests {
     use super::*;
     use crate::algorithms::physics::elastic::{Elastic, Material};
-    use crate::algorithms::spacetime::solver::{apply_step, objective, Settings};
+    use crate::algorithms::spacetime::settings::Settings;
+    use crate::algorithms::spacetime::solver::{apply_step, objective};
     use crate::algorithms::spacetime::trajectory::Trajectory;
     use crate::algorithms::spacetime::unknowns::KeyConstraints;
     use crate::support::testing::{cube_mesh, Rng};

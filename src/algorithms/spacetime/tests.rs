@@ -1,7 +1,8 @@
 //! Verification of the spacetime solver: analytic cases, invariants, and derivatives.
 
 use super::global_step::assemble;
-use super::solver::{apply_step, objective, solve, Settings};
+use super::settings::Settings;
+use super::solver::{apply_step, objective, solve};
 use super::time_coefficients::TimeCoefficients;
 use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
@@ -462,7 +463,8 @@ fn a_free_fall_converges_by_default_where_the_relative_rule_never_settles() {
 /// extrapolation assumes) it predicts where the stopping rule, run on the same sequence, stops.
 #[test]
 fn predicted_iterations_match_the_stopping_rule_on_linear_convergence() {
-    use super::solver::{predicted_iterations, WINDOW};
+    use super::settings::WINDOW;
+    use super::solver::predicted_iterations;
     let stops = |e: &[f64], tol: f64, floor: f64| (WINDOW..e.len()).find(|&k| e[k - WINDOW] - e[k] <= tol * (e[k] + floor)).expect("stops");
     for (a, r, c, tol) in [(1e4, 0.97, 2e2, 1e-3), (5.0, 0.9, 1.0, 1e-3), (1e3, 0.99, 10.0, 1e-4), (1.0, 0.95, 3.0, 1e-2)] {
         let energy: Vec<f64> = (0..3000).map(|k| c + a * f64::powi(r, k)).collect();
@@ -652,7 +654,7 @@ fn the_iteration_estimate_waits_out_a_stall() {
     let (floor, n) = (1e-3 * 626.893, energy.len() - 1);
     let mut estimate = IterationEstimate::default();
     let totals: Vec<Option<usize>> = energy.iter().enumerate().map(|(k, &w)| estimate.update(k, w, floor, 1e-3, 1000)).collect();
-    assert!(totals[..2 * super::solver::WINDOW].iter().all(Option::is_none), "no total before two windows");
+    assert!(totals[..2 * super::settings::WINDOW].iter().all(Option::is_none), "no total before two windows");
     let late: Vec<(usize, usize)> = totals.iter().enumerate().filter(|(k, _)| 4 * k >= 3 * n).filter_map(|(k, t)| t.map(|t| (k, t))).collect();
     assert!(late.len() >= 10, "a total over the last quarter: {totals:?}");
     for (k, total) in late {
@@ -667,7 +669,7 @@ fn the_iteration_estimate_waits_out_a_stall() {
 /// stops working; the count is deterministic (same bytes between runs).
 #[test]
 fn the_learned_h0_scale_keeps_the_bending_scene_within_its_iteration_bound() {
-    use super::solver::{DEFAULT_TOLERANCE, NEGLIGIBLE};
+    use super::settings::{DEFAULT_TOLERANCE, NEGLIGIBLE};
     let (el, k) = bending_scene(false);
     let default = Settings { tolerance: DEFAULT_TOLERANCE, negligible: NEGLIGIBLE, max_iterations: 1000, ..settings() };
     let log = solve(&el, &k, &default, &|_, _, _| {}).unwrap().log;
@@ -683,7 +685,7 @@ fn the_learned_h0_scale_keeps_the_bending_scene_within_its_iteration_bound() {
 /// solve's wall time (they are disjoint parts of it, whatever the timing).
 #[test]
 fn the_iteration_split_counts_evaluations_and_solves() {
-    use super::solver::{DEFAULT_TOLERANCE, NEGLIGIBLE};
+    use super::settings::{DEFAULT_TOLERANCE, NEGLIGIBLE};
     let (el, k) = bending_scene(false);
     let default = Settings { tolerance: DEFAULT_TOLERANCE, negligible: NEGLIGIBLE, max_iterations: 1000, ..settings() };
     let log = solve(&el, &k, &default, &|_, _, _| {}).unwrap().log;
@@ -713,7 +715,8 @@ fn twisting_scene() -> (Elastic, KeyConstraints) {
 /// the single-phase solve reaches run to 1e-10; two runs give the same bits.
 #[test]
 fn coarse_to_fine_stops_near_the_converged_w_and_never_raises_it() {
-    use super::solver::{baseline, NEGLIGIBLE};
+    use super::settings::NEGLIGIBLE;
+    use super::solver::baseline;
     let (el, k) = twisting_scene();
     let fine =
         Settings { tolerance: 1e-3, negligible: NEGLIGIBLE, max_iterations: 1000, coarse_samples: 0, ..Settings::new(8, 0.1, [0.0, -9.81, 0.0]) };
@@ -785,12 +788,12 @@ fn the_stop_is_free_of_the_geometrys_scale() {
             let settings = Settings { tolerance, max_iterations: 3000, ..Settings::new(6, 1.0, [0.0; 3]) };
             solve(&el, &k, &settings, &|_, _, _| {}).unwrap().log
         };
-        let (stopped, reference) = (run(crate::algorithms::spacetime::solver::DEFAULT_TOLERANCE), run(1e-8));
+        let (stopped, reference) = (run(crate::algorithms::spacetime::settings::DEFAULT_TOLERANCE), run(1e-8));
         let (w, w_ref) = (*stopped.energy.last().unwrap(), *reference.energy.last().unwrap());
         let above = w / w_ref - 1.0;
         table.push(format!("1e{d}: {} iterations, W {above:.2e} above the 1e-8 run's ({} iterations)", stopped.iterations, reference.iterations));
         assert!(!stopped.converged || above <= 0.02, "s = 1e{d}: stopped {above:e} above W at 1e-8 and said converged: {}", stopped.stop_reason);
-        assert!(stopped.iterations > 2 * crate::algorithms::spacetime::solver::WINDOW || !stopped.converged, "s = 1e{d}: {}", stopped.stop_reason);
+        assert!(stopped.iterations > 2 * crate::algorithms::spacetime::settings::WINDOW || !stopped.converged, "s = 1e{d}: {}", stopped.stop_reason);
     }
     println!("{}", table.join("\n"));
 }

@@ -54,7 +54,7 @@ pub const PROXIMAL_FLOOR: f64 = 1e-10;
 
 /// The proximal weight `1/h⁴` for the regularization time scale `h` (0 = off), floored by
 /// [`PROXIMAL_FLOOR`] times the body's stiffest rate.
-pub fn proximal_weight(objective: &Objective, regularization: f64) -> f64 {
+pub(crate) fn proximal_weight(objective: &Objective, regularization: f64) -> f64 {
     if regularization <= 0.0 {
         return 0.0;
     }

@@ -87,7 +87,7 @@ use rayon::prelude::*;
 
 use super::objective::{Objective, Projections};
 use super::sampling::{sample_counts, samples, Sample, TimeSlots};
-use super::solver::Settings;
+use super::settings::{Settings, TimingSettings};
 use super::trajectory::{length_derivative, Trajectory};
 use super::unknowns::KeyConstraints;
 use crate::algorithms::geometry::Point;
@@ -131,27 +131,6 @@ pub struct TimeDerivatives {
     pub gradient: Vec<f64>,
     /// `∂²W/∂T_i²`, the whole Hessian (it is diagonal).
     pub curvature: Vec<f64>,
-}
-
-/// Constraints and budget of [`Timing::optimize_times`].
-#[derive(Debug, Clone, PartialEq)]
-pub struct TimingSettings {
-    /// Smallest interval length (s); an interval already shorter keeps its length as bound.
-    pub min_interval: f64,
-    /// Keep the total duration (the last key's time).
-    pub keep_duration: bool,
-    /// Keys whose time may not move.
-    pub fixed_times: Vec<usize>,
-    /// Newton iterations at most.
-    pub max_iterations: usize,
-    /// Stop when the model's predicted decrease `-g·ΔT` falls below `tolerance × W`.
-    pub tolerance: f64,
-}
-
-impl Default for TimingSettings {
-    fn default() -> Self {
-        TimingSettings { min_interval: 1e-3, keep_duration: false, fixed_times: Vec::new(), max_iterations: 10, tolerance: 1e-9 }
-    }
 }
 
 /// What a timing step did.

@@ -62,7 +62,7 @@ const ACC_POWER: [f64; 4] = [-2.0, -1.0, -2.0, -1.0];
 /// The first (`order = 1`) or second (`order = 2`) derivative of the weights `w` of an
 /// interval of length `t_len` with respect to that length, at fixed `θ` (the instant moves with
 /// the interval).
-pub fn length_derivative(w: &SlotWeights, t_len: f64, order: u32) -> SlotWeights {
+pub(crate) fn length_derivative(w: &SlotWeights, t_len: f64, order: u32) -> SlotWeights {
     let d = |weights: &[f64; 4], powers: &[f64; 4]| -> [f64; 4] {
         std::array::from_fn(|j| {
             let p = powers[j];
@@ -104,7 +104,7 @@ pub struct Trajectory {
 
 impl Trajectory {
     /// The geometric baseline: keyframes joined with zero velocities ("hermite" method).
-    pub fn with_zero_velocities(times: Vec<f64>, positions: Vec<Vec<Point>>) -> Self {
+    pub(crate) fn with_zero_velocities(times: Vec<f64>, positions: Vec<Vec<Point>>) -> Self {
         let velocities = positions.iter().map(|p| vec![[0.0; 3]; p.len()]).collect();
         Trajectory { times, positions, velocities }
     }
@@ -148,7 +148,7 @@ impl Trajectory {
     }
 
     /// [`Trajectory::evaluate`] into a caller's buffer.
-    pub fn evaluate_into(&self, t: f64, out: &mut [Point]) {
+    pub(crate) fn evaluate_into(&self, t: f64, out: &mut [Point]) {
         let (i, theta) = self.locate(t);
         let w = hermite_weights(theta, self.times[i + 1] - self.times[i]);
         self.combine(i, &w.pos, out);
@@ -185,7 +185,7 @@ impl Trajectory {
 
     /// Apply a linear map of vertex arrays (for example an embedding) to every key. A linear
     /// map commutes with the Hermite basis, so the mapped trajectory is exact, not resampled.
-    pub fn map_linear(&self, map: impl Fn(&[Point]) -> Vec<Point>) -> Trajectory {
+    pub(crate) fn map_linear(&self, map: impl Fn(&[Point]) -> Vec<Point>) -> Trajectory {
         Trajectory {
             times: self.times.clone(),
             positions: self.positions.iter().map(|p| map(p)).collect(),

@@ -132,7 +132,7 @@ impl Unknowns {
     /// Whether any keyframe position is held. Without one, translating the whole animation
     /// (and, with free velocities, a uniform drift `c t`) leaves W unchanged: the problem has a
     /// null space that only regularization removes.
-    pub fn any_position_fixed(&self) -> bool {
+    pub(crate) fn any_position_fixed(&self) -> bool {
         let s_count = self.slots.count();
         (0..s_count).filter(|&s| self.slots.is_position(s)).any(|s| (0..self.nodes).any(|a| self.get(a, s).is_none()))
     }

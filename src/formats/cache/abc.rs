@@ -56,7 +56,7 @@ struct ReadInfo {
 
 /// The frames of an Alembic mesh, served from a temporary PC2 copy of the selected samples.
 #[derive(Debug)]
-pub struct AbcFrames {
+pub(crate) struct AbcFrames {
     pc2: Pc2Frames,
     /// Frame times in seconds.
     times: Vec<f64>,
@@ -67,7 +67,7 @@ pub struct AbcFrames {
 
 /// An opened Alembic cache.
 #[derive(Debug)]
-pub struct OpenedAbc {
+pub(crate) struct OpenedAbc {
     /// Topology and the first selected frame's points.
     pub mesh: TriMesh,
     /// The frames.

@@ -20,7 +20,7 @@ use crate::support::error::{Error, Result};
 
 /// What the caller chooses in an FBX file.
 #[derive(Debug, Clone, Default)]
-pub struct FbxChoice<'a> {
+pub(crate) struct FbxChoice<'a> {
     /// The mesh node (default: the only mesh, or the only animated one).
     pub object: Option<&'a str>,
     /// The animation stack (default: the only one).
@@ -30,7 +30,7 @@ pub struct FbxChoice<'a> {
 }
 
 /// An opened FBX animation.
-pub struct OpenedFbx {
+pub(crate) struct OpenedFbx {
     /// Topology and the first frame's positions.
     pub mesh: TriMesh,
     /// The frames, evaluated on demand.
@@ -48,7 +48,7 @@ pub struct OpenedFbx {
 }
 
 /// The frames of one mesh of one animation stack, evaluated per read.
-pub struct FbxFrames {
+pub(crate) struct FbxFrames {
     scene: ufbx::SceneRoot,
     stack: usize,
     node: usize,

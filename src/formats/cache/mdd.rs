@@ -29,7 +29,7 @@ const BE: Endian = Endian::Big;
 
 /// Where an MDD file's frame times come from.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum MddTimes {
+pub(crate) enum MddTimes {
     /// The file's own times (finite, strictly increasing), at this mean rate.
     File { fps: f64 },
     /// Frame `i` at `i / fps`: the file's times were unusable and the caller gave a rate.
@@ -38,7 +38,7 @@ pub enum MddTimes {
 
 /// The frames of an MDD file, read on demand. `R` is a file, or any seekable bytes in tests.
 #[derive(Debug)]
-pub struct MddFrames<R = File> {
+pub(crate) struct MddFrames<R = File> {
     path: PathBuf,
     reader: R,
     points: usize,
@@ -127,7 +127,7 @@ impl<R: Read + Seek> MddFrames<R> {
 
     /// Whether the file has a rest pose before the frames (skipped).
     #[cfg(test)]
-    pub fn has_rest_pose(&self) -> bool {
+    pub(crate) fn has_rest_pose(&self) -> bool {
         self.data_start > 8 + 4 * self.times.len() as u64
     }
 }

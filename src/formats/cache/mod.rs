@@ -34,7 +34,7 @@ use crate::support::error::{Error, Result};
 
 /// The most frames a cache may hold: consumers keep a few numbers per frame, and a header
 /// or an animation asking for more is damaged rather than long (10 hours at 60 fps).
-pub const MAX_FRAMES: usize = 2_160_000;
+pub(crate) const MAX_FRAMES: usize = 2_160_000;
 
 /// What every writer needs of its frames: a positive finite fps, at least one frame and one
 /// vertex, counts that fit the formats' 32-bit fields, increasing times. Returns
@@ -73,7 +73,7 @@ pub(crate) mod tests {
     }
 
     /// An `n` x `n` grid in the xy plane, two triangles per square.
-    pub fn wave_mesh(n: u32) -> TriMesh {
+    pub(crate) fn wave_mesh(n: u32) -> TriMesh {
         let positions = (0..n * n).map(|v| [(v % n) as f64, (v / n) as f64, 0.0]).collect();
         let mut triangles = Vec::new();
         for i in 0..n - 1 {
@@ -102,7 +102,7 @@ pub(crate) mod tests {
     }
 
     /// Same counts, times within 1e-6 s, and every point within `tolerance` plus f32 rounding.
-    pub fn assert_frames_equal(expected: &mut dyn FrameSource, got: &mut dyn FrameSource, tolerance: f64) {
+    pub(crate) fn assert_frames_equal(expected: &mut dyn FrameSource, got: &mut dyn FrameSource, tolerance: f64) {
         assert_eq!((got.frame_count(), got.vertex_count()), (expected.frame_count(), expected.vertex_count()));
         let mut a = vec![[0.0; 3]; expected.vertex_count()];
         let mut b = a.clone();

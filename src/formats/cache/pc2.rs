@@ -24,14 +24,14 @@ use super::{check_writable, FrameSource};
 use crate::algorithms::geometry::Point;
 use crate::support::error::{Error, Result};
 
-pub const MAGIC: &[u8; 12] = b"POINTCACHE2\0";
-pub const HEADER_BYTES: u64 = 32;
+pub(crate) const MAGIC: &[u8; 12] = b"POINTCACHE2\0";
+pub(crate) const HEADER_BYTES: u64 = 32;
 
 const FIX_DAMAGED: &str = "the file is truncated or its header does not match its data; re-export the cache";
 
 /// The fields of a PC2 header, checked against the file size.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Pc2Header {
+pub(crate) struct Pc2Header {
     pub points: usize,
     pub start_frame: f64,
     /// Frames between samples, > 0.
@@ -106,7 +106,7 @@ pub(crate) fn size_mismatch(file_len: u64, expected: u128, data_start: u64, fram
 
 /// The frames of a PC2 file, read on demand. `R` is a file, or any seekable bytes in tests.
 #[derive(Debug)]
-pub struct Pc2Frames<R = File> {
+pub(crate) struct Pc2Frames<R = File> {
     path: PathBuf,
     reader: R,
     header: Pc2Header,
@@ -132,7 +132,7 @@ impl<R: Read + Seek> Pc2Frames<R> {
     }
 
     /// Samples per second: the frame rate divided by the frames between samples.
-    pub fn sample_fps(&self) -> f64 {
+    pub(crate) fn sample_fps(&self) -> f64 {
         self.fps / self.header.sample_rate
     }
 }

@@ -77,7 +77,7 @@ fn placeholder(name: &str) -> std::result::Result<Option<(usize, usize, usize)>,
 
 impl SequencePattern {
     /// Whether `path` names a sequence (its file name has a placeholder) rather than one file.
-    pub fn is_pattern(path: &Path) -> bool {
+    pub(crate) fn is_pattern(path: &Path) -> bool {
         path.file_name().and_then(|n| n.to_str()).is_some_and(|n| !matches!(placeholder(n), Ok(None)))
     }
 
@@ -119,7 +119,7 @@ impl SequencePattern {
     }
 
     /// The frame number a file name spells in this pattern, if it matches.
-    pub fn number_of(&self, file_name: &str) -> Option<u64> {
+    pub(crate) fn number_of(&self, file_name: &str) -> Option<u64> {
         let digits = file_name.strip_prefix(&self.prefix)?.strip_suffix(&self.suffix)?;
         let canonical = digits.len() == self.width || (digits.len() > self.width && !digits.starts_with('0'));
         if digits.is_empty() || digits.len() > 19 || !canonical || !digits.bytes().all(|b| b.is_ascii_digit()) {
@@ -161,7 +161,7 @@ impl SequencePattern {
 
 /// The frames of an OBJ sequence, parsed one file at a time.
 #[derive(Debug)]
-pub struct ObjSequence {
+pub(crate) struct ObjSequence {
     pattern: SequencePattern,
     /// Frame number of index 0 of the selected range.
     first: u64,
@@ -173,7 +173,7 @@ pub struct ObjSequence {
 
 /// An opened sequence: the first selected frame's mesh, its frames, and their total bytes.
 #[derive(Debug)]
-pub struct OpenedSequence {
+pub(crate) struct OpenedSequence {
     pub mesh: TriMesh,
     pub frames: ObjSequence,
     pub bytes: u64,
@@ -218,7 +218,7 @@ pub fn open(pattern: &Path, fps: f64, range: FrameRange) -> Result<OpenedSequenc
 
 impl ObjSequence {
     /// The file of frame index `frame`.
-    pub fn frame_path(&self, frame: usize) -> PathBuf {
+    pub(crate) fn frame_path(&self, frame: usize) -> PathBuf {
         self.pattern.path(self.first + frame as u64)
     }
 }

@@ -66,7 +66,7 @@ struct ReadInfo {
 
 /// The frames of a USD point cache, served from a temporary PC2 copy of the selected samples.
 #[derive(Debug)]
-pub struct UsdFrames {
+pub(crate) struct UsdFrames {
     pc2: Pc2Frames,
     /// Frame times in seconds.
     times: Vec<f64>,
@@ -75,7 +75,7 @@ pub struct UsdFrames {
 
 /// An opened USD point cache.
 #[derive(Debug)]
-pub struct OpenedUsd {
+pub(crate) struct OpenedUsd {
     /// Topology and the first selected frame's points.
     pub mesh: TriMesh,
     pub frames: UsdFrames,

@@ -50,7 +50,7 @@ impl CacheFormat {
     }
 
     /// The format with its article, for messages: "an OBJ sequence", "a PC2 cache", ...
-    pub fn described(self) -> &'static str {
+    pub(crate) fn described(self) -> &'static str {
         match self {
             CacheFormat::ObjSequence => "an OBJ sequence",
             CacheFormat::Pc2 => "a PC2 cache",
@@ -362,7 +362,7 @@ impl VertexCache {
 
     /// One line for the user: the rate and where it came from, e.g.
     /// `60 fps (from the file: the stage's timeCodesPerSecond (prim /Root/Mesh))`.
-    pub fn fps_note(&self) -> String {
+    pub(crate) fn fps_note(&self) -> String {
         match &self.fps_source {
             FpsSource::File(what) => format!("{} fps (from the file: {what})", self.fps),
             FpsSource::Caller => format!("{} fps (given by the scene)", self.fps),

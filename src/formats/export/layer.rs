@@ -80,7 +80,7 @@ impl Attribute {
     }
 
     /// The same attribute with primvar `interpolation` metadata (e.g. `faceVarying`).
-    pub fn with_interpolation(self, interpolation: &'static str) -> Attribute {
+    pub(crate) fn with_interpolation(self, interpolation: &'static str) -> Attribute {
         Attribute { interpolation: Some(interpolation), ..self }
     }
 }
@@ -131,7 +131,7 @@ impl Prim {
     }
 
     /// The same prim with API schema `schema` added last.
-    pub fn with_api(mut self, schema: &'static str) -> Prim {
+    pub(crate) fn with_api(mut self, schema: &'static str) -> Prim {
         self.api_schemas.push(schema);
         self
     }

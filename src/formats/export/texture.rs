@@ -25,7 +25,7 @@ pub struct Texture {
 }
 
 /// The MIME type of PNG or JPEG bytes, from their signature.
-pub fn mime_of(bytes: &[u8]) -> Option<&'static str> {
+pub(crate) fn mime_of(bytes: &[u8]) -> Option<&'static str> {
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         Some("image/png")
     } else if bytes.starts_with(&[0xff, 0xd8, 0xff]) {

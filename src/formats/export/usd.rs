@@ -101,7 +101,12 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
 
 /// [`full_frame`] without the points' samples, for a writer that streams them from `frames`
 /// (`usdc::full_frame`): the points are not copied into the layer.
-pub fn full_frame_unsampled(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option<&CornerAttributes>, settings: &UsdSettings) -> Layer {
+pub(crate) fn full_frame_unsampled(
+    frames: &FullFrame,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+) -> Layer {
     let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
     let extents = frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, extent(p))).collect();
     let vertices = frames.points.first().map_or(0, Vec::len);
@@ -109,7 +114,7 @@ pub fn full_frame_unsampled(frames: &FullFrame, triangles: &[[u32; 3]], attribut
 }
 
 /// The path of the points attribute of [`full_frame`] and [`sampled_points`]' layers.
-pub fn points_path(settings: &UsdSettings) -> String {
+pub(crate) fn points_path(settings: &UsdSettings) -> String {
     format!("/{}/Mesh.points", settings.name)
 }
 
@@ -133,7 +138,7 @@ pub fn sampled_points(
 
 /// [`sampled_points`] from each sample's extent and the points' samples (empty when the usdc
 /// writer streams them: [`crate::formats::export::usdc::bytes_streamed`]) of `vertices` points.
-pub fn sampled_points_layer(
+pub(crate) fn sampled_points_layer(
     extents: Vec<(f64, [[f32; 3]; 2])>,
     points: Vec<(f64, Value)>,
     vertices: usize,

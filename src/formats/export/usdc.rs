@@ -37,33 +37,33 @@ const VERSION: [u8; 3] = [0, 8, 0];
 
 /// usd-core's type numbers of the values we write (crateDataTypes.h).
 mod ty {
-    pub const BOOL: u64 = 1;
-    pub const INT: u64 = 3;
+    pub(crate) const BOOL: u64 = 1;
+    pub(crate) const INT: u64 = 3;
     pub const FLOAT: u64 = 8;
-    pub const DOUBLE: u64 = 9;
-    pub const STRING: u64 = 10;
-    pub const TOKEN: u64 = 11;
-    pub const ASSET_PATH: u64 = 12;
-    pub const VEC2F: u64 = 20;
-    pub const VEC3F: u64 = 24;
-    pub const TOKEN_LIST_OP: u64 = 32;
-    pub const PATH_LIST_OP: u64 = 34;
-    pub const PATH_VECTOR: u64 = 40;
-    pub const TOKEN_VECTOR: u64 = 41;
-    pub const SPECIFIER: u64 = 42;
-    pub const VARIABILITY: u64 = 44;
-    pub const TIME_SAMPLES: u64 = 46;
-    pub const DOUBLE_VECTOR: u64 = 48;
+    pub(crate) const DOUBLE: u64 = 9;
+    pub(crate) const STRING: u64 = 10;
+    pub(crate) const TOKEN: u64 = 11;
+    pub(crate) const ASSET_PATH: u64 = 12;
+    pub(crate) const VEC2F: u64 = 20;
+    pub(crate) const VEC3F: u64 = 24;
+    pub(crate) const TOKEN_LIST_OP: u64 = 32;
+    pub(crate) const PATH_LIST_OP: u64 = 34;
+    pub(crate) const PATH_VECTOR: u64 = 40;
+    pub(crate) const TOKEN_VECTOR: u64 = 41;
+    pub(crate) const SPECIFIER: u64 = 42;
+    pub(crate) const VARIABILITY: u64 = 44;
+    pub(crate) const TIME_SAMPLES: u64 = 46;
+    pub(crate) const DOUBLE_VECTOR: u64 = 48;
 }
 
 /// `SdfSpecType` numbers.
 mod spec {
-    pub const ATTRIBUTE: u32 = 1;
-    pub const CONNECTION: u32 = 2;
-    pub const PRIM: u32 = 6;
-    pub const PSEUDO_ROOT: u32 = 7;
-    pub const RELATIONSHIP: u32 = 8;
-    pub const RELATIONSHIP_TARGET: u32 = 9;
+    pub(crate) const ATTRIBUTE: u32 = 1;
+    pub(crate) const CONNECTION: u32 = 2;
+    pub(crate) const PRIM: u32 = 6;
+    pub(crate) const PSEUDO_ROOT: u32 = 7;
+    pub(crate) const RELATIONSHIP: u32 = 8;
+    pub(crate) const RELATIONSHIP_TARGET: u32 = 9;
 }
 
 const ARRAY_BIT: u64 = 1 << 63;
@@ -108,7 +108,7 @@ pub struct StreamedSamples<'a> {
 }
 
 /// Reads sample `i`'s values into a buffer (see [`StreamedSamples`]).
-pub type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()> + 'a;
+pub(crate) type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Result<()> + 'a;
 
 /// [`bytes`] with the samples of `streamed.attribute` read from `streamed` as they are written:
 /// the same bytes as [`bytes`] of the layer holding them.

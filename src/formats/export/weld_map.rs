@@ -13,7 +13,7 @@ use super::layer::{Attribute, Layer, Value};
 /// The extras key (glTF) and attribute name (USD).
 pub const GLTF_KEY: &str = "weldMap";
 /// See [`GLTF_KEY`].
-pub const USD_ATTRIBUTE: &str = "blendsim:weldMap";
+pub(crate) const USD_ATTRIBUTE: &str = "blendsim:weldMap";
 
 /// `layer` with the map on its `Mesh` prims (the children of its root prims).
 pub fn usd(layer: &mut Layer, map: &[u32]) {

@@ -61,7 +61,7 @@ pub fn read(path: &Path) -> Result<TriMesh> {
 /// The files an OBJ brings in besides itself, as a build tool must know them (`bake
 /// --depfile`): each `.mtl` of its `mtllib` lines that exists, and each texture a `map_Kd` of
 /// those names that exists. Nothing is checked here: [`read`] does that.
-pub fn companions(path: &Path) -> Result<Vec<std::path::PathBuf>> {
+pub(crate) fn companions(path: &Path) -> Result<Vec<std::path::PathBuf>> {
     let bytes = crate::support::input::read_bytes(path, "the OBJ surface")?;
     let folder = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();

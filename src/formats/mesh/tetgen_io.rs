@@ -38,7 +38,7 @@ pub fn read(path: &Path) -> Result<TetMesh> {
 }
 
 /// Parse `.node` text: returns the points and the first index (0 or 1).
-pub fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
+pub(crate) fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
     let mut lines = content_lines(text);
     let (header_no, header) = lines.next().ok_or_else(|| Error::general("is empty, expected a `count 3 attributes markers` header", REMESH))?;
     let count: usize = field(&header, 0, header_no, "the node count")?;
@@ -79,7 +79,7 @@ pub fn parse_node(text: &str) -> Result<(Vec<Point>, usize)> {
 }
 
 /// Parse `.ele` text given the first node index.
-pub fn parse_ele(text: &str, first_index: usize, node_count: usize) -> Result<Vec<[u32; 4]>> {
+pub(crate) fn parse_ele(text: &str, first_index: usize, node_count: usize) -> Result<Vec<[u32; 4]>> {
     let mut lines = content_lines(text);
     let (header_no, header) = lines.next().ok_or_else(|| Error::general("is empty, expected a `count 4 attributes` header", REMESH))?;
     let count: usize = field(&header, 0, header_no, "the tetrahedron count")?;
@@ -115,7 +115,7 @@ pub fn parse_ele(text: &str, first_index: usize, node_count: usize) -> Result<Ve
 }
 
 /// A `.smesh` PLC for a closed surface (all vertices listed, 0-based).
-pub fn write_smesh(surface: &TriMesh) -> String {
+pub(crate) fn write_smesh(surface: &TriMesh) -> String {
     let mut out = String::new();
     let ok = "writing to a String cannot fail";
     writeln!(out, "# blendsim surface: nodes (0-based), facets, holes, regions").expect(ok);

@@ -79,7 +79,7 @@ impl From<CacheDeviation> for CacheError {
 }
 
 /// Per format: `cache_bytes` / the blendshape file's bytes.
-pub fn cache_ratios(cache_bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
+pub(crate) fn cache_ratios(cache_bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
     outputs.iter().filter(|f| f.kind == OutputKind::Blendshape && f.bytes > 0).map(|f| (f.format, cache_bytes as f64 / f.bytes as f64)).collect()
 }
 

@@ -11,31 +11,31 @@ use crate::pipeline::stage_file::SolverLog;
 /// The codes of the warnings a bake can give, in the order the report lists them.
 pub mod code {
     /// A key of a tet body with inverted or flattened tets (a rig pose; `tetrahedralize`).
-    pub const FOLDED_KEY: &str = "folded-key";
+    pub(crate) const FOLDED_KEY: &str = "folded-key";
     /// TetGen left a tet far over `[tet] max_volume` (`tetrahedralize`).
-    pub const MAX_VOLUME: &str = "max-volume";
+    pub(crate) const MAX_VOLUME: &str = "max-volume";
     /// The body's size, in meters after `units`, is far from what the material is meant for
     /// (`tetrahedralize`).
-    pub const BODY_SIZE: &str = "body-size";
+    pub(crate) const BODY_SIZE: &str = "body-size";
     /// An `[embed] surface` reaching far outside the body (`tetrahedralize`).
     pub const EMBED_FAR: &str = "embed-far";
     /// A cache file stating a unit other than the scene's `units` (`tetrahedralize`).
-    pub const UNITS_CONFLICT: &str = "units-conflict";
+    pub(crate) const UNITS_CONFLICT: &str = "units-conflict";
     /// Iterative global-step solves stopped at their iteration cap short of their residual
     /// goal (`solve`).
-    pub const CG_CAPPED: &str = "cg-capped";
+    pub(crate) const CG_CAPPED: &str = "cg-capped";
     /// The solve stopped before its stopping rule was met.
-    pub const NOT_CONVERGED: &str = "not-converged";
+    pub(crate) const NOT_CONVERGED: &str = "not-converged";
     /// The exported animation misses the input keyframes by more than [`super::KEYS_MOVED_SHARE`].
-    pub const KEYS_MOVED: &str = "keys-moved";
+    pub(crate) const KEYS_MOVED: &str = "keys-moved";
     /// The volume left the band [`super::VOLUME_BAND`] around rest while hermite stayed in it.
     pub const VOLUME_BAND: &str = "volume-band";
     /// The key times are probably frame numbers ([`super::looks_like_frames`]).
-    pub const TIMES_LOOK_LIKE_FRAMES: &str = "times-look-like-frames";
+    pub(crate) const TIMES_LOOK_LIKE_FRAMES: &str = "times-look-like-frames";
     /// A blendshape file larger than the full-frame file or the cache it replaces.
-    pub const OUTPUT_LARGER: &str = "output-larger";
+    pub(crate) const OUTPUT_LARGER: &str = "output-larger";
     /// A glb whose quantization error, read back from the file, exceeds the scene's tolerance.
-    pub const QUANTIZATION_ERROR: &str = "quantization-error";
+    pub(crate) const QUANTIZATION_ERROR: &str = "quantization-error";
 }
 
 /// `code: message`, the form of every warning line.
@@ -44,7 +44,7 @@ pub fn coded(code: &str, message: impl std::fmt::Display) -> String {
 }
 
 /// The code a warning line starts with; `warning` for a report written before codes existed.
-pub fn code_of(warning: &str) -> &str {
+pub(crate) fn code_of(warning: &str) -> &str {
     match warning.split_once(": ") {
         Some((code, _)) if !code.is_empty() && code.bytes().all(|b| b.is_ascii_lowercase() || b == b'-') => code,
         _ => "warning",

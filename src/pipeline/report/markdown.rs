@@ -210,7 +210,7 @@ pub fn basis(report: &Report) -> String {
 }
 
 /// `1.2 MB`, `45.3 KB`, `812 B` (decimal units, as file managers show).
-pub fn human_bytes(bytes: u64) -> String {
+pub(crate) fn human_bytes(bytes: u64) -> String {
     let b = bytes as f64;
     if b >= 1e6 {
         format!("{:.1} MB", b / 1e6)

@@ -35,7 +35,7 @@ pub fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal
 /// The blendshape `clip` of `tr` as the files store it (f32 shapes, f32 weights sampled at
 /// `frames`) against the trajectory itself at those frames, and per frame the largest and the
 /// rms distance (relative to `diagonal`, as the deviation).
-pub fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> (Deviation, Vec<f64>, Vec<f64>) {
+pub(crate) fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> (Deviation, Vec<f64>, Vec<f64>) {
     // As USD stores it: f32 weights sampled at frames.
     let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
     let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
@@ -56,7 +56,7 @@ pub fn volume_series(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 
 
 /// Enclosed volume of the surface `triangles` moving on `tr`, over `frames`, relative to
 /// `rest` (see [`VolumeRange`]); `series` is [`volume_series`] of the same (in volume units).
-pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, series: &[f64]) -> VolumeRange {
+pub(crate) fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, series: &[f64]) -> VolumeRange {
     let key_volumes: Vec<f64> = tr.positions.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
     let blend = |t: f64| {
         let (i, theta) = tr.locate(t);
@@ -70,7 +70,7 @@ pub fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3
 }
 
 /// Per format: `bytes` / the blendshape file's bytes (none when `bytes` is 0: not recorded).
-pub fn ratios_to(bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
+pub(crate) fn ratios_to(bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
     outputs
         .iter()
         .filter(|f| f.kind == OutputKind::Blendshape && f.bytes > 0 && bytes > 0)
@@ -79,7 +79,7 @@ pub fn ratios_to(bytes: u64, outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
 }
 
 /// Per format: full-frame bytes / blendshape bytes, for the formats written both ways.
-pub fn size_ratios(outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
+pub(crate) fn size_ratios(outputs: &[OutputFile]) -> BTreeMap<Format, f64> {
     let mut ratios = BTreeMap::new();
     for format in [Format::Usda, Format::Usdc, Format::Glb] {
         let size = |kind| outputs.iter().find(|f| f.format == format && f.kind == kind).map(|f| f.bytes);

@@ -29,7 +29,7 @@ use crate::support::error::Result;
 use crate::support::output::Staging;
 
 /// The files [`Report::write`] stages.
-pub const FILES: [&str; 3] = ["report.json", "report.md", "report.html"];
+pub(crate) const FILES: [&str; 3] = ["report.json", "report.md", "report.html"];
 
 /// Distances between two animations, relative to the rest bounding-box diagonal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

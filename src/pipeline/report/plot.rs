@@ -14,7 +14,7 @@ const TOP: f64 = 30.0;
 const BOTTOM: f64 = 46.0;
 
 /// Colours of the series, in order (distinct for colour-blind readers: Okabe-Ito).
-pub const COLOURS: [&str; 6] = ["#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9"];
+pub(crate) const COLOURS: [&str; 6] = ["#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9"];
 
 /// One series: a polyline, or dots only.
 #[derive(Debug, Clone)]
@@ -29,7 +29,7 @@ pub struct Line {
 
 /// A vertical mark: a dashed line at `x` with a short label.
 #[derive(Debug, Clone)]
-pub struct Mark {
+pub(crate) struct Mark {
     /// Where.
     pub x: f64,
     /// Its label (drawn at the top of the plot area).
@@ -38,7 +38,7 @@ pub struct Mark {
 
 /// A line plot.
 #[derive(Debug, Clone)]
-pub struct LinePlot {
+pub(crate) struct LinePlot {
     /// The `id` of the `<svg>` element (`plot-energy`).
     pub id: String,
     /// The title drawn above.
@@ -57,7 +57,7 @@ pub struct LinePlot {
 
 /// A grouped bar plot on a logarithmic axis: per group (a format), one bar per series.
 #[derive(Debug, Clone)]
-pub struct BarPlot {
+pub(crate) struct BarPlot {
     /// The `id` of the `<svg>` element.
     pub id: String,
     /// The title drawn above.

@@ -147,7 +147,7 @@ impl CacheSpec {
 
     /// The `fixed` selection for `method`: as given, else "all" (the keys are the cache's
     /// frames) for spacetime and hermite, "none" (least squares places the keys) for fit.
-    pub fn fixed_for(&self, method: Method) -> Selection {
+    pub(crate) fn fixed_for(&self, method: Method) -> Selection {
         self.fixed.clone().unwrap_or(if method == Method::Fit { Selection::None } else { Selection::All })
     }
 

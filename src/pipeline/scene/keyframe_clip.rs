@@ -17,7 +17,7 @@ impl KeyframeSpec {
 
     /// Per key, how the scene names it in messages: its mesh as written, or the clip and the
     /// frame or time.
-    pub fn key_names(&self) -> Vec<String> {
+    pub(crate) fn key_names(&self) -> Vec<String> {
         match (&self.clip, &self.frames) {
             (Some(clip), Some(frames)) => frames.iter().map(|f| format!("{clip} frame {f}")).collect(),
             (Some(clip), None) => self.times.iter().map(|t| format!("{clip} at {} s", number(*t))).collect(),

@@ -145,7 +145,7 @@ impl BakeCache {
     }
 
     /// Keep TetGen's `mesh` for the inputs of `key`.
-    pub fn keep_tetgen(&mut self, key: String, mesh: &TetMesh) {
+    pub(crate) fn keep_tetgen(&mut self, key: String, mesh: &TetMesh) {
         self.tetgen = Some(TetgenEntry { key, mesh: mesh.clone() });
     }
 
@@ -158,7 +158,7 @@ impl BakeCache {
     /// Where the solve of `body` may start: the kept solution of the same body with other key
     /// poses, each key's nodes moved by their key's edit (prescribed values set to the new
     /// key's exactly).
-    pub fn warm_start(&self, body: &Body, keys: &SolveKeys) -> Option<Trajectory> {
+    pub(crate) fn warm_start(&self, body: &Body, keys: &SolveKeys) -> Option<Trajectory> {
         let e = self.solve.as_ref().filter(|e| e.warm_key == keys.warm_key)?;
         let poses = &body.keys;
         let mut start = e.trajectory.clone();
@@ -187,7 +187,7 @@ impl BakeCache {
     }
 
     /// Keep `solution`'s result, solved for the inputs of `keys`.
-    pub fn keep_solution(&mut self, solution: &Solution, keys: SolveKeys) {
+    pub(crate) fn keep_solution(&mut self, solution: &Solution, keys: SolveKeys) {
         self.solve = Some(SolveEntry {
             key: keys.key,
             warm_key: keys.warm_key,

@@ -1,41 +1,22 @@
-//! Mass-spring blendshapes (Ma et al. 2012, `src/massspring/`) as a stage, two ways:
+//! Mass-spring blendshapes (Ma et al. 2012, `algorithms::massspring`) as a stage: `blendsim
+//! blend` ([`blend()`]): target meshes and convex weights in, blended shapes out (one OBJ, or a
+//! vertex cache for a weights file). A keyframe scene's `[solver] method = "mass-spring"` is
+//! the `solve` stage's ([`stages::solve`](mod@super::solve)).
 //!
-//! - [`blend()`]: `blendsim blend`: target meshes and convex weights in, blended shapes out
-//!   (one OBJ, or a vertex cache for a weights file);
-//! - `inbetween`: `[solver] method = "mass-spring"` in a keyframe scene (the `solve` stage
-//!   calls it): in-between shapes on every keyframe interval, as keys of the node trajectory.
-//!
-//! This layer translates files, the scene and the body into the model's plain inputs (target
-//! positions, triangles, the tet body, fixed vertices or the default anchor, obstacles) and the
-//! blended shapes back into files or a [`Trajectory`].
-//!
-//! In a scene, interval `[t_k, t_k+1]` gets `inbetweens` shapes at `θ = i / (inbetweens + 1)`
-//! with weights `(1 - α, α)` on keys `k` and `k + 1`, `α = 3θ² - 2θ³`: the hermite baseline's
-//! easing, so the linear blend at the same `α` IS the hermite trajectory and the two methods
-//! differ in shape, not timing. Each shape's velocity is `dX/dα · dα/dt` (`dX/dα` by central
-//! differences over the interval's shapes, zero at the keys like the baseline's), and the
-//! trajectory is the cubic Hermite curve through keys and in-betweens: every in-between is an
-//! exact equilibrium, frames between them are interpolated (the log's stop reason says how
-//! many frames are; with keys on frames and `inbetweens` = frames per interval - 1, none). Vertices held at EVERY key (and not
-//! the whole surface) follow the eased linear blend as fixed vertices; otherwise the body hangs
-//! on the paper's default anchor. The tet body's edges are the internal springs and every
-//! node's keyframe pose (interior nodes from the quasi-static fit) is its target pose.
+//! This layer translates files into the model's plain inputs (target positions, triangles, the
+//! tet body, fixed vertices or the default anchor, obstacles) and the blended shapes back into
+//! files.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::algorithms::frames::MemoryFrames;
-use crate::algorithms::geometry::{surface, Point, TetMesh, TriMesh};
-use crate::algorithms::massspring::{self, refine, Bending, Boundary, MassSpring, Settings, Targets};
-use crate::algorithms::physics::elastic::Elastic;
-use crate::algorithms::spacetime::solver;
-use crate::algorithms::spacetime::trajectory::Trajectory;
-use crate::algorithms::spacetime::unknowns::KeyConstraints;
+use crate::algorithms::geometry::{surface, Point, TriMesh};
+use crate::algorithms::massspring::{self, refine, Boundary, MassSpring, Settings, Targets};
 use crate::formats::cache::{self, CacheFormat};
 use crate::formats::mesh::{obj, selection};
 use crate::formats::tetgen::{self, TetgenOptions};
-use crate::pipeline::scene::{self, Method, ObstacleSpec};
-use crate::pipeline::stage_file::{Body, SolverLog};
+use crate::pipeline::scene::{self, ObstacleSpec};
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
@@ -315,183 +296,18 @@ fn read_obstacles(path: &Path) -> Result<Vec<massspring::Obstacle>> {
         .collect()
 }
 
-fn model_obstacle(o: &ObstacleSpec) -> massspring::Obstacle {
+/// A scene's or an obstacles file's `[[obstacle]]` as the mass-spring model's.
+pub(crate) fn model_obstacle(o: &ObstacleSpec) -> massspring::Obstacle {
     match *o {
         ObstacleSpec::Plane { point, normal } => massspring::Obstacle::Plane { point, normal },
         ObstacleSpec::Sphere { center, radius } => massspring::Obstacle::Sphere { center, radius },
     }
 }
 
-/// The hermite baseline's easing `α(θ) = 3θ² - 2θ³` and its derivative.
-fn ease(theta: f64) -> (f64, f64) {
-    (theta * theta * (3.0 - 2.0 * theta), 6.0 * theta * (1.0 - theta))
-}
-
-/// `method = "mass-spring"`: the node trajectory of `body` with `[mass_spring] inbetweens`
-/// equilibria per keyframe interval (see the module documentation), and its log. Its `W` is
-/// the spacetime objective of that trajectory (the same integral, sampled on the finer
-/// intervals), so reports compare it with the other methods.
-pub(crate) fn inbetween(body: &Body, budget: &Budget, progress: &Progress) -> Result<(Trajectory, SolverLog)> {
-    let start = Instant::now();
-    let scene = &body.scene;
-    let spec = &scene.mass_spring;
-    let keys = &body.keys;
-    let Some(mesh) = body.mesh.as_ref() else {
-        return Err(Error::general(
-            "method mass-spring needs a tet mesh, but this body was imported for method fit",
-            "set [solver] method = \"mass-spring\" in the scene (or bake with --method mass-spring) and re-run import and tetrahedralize",
-        ));
-    };
-    let nodes = mesh.positions.len();
-    // Surface nodes first, in index order (the model's convention), then the interior.
-    let triangles = surface::boundary(mesh);
-    let mut on_surface = vec![false; nodes];
-    triangles.iter().flatten().for_each(|&v| on_surface[v as usize] = true);
-    let order: Vec<usize> = (0..nodes).filter(|&v| on_surface[v]).chain((0..nodes).filter(|&v| !on_surface[v])).collect();
-    let surface_count = on_surface.iter().filter(|&&s| s).count();
-    let mut new_index = vec![0u32; nodes];
-    for (i, &v) in order.iter().enumerate() {
-        new_index[v] = i as u32;
-    }
-    let permute = |x: &[Point]| -> Vec<Point> { order.iter().map(|&v| x[v]).collect() };
-    let poses: Vec<Vec<Point>> = keys.positions.iter().map(|p| permute(p)).collect();
-    let surfaces: Vec<Vec<Point>> = poses.iter().map(|p| p[..surface_count].to_vec()).collect();
-    let triangles: Vec<[u32; 3]> = triangles.iter().map(|t| t.map(|v| new_index[v as usize])).collect();
-    let tet_body = TetMesh { positions: poses[0].clone(), tets: mesh.tets.iter().map(|t| t.map(|v| new_index[v as usize])).collect() };
-    let targets = Targets { surface: &surfaces, triangles: &triangles, body: Some(&tet_body), body_poses: Some(&poses) };
-    // Held at every key, and not the whole surface: those follow the (eased) linear blend.
-    let held: Vec<u32> = (0..nodes as u32).filter(|&v| keys.fixed.iter().all(|s| s.contains(v))).map(|v| new_index[v as usize]).collect();
-    let boundary = if !held.is_empty() && held.len() < surface_count {
-        let mut held = held;
-        held.sort_unstable();
-        Boundary::Fixed(held)
-    } else {
-        Boundary::Anchor(None)
-    };
-    let settings = Settings {
-        bending: if spec.bending == "hinge" { Bending::Hinge } else { Bending::TwoRing },
-        tolerance: spec.tolerance,
-        budget: *budget,
-        ..Settings::default()
-    };
-    // The scene's `[[obstacle]]` entries, the same ones the spacetime solver's contacts use.
-    let obstacles: Vec<massspring::Obstacle> = scene.obstacles.iter().map(model_obstacle).collect();
-    let bar = progress.stage("solve: mass-spring network");
-    let mut model = MassSpring::new(&targets, &boundary, &settings)?;
-    bar.finish_and_clear();
-    let precompute_seconds = start.elapsed().as_secs_f64();
-
-    let key_count = keys.times.len();
-    let steps = spec.inbetweens + 1;
-    let mut times = vec![keys.times[0]];
-    let mut positions = vec![keys.positions[0].clone()];
-    let mut velocities = vec![vec![[0.0; 3]; nodes]];
-    let (mut iterations, mut blends, mut held_vertices) = (0, 0, 0);
-    let bar = progress.bar(((key_count - 1) * spec.inbetweens) as u64, "solve: mass-spring in-betweens");
-    let unpermute = |x: &[Point]| -> Vec<Point> { (0..nodes).map(|v| x[new_index[v] as usize]).collect() };
-    for k in 0..key_count - 1 {
-        let (t0, t1) = (keys.times[k], keys.times[k + 1]);
-        // The interval's shapes at α = 0, the in-betweens, α = 1.
-        let mut alphas = vec![0.0];
-        let mut shapes = vec![keys.positions[k].clone()];
-        for i in 1..steps {
-            budget.check_time("mass-spring in-betweens", || format!("after {blends} of {} in-betweens", (key_count - 1) * spec.inbetweens))?;
-            let (alpha, _) = ease(i as f64 / steps as f64);
-            let mut w = vec![0.0; key_count];
-            w[k] = 1.0 - alpha;
-            w[k + 1] = alpha;
-            let shape = model
-                .blend(&w, &obstacles)
-                .map_err(|e| Error { problem: format!("mass-spring in-between {i} of interval {k} (t = {t0} to {t1}): {}", e.problem), ..e })?;
-            iterations += shape.report.iterations;
-            held_vertices += shape.report.held.len();
-            blends += 1;
-            alphas.push(alpha);
-            shapes.push(unpermute(&shape.positions[..nodes]));
-            bar.inc(1);
-        }
-        alphas.push(1.0);
-        shapes.push(keys.positions[k + 1].clone());
-        for i in 1..steps {
-            let (_, rate) = ease(i as f64 / steps as f64);
-            let scale = rate / (t1 - t0) / (alphas[i + 1] - alphas[i - 1]);
-            times.push(t0 + (t1 - t0) * i as f64 / steps as f64);
-            velocities.push((0..nodes).map(|v| std::array::from_fn(|c| (shapes[i + 1][v][c] - shapes[i - 1][v][c]) * scale)).collect());
-            positions.push(shapes[i].clone());
-        }
-        times.push(t1);
-        positions.push(keys.positions[k + 1].clone());
-        velocities.push(vec![[0.0; 3]; nodes]);
-    }
-    bar.finish_and_clear();
-    if keys.cyclic {
-        // The last key is the first, exactly (as the other methods make it).
-        let first = positions[0].clone();
-        *positions.last_mut().expect("keys") = first;
-    }
-    let trajectory = Trajectory { times, positions, velocities };
-    // Say whether the exported frames are equilibria: frames on a key or an in-between are,
-    // frames between them are Hermite-interpolated.
-    let frames = trajectory.frames(scene.fps);
-    let between = frames.iter().filter(|(_, t)| !trajectory.times.iter().any(|k| (k - t).abs() <= 1e-9 / scene.fps)).count();
-    let frames_note = if between == 0 {
-        "; every frame is an equilibrium (a key or an in-between)".to_string()
-    } else {
-        format!("; {between} of {} frames fall between in-betweens and are Hermite-interpolated (for an equilibrium at every frame, keys on frames and inbetweens = frames per interval - 1)", frames.len())
-    };
-    // W on the spacetime scale: the trajectory's keys (in-betweens included) as the keys of
-    // the objective, so its samples cover every sub-interval.
-    let elastic = Elastic::new(mesh, &super::elastic_material(scene))?;
-    let constraints = KeyConstraints {
-        times: trajectory.times.clone(),
-        positions: trajectory.positions.clone(),
-        fixed: vec![Vec::new(); trajectory.key_count()],
-        fixed_velocity: vec![Vec::new(); trajectory.key_count()],
-        cyclic: keys.cyclic,
-    };
-    let objective = solver::objective(&elastic, &constraints, &super::solve::settings(scene));
-    let w = objective.evaluate(&trajectory, &objective.local_step(&trajectory, false)).value;
-    let summary = model.summary();
-    let log = SolverLog {
-        method: Method::MassSpring,
-        iterations,
-        energy: vec![w],
-        seconds: start.elapsed().as_secs_f64(),
-        precompute_seconds,
-        iteration_seconds: if blends > 0 { (start.elapsed().as_secs_f64() - precompute_seconds) / blends as f64 } else { 0.0 },
-        unknowns: summary.surface_vertices + summary.interior_vertices,
-        halvings: 0,
-        converged: true,
-        stop_reason: format!(
-            "mass-spring: {} in-betweens per interval, each the equilibrium of the blended springs ({} springs, {}; {iterations} Newton iterations in all{}){frames_note}",
-            spec.inbetweens,
-            summary.springs,
-            if matches!(boundary, Boundary::Fixed(_)) { "vertices held at every key follow the linear blend" } else { "default anchor" },
-            if held_vertices > 0 { format!(", {held_vertices} vertex holds on obstacles") } else { String::new() },
-        ),
-        linear_solver: String::new(),
-        last_decrease: 0.0,
-        predicted_remaining: None,
-        force_scale: None,
-        force_scales: Vec::new(),
-        input_times: keys.times.clone(),
-        times: keys.times.clone(),
-        timing_iterations: 0,
-        refactorizations: 0,
-        active_contacts: 0,
-        clearance: None,
-        conjugate_gradients: None,
-        iteration_split: None,
-        coarse_iterations: 0,
-        coarse_samples: 0,
-    };
-    Ok((trajectory, log))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::scene::Scene;
+    use crate::pipeline::scene::{Method, Scene};
 
     const SCENE: &str = "name = \"s\"\n[keyframes]\nmeshes = [\"a.obj\", \"b.obj\"]\ntimes = [0.0, 1.0]\n[solver]\nmethod = \"mass-spring\"\n";
 
@@ -516,20 +332,6 @@ mod tests {
         ] {
             let e = Scene::parse(&format!("{SCENE}[mass_spring]\n{table}\n")).unwrap_err();
             assert!(e.to_string().contains(says), "{table}: {e}");
-        }
-    }
-
-    #[test]
-    fn easing_is_the_hermite_baselines() {
-        // The hermite baseline's position weight of the next key is 3θ² - 2θ³; its derivative
-        // checked by central differences.
-        for theta in [0.0, 0.1, 0.25, 0.5, 0.9, 1.0] {
-            let (a, da) = ease(theta);
-            let h01 = crate::algorithms::spacetime::trajectory::hermite_weights(theta, 1.0).pos[2];
-            assert!((a - h01).abs() < 1e-15, "θ = {theta}: {a} vs {h01}");
-            let e = 1e-6;
-            let fd = (ease(theta + e).0 - ease(theta - e).0) / (2.0 * e);
-            assert!((da - fd).abs() < 1e-8, "θ = {theta}: {da} vs {fd}");
         }
     }
 

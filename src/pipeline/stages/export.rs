@@ -206,7 +206,7 @@ pub fn outputs_list_name(scene: &Scene) -> String {
 
 /// The share of the scene's tolerance (`[cache] tolerance`, or its default) a glb's quantization
 /// may add, of the bounding-box diagonal (`formats/gltf.md`, "Quantization").
-pub const QUANTIZATION_SHARE: f64 = 0.1;
+pub(crate) const QUANTIZATION_SHARE: f64 = 0.1;
 
 /// Reduction error allowed when a principal clip has no tolerance to meet (a keyframe scene):
 /// the trajectory to f32 precision, of the bounding-box diagonal.

@@ -27,7 +27,7 @@ use crate::pipeline::stage_file::{CacheRecord, CacheRecordOptions, Keyframes, Sh
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
-use super::import::resolve_selection;
+use super::key_meshes::resolve_selection;
 
 /// Modification time of a regular file in ns since the epoch (none for a sequence pattern or
 /// a file system without times).
@@ -85,7 +85,7 @@ fn welded(mut cache: VertexCache, weld: Weld) -> VertexCache {
 
 /// The least-squares fit of the cache of `record` on its keys, its `fixed` vertices held on
 /// the cache frames at every key.
-pub fn fit_cache(record: &CacheRecord, budget: &Budget) -> Result<Trajectory> {
+pub(crate) fn fit_cache(record: &CacheRecord, budget: &Budget) -> Result<Trajectory> {
     let mut cache = reopen(record, budget)?;
     let pins = if record.fixed.is_empty() { Vec::new() } else { vec![record.fixed.to_mask(record.vertices); record.keys.len()] };
     fit(&mut timed(cache.frames.as_mut(), "cache fit", budget), &record.keys, &pins, &FitSettings::default())
@@ -107,7 +107,7 @@ fn timed<'a, S: FrameSource + ?Sized>(
 /// The distance of `trajectory` (over the cache's vertices) from every frame of the cache.
 /// It streams the whole cache (once per candidate rank in the export's rank search), so it
 /// checks `--max-time` at every frame like the fit.
-pub fn error_against(record: &CacheRecord, trajectory: &Trajectory, budget: &Budget) -> Result<CacheDeviation> {
+pub(crate) fn error_against(record: &CacheRecord, trajectory: &Trajectory, budget: &Budget) -> Result<CacheDeviation> {
     let mut cache = reopen(record, budget)?;
     deviation(&mut timed(cache.frames.as_mut(), "cache error measure", budget), trajectory, record.diagonal)
         .map_err(|e| e.with_path(Path::new(&record.path)))

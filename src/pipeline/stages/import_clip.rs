@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use super::import::{KeyMeshes, MeshCache, Topology};
+use super::key_meshes::{KeyMeshes, MeshCache, Topology};
 use crate::algorithms::frames::FrameRange;
 use crate::algorithms::geometry::Point;
 use crate::formats::cache::{CacheFormat, CacheOptions, VertexCache};

@@ -29,6 +29,7 @@ pub mod export;
 pub mod import;
 pub mod import_cache;
 mod import_clip;
+mod key_meshes;
 pub mod report;
 pub mod solve;
 pub mod tetrahedralize;

@@ -3,24 +3,26 @@
 //! - `hermite`: the keyframes joined with zero velocities (the geometric baseline); its W is
 //!   still evaluated, so reports compare methods on one scale.
 //! - `spacetime`: BlendSim's spacetime projective dynamics, starting from that baseline.
-//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval ([`stages::blend`](mod@super::blend)).
+//! - `mass-spring`: in-between shapes of Ma et al. 2012 on every interval
+//!   ([`massspring::inbetween`](mod@crate::algorithms::massspring::inbetween)).
 //!
 //! The scene's `[solver]`, `[material]` and `[[obstacle]]` become the solver's [`Settings`] and
 //! the body's elastic material here; the body's keyframes become its [`KeyConstraints`].
 
 use std::time::Instant;
 
+use crate::algorithms::massspring::{self, Bending};
 use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::spacetime::contact::Contacts;
 use crate::algorithms::spacetime::global_step::Method as GlobalMethod;
 use crate::algorithms::spacetime::obstacles::Obstacle;
-use crate::algorithms::spacetime::solver::{self, ModelHessian, Settings, Step};
-use crate::algorithms::spacetime::timing::TimingSettings;
+use crate::algorithms::spacetime::settings::{ModelHessian, Settings, Step, TimingSettings};
+use crate::algorithms::spacetime::solver;
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
 use crate::pipeline::report::guard_rails::{code, coded};
 use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
-use crate::pipeline::stage_file::{Body, CgSummary, IterationSplit, KeyPoses, Solution, SolverLog};
+use crate::pipeline::stage_file::{Body, KeyPoses, Solution, SolverLog};
 use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
@@ -70,33 +72,8 @@ pub fn solve_starting(body: &Body, method: Option<Method>, budget: &Budget, prog
         Method::Hermite => {
             let start = Instant::now();
             let (trajectory, w) = solver::baseline(&elastic, &keys, &settings);
-            let log = SolverLog {
-                method: Method::Hermite,
-                iterations: 0,
-                energy: vec![w],
-                seconds: start.elapsed().as_secs_f64(),
-                precompute_seconds: 0.0,
-                iteration_seconds: 0.0,
-                unknowns: 0,
-                halvings: 0,
-                converged: true,
-                stop_reason: "hermite: keyframes joined with zero velocities, nothing to optimize".into(),
-                linear_solver: String::new(),
-                last_decrease: 0.0,
-                predicted_remaining: None,
-                force_scale: None,
-                force_scales: Vec::new(),
-                times: input_times.clone(),
-                input_times,
-                timing_iterations: 0,
-                refactorizations: 0,
-                active_contacts: 0,
-                clearance: None,
-                conjugate_gradients: None,
-                iteration_split: None,
-                coarse_iterations: 0,
-                coarse_samples: 0,
-            };
+            let stop_reason = "hermite: keyframes joined with zero velocities, nothing to optimize".into();
+            let log = SolverLog::closed_form(Method::Hermite, vec![w], start.elapsed().as_secs_f64(), 0, stop_reason, input_times);
             (trajectory, log)
         }
         Method::Spacetime => {
@@ -131,50 +108,11 @@ pub fn solve_starting(body: &Body, method: Option<Method>, budget: &Budget, prog
                 }
             })?;
             bar.finish_and_clear();
-            let l = solved.log;
-            let log = SolverLog {
-                method: Method::Spacetime,
-                iterations: l.iterations,
-                energy: l.energy,
-                seconds: l.seconds,
-                precompute_seconds: l.precompute_seconds,
-                iteration_seconds: l.iteration_seconds,
-                unknowns: l.unknowns,
-                halvings: l.halvings,
-                converged: l.converged,
-                stop_reason: l.stop_reason,
-                linear_solver: l.linear_solver,
-                last_decrease: l.last_decrease,
-                predicted_remaining: l.predicted_remaining,
-                force_scale: Some(l.force_scale),
-                force_scales: estimate.into_inner().unwrap_or_else(|e| e.into_inner()).1,
-                times: solved.trajectory.times.clone(),
-                input_times,
-                timing_iterations: l.timing_iterations,
-                refactorizations: l.refactorizations,
-                active_contacts: l.active_contacts,
-                clearance: l.clearance,
-                conjugate_gradients: l.conjugate_gradients.map(|c| CgSummary {
-                    solves: c.solves,
-                    iterations: c.iterations,
-                    capped: c.capped,
-                    max_iterations: c.max_iterations,
-                    tolerance: c.tolerance,
-                    worst_residual: c.worst_residual,
-                }),
-                coarse_iterations: l.coarse_iterations,
-                coarse_samples: l.coarse_samples,
-                iteration_split: Some(IterationSplit {
-                    evaluations: l.split.evaluations,
-                    exact_evaluations: l.split.exact_evaluations,
-                    evaluation_seconds: l.split.evaluation_seconds,
-                    solves: l.split.solves,
-                    solve_seconds: l.split.solve_seconds,
-                }),
-            };
+            let force_scales = estimate.into_inner().unwrap_or_else(|e| e.into_inner()).1;
+            let log = SolverLog::spacetime(solved.log, input_times, solved.trajectory.times.clone(), force_scales);
             (solved.trajectory, log)
         }
-        Method::MassSpring => super::blend::inbetween(&body, budget, progress)?,
+        Method::MassSpring => mass_spring(&body, budget, progress)?,
         Method::Fit => unreachable!("handled above"),
     };
     if let Some(w) = cg_capped(&log) {
@@ -214,34 +152,78 @@ fn solve_fit(body: Body, budget: &Budget) -> Result<Solution> {
         .as_ref()
         .ok_or_else(|| Error::general("method fit needs a vertex cache, and this body has none", "give the scene a [cache] table"))?;
     let trajectory = super::import_cache::fit_cache(record, budget)?;
-    let log = SolverLog {
-        method: Method::Fit,
-        iterations: 0,
-        energy: Vec::new(),
-        seconds: start.elapsed().as_secs_f64(),
-        precompute_seconds: 0.0,
-        iteration_seconds: 0.0,
-        unknowns: 2 * body.keys.times.len(),
-        halvings: 0,
-        converged: true,
-        stop_reason: "fit: linear least squares, solved exactly".into(),
-        linear_solver: String::new(),
-        last_decrease: 0.0,
-        predicted_remaining: None,
-        force_scale: None,
-        force_scales: Vec::new(),
-        input_times: body.keys.times.clone(),
-        times: body.keys.times.clone(),
-        timing_iterations: 0,
-        refactorizations: 0,
-        active_contacts: 0,
-        clearance: None,
-        conjugate_gradients: None,
-        iteration_split: None,
-        coarse_iterations: 0,
-        coarse_samples: 0,
-    };
+    let stop_reason = "fit: linear least squares, solved exactly".into();
+    let log = SolverLog::closed_form(
+        Method::Fit,
+        Vec::new(),
+        start.elapsed().as_secs_f64(),
+        2 * body.keys.times.len(),
+        stop_reason,
+        body.keys.times.clone(),
+    );
     Ok(Solution { body, trajectory, log })
+}
+
+/// `method = "mass-spring"`: the node trajectory of `body` with `[mass_spring] inbetweens`
+/// equilibria per keyframe interval ([`massspring::inbetween`](mod@massspring::inbetween)), and
+/// its log. Its `W` is the spacetime objective of that trajectory (the same integral, sampled
+/// on the finer intervals), so reports compare it with the other methods.
+fn mass_spring(body: &Body, budget: &Budget, progress: &Progress) -> Result<(Trajectory, SolverLog)> {
+    let start = Instant::now();
+    let scene = &body.scene;
+    let spec = &scene.mass_spring;
+    let keys = &body.keys;
+    let Some(mesh) = body.mesh.as_ref() else {
+        return Err(Error::general(
+            "method mass-spring needs a tet mesh, but this body was imported for method fit",
+            "set [solver] method = \"mass-spring\" in the scene (or bake with --method mass-spring) and re-run import and tetrahedralize",
+        ));
+    };
+    let model = massspring::Settings {
+        bending: if spec.bending == "hinge" { Bending::Hinge } else { Bending::TwoRing },
+        tolerance: spec.tolerance,
+        budget: *budget,
+        ..massspring::Settings::default()
+    };
+    // The scene's `[[obstacle]]` entries, the same ones the spacetime solver's contacts use.
+    let obstacles: Vec<massspring::Obstacle> = scene.obstacles.iter().map(super::blend::model_obstacle).collect();
+    let done = massspring::inbetween(mesh, &key_constraints(keys), spec.inbetweens, &model, &obstacles, progress)?;
+    let trajectory = done.trajectory;
+    // Say whether the exported frames are equilibria: frames on a key or an in-between are,
+    // frames between them are Hermite-interpolated.
+    let frames = trajectory.frames(scene.fps);
+    let between = frames.iter().filter(|(_, t)| !trajectory.times.iter().any(|k| (k - t).abs() <= 1e-9 / scene.fps)).count();
+    let frames_note = if between == 0 {
+        "; every frame is an equilibrium (a key or an in-between)".to_string()
+    } else {
+        format!("; {between} of {} frames fall between in-betweens and are Hermite-interpolated (for an equilibrium at every frame, keys on frames and inbetweens = frames per interval - 1)", frames.len())
+    };
+    // W on the spacetime scale: the trajectory's keys (in-betweens included) as the keys of
+    // the objective, so its samples cover every sub-interval.
+    let elastic = Elastic::new(mesh, &super::elastic_material(scene))?;
+    let constraints = KeyConstraints {
+        times: trajectory.times.clone(),
+        positions: trajectory.positions.clone(),
+        fixed: vec![Vec::new(); trajectory.key_count()],
+        fixed_velocity: vec![Vec::new(); trajectory.key_count()],
+        cyclic: keys.cyclic,
+    };
+    let objective = solver::objective(&elastic, &constraints, &settings(scene));
+    let w = objective.evaluate(&trajectory, &objective.local_step(&trajectory, false)).value;
+    let (summary, iterations, blends) = (&done.summary, done.iterations, done.blends);
+    let stop_reason = format!(
+        "mass-spring: {} in-betweens per interval, each the equilibrium of the blended springs ({} springs, {}; {iterations} Newton iterations in all{}){frames_note}",
+        spec.inbetweens,
+        summary.springs,
+        if done.fixed { "vertices held at every key follow the linear blend" } else { "default anchor" },
+        if done.held_vertices > 0 { format!(", {} vertex holds on obstacles", done.held_vertices) } else { String::new() },
+    );
+    let unknowns = summary.surface_vertices + summary.interior_vertices;
+    let mut log = SolverLog::closed_form(Method::MassSpring, vec![w], start.elapsed().as_secs_f64(), unknowns, stop_reason, keys.times.clone());
+    log.iterations = iterations;
+    log.precompute_seconds = done.network_seconds;
+    log.iteration_seconds = if blends > 0 { (start.elapsed().as_secs_f64() - done.network_seconds) / blends as f64 } else { 0.0 };
+    Ok((trajectory, log))
 }
 
 /// The solver's inputs for a body, as [`solve`] builds them: the elastic body, its key
@@ -266,7 +248,7 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
         contact_samples: s.contact_samples,
         max_iterations: s.max_iterations,
         tolerance: s.tolerance,
-        negligible: crate::algorithms::spacetime::solver::NEGLIGIBLE,
+        negligible: crate::algorithms::spacetime::settings::NEGLIGIBLE,
         regularization: s.regularization,
         damping: scene.material.damping,
         gravity: super::gravity(scene),
@@ -283,7 +265,7 @@ pub(crate) fn settings(scene: &Scene) -> Settings {
             _ => None,
         },
         coarse_samples: s.coarse_samples,
-        coarse_tolerance: crate::algorithms::spacetime::solver::DEFAULT_COARSE_TOLERANCE,
+        coarse_tolerance: crate::algorithms::spacetime::settings::DEFAULT_COARSE_TOLERANCE,
         step: match s.step.as_str() {
             "gauss-newton" => Step::GaussNewton,
             "quasi-newton" => Step::QuasiNewton,

@@ -46,7 +46,7 @@ pub fn tetrahedralize(keys: &Keyframes, budget: &Budget, progress: &Progress) ->
 
 /// TetGen's mesh of a rest surface with options (`source` names the surface in errors):
 /// [`tetgen::run_within`], or a mesh an earlier bake kept for the same inputs.
-pub type Tetgen<'a> = dyn FnMut(&TriMesh, &TetgenOptions, &Path, &Budget) -> Result<TetMesh> + 'a;
+pub(crate) type Tetgen<'a> = dyn FnMut(&TriMesh, &TetgenOptions, &Path, &Budget) -> Result<TetMesh> + 'a;
 
 /// [`tetrahedralize`], TetGen's meshes made by `tetgen` (`blendsim bake --from` reuses one).
 pub fn tetrahedralize_with(keys: &Keyframes, budget: &Budget, progress: &Progress, tetgen: &mut Tetgen) -> Result<Body> {
@@ -223,7 +223,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
 /// (the demo's largest is 2.5x, 161 of 777 over; `formats/scene.md`; the report lists the
 /// largest volume always); an order of magnitude means the bound is far below what the
 /// surface's own triangles allow (a box with max_volume = 1e-9 kept tets of 0.02).
-pub const MAX_VOLUME_WARNING_FACTOR: f64 = 10.0;
+pub(crate) const MAX_VOLUME_WARNING_FACTOR: f64 = 10.0;
 
 /// The warning when TetGen left a tet far larger than `[tet] max_volume`.
 fn unhonoured_max_volume(mesh: &TetMesh, max_volume: f64, source: &str) -> Option<String> {

@@ -33,7 +33,7 @@ use super::ordering::FillOrdering;
 /// threads (`Par::rayon`): below, the thread hand-offs cost more than the second core saves
 /// (measured with faer's factorization on 2 cores: 0.37 G flops, 24-40 ms on one thread, 31-55
 /// ms on two; 2.6 G flops, 101-134 ms against 77-106 ms).
-pub const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
+pub(crate) const PARALLEL_FACTOR_FLOPS: f64 = 1e9;
 
 /// The matrix is not (numerically) positive definite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,7 +128,7 @@ impl Cholesky {
     }
 
     /// Solve `A X = B` in place for all columns of `rhs` at once.
-    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>) {
+    pub(crate) fn solve_in_place(&self, rhs: MatMut<'_, f64>) {
         let par = self.par;
         let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(&mut mem));

@@ -327,7 +327,7 @@ impl GlobalStep {
     }
 
     /// How the iterative step's CG solves went (None for a direct step).
-    pub fn cg_log(&self) -> Option<CgLog> {
+    pub(crate) fn cg_log(&self) -> Option<CgLog> {
         match &self.cholesky {
             Some(Inverse::Iterative(it)) => Some(*it.log.lock().expect("no panic while solving")),
             _ => None,

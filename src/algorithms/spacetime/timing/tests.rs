@@ -425,7 +425,7 @@ fn retimed_global_step_equals_a_fresh_one() {
 fn alternate(
     el: &Elastic,
     keys: &KeyConstraints,
-    settings: &crate::algorithms::spacetime::solver::Settings,
+    settings: &crate::algorithms::spacetime::settings::Settings,
     timing: &TimingSettings,
     rounds: usize,
 ) -> (Vec<Vec<f64>>, Vec<(f64, f64)>) {
@@ -457,7 +457,7 @@ fn free_fall_key_times_move_back_to_the_parabola() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::algorithms::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
+    let settings = crate::algorithms::spacetime::settings::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let (times, energy) = alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
         println!("t1 = {:.6}: W {:.4e} -> {:.4e}", t[1], w.0, w.1);
@@ -477,7 +477,7 @@ fn a_high_jump_gets_longer_intervals_around_its_apex() {
     // ground intervals (the paper's Fig. 10).
     let g = [0.0, -9.81, 0.0];
     let (el, keys) = rigid_keys(&[[0.0; 3], [0.0; 3], [0.0, 3.0, 0.0], [0.0; 3], [0.0; 3]], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
-    let settings = crate::algorithms::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
+    let settings = crate::algorithms::spacetime::settings::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let (times, energy) =
         alternate(&el, &keys, &settings, &TimingSettings { keep_duration: true, min_interval: 0.05, ..TimingSettings::default() }, 4);
     for (t, w) in times.iter().zip(&energy) {
@@ -498,7 +498,7 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::algorithms::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-14, max_iterations: 2000, ..settings() };
+    let settings = crate::algorithms::spacetime::settings::Settings { gravity: g, samples: 6, tolerance: 1e-14, max_iterations: 2000, ..settings() };
     let solve_at = |t1: f64| {
         let mut k = keys.clone();
         k.times[1] = t1;
@@ -519,10 +519,10 @@ fn at_converged_keys_the_timing_gradient_is_the_gradient_of_the_reduced_w() {
 fn solve_timed(
     el: &Elastic,
     keys: &KeyConstraints,
-    settings: &crate::algorithms::spacetime::solver::Settings,
+    settings: &crate::algorithms::spacetime::settings::Settings,
     timing: TimingSettings,
 ) -> crate::algorithms::spacetime::solver::Solved {
-    let settings = crate::algorithms::spacetime::solver::Settings { timing: Some(timing), ..settings.clone() };
+    let settings = crate::algorithms::spacetime::settings::Settings { timing: Some(timing), ..settings.clone() };
     crate::algorithms::spacetime::solver::solve(el, keys, &settings, &|_, _, _| {}).unwrap()
 }
 
@@ -534,7 +534,7 @@ fn the_solver_moves_a_free_fall_key_to_the_parabola() {
     let (u, g) = ([1.0, 5.0, 0.0], [0.0, -9.81, 0.0]);
     let at = |t: f64| -> Point { [0, 1, 2].map(|d| u[d] * t + 0.5 * g[d] * t * t) };
     let (el, keys) = rigid_keys(&[at(0.0), at(0.5), at(1.0)], vec![0.0, 0.62, 1.0]);
-    let settings = crate::algorithms::spacetime::solver::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
+    let settings = crate::algorithms::spacetime::settings::Settings { gravity: g, samples: 6, tolerance: 1e-12, max_iterations: 500, ..settings() };
     let solved = solve_timed(&el, &keys, &settings, TimingSettings { keep_duration: true, ..TimingSettings::default() });
     let (t, log) = (&solved.trajectory.times, &solved.log);
     println!(

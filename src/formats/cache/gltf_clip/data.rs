@@ -421,7 +421,7 @@ impl BufferStore {
 
     /// Check that an accessor is backed by data (a buffer view), so its count is bounded by
     /// the file; accessors read without that check have a count tied to one that is.
-    pub fn require_data(&self, layout: &Layout, what: &str) -> Result<()> {
+    pub(crate) fn require_data(&self, layout: &Layout, what: &str) -> Result<()> {
         match layout.dense {
             Some(_) => Ok(()),
             None if layout.count <= 1 => Ok(()),
@@ -445,7 +445,7 @@ impl BufferStore {
 
     /// Every component of every element as f32 (normalized integers converted), sparse
     /// substitution applied: `count * components` values into `out`. `scratch` holds bytes.
-    pub fn read_floats(&mut self, layout: &Layout, out: &mut Vec<f32>, scratch: &mut Vec<u8>) -> Result<()> {
+    pub(crate) fn read_floats(&mut self, layout: &Layout, out: &mut Vec<f32>, scratch: &mut Vec<u8>) -> Result<()> {
         let (c, size) = (layout.component, component_size(layout.component));
         out.clear();
         out.resize(layout.count * layout.components, 0.0);
@@ -472,7 +472,7 @@ impl BufferStore {
     }
 
     /// Integer elements (indices, joints) as u32: `count * components` values.
-    pub fn read_uints(&mut self, layout: &Layout, what: &str) -> Result<Vec<u32>> {
+    pub(crate) fn read_uints(&mut self, layout: &Layout, what: &str) -> Result<Vec<u32>> {
         if !matches!(layout.component, DataType::U8 | DataType::U16 | DataType::U32) || layout.normalized {
             return Err(damaged(
                 &self.path,

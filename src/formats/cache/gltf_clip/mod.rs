@@ -52,7 +52,7 @@ const FIX_DAMAGED: &str = "the glTF file is damaged or was written by a faulty e
 
 /// An opened clip: the first frame's mesh, the frames, and the rate.
 #[derive(Debug)]
-pub struct OpenedClip {
+pub(crate) struct OpenedClip {
     pub mesh: TriMesh,
     pub frames: GltfFrames,
     pub fps: f64,
@@ -106,7 +106,7 @@ struct Skin {
 
 /// The frames of a glTF clip, evaluated on demand.
 #[derive(Debug)]
-pub struct GltfFrames {
+pub(crate) struct GltfFrames {
     path: PathBuf,
     store: BufferStore,
     rest: Vec<Local>,

@@ -4,7 +4,7 @@
 
 /// How a sampler interpolates between keys.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Interpolation {
+pub(crate) enum Interpolation {
     Step,
     Linear,
     CubicSpline,

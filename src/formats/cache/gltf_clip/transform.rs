@@ -3,13 +3,13 @@
 use crate::algorithms::geometry::Point;
 
 /// Column-major 4x4 matrix: element (row r, column c) is `m[4 * c + r]`.
-pub type Mat4 = [f64; 16];
+pub(crate) type Mat4 = [f64; 16];
 
-pub const IDENTITY: Mat4 = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+pub(crate) const IDENTITY: Mat4 = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
 
 /// A node's local transform: translation, rotation (unit quaternion x, y, z, w), scale.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Trs {
+pub(crate) struct Trs {
     pub translation: [f64; 3],
     pub rotation: [f64; 4],
     pub scale: [f64; 3],

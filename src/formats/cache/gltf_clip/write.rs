@@ -30,7 +30,7 @@ use crate::formats::export::sparse_is_smaller;
 use crate::support::error::{Error, Result};
 
 /// glTF targets are indexed by a u32 weight slot, and the one-hot output has frames^2 slots.
-pub const MAX_GLB_FRAMES: usize = 65_535;
+pub(crate) const MAX_GLB_FRAMES: usize = 65_535;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Storage {

@@ -105,7 +105,7 @@ pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placemen
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
 /// frames, the linear blend of two frames in between, and nothing an importer could drop
 /// (Blender's glTF importer ignores CUBICSPLINE tangents).
-pub fn blendshapes_sampled(
+pub(crate) fn blendshapes_sampled(
     clip: &BlendShapeClip,
     frame_times: &[f64],
     surface: Surface,

@@ -30,7 +30,7 @@ impl Grid {
     /// `step = 2 max_error / (√3 (1 + weight_sum))`. `None` when signed shorts cannot hold the
     /// base's extent or the largest offset component (`largest_offset`) at that step, or when
     /// there is no budget: the file then stays f32.
-    pub fn for_budget(base: &[[f32; 3]], largest_offset: f32, weight_sum: f64, max_error: f64) -> Option<Grid> {
+    pub(crate) fn for_budget(base: &[[f32; 3]], largest_offset: f32, weight_sum: f64, max_error: f64) -> Option<Grid> {
         let step = 2.0 * max_error / (3f64.sqrt() * (1.0 + weight_sum.abs()));
         if !(step.is_finite() && step > 0.0) || base.is_empty() {
             return None;
@@ -71,7 +71,7 @@ pub fn component(values: &[[i32; 3]]) -> (ComponentType, usize) {
 /// Little-endian bytes of `values` in components of `size` bytes; with `padded`, each vec3 is
 /// followed by one zero component, so that every element starts on a 4-byte boundary (vertex
 /// attributes, glTF 2.0 §3.6.2.4); without, tightly packed (sparse values).
-pub fn vec3_bytes(values: &[[i32; 3]], size: usize, padded: bool) -> Vec<u8> {
+pub(crate) fn vec3_bytes(values: &[[i32; 3]], size: usize, padded: bool) -> Vec<u8> {
     let mut out = Vec::with_capacity(values.len() * 4 * size);
     for v in values {
         for &x in v.iter().chain(padded.then_some(&0)) {
@@ -86,13 +86,13 @@ pub fn vec3_bytes(values: &[[i32; 3]], size: usize, padded: bool) -> Vec<u8> {
 
 /// Unit normals as normalized signed bytes, each vec3 padded to 4 bytes (`round(127 n)`: about
 /// half a degree, below what shading shows).
-pub fn normal_bytes(normals: &[[f32; 3]]) -> Vec<u8> {
+pub(crate) fn normal_bytes(normals: &[[f32; 3]]) -> Vec<u8> {
     normals.iter().flat_map(|n| [n[0], n[1], n[2], 0.0]).map(|x| (x.clamp(-1.0, 1.0) * 127.0).round() as i8 as u8).collect()
 }
 
 /// UVs as normalized unsigned shorts (`round(65535 u)`), when every coordinate is in [0, 1]
 /// (else `None`: tiling UVs stay f32, since undoing a range needs `KHR_texture_transform`).
-pub fn uv_bytes(uvs: &[[f32; 2]]) -> Option<Vec<u8>> {
+pub(crate) fn uv_bytes(uvs: &[[f32; 2]]) -> Option<Vec<u8>> {
     uvs.iter()
         .flatten()
         .all(|x| (0.0..=1.0).contains(x))
@@ -100,7 +100,7 @@ pub fn uv_bytes(uvs: &[[f32; 2]]) -> Option<Vec<u8>> {
 }
 
 /// `min` and `max` per component of integer vec3s (glTF requires them to equal the stored values).
-pub fn int_bounds(values: &[[i32; 3]]) -> ([i32; 3], [i32; 3]) {
+pub(crate) fn int_bounds(values: &[[i32; 3]]) -> ([i32; 3], [i32; 3]) {
     let mut lo = [i32::MAX; 3];
     let mut hi = [i32::MIN; 3];
     for v in values {

@@ -27,7 +27,7 @@ fn chunks(bytes: &[u8]) -> Option<(Value, &[u8])> {
 
 /// A meshopt glb as the same glb without the extension: every compressed view decoded into
 /// one buffer at its fallback offsets, the other views' bytes appended after them.
-pub fn decode_meshopt(bytes: &[u8]) -> std::result::Result<Vec<u8>, String> {
+pub(crate) fn decode_meshopt(bytes: &[u8]) -> std::result::Result<Vec<u8>, String> {
     let (mut json, bin) = chunks(bytes).ok_or("not a GLB")?;
     let fallback = json["buffers"][1]["byteLength"].as_u64().ok_or("no fallback buffer")? as usize;
     let mut data = vec![0u8; fallback];
@@ -66,7 +66,7 @@ pub fn decode_meshopt(bytes: &[u8]) -> std::result::Result<Vec<u8>, String> {
 /// the clip reader, in glTF's y-up meters) and `expected(t)` placed the same way, relative to
 /// `diagonal` (scene units). Only the first `expected(t).len()` vertices are compared (seam
 /// copies follow them and show the same points). `None` for a file with no animation.
-pub fn played_error(
+pub(crate) fn played_error(
     bytes: &[u8],
     (times, fps): (&[f64], f64),
     expected: &dyn Fn(f64) -> Vec<Point>,

@@ -28,7 +28,7 @@ const LAST_LITERALS: usize = 5;
 const HASH_BITS: u32 = 12;
 
 /// One LZ4 block: sequences of (literals, match), the last one literals only.
-pub fn lz4_block(input: &[u8], out: &mut Vec<u8>) {
+pub(crate) fn lz4_block(input: &[u8], out: &mut Vec<u8>) {
     let n = input.len();
     let mut last_seen = vec![usize::MAX; 1 << HASH_BITS];
     let (mut anchor, mut i) = (0, 0);
@@ -83,7 +83,7 @@ pub fn compressed_ints(ints: &[i32]) -> Vec<u8> {
 /// The integer coding before LZ4: the most common difference (ties: the largest), the 2-bit
 /// codes of every integer (4 per byte, first in the low bits), then the values not coded as the
 /// common one, in the smallest of 8, 16 or 32 bits that holds them.
-pub fn encoded_ints(ints: &[i32]) -> Vec<u8> {
+pub(crate) fn encoded_ints(ints: &[i32]) -> Vec<u8> {
     if ints.is_empty() {
         return Vec::new();
     }

@@ -1,436 +1,36 @@
-//! The spacetime projective-dynamics iteration: local step, residuals, global step, repeat;
-//! then quasi-Newton on the exact W, over the key times too when they are optimized.
-//!
-//! Starts from the keyframes joined with zero velocities (the hermite baseline), moved out of
-//! any obstacle. W is recorded per iteration. It cannot grow: a step that would raise it is
-//! halved, and the solve stops where no step lowers it. A NaN is an error naming the
-//! iteration, never a result.
-//!
-//! # When it stops
-//!
-//! When W decreased by less than `tolerance × (W + negligible × S)` over the last [`WINDOW`]
-//! quasi-Newton iterations. S is the force scale ([`Evaluation::force_scale`]): the residual
-//! `f = M (ẍ + α ẋ) - M g + (L x - J p)` is a sum of three forces, and S is W with each of
-//! them squared on its own, `Σ dτ ½ (|M (ẍ + α ẋ)|² + |M g|² + |L x - J p|²)_{M⁻¹}`. So
-//! `0 <= W <= 3 S`, and `W / S` is the squared size of what the forces fail to cancel relative
-//! to the forces themselves: a number free of units and of the first guess.
-//!
-//! - Where the keys cannot be joined by exact dynamics (every paper scene but the bounces),
-//!   W levels off at a sizeable part of S (measured `W / S` 0.3 to 1.0 at the stop), the floor
-//!   `negligible × S` (1e-3 S) is far below W, and the rule is the relative rate: W fell by
-//!   less than `tolerance` of itself. It does not depend on how bad the first guess was (a test
-//!   against the initial W stops a solve that started far away early, and one that started
-//!   close never).
-//! - Where they can (a free fall fitted exactly: BALL, SPOT, a ballistic jump), W goes to 0 and
-//!   keeps falling by a large fraction of itself, so a relative rate never fires. Below the
-//!   floor W is negligible against the forces of the scene: the rule then asks for a decrease
-//!   below `tolerance × negligible × S` over the window, which (W never being negative) it
-//!   meets at the latest a window after `W <= tolerance × negligible × S` (by default 1e-6 S:
-//!   a residual force of 1e-3 of the forces); a slow solve stops earlier, once its progress
-//!   over the window is that small.
-//!
-//! The log carries the decrease of that last window and a prediction of what is left (the
-//! decreases of the last two windows extrapolated as a geometric series; the iteration
-//! converges linearly there), both relative to `W + negligible × S`, and S. The defaults are
-//! chosen by measurement (see `formats/scene.md`).
-//!
-//! # Coarse to fine
-//!
-//! With [`Settings::coarse_samples`] the whole solve first runs with that many samples per
-//! interval (to [`Settings::coarse_tolerance`]); the unknowns (key positions and velocities)
-//! do not depend on the samples, so its result is a warm start for the solve at
-//! [`Settings::samples`], which goes straight to quasi-Newton (fresh curvature pairs) on the
-//! coarse phase's factorized matrix (a preconditioner: any positive definite model serves, and
-//! one factorization is saved). The warm start is taken only where W at the configured samples
-//! is below the first guess's, so that W never increases; [`Log::energy`] is W at the
-//! configured samples only. Off by default (measured in `formats/scene.md`: the coarse phase
-//! takes about as many iterations as a single-phase solve, so it saves 20-40% of the cost on
-//! the paper scenes and nothing on a 20-key body). Not with obstacles or moving key times.
-//!
-//! # Gauss-Newton steps
-//!
-//! With [`Settings::step`] = [`Step::GaussNewton`], each quasi-Newton-phase iteration first
-//! tries the truncated Gauss-Newton step of [`super::gauss_newton`]: `H d = -g` with `H` the
-//! Gauss-Newton Hessian of W (the projections' Jacobians included), solved by CG to the
-//! Eisenstat-Walker forcing tolerance, at most [`GAUSS_NEWTON_CG`] products. The same line
-//! search on W takes it (W never increases); where it fails, the L-BFGS step is taken instead.
-//! CG is preconditioned by the L-BFGS inverse Hessian, the curvature pairs of the last steps
-//! on the model Hessian's factor (Morales & Nocedal's automatic preconditioning): the factor
-//! alone (the global step's matrix is `H` without the projections' Jacobians, stiffer along
-//! bending and twisting) left CG at its cap on 52 of TWIST's 54 steps.
-//!
-//! Measured side by side (1 thread, `benches/convergence.rs` with `STEPS=1`, load 9 to 15 on
-//! 2 cores): it halves the iterations or better, not the cost. A product with `H` costs about
-//! 0.6 of an iteration (two stiffness and two projection-Jacobian passes per sample, against
-//! one of each and the projections themselves), and a step takes 3 to 8 products.
-//!
-//! | scene | quasi-Newton: iterations, CPU s | Gauss-Newton: iterations, CPU s (CG products) |
-//! |---|---:|---:|
-//! | TWIST | 98, 3.59 | 66, 7.55 (199) |
-//! | DINO | 130, 5.24 | 38, 9.91 |
-//! | the demo | 117, 0.80 | 54, 1.23 (177) |
-//! | a 20-key body on 400 nodes (`KEY20-small`) | 98, 14.1 | 65, 33.4 |
-//! | the scale benchmark's 20-key 2.6k body (`KEY20-2.6k`) | 202, 175 | 72, 391 (578) |
-//!
-//! Both stop within the 2% of the W reached at 1e-8 (Gauss-Newton closer: TWIST 0.00% against
-//! 0.04%, DINO 0.20% against 0.72%). So [`Step::Auto`] (the default) keeps L-BFGS.
-//!
-//! # Key times
-//!
-//! With [`Settings::timing`], the quasi-Newton phase runs on the keyframe unknowns and the
-//! interval lengths together: the exact `∂W/∂T_i` comes with the exact gradient (same
-//! projection Jacobians), the initial inverse Hessian is the global step's factorization for
-//! the keys and the held-keys curvature `∂²W/∂T_i²` ([`super::timing`]) for the times, and the
-//! curvature pairs learn how the keys absorb a change of timing (the reduced curvature is far
-//! below the held-keys one: 199 vs 3219 on a free fall). So every quasi-Newton iteration is also
-//! a timing step, and the times and keys settle together. The factorization depends on the
-//! times; it is refactorized (on its kept symbolic analysis) only when an interval has moved by
-//! more than [`REFACTOR_CHANGE`] since the last factorization, and is a valid preconditioner
-//! in between (the line search keeps W from increasing whatever it is).
-//!
-//! # Obstacles
-//!
-//! With [`Settings::contacts`], every node stays outside every obstacle at every key and every
-//! frame ([`super::contact`]). The checks a step would cross join an active set held by hard
-//! constraints ([`super::active_set`]); a check leaves it when its multiplier says the
-//! obstacle would have to pull.
+//! One solve: its state (the iterate and the factorized matrices), the two phases of the
+//! iteration (local/global, then quasi-Newton over the keys and the key times), the line
+//! search on W, and the obstacles' active set.
 
 use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::time::Instant;
 
-use super::active_set::{Preconditioner, Projection, Row, RowKind};
-use super::contact::{At, Check, Contacts};
-use super::gauss_newton::{truncated_cg, CgEnd, Forcing, TruncatedCg};
-use super::global_step::{CgLog, GlobalStep};
-use super::objective::{Evaluation, Objective, Projections};
-use super::quasi_newton::{dot, Lbfgs};
-use super::sampling::{sample_counts, samples, TimeSlots};
-use super::tangent_step::TangentStep;
-use super::timing::{safe_curvature, Blocks, ProjectionMode, Timing, TimingSettings};
-use super::trajectory::Trajectory;
-use super::unknowns::{KeyConstraints, Unknowns};
+use super::super::active_set::{Preconditioner, Projection, Row, RowKind};
+use super::super::contact::{At, Check, Contacts};
+use super::super::gauss_newton::{truncated_cg, CgEnd, Forcing, TruncatedCg};
+use super::super::global_step::GlobalStep;
+use super::super::objective::{Evaluation, Objective, Projections};
+use super::super::quasi_newton::{dot, Lbfgs};
+use super::super::settings::{ModelHessian, Settings, Step, GAUSS_NEWTON_CG, REFACTOR_CHANGE, WINDOW};
+use super::super::tangent_step::TangentStep;
+use super::super::timing::{safe_curvature, Blocks, ProjectionMode, Timing};
+use super::super::trajectory::Trajectory;
+use super::super::unknowns::{KeyConstraints, Unknowns};
+use super::predict::prediction;
+use super::{apply_step, initial_trajectory, objective, IterationSplit, Log, Solved};
 use crate::algorithms::geometry::Point;
 use crate::algorithms::physics::elastic::Elastic;
-use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 
-/// Solver settings.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Settings {
-    /// Residual samples per interval.
-    pub samples: usize,
-    /// Residual samples on an interval that begins or ends at a contact.
-    pub contact_samples: usize,
-    /// Iterations (of both phases together) before the solve gives up.
-    pub max_iterations: usize,
-    /// Stop when W decreased by less than `tolerance × (W + negligible × S)` over the last
-    /// [`WINDOW`] quasi-Newton iterations (S: the force scale, module documentation).
-    pub tolerance: f64,
-    /// The part of the force scale S below which W counts as zero in the stopping rule (0: the
-    /// purely relative rule, which never fires where W can reach 0).
-    pub negligible: f64,
-    /// Proximal time scale h (0 = off).
-    pub regularization: f64,
-    /// Rayleigh mass damping α (D = α M), per second.
-    pub damping: f64,
-    /// Gravitational acceleration.
-    pub gravity: Point,
-    /// The memory the global step may use (its direct factor's predicted peak; past it the
-    /// step is solved iteratively) and the time the solve may take.
-    pub budget: Budget,
-    /// Optimize the key times too, under these constraints (`max_iterations` and `tolerance`
-    /// of [`TimingSettings`] are those of [`Timing::optimize_times`], not used here).
-    pub timing: Option<TimingSettings>,
-    /// Obstacles the nodes may not enter.
-    pub contacts: Option<Contacts>,
-    /// The quasi-Newton phase's model Hessian (its preconditioner). Default: auto, which keeps
-    /// the projective one wherever a key moves beyond `LINEAR_REGIME` (every Table 1 scene
-    /// and the demo) and takes the tangent one for small motions about the rest shape, where
-    /// the projective one stalls: on the cyclic bar L-BFGS preconditioned by `L` lowers W at
-    /// the first guess's times by 0.26% in 670 iterations, against the 8.8% the tangent model
-    /// finds in one, and the stopping rule then rightly ends a solve that is not moving.
-    pub model_hessian: ModelHessian,
-    /// How the global step is inverted; `None`: the cheapest predicted within the memory
-    /// budget (`super::global_step::choose`).
-    pub global_step: Option<super::global_step::Method>,
-    /// Residual samples per interval of the coarse phase (0: none; module documentation,
-    /// "Coarse to fine"). Not used with obstacles or optimized key times, nor when it is not
-    /// below `samples`.
-    pub coarse_samples: usize,
-    /// The coarse phase's own `tolerance` (its stopping rule is the fine one's otherwise).
-    pub coarse_tolerance: f64,
-    /// The quasi-Newton phase's step: L-BFGS, or a Gauss-Newton step solved by truncated CG
-    /// ([`Step`]).
-    pub step: Step,
-}
-
-/// The step of the quasi-Newton phase (module documentation, "Gauss-Newton steps").
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Step {
-    /// L-BFGS on the exact W, preconditioned by the model Hessian.
-    QuasiNewton,
-    /// A truncated Gauss-Newton step (module `gauss_newton`), preconditioned by the model
-    /// Hessian, falling back to the L-BFGS step where its line search fails. Not with obstacles
-    /// or moving key times (L-BFGS is used there).
-    GaussNewton,
-    /// [`Step::GaussNewton`] where it was measured to win (nowhere yet: every scene measured costs more), else [`Step::QuasiNewton`]
-    /// ([`Step::resolve`]).
-    Auto,
-}
-
-/// The default of [`Settings::step`].
-pub const DEFAULT_STEP: Step = Step::Auto;
-
-/// CG iterations (products with the Gauss-Newton Hessian) per Gauss-Newton step at most.
-pub const GAUSS_NEWTON_CG: usize = 20;
-
-impl Step {
-    /// The step taken: `Auto` decided, and L-BFGS wherever Gauss-Newton does not apply.
-    pub fn resolve(self, settings: &Settings) -> Step {
-        if settings.contacts.is_some() || settings.timing.is_some() {
-            return Step::QuasiNewton;
-        }
-        match self {
-            // Measured: Gauss-Newton cuts the iterations 1.5 to 3.4x but costs 1.5 to 2.4x the CPU time
-            // (module documentation, "Gauss-Newton steps").
-            Step::Auto => Step::QuasiNewton,
-            other => other,
-        }
-    }
-}
-
-/// The quasi-Newton phase's initial inverse Hessian.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ModelHessian {
-    /// [`ModelHessian::Tangent`] when every key stays within `LINEAR_REGIME` of the body's
-    /// size of its rest shape (where the rest tangent stiffness is the body's) and its
-    /// factorization succeeds, else [`ModelHessian::Projective`].
-    Auto,
-    /// The global step's matrix (projective stiffness `L`), factorized anyway for phase 1.
-    Projective,
-    /// The same normal matrix with the rest tangent stiffness (`super::tangent_step`);
-    /// not with obstacles (the projective one is used there).
-    Tangent,
-}
-
-/// How far (relative to the body's bounding-box diagonal) every key may be from the rest shape
-/// for [`ModelHessian::Auto`] to choose the tangent model.
-pub const LINEAR_REGIME: f64 = 0.01;
-
-impl ModelHessian {
-    /// The model for `keys` on `elastic`: `Auto` decided.
-    pub fn resolve(self, elastic: &Elastic, keys: &KeyConstraints) -> ModelHessian {
-        if self != ModelHessian::Auto {
-            return self;
-        }
-        let size = crate::algorithms::geometry::bbox_diagonal(&elastic.rest);
-        let far = keys
-            .positions
-            .iter()
-            .flatten()
-            .zip(elastic.rest.iter().cycle())
-            .map(|(p, r)| crate::algorithms::geometry::norm(crate::algorithms::geometry::sub(*p, *r)))
-            .fold(0.0, f64::max);
-        if far <= LINEAR_REGIME * size {
-            ModelHessian::Tangent
-        } else {
-            ModelHessian::Projective
-        }
-    }
-}
-
-impl Settings {
-    /// The settings of an unconstrained solve with these samples and material.
-    pub fn new(samples: usize, damping: f64, gravity: Point) -> Settings {
-        Settings {
-            samples,
-            contact_samples: 2 * samples,
-            max_iterations: DEFAULT_MAX_ITERATIONS,
-            tolerance: DEFAULT_TOLERANCE,
-            negligible: NEGLIGIBLE,
-            regularization: 0.1,
-            damping,
-            gravity,
-            budget: Budget::default(),
-            timing: None,
-            contacts: None,
-            model_hessian: ModelHessian::Auto,
-            global_step: None,
-            coarse_samples: DEFAULT_COARSE_SAMPLES,
-            coarse_tolerance: DEFAULT_COARSE_TOLERANCE,
-            step: DEFAULT_STEP,
-        }
-    }
-
-    /// The samples of the coarse phase, when one runs (module documentation, "Coarse to fine").
-    pub fn coarse_phase(&self) -> Option<usize> {
-        (self.coarse_samples > 0 && self.coarse_samples < self.samples && self.contacts.is_none() && self.timing.is_none())
-            .then_some(self.coarse_samples)
-    }
-}
-
-/// The default of [`Settings::coarse_samples`] (measured: see `formats/scene.md`).
-pub const DEFAULT_COARSE_SAMPLES: usize = 0;
-/// The default of [`Settings::coarse_tolerance`].
-pub const DEFAULT_COARSE_TOLERANCE: f64 = 1e-3;
-
-/// The default of [`Settings::tolerance`] (measured: see `formats/scene.md`).
-pub const DEFAULT_TOLERANCE: f64 = 1e-3;
-/// The default of [`Settings::negligible`] (module documentation).
-pub const NEGLIGIBLE: f64 = 1e-3;
-/// The default of [`Settings::max_iterations`].
-pub const DEFAULT_MAX_ITERATIONS: usize = 1000;
-/// Iterations over which the stopping rule measures the decrease of W.
-pub const WINDOW: usize = 10;
 /// The local/global phase hands over to quasi-Newton when an iteration lowers W by less than
 /// this fraction of W.
 const PHASE1_SWITCH: f64 = 1e-2;
-/// Relative change of an interval since the last factorization that triggers a refactorization.
-pub const REFACTOR_CHANGE: f64 = 0.1;
 /// Largest relative change of an interval in one step.
 const MAX_INTERVAL_CHANGE: f64 = 0.5;
 /// Penetration allowed at a trial point, relative to the body's size (the linearized steps
 /// keep the active checks to second order when the times move).
 const CLEARANCE_TOLERANCE: f64 = 1e-6;
-
-/// What the iteration did.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Log {
-    /// Iterations taken (steps accepted).
-    pub iterations: usize,
-    /// W after each iteration, starting with the initial guess (the hermite baseline).
-    pub energy: Vec<f64>,
-    /// Wall-clock seconds for the whole solve.
-    pub seconds: f64,
-    /// Seconds spent assembling and factorizing before the first iteration.
-    pub precompute_seconds: f64,
-    /// Mean seconds per iteration (local step, residuals, global step).
-    pub iteration_seconds: f64,
-    /// Free unknowns per coordinate.
-    pub unknowns: usize,
-    /// Steps halved because the full step would have increased W.
-    pub halvings: usize,
-    /// Whether W settled (or nothing was left to optimize) within the iteration budget.
-    pub converged: bool,
-    /// Why the iteration stopped, in words.
-    pub stop_reason: String,
-    /// How the global step was solved: `direct` or `iterative` (over the memory budget).
-    pub linear_solver: String,
-    /// W's decrease over the last [`WINDOW`] iterations when the solve stopped, relative to
-    /// the stopping rule's reference `W + negligible × S`.
-    pub last_decrease: f64,
-    /// The predicted further decrease of W, relative to the same reference, had the iteration
-    /// gone on (the last two windows' decreases extrapolated geometrically; `None` when they
-    /// do not shrink, or the solve stopped before two windows).
-    pub predicted_remaining: Option<f64>,
-    /// The force scale S at the final iterate ([`Evaluation::force_scale`]): `W / S` is the
-    /// squared relative size of the residual force.
-    pub force_scale: f64,
-    /// Quasi-Newton iterations that moved the key times.
-    pub timing_iterations: usize,
-    /// With the key times optimized: the key times after each iteration, starting with the
-    /// given ones (one entry per entry of `energy`); empty otherwise.
-    pub times: Vec<Vec<f64>>,
-    /// Numeric refactorizations of the global step for new key times.
-    pub refactorizations: usize,
-    /// Node-obstacle checks held on an obstacle at the end.
-    pub active_contacts: usize,
-    /// The smallest distance of any node to any obstacle at any check instant (none without
-    /// obstacles).
-    pub clearance: Option<f64>,
-    /// How the iterative global step's CG solves went (none for a direct step).
-    pub conjugate_gradients: Option<CgLog>,
-    /// Iterations of the coarse phase (0 when none ran); they are in `iterations`, not in
-    /// `energy`, whose entries are W at the configured samples: the initial guess, the coarse
-    /// phase's result, then one per fine iteration.
-    pub coarse_iterations: usize,
-    /// Samples per interval of the coarse phase (0 when none ran).
-    pub coarse_samples: usize,
-    /// Where the iterations' time went: W's evaluations and the global step's solves.
-    pub split: IterationSplit,
-}
-
-/// Where a solve's iterations spend their time (wall seconds summed over the solve, the first
-/// guess's evaluation included, the precompute not): what an iteration costs, taken apart.
-/// The remainder of the iterations' time (the L-BFGS two-loop recursion, gathering and
-/// scattering the unknowns, Gauss-Newton products) is `iteration time - evaluation_seconds -
-/// solve_seconds`. Timing only: nothing here changes a result.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct IterationSplit {
-    /// Evaluations of W (the local step and the residuals): the first guess, every trial
-    /// point of every line search.
-    pub evaluations: usize,
-    /// How many of them also formed the projections' Jacobians and the exact gradient (the
-    /// quasi-Newton phase's).
-    pub exact_evaluations: usize,
-    /// Seconds in those evaluations.
-    pub evaluation_seconds: f64,
-    /// Solves with the global step's matrix or the quasi-Newton model (one per local/global
-    /// step and per quasi-Newton direction, one per three active rows).
-    pub solves: usize,
-    /// Seconds in those solves.
-    pub solve_seconds: f64,
-}
-
-/// A finished solve.
-#[derive(Debug, Clone)]
-pub struct Solved {
-    /// The optimized trajectory of every node (at the optimized times, when they are).
-    pub trajectory: Trajectory,
-    /// What the iteration did.
-    pub log: Log,
-}
-
-/// The initial guess: the input keyframes with zero velocities. In a loop the last key is the
-/// first.
-pub fn initial_trajectory(keys: &KeyConstraints) -> Trajectory {
-    let mut positions = keys.positions.clone();
-    if keys.cyclic {
-        let first = positions[0].clone();
-        *positions.last_mut().expect("keys") = first;
-    }
-    Trajectory::with_zero_velocities(keys.times.clone(), positions)
-}
-
-/// The objective of `keys` on `elastic` with these settings, at the keys' times.
-pub fn objective<'a>(elastic: &'a Elastic, keys: &KeyConstraints, settings: &Settings) -> Objective<'a> {
-    let slots = keys.slots();
-    let counts = sample_counts(&keys.times, settings.samples, settings.contact_samples);
-    Objective {
-        elastic,
-        samples: samples(&keys.times, &counts, &slots),
-        slots,
-        damping: settings.damping,
-        gravity: settings.gravity,
-        supports: keys.supports(elastic.node_count()),
-        time_gradient: false,
-    }
-}
-
-/// The hermite baseline (the initial guess, see [`initial_trajectory`]) and its W, so that
-/// methods compare on one scale.
-pub fn baseline(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings) -> (Trajectory, f64) {
-    let trajectory = initial_trajectory(keys);
-    let objective = objective(elastic, keys, settings);
-    let w = objective.evaluate(&trajectory, &objective.local_step(&trajectory, false)).value;
-    (trajectory, w)
-}
-
-/// Add a per-slot step to the trajectory (every key sharing a slot gets the same value).
-pub fn apply_step(tr: &mut Trajectory, slots: &TimeSlots, delta: &[Vec<Point>], scale: f64) {
-    for (s, ds) in delta.iter().enumerate() {
-        let position = slots.is_position(s);
-        for k in slots.keys_of(s) {
-            let target = if position { &mut tr.positions[k] } else { &mut tr.velocities[k] };
-            for (x, d) in target.iter_mut().zip(ds) {
-                for c in 0..3 {
-                    x[c] += scale * d[c];
-                }
-            }
-        }
-    }
-}
 
 /// Halvings of a step that would increase W before it is given up.
 const MAX_HALVINGS: usize = 8;
@@ -479,101 +79,18 @@ struct Iterate {
 }
 
 /// Optimize keyframe positions and velocities (and key times). `on_iteration(k, W, floor)`
-/// reports progress: W at iteration k and the stopping rule's floor `negligible × S` there.
-///
-/// Two phases share one factorized matrix:
-///
-/// 1. The paper's local/global step (`Solver::local_global`): the minimizer of the quadratic
-///    model of W with frozen projections (plus the proximal term, and the active contacts as
-///    hard constraints). It is fast far from the solution but it is not a descent direction of
-///    W everywhere (its stiffness is `L`, not `∇²E`), and near its fixed point it turns W back
-///    up.
-/// 2. Once an iteration lowers W by less than 1% or stops decreasing it: L-BFGS on the exact W
-///    (whose gradient differentiates the projections), with the same matrix as initial
-///    inverse Hessian (`Solver::quasi_newton`), over the key times too when asked.
-///
-/// In both, a step that would not decrease W is halved until it does (the trial's local step
-/// is the next iteration's, so an accepted step costs nothing extra). W never increases, and
-/// the regularization never moves a fixed point. The solve stops when phase 2 settles
-/// (module documentation) or stalls, or after `max_iterations` in all.
-///
-/// With [`Settings::coarse_phase`], all this runs twice: first with the coarse samples to
-/// their own tolerance, then with the configured samples from there (module documentation,
-/// "Coarse to fine").
-pub fn solve(elastic: &Elastic, keys: &KeyConstraints, settings: &Settings, on_iteration: &dyn Fn(usize, f64, f64)) -> Result<Solved> {
-    let Some(samples) = settings.coarse_phase() else {
-        return Ok(solve_from(elastic, keys, settings, None, on_iteration)?.0);
-    };
-    let start = Instant::now();
-    let coarse_settings = Settings { samples, tolerance: settings.coarse_tolerance, coarse_samples: 0, ..settings.clone() };
-    let (coarse, _, factors) = solve_from(elastic, keys, &coarse_settings, None, on_iteration)?;
-    let n = coarse.log.iterations;
-    // The fine phase's W at the configured samples starts over at the first guess (reported,
-    // not counted): its iteration k is the whole solve's `n + k - 1`.
-    let fine_settings = Settings { max_iterations: settings.max_iterations.saturating_sub(n), ..settings.clone() };
-    let label = format!("{n} coarse iterations at {samples} samples per interval, then ");
-    let warm = Warm { trajectory: &coarse.trajectory, label, factors: Some(factors) };
-    let (fine, warm, _) = solve_from(elastic, keys, &fine_settings, Some(warm), &|k, w, floor| {
-        if k > 0 {
-            on_iteration(n + k - 1, w, floor);
-        }
-    })?;
-    let mut log = fine.log;
-    log.iterations += n - usize::from(warm);
-    log.coarse_iterations = n;
-    log.coarse_samples = samples;
-    log.halvings += coarse.log.halvings;
-    log.precompute_seconds += coarse.log.precompute_seconds;
-    let (c, f) = (&coarse.log.split, &mut log.split);
-    f.evaluations += c.evaluations;
-    f.exact_evaluations += c.exact_evaluations;
-    f.evaluation_seconds += c.evaluation_seconds;
-    f.solves += c.solves;
-    f.solve_seconds += c.solve_seconds;
-    log.seconds = start.elapsed().as_secs_f64();
-    if !warm {
-        log.stop_reason += &format!("; the coarse phase's result ({n} iterations at {samples} samples per interval) was not below the first guess at {} samples, so the fine phase started from the first guess", settings.samples);
-    }
-    Ok(Solved { trajectory: fine.trajectory, log })
-}
-
-/// [`solve`] from `start` instead of the first guess when W is lower there: an earlier
-/// solution of the same body whose keys have since moved (`blendsim bake --from`), with the
-/// prescribed values already the new keys'. The solve then goes straight to the quasi-Newton
-/// phase and stops by the same rule, so its result is a cold solve's within the stopping
-/// tolerance. Not with obstacles, moving key times or a coarse phase (a cold solve then).
-pub fn solve_starting(
-    elastic: &Elastic,
-    keys: &KeyConstraints,
-    settings: &Settings,
-    start: &Trajectory,
-    on_iteration: &dyn Fn(usize, f64, f64),
-) -> Result<Solved> {
-    let fits =
-        start.times == keys.times && start.positions.len() == keys.times.len() && start.positions.iter().all(|p| p.len() == elastic.node_count());
-    if !fits || settings.coarse_phase().is_some() || settings.timing.is_some() || settings.contacts.is_some() {
-        return solve(elastic, keys, settings, on_iteration);
-    }
-    let label = "the previous bake's solution with the keys' edits, then ".to_string();
-    let (mut solved, warm, _) = solve_from(elastic, keys, settings, Some(Warm { trajectory: start, label, factors: None }), on_iteration)?;
-    if !warm {
-        solved.log.stop_reason += "; the previous bake's solution was not below the first guess, so the solve started from the first guess";
-    }
-    Ok(solved)
-}
-
 /// Where a solve may start: the coarse phase's result or an earlier bake's solution, the words
 /// that say so in the stop reason, and the coarse phase's factorized matrices, the fine
 /// quasi-Newton phase's preconditioner (any positive definite model serves there; the
 /// curvature pairs learn the rest, and W's line search keeps every step a descent).
-struct Warm<'t> {
-    trajectory: &'t Trajectory,
-    label: String,
-    factors: Option<Factors>,
+pub(super) struct Warm<'t> {
+    pub(super) trajectory: &'t Trajectory,
+    pub(super) label: String,
+    pub(super) factors: Option<Factors>,
 }
 
 /// The factorized matrices of a solve: the global step and the tangent model Hessian.
-struct Factors {
+pub(super) struct Factors {
     global: GlobalStep,
     tangent: Option<TangentStep>,
 }
@@ -581,7 +98,7 @@ struct Factors {
 /// One solve at `settings.samples`, from the first guess, or from `warm` when W is lower there
 /// (then straight to the quasi-Newton phase, on the warm start's matrices); whether it started
 /// from `warm`, and the matrices, for a next solve to reuse.
-fn solve_from(
+pub(super) fn solve_from(
     elastic: &Elastic,
     keys: &KeyConstraints,
     settings: &Settings,
@@ -738,90 +255,6 @@ fn finite(eval: Evaluation, iteration: usize) -> Result<Evaluation> {
         ));
     }
     Ok(eval)
-}
-
-/// The decrease of W over the last window, and the geometric extrapolation of the last two
-/// windows' decreases (module documentation), both relative to `W + floor`.
-fn prediction(energy: &[f64], floor: f64) -> (f64, Option<f64>) {
-    let k = energy.len() - 1;
-    let w = energy[k] + floor;
-    if w <= 0.0 || k == 0 {
-        return (0.0, None);
-    }
-    let window = WINDOW.min(k);
-    let last = energy[k - window] - energy[k];
-    if k < 2 * WINDOW {
-        return (last / w, None);
-    }
-    let before = energy[k - 2 * WINDOW] - energy[k - WINDOW];
-    let ratio = last / before;
-    let remaining = (before > 0.0 && ratio < 1.0).then(|| last * ratio / (1.0 - ratio) / w);
-    (last / w, remaining)
-}
-
-/// The iterations left before the stopping rule stops a solve whose W went through `energy`
-/// (one entry per iteration, the first guess first), for a progress estimate: the same
-/// geometric extrapolation of the last two windows' decreases as [`Log::predicted_remaining`],
-/// run forward until the window's decrease falls to `tolerance` of the W it levels off at plus
-/// `floor` (the stopping rule's `negligible × S`). `None` before two windows, or when the
-/// decreases do not shrink (or W heads to zero with no floor, where a relative rule has no
-/// predictable end); `Some(0)` once the last window is within tolerance.
-pub fn predicted_iterations(energy: &[f64], tolerance: f64, floor: f64) -> Option<usize> {
-    let k = energy.len().checked_sub(1)?;
-    if k < 2 * WINDOW {
-        return None;
-    }
-    let last = energy[k - WINDOW] - energy[k];
-    let before = energy[k - 2 * WINDOW] - energy[k - WINDOW];
-    if last <= tolerance * (energy[k] + floor) {
-        return Some(0);
-    }
-    let ratio = last / before;
-    if !(before > 0.0 && ratio > 0.0 && ratio < 1.0) {
-        return None;
-    }
-    // Decreases over a sliding window shrink by `ratio` every WINDOW iterations; the rule's
-    // reference `W + floor` levels off at `settled` (W's limit clamped at 0: W is never negative).
-    let settled = (energy[k] - last * ratio / (1.0 - ratio)).max(0.0) + floor;
-    if settled.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let windows = (tolerance * settled / last).ln() / ratio.ln();
-    Some((WINDOW as f64 * windows).ceil().max(0.0) as usize)
-}
-
-/// The predicted total iteration count of a running solve, for its progress bar: the median
-/// of the last WINDOW `predicted_iterations`, shown only while most of them exist. After a
-/// stall W can speed up again (a buckling, a contact settling); the few windows whose decrease
-/// shrinks again right after it extrapolate from one uncertain ratio and can be off by 4x, so
-/// a total waits for a majority of the window to agree rather than show one of them.
-#[derive(Debug, Default)]
-pub struct IterationEstimate {
-    energy: Vec<f64>,
-    totals: std::collections::VecDeque<Option<usize>>,
-    shown: Option<usize>,
-}
-
-impl IterationEstimate {
-    /// Record iteration `k`'s `w` and the stopping rule's `floor` (the arguments of
-    /// `solve`'s `on_iteration`), and return the predicted total (at least `k`, at most
-    /// `max_iterations`), or `None` while nothing reliable is predicted.
-    pub fn update(&mut self, k: usize, w: f64, floor: f64, tolerance: f64, max_iterations: usize) -> Option<usize> {
-        self.energy.push(w);
-        self.totals.push_back(predicted_iterations(&self.energy, tolerance, floor).map(|left| (k + left).min(max_iterations)));
-        if self.totals.len() > WINDOW {
-            self.totals.pop_front();
-        }
-        let mut known: Vec<usize> = self.totals.iter().flatten().copied().collect();
-        known.sort_unstable();
-        if self.totals.len() == WINDOW && 2 * known.len() > WINDOW {
-            self.shown = Some(known[known.len() / 2].max(k));
-        } else if self.shown.is_some_and(|n| n < k) {
-            // The last total stands until it is passed.
-            self.shown = None;
-        }
-        self.shown
-    }
 }
 
 /// The objective, the factorized global step and the constraints of one solve.
@@ -1053,8 +486,8 @@ impl<'a> Solver<'a> {
                     tr.times[k],
                     o + 1,
                     match contacts.obstacles[o] {
-                        super::obstacles::Obstacle::Plane { .. } => "plane",
-                        super::obstacles::Obstacle::Sphere { .. } => "sphere",
+                        super::super::obstacles::Obstacle::Plane { .. } => "plane",
+                        super::super::obstacles::Obstacle::Sphere { .. } => "sphere",
                     },
                 ),
                 "move that keyframe's mesh out of the obstacle, or free its vertices at that key (`fixed`) so the solver puts them on the surface",
@@ -1255,7 +688,7 @@ impl<'a> Solver<'a> {
                 // CG is preconditioned by the L-BFGS inverse Hessian (the curvature pairs of the
                 // last steps on top of the model's): the model alone is too stiff along the slow
                 // motions, and CG then ran into its cap on 52 of TWIST's 54 steps (measured;
-                // module documentation).
+                // the solver's module documentation).
                 let lbfgs_precondition = |q: &mut [f64]| {
                     let d = lbfgs.direction(q, precondition);
                     q.iter_mut().zip(&d).for_each(|(a, b)| *a = -b);
