@@ -76,13 +76,13 @@ fn main() {
         .map(|_| {
             let mut counted = Counted(0);
             let (t, c) = (Instant::now(), cpu_seconds());
-            usda::write_full_frame(&frames, triangles, None, &settings, &mut counted).unwrap();
+            usda::write_full_frame(&frames, triangles, None, &settings, None, &mut counted).unwrap();
             size = counted.0;
             (t.elapsed().as_secs_f64(), cpu_seconds() - c)
         })
         .unzip();
     let disk: Vec<f64> = (0..repeats)
-        .map(|_| to_disk(&dir.join("prism.full.usda"), |f| usda::write_full_frame(&frames, triangles, None, &settings, f).unwrap()))
+        .map(|_| to_disk(&dir.join("prism.full.usda"), |f| usda::write_full_frame(&frames, triangles, None, &settings, None, f).unwrap()))
         .collect();
     println!("| usda (streamed) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
 
@@ -99,7 +99,7 @@ fn main() {
         let disk: Vec<f64> = (0..repeats).map(|_| to_disk(&dir.join(name), |file| file.write_all(&f()).unwrap())).collect();
         (size, make, cpu, disk)
     };
-    let (size, make, cpu, disk) = built(&|| usdc::full_frame(&frames, triangles, None, &settings, &path).unwrap(), "prism.full.usdc");
+    let (size, make, cpu, disk) = built(&|| usdc::full_frame(&frames, triangles, None, &settings, None, &path).unwrap(), "prism.full.usdc");
     println!("| usdc (built in memory) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
     let (size, make, cpu, disk) =
         built(&|| glb::full_frame(&frames, Surface::plain(triangles), "prism", placement, Encoding::FLOAT), "prism.full.glb");

@@ -173,8 +173,10 @@ pub struct Body {
     pub mesh: Option<TetMesh>,
     /// The keyframes of every node.
     pub keys: KeyPoses,
-    /// The surface that is exported, in the rest pose, outward oriented, with no unused
-    /// vertices. It is embedded in `mesh`.
+    /// The surface that is exported, in the rest pose, outward oriented. Keyframe and `[embed]`
+    /// surfaces keep every vertex of their file, unused ones included, so point `i` of the
+    /// files is the input's vertex `i`; a tet mesh's is its boundary (interior nodes left
+    /// out). It is embedded in `mesh`.
     pub surface: TriMesh,
     /// The cache the keys were taken from (`[cache]` scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -10,6 +10,7 @@ use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::formats::mesh::obj;
 use serde_json::Value;
 
+use crate::common::checkers::usd_probe;
 use crate::common::cli::{read_json, run, TempDir};
 
 /// An `n` x `n` grid in the xy plane, two triangles per square.
@@ -161,6 +162,18 @@ fn check_ratios(report: &Value, cache_bytes: u64, path: &str) {
     }
 }
 
+/// usd-core's view of a file's Mesh: its point count (at the first time code) and its
+/// `blendsim:weldMap` (`null` when absent).
+const USD_WELD_MAP: &str = r#"
+import json, sys
+from pxr import Usd, UsdGeom
+stage = Usd.Stage.Open(sys.argv[1])
+mesh = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)][0]
+points = UsdGeom.Mesh(mesh).GetPointsAttr().Get(Usd.TimeCode(stage.GetStartTimeCode()))
+attr = mesh.GetAttribute("blendsim:weldMap")
+print(json.dumps({"points": len(points), "weldMap": list(attr.Get()) if attr and attr.HasValue() else None}))
+"#;
+
 /// A clip with a vertex per triangle corner (as glTF exporters often write a skinned mesh):
 /// welded on import by default, written on the welded vertices with the weld map in the files,
 /// and kept as given with `weld = false`. The map gives back every input vertex's frames.
@@ -202,6 +215,17 @@ fn a_vertex_per_corner_clip_is_welded_and_maps_back() {
         assert_eq!(map.len(), corners.positions.len());
         let usda = std::fs::read_to_string(out.join("clip.usda")).unwrap();
         assert_eq!(usda.contains("uniform int[] blendsim:weldMap = ["), weld);
+        // usd-core reads the same map on the Mesh of the blendshape and the streamed
+        // full-frame USD files, over as many points as the files have.
+        for file in ["clip.usda", "clip.full.usda"] {
+            let v = usd_probe(USD_WELD_MAP, &out.join(file));
+            assert_eq!(v["points"].as_u64(), Some(expected as u64), "{file}");
+            let read: Option<Vec<usize>> = serde_json::from_value(v["weldMap"].clone()).unwrap();
+            assert_eq!(read.is_some(), weld, "{file}: a weld map only when welded");
+            if let Some(read) = read {
+                assert_eq!(read, map, "{file}: the glb's weld map");
+            }
+        }
         let mut written = VertexCache::open(&out.join("clip.glb"), &CacheOptions { fps: Some(30.0), ..CacheOptions::default() }).unwrap();
         assert_eq!((written.frames.frame_count(), written.frames.vertex_count()), (48, expected));
         let diagonal = c["error"]["diagonal"].as_f64().unwrap();

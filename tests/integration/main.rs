@@ -39,4 +39,5 @@ mod render_demo;
 mod report_html;
 mod studio_caches;
 mod texture;
+mod vertex_numbers;
 mod warm_rebake;

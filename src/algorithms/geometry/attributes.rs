@@ -122,9 +122,10 @@ fn per_vertex<T: Copy + PartialEq + Default>(triangles: &[[u32; 3]], vertices: u
 /// A surface with one value of every attribute per vertex: vertices split where corners of one
 /// vertex carry different UVs or normals (a seam).
 ///
-/// Invariant: `sources[i] == i` for `i < vertices` (every used vertex keeps its index; the
-/// surface has no unused vertices), and the seam copies follow, so point `i` of the animation
-/// is split vertex `i` and copy `j >= vertices` moves with point `sources[j]`.
+/// Invariant: `sources[i] == i` for `i < vertices` (every vertex keeps its index, unused ones
+/// included), and the seam copies follow, so point `i` of the animation is split vertex `i`
+/// and copy `j >= vertices` moves with point `sources[j]`. A vertex no triangle uses has no
+/// corner to take attributes from: its UV is `[0, 0]` and its normal zero.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SplitSurface {
     /// For each split vertex, the surface vertex it copies.
@@ -137,8 +138,7 @@ pub struct SplitSurface {
     pub normals: Option<Vec<Point>>,
 }
 
-/// Split `triangles` (over `vertices` vertices, each used by some triangle) at the seams of
-/// `attributes`. A vertex's first corner, in triangle order, keeps its index; each further
+/// Split `triangles` (over `vertices` vertices) at the seams of `attributes`. A vertex's first corner, in triangle order, keeps its index; each further
 /// distinct (UV index, normal index) pair of it becomes a copy appended after all vertices.
 pub fn split_at_seams(triangles: &[[u32; 3]], vertices: usize, attributes: &CornerAttributes) -> SplitSurface {
     let has_uv = !attributes.uv_corners.is_empty();
@@ -148,7 +148,8 @@ pub fn split_at_seams(triangles: &[[u32; 3]], vertices: usize, attributes: &Corn
     // Per vertex, its (key, split index) list; a handful of entries at most.
     let mut seen: Vec<Vec<((u32, u32), u32)>> = vec![Vec::new(); vertices];
     let mut sources: Vec<u32> = (0..vertices as u32).collect();
-    let mut corner_key = vec![(0, 0); vertices];
+    // Per split vertex, the (UV index, normal index) it shows; `None` for unused vertices.
+    let mut corner_key: Vec<Option<(u32, u32)>> = vec![None; vertices];
     let mut split = Vec::with_capacity(triangles.len());
     for (t, tri) in triangles.iter().enumerate() {
         let mut out = [0u32; 3];
@@ -158,22 +159,22 @@ pub fn split_at_seams(triangles: &[[u32; 3]], vertices: usize, attributes: &Corn
             let list = &mut seen[v];
             out[k] = if list.is_empty() {
                 list.push((kk, v as u32));
-                corner_key[v] = kk;
+                corner_key[v] = Some(kk);
                 v as u32
             } else if let Some(&(_, i)) = list.iter().find(|(x, _)| *x == kk) {
                 i
             } else {
                 let i = sources.len() as u32;
                 sources.push(v as u32);
-                corner_key.push(kk);
+                corner_key.push(Some(kk));
                 list.push((kk, i));
                 i
             };
         }
         split.push(out);
     }
-    let uvs = has_uv.then(|| corner_key.iter().map(|k| attributes.uvs[k.0 as usize]).collect());
-    let normals = has_normal.then(|| corner_key.iter().map(|k| attributes.normals[k.1 as usize]).collect());
+    let uvs = has_uv.then(|| corner_key.iter().map(|k| k.map_or([0.0; 2], |k| attributes.uvs[k.0 as usize])).collect());
+    let normals = has_normal.then(|| corner_key.iter().map(|k| k.map_or([0.0; 3], |k| attributes.normals[k.1 as usize])).collect());
     SplitSurface { sources, triangles: split, uvs, normals }
 }
 
@@ -207,6 +208,27 @@ mod tests {
         assert_eq!(s.sources, vec![0, 1, 2, 3]);
         assert_eq!(s.triangles, triangles.to_vec());
         assert_eq!(a.uvs_per_vertex(&triangles, 4), Some(vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]));
+    }
+
+    #[test]
+    fn unused_vertices_keep_their_index_with_a_zero_uv_and_normal() {
+        // Vertex 2 of 5 and vertex 4 (the last) are used by no triangle.
+        let triangles = [[0, 1, 3], [3, 1, 0]];
+        let a = CornerAttributes {
+            uvs: vec![[0.5, 0.5], [1.0, 0.0], [0.0, 1.0]],
+            uv_corners: vec![[0, 1, 2], [2, 1, 1]],
+            normals: vec![[0.0, 1.0, 0.0]],
+            normal_corners: vec![[0, 0, 0], [0, 0, 0]],
+            ..Default::default()
+        };
+        let s = split_at_seams(&triangles, 5, &a);
+        // Vertex 0 has UVs 0 and 1: one copy, after the five points.
+        assert_eq!(s.sources, vec![0, 1, 2, 3, 4, 0]);
+        assert_eq!(s.triangles, vec![[0, 1, 3], [3, 1, 5]]);
+        assert_eq!(s.uvs.unwrap(), vec![[0.5, 0.5], [1.0, 0.0], [0.0, 0.0], [0.0, 1.0], [0.0, 0.0], [1.0, 0.0]]);
+        let normals = s.normals.unwrap();
+        assert_eq!((normals[2], normals[4], normals[3]), ([0.0; 3], [0.0; 3], [0.0, 1.0, 0.0]));
+        assert_eq!(a.normals_per_vertex(&triangles, 5).unwrap()[2], [0.0; 3]);
     }
 
     #[test]

@@ -100,17 +100,23 @@ pub fn full_frame(frames: &FullFrame, triangles: &[[u32; 3]], attributes: Option
 }
 
 /// [`full_frame`] without the points' samples, for a writer that streams them from `frames`
-/// (`usdc::full_frame`): the points are not copied into the layer.
+/// (`usdc::full_frame`): the points are not copied into the layer. With `weld_map` (per
+/// input vertex, its point: a welded bake), the mesh carries it (`weld_map::usd`).
 pub(crate) fn full_frame_unsampled(
     frames: &FullFrame,
     triangles: &[[u32; 3]],
     attributes: Option<&CornerAttributes>,
     settings: &UsdSettings,
+    weld_map: Option<&[u32]>,
 ) -> Layer {
     let (first, last) = (frames.frames[0], frames.frames[frames.frames.len() - 1]);
     let extents = frames.frames.iter().zip(&frames.points).map(|(&frame, p)| (frame as f64, extent(p))).collect();
     let vertices = frames.points.first().map_or(0, Vec::len);
-    sampled_points_layer(extents, Vec::new(), vertices, triangles, attributes, settings, (first, last))
+    let mut layer = sampled_points_layer(extents, Vec::new(), vertices, triangles, attributes, settings, (first, last));
+    if let Some(map) = weld_map {
+        super::weld_map::usd(&mut layer, map);
+    }
+    layer
 }
 
 /// The path of the points attribute of [`full_frame`] and [`sampled_points`]' layers.

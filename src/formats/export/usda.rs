@@ -36,15 +36,16 @@ pub fn text(layer: &Layer) -> String {
 /// `text(&usd::full_frame(frames, ..))` written to `file` as it is made: the points are
 /// formatted from `frames` one sample at a time and the text passed on in pieces of about
 /// 1 MB, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
-/// the points is held. The same bytes.
+/// the points is held. The same bytes. `weld_map`: as [`super::usd::full_frame_unsampled`].
 pub fn write_full_frame(
     frames: &FullFrame,
     triangles: &[[u32; 3]],
     attributes: Option<&CornerAttributes>,
     settings: &UsdSettings,
+    weld_map: Option<&[u32]>,
     file: &mut dyn std::io::Write,
 ) -> std::io::Result<()> {
-    let layer = super::usd::full_frame_unsampled(frames, triangles, attributes, settings);
+    let layer = super::usd::full_frame_unsampled(frames, triangles, attributes, settings, weld_map);
     let mut stream = Some(Streamed { attribute: super::usd::points_path(settings), frames, file, failed: None });
     let mut out = String::with_capacity(2 * PIECE);
     push_layer(&mut out, &layer, &mut stream);
@@ -395,7 +396,7 @@ mod tests {
             let want = text(&crate::formats::export::usd::full_frame(&frames, &triangles, attributes, &settings()));
             assert!(want.len() > 2 * PIECE, "several pieces: {}", want.len());
             let mut got = Vec::new();
-            write_full_frame(&frames, &triangles, attributes, &settings(), &mut got).unwrap();
+            write_full_frame(&frames, &triangles, attributes, &settings(), None, &mut got).unwrap();
             assert!(got == want.as_bytes());
         }
         struct Full(usize);
@@ -411,7 +412,7 @@ mod tests {
                 Ok(())
             }
         }
-        let e = write_full_frame(&frames, &triangles, None, &settings(), &mut Full(PIECE + 10)).unwrap_err();
+        let e = write_full_frame(&frames, &triangles, None, &settings(), None, &mut Full(PIECE + 10)).unwrap_err();
         assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
     }
 }

@@ -133,15 +133,17 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
 /// The `.usdc` bytes of the full-frame layer (`usd::full_frame`), the same bytes as [`bytes`]
 /// of it, with the points streamed from `frames` instead of copied into the layer: a large
 /// animation's frames (40k vertices x 151 frames is 72 MB) are held by `frames` and once more
-/// as the file's bytes, not a third time in the layer.
+/// as the file's bytes, not a third time in the layer. `weld_map`: as
+/// [`usd::full_frame_unsampled`].
 pub fn full_frame(
     frames: &FullFrame,
     triangles: &[[u32; 3]],
     attributes: Option<&CornerAttributes>,
     settings: &UsdSettings,
+    weld_map: Option<&[u32]>,
     path: &Path,
 ) -> Result<Vec<u8>> {
-    let layer = usd::full_frame_unsampled(frames, triangles, attributes, settings);
+    let layer = usd::full_frame_unsampled(frames, triangles, attributes, settings, weld_map);
     let times: Vec<f64> = frames.frames.iter().map(|&f| f as f64).collect();
     let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
         out.clear();
@@ -887,10 +889,10 @@ mod tests {
         let groups = CornerAttributes { groups: vec!["side".into(), "cap".into()], triangle_groups: vec![0, 1], ..Default::default() };
         for attributes in [None, Some(&groups)] {
             let want = bytes(&usd::full_frame(&frames, &triangles, attributes, &settings), Path::new("x.usdc")).unwrap();
-            assert!(full_frame(&frames, &triangles, attributes, &settings, Path::new("x.usdc")).unwrap() == want);
+            assert!(full_frame(&frames, &triangles, attributes, &settings, None, Path::new("x.usdc")).unwrap() == want);
         }
         frames.points[2][3][1] = f32::INFINITY;
-        let e = full_frame(&frames, &triangles, None, &settings, Path::new("out/x.usdc")).unwrap_err().to_string();
+        let e = full_frame(&frames, &triangles, None, &settings, None, Path::new("out/x.usdc")).unwrap_err().to_string();
         assert!(e.contains("out/x.usdc: cannot write the usdc file") && e.contains("non-finite"), "{e}");
     }
 }

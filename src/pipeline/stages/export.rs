@@ -129,7 +129,7 @@ pub fn export_with(
             match format {
                 Format::Usda => match &full {
                     Some(full) if streamed => {
-                        staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, file))?
+                        staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, weld, file))?
                     }
                     _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
                 },
@@ -137,7 +137,7 @@ pub fn export_with(
                     // The interruption tests stop here: in the export, before the usdc is staged.
                     crate::support::interrupt::pause_point("usdc", "");
                     let bytes = match &full {
-                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, &staging.final_path(&name))?,
+                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, weld, &staging.final_path(&name))?,
                         _ => usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?,
                     };
                     staging.write(&name, &bytes)?;

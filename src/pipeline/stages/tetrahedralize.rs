@@ -31,10 +31,11 @@ use crate::support::budget::Budget;
 use crate::support::error::{Error, Result};
 use crate::support::progress::Progress;
 
-/// The surface that is exported: the scene's display mesh, or the keyframe surface without
-/// unused vertices.
+/// The surface that is exported: the scene's display mesh, or the keyframe surface with every
+/// vertex, unused ones included (they are tet nodes, so they have trajectories), so that
+/// point `i` of the files is the input's vertex `i`.
 fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
-    keys.display.clone().unwrap_or_else(|| surface::compact(&rest_surface).0)
+    keys.display.clone().unwrap_or(rest_surface)
 }
 
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
@@ -156,7 +157,8 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
             input_bytes: keys.input_bytes,
         }),
         Shape::Volume(mesh) => {
-            let boundary = TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None };
+            // A tet mesh's surface is its boundary: interior nodes are not points of it.
+            let boundary = surface::compact(&TriMesh { positions: mesh.positions.clone(), triangles: surface::boundary(mesh), attributes: None }).0;
             let warnings = folded_keys(mesh, &keys.poses, keys);
             warnings.iter().for_each(|w| progress.warn(w));
             Ok(Body {
