@@ -125,7 +125,7 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
     }
 }
 
-/// [`bytes_streamed`] written into `file` (opened for reading too: see [`Out`]) as the bytes
+/// [`bytes_streamed`] written into `file` (opened for reading too: equal values are compared by reading back) as the bytes
 /// are produced, through a buffer: the file is never held whole, however many samples it has.
 /// `path` names the file in errors.
 pub fn write_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>, file: File) -> Result<()> {
