@@ -45,7 +45,7 @@ pub fn gltf(glb: &[u8], map: &[u32]) -> Vec<u8> {
 }
 
 /// A glTF JSON chunk (this crate's) with the map in every mesh's `extras`, unpadded: what
-/// [`gltf`] puts in the GLB, for a GLB still in parts (`glb::Glb::with_json`).
+/// [`fn@gltf`] puts in the GLB, for a GLB still in parts (`glb::Glb::with_json`).
 pub fn gltf_json(json: &[u8], map: &[u32]) -> Vec<u8> {
     let mut root: Json = serde_json::from_slice(json).expect("our own GLB's JSON");
     if let Some(meshes) = root.get_mut("meshes").and_then(Json::as_array_mut) {
