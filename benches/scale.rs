@@ -5,8 +5,10 @@
 //! solved: TetGen's, or the cage's), the fill-reducing order and factorization of the global
 //! step (the solver's precompute), the mean solver iteration and its W evaluations' and global
 //! step solves' share (the report's `iteration_split`), the whole bake (wall and CPU),
-//! the process's peak resident memory, the cage's key reproduction error and the in-between
-//! volume loss. Medians of `SCALE_REPEATS` runs (default 1: these are long).
+//! the process's peak resident memory beside the bake's own memory estimate before it runs
+//! (`Scene::memory_estimate`, what `--max-memory` is checked against) and their ratio, the
+//! cage's key reproduction error and the in-between volume loss. Medians of `SCALE_REPEATS`
+//! runs (default 1: these are long).
 //!
 //! The rows: the prism series at 5 keys without the cage (1k, 2.6k, 10k, 21k and 30k tet
 //! nodes; the three large ones stop after 20 iterations, [`SERIES_ITERATIONS`], enough
@@ -14,7 +16,8 @@
 //! after 20 iterations as the table was measured), the CHEB-style 6.8k
 //! surface on its cage and in full (in-between volume within one percentage point), and the
 //! 25k and 100k surfaces on their cages (10 keys: under 60 s and 4 GB, embedded keys within 1%
-//! of the bbox diagonal). Held at every key: both end faces (the prisms and the 2.6k and 6.8k
+//! of the bbox diagonal), and the same two with full-frame files in every format (where the
+//! frames are most of the memory). Held at every key: both end faces (the prisms and the 2.6k and 6.8k
 //! bodies), or the whole surface (the default; the 25k and 100k surfaces).
 //!
 //! `cargo bench --bench scale` (or `make bench-scale`). `SCALE_CASES=10k,100k` (or arguments
@@ -38,6 +41,7 @@ use std::process::Command;
 use blendsim::algorithms::geometry::{Axis, Point, TriMesh};
 use blendsim::algorithms::procedural::{prism, twist, Twist};
 use blendsim::formats::mesh::obj;
+use blendsim::pipeline::scene::Scene;
 
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
@@ -84,6 +88,8 @@ struct Case {
     args: &'static [&'static str],
     /// Run only when named by a filter.
     extra: bool,
+    /// `[export] full_frame` (and the three formats): the rows that measure the frames' memory.
+    full_frame: bool,
 }
 
 /// Both end faces held at every key.
@@ -95,12 +101,12 @@ const SLIM: [f64; 3] = [1.0, 3.0, 1.0];
 
 /// A row of the prism series: 5 keys, no cage, TetGen's `max_volume`.
 const fn series(name: &'static str, d: usize, tet: &'static str, solver: &'static str) -> Case {
-    Case { name, size: BODY, divisions: [d, 3 * d, d], keys: 5, tet, solver, hold: ENDS, args: &[], extra: false }
+    Case { name, size: BODY, divisions: [d, 3 * d, d], keys: 5, tet, solver, hold: ENDS, args: &[], extra: false, full_frame: false }
 }
 
 /// The 2.6k-node body with 20 keys, both end faces held.
 const fn twenty_keys(name: &'static str, solver: &'static str, args: &'static [&'static str], extra: bool) -> Case {
-    Case { name, size: BODY, divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver, hold: ENDS, args, extra }
+    Case { name, size: BODY, divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver, hold: ENDS, args, extra, full_frame: false }
 }
 
 /// Write the scene of `case` into `dir`, its solver capped at `iterations` when given; returns
@@ -136,7 +142,12 @@ fn write_scene(case: &Case, dir: &Path, iterations: Option<usize>) -> PathBuf {
     if !solver.is_empty() {
         text.push_str(&format!("[solver]\n{}\n", solver.join("\n")));
     }
-    text.push_str(&format!("[tet]\n{}\n[export]\nformats = [\"usdc\", \"glb\"]\nfull_frame = false\n", case.tet));
+    let export = if case.full_frame {
+        "formats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = true"
+    } else {
+        "formats = [\"usdc\", \"glb\"]\nfull_frame = false"
+    };
+    text.push_str(&format!("[tet]\n{}\n[export]\n{export}\n", case.tet));
     let scene = dir.join("scene.toml");
     std::fs::write(&scene, text).unwrap();
     scene
@@ -219,6 +230,7 @@ fn main() {
             hold: ENDS,
             args: &[],
             extra: false,
+            full_frame: false,
         },
         Case {
             name: "6.8k-full",
@@ -230,9 +242,58 @@ fn main() {
             hold: ENDS,
             args: &[],
             extra: false,
+            full_frame: false,
         },
-        Case { name: "25k-cage", size: SLIM, divisions: [42, 130, 42], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
-        Case { name: "100k-cage", size: SLIM, divisions: [85, 260, 85], keys: 10, tet: "", solver: "", hold: None, args: &[], extra: false },
+        Case {
+            name: "25k-cage",
+            size: SLIM,
+            divisions: [42, 130, 42],
+            keys: 10,
+            tet: "",
+            solver: "",
+            hold: None,
+            args: &[],
+            extra: false,
+            full_frame: false,
+        },
+        Case {
+            name: "100k-cage",
+            size: SLIM,
+            divisions: [85, 260, 85],
+            keys: 10,
+            tet: "",
+            solver: "",
+            hold: None,
+            args: &[],
+            extra: false,
+            full_frame: false,
+        },
+        // The frames' memory: the cage surfaces with full-frame files in every format (136
+        // frames), where the frames are most of the peak.
+        Case {
+            name: "25k-cage-full-frame",
+            size: SLIM,
+            divisions: [42, 130, 42],
+            keys: 10,
+            tet: "",
+            solver: "",
+            hold: None,
+            args: &[],
+            extra: false,
+            full_frame: true,
+        },
+        Case {
+            name: "100k-cage-full-frame",
+            size: SLIM,
+            divisions: [85, 260, 85],
+            keys: 10,
+            tet: "",
+            solver: "",
+            hold: None,
+            args: &[],
+            extra: false,
+            full_frame: true,
+        },
     ];
     // A word picks the rows whose name contains it; an extra row only by its whole name.
     let chosen =
@@ -256,8 +317,8 @@ fn main() {
         load()
     );
     println!();
-    println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | evaluate + solve s | total bake s | CPU s | peak MB | cage key error | in-between volume loss | load |");
-    println!("|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---|");
+    println!("| scene | surface vertices | tet nodes | keys | global step | iterations | order + factor s | per iteration s | evaluate + solve s | total bake s | CPU s | peak MB | estimate MB (estimate / peak) | cage key error | in-between volume loss | load |");
+    println!("|---|---:|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---|");
     for case in cases.iter().filter(chosen) {
         let dir = scratch.join(case.name);
         let scene = write_scene(case, &dir, None);
@@ -287,8 +348,13 @@ fn main() {
         let nodes = if cage.is_null() { format!("{}", report["tet_nodes"]) } else { format!("{} (cage)", report["tet_nodes"]) };
         let iterations = format!("{}{}", solver["iterations"], if solver["converged"].as_bool() == Some(false) { " (cap)" } else { "" });
         let loss = report["volume"]["animation"]["in_between_loss"].as_f64().map_or("-".into(), |l| format!("{:.2}%", 100.0 * l));
+        // The bake's own estimate before it runs (`Scene::memory_estimate`: what
+        // `--max-memory` is checked against), of the scene as baked.
+        let parsed = Scene::parse(&std::fs::read_to_string(&scene).unwrap()).unwrap();
+        let times: Vec<f64> = (0..case.keys).map(|k| 0.5 * k as f64).collect();
+        let estimate = parsed.memory_estimate(&times, report["vertices"].as_u64().unwrap() as usize, report["tets"].as_u64().unwrap() as usize);
         println!(
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.3} + {:.3} | {:.1} | {:.1} | {:.0} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.3} + {:.3} | {:.1} | {:.1} | {:.0} | {:.0} ({:.2}) | {} | {} | {} |",
             case.name,
             report["vertices"],
             nodes,
@@ -302,6 +368,8 @@ fn main() {
             seconds,
             cpu,
             peak / 1024.0,
+            estimate / 1e6 / 1.024 / 1.024,
+            estimate / (peak * 1024.0),
             key_error,
             loss,
             load()

@@ -1,10 +1,10 @@
 //! The full-frame writers' speed beside the disk's: a twisting prism of about 90k vertices
 //! over `FRAMES` frames (default 48) written as `.usda`, `.usdc` and `.glb` (f32, no
 //! compression). Per format: the file's size, the writer's MB/s making the bytes (`.usda`
-//! into a sink, as it streams; `.usdc` and `.glb` into memory, as they are built), the same
+//! and `.glb` into a sink, `.usdc` into its file unsynced: it seeks back in it), the same
 //! per CPU second (what the load of a shared machine does not change), and MB/s to a synced
-//! file. The disk's line: a 256 MiB buffer written and synced. Medians of
-//! `REPEATS` (default 3); MB are 10^6 bytes.
+//! file; then the three written at once, as the export stage does. The disk's line: a 256
+//! MiB buffer written and synced. Medians of `REPEATS` (default 3); MB are 10^6 bytes.
 //!
 //! `cargo bench --bench writers` (`make bench-writers`). Mind the load average printed with
 //! it: the machine is shared.
@@ -86,24 +86,93 @@ fn main() {
         .collect();
     println!("| usda (streamed) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
 
+    // usdc streams into its file (it seeks back to patch jumps and reads back equal frames):
+    // making it is writing the file, unsynced.
+    let usdc = |path: &Path| {
+        let file = std::fs::File::options().read(true).write(true).create(true).truncate(true).open(path).expect("create");
+        usdc::write_full_frame(&frames, triangles, None, &settings, None, path, file).unwrap();
+    };
     let path = dir.join("prism.full.usdc");
-    let built = |f: &dyn Fn() -> Vec<u8>, name: &str| {
+    let (make, cpu): (Vec<f64>, Vec<f64>) = (0..repeats)
+        .map(|_| {
+            let (t, c) = (Instant::now(), cpu_seconds());
+            usdc(&path);
+            (t.elapsed().as_secs_f64(), cpu_seconds() - c)
+        })
+        .unzip();
+    let size = std::fs::metadata(&path).unwrap().len() as usize;
+    let disk: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            usdc(&path);
+            std::fs::File::open(&path).unwrap().sync_all().unwrap();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    println!("| usdc (streamed to its file) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
+    // glb: the blocks are made, then written out from where they are into a sink.
+    let glb = || glb::full_frame(&frames, Surface::plain(triangles), "prism", placement, Encoding::FLOAT);
+    let mut size = 0;
+    let (make, cpu): (Vec<f64>, Vec<f64>) = (0..repeats)
+        .map(|_| {
+            let (t, c) = (Instant::now(), cpu_seconds());
+            let mut counted = Counted(0);
+            glb().write_to(&mut counted).unwrap();
+            size = counted.0;
+            (t.elapsed().as_secs_f64(), cpu_seconds() - c)
+        })
+        .unzip();
+    let disk: Vec<f64> =
+        (0..repeats).map(|_| to_disk(&dir.join("prism.full.glb"), |f| glb().write_to(&mut std::io::BufWriter::new(f)).unwrap())).collect();
+    println!("| glb, f32 (blocks written out) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
+    // Beside them, the files made whole in memory and then written, as the writers did before
+    // they streamed (the usdc writer's own in-memory path; the glb's parts copied into one
+    // buffer): the same bytes.
+    let whole = |name: &str, make: &dyn Fn() -> Vec<u8>| {
         let mut size = 0;
-        let (make, cpu): (Vec<f64>, Vec<f64>) = (0..repeats)
+        let (made, cpu): (Vec<f64>, Vec<f64>) = (0..repeats)
             .map(|_| {
                 let (t, c) = (Instant::now(), cpu_seconds());
-                size = f().len();
+                size = make().len();
                 (t.elapsed().as_secs_f64(), cpu_seconds() - c)
             })
             .unzip();
-        let disk: Vec<f64> = (0..repeats).map(|_| to_disk(&dir.join(name), |file| file.write_all(&f()).unwrap())).collect();
-        (size, make, cpu, disk)
+        let disk: Vec<f64> = (0..repeats).map(|_| to_disk(&dir.join("whole.bin"), |f| f.write_all(&make()).unwrap())).collect();
+        println!("| {name} | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, made), mb(size, cpu), mb(size, disk));
     };
-    let (size, make, cpu, disk) = built(&|| usdc::full_frame(&frames, triangles, None, &settings, None, &path).unwrap(), "prism.full.usdc");
-    println!("| usdc (built in memory) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
-    let (size, make, cpu, disk) =
-        built(&|| glb::full_frame(&frames, Surface::plain(triangles), "prism", placement, Encoding::FLOAT), "prism.full.glb");
-    println!("| glb, f32 (built in memory) | {:.1} | {:.0} | {:.0} | {:.0} |", size as f64 / 1e6, mb(size, make), mb(size, cpu), mb(size, disk));
+    whole("usdc, whole in memory, then written", &|| usdc::full_frame(&frames, triangles, None, &settings, None, &path).unwrap());
+    whole("glb, f32, whole in memory, then written", &|| glb().to_vec());
+    // The three at once, as the export stage writes them (each on a thread of the pool), to
+    // synced files: their bytes over the wall time.
+    let mut total = 0;
+    let all: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            rayon::scope(|s| {
+                s.spawn(|_| {
+                    to_disk(&dir.join("all.usda"), |f| {
+                        let mut w = std::io::BufWriter::new(f);
+                        usda::write_full_frame(&frames, triangles, None, &settings, None, &mut w).unwrap();
+                        w.flush().unwrap();
+                    });
+                });
+                s.spawn(|_| {
+                    usdc(&dir.join("all.usdc"));
+                    std::fs::File::open(dir.join("all.usdc")).unwrap().sync_all().unwrap();
+                });
+                s.spawn(|_| {
+                    to_disk(&dir.join("all.glb"), |f| {
+                        let mut w = std::io::BufWriter::new(f);
+                        glb().write_to(&mut w).unwrap();
+                        w.flush().unwrap();
+                    });
+                });
+            });
+            total = ["all.usda", "all.usdc", "all.glb"].iter().map(|n| std::fs::metadata(dir.join(n)).unwrap().len() as usize).sum();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    println!("| all three in parallel, to synced files | {:.1} | | | {:.0} |", total as f64 / 1e6, mb(total, all));
     println!();
     println!("load average after: {}", load());
     let _ = std::fs::remove_dir_all(&dir);

@@ -15,9 +15,13 @@ use std::time::Instant;
 
 use crate::support::error::{Error, Result};
 
-/// Bytes per evaluated frame and vertex: the full-frame pose (3 f64), the blendshape
-/// reconstruction compared with it in the report, and the written copy (USD text or glb).
-const BYTES_PER_FRAME_VERTEX: f64 = 4.0 * 24.0;
+/// Bytes per frame and exported vertex a full-frame export holds: the full-frame poses (3
+/// f32, `FullFrame`) and the full-frame glb's morph targets (3 f32, or 3 i16 quantized, held
+/// as its blocks until written). `.usda` and `.usdc` stream from the poses, and the report
+/// measures one frame at a time; without full-frame files nothing is held per frame and vertex.
+/// (The former 96 bytes counted the glb three times, a whole usdc, and every frame's two poses
+/// in the report: 62 bytes measured per frame and vertex, 54 of them without full-frame files.)
+const BYTES_PER_FULL_FRAME_VERTEX: f64 = 24.0;
 /// Bytes per frame for the frame list itself (frame number and time).
 const BYTES_PER_FRAME: f64 = 16.0;
 /// Bytes per spacetime sample and tet: the projection target (a 3x3 matrix), its residual and
@@ -93,12 +97,13 @@ impl Budget {
         }
     }
 
-    /// The frames an export or a report evaluates: `frames x vertices`.
-    pub(crate) fn check_frames(&self, start: f64, end: f64, fps: f64, vertices: usize) -> Result<()> {
+    /// The frames an export or a report evaluates: the frame list, and `frames x vertices`
+    /// when the export writes full-frame files (`full_frame`); without them every frame is
+    /// evaluated, measured and let go (the report's player is bounded on its own).
+    pub(crate) fn check_frames(&self, start: f64, end: f64, fps: f64, vertices: usize, full_frame: bool) -> Result<()> {
         let frames = frame_count(start, end, fps);
-        let bytes = frames * (BYTES_PER_FRAME + BYTES_PER_FRAME_VERTEX * vertices as f64);
         self.check(
-            bytes,
+            frames_bytes(frames, vertices, full_frame),
             &format!("{frames:.3e} frames ({} s at {fps} fps) of {vertices} vertices", end - start),
             "lower fps, or shorten the key times (they are in seconds)",
         )
@@ -106,8 +111,11 @@ impl Budget {
 
     /// The spacetime samples the solver keeps: `samples per interval x intervals x tets`.
     pub(crate) fn check_samples(&self, samples: usize, intervals: usize, tets: usize) -> Result<()> {
-        let bytes = samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET;
-        self.check(bytes, &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"), "lower [solver] samples (10 is typical)")
+        self.check(
+            samples_bytes(samples, intervals, tets),
+            &format!("{samples} samples per interval x {intervals} intervals x {tets} tets"),
+            "lower [solver] samples (10 is typical)",
+        )
     }
 
     /// Err when the bake has run past `--max-time` (none set: always Ok). `phase` and
@@ -174,6 +182,16 @@ pub(crate) fn available_memory() -> Option<f64> {
     Some(kb * 1024.0)
 }
 
+/// The bytes [`Budget::check_frames`] estimates for `frames` frames of `vertices` vertices.
+pub fn frames_bytes(frames: f64, vertices: usize, full_frame: bool) -> f64 {
+    frames * (BYTES_PER_FRAME + if full_frame { BYTES_PER_FULL_FRAME_VERTEX * vertices as f64 } else { 0.0 })
+}
+
+/// The bytes [`Budget::check_samples`] estimates.
+pub fn samples_bytes(samples: usize, intervals: usize, tets: usize) -> f64 {
+    samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET
+}
+
 /// Frames of an animation from `start` to `end` seconds at `fps` (an upper bound).
 pub fn frame_count(start: f64, end: f64, fps: f64) -> f64 {
     ((end - start) * fps).abs().floor() + 2.0
@@ -210,8 +228,8 @@ mod tests {
     #[test]
     fn two_budgets_in_one_process_are_independent() {
         let (small, large) = (Budget::new(Some(1_000_000), None), Budget::new(Some(1 << 40), None));
-        assert!(small.check_frames(0.0, 1.0, 60.0, 10_000).is_err());
-        assert!(large.check_frames(0.0, 1.0, 60.0, 10_000).is_ok());
+        assert!(small.check_frames(0.0, 1.0, 60.0, 10_000, true).is_err());
+        assert!(large.check_frames(0.0, 1.0, 60.0, 10_000, true).is_ok());
         let (spent, open) = (Budget::new(None, Some(0.0)), Budget::new(None, Some(3600.0)));
         std::thread::sleep(std::time::Duration::from_millis(2));
         let e = spent.check_time("solve", || "after 3 iterations".into()).unwrap_err();

@@ -465,6 +465,19 @@ impl Staging {
     /// Write a file into the staging folder from `fill`, through a buffer: a large file made
     /// in pieces is never held whole.
     pub fn write_with(&mut self, name: &str, fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<()> {
+        let created = self.create(name)?;
+        let fail = |e: std::io::Error| Error::io(self.final_path(name), &e, "write an output file");
+        let mut w = std::io::BufWriter::new(created);
+        fill(&mut w).and_then(|_| w.flush()).map_err(fail)?;
+        drop(w);
+        self.record(name);
+        Ok(())
+    }
+
+    /// Create (or truncate) a file in the staging folder, open for writing and reading back,
+    /// from any thread: the writers of one export fill their files in parallel, and the caller
+    /// [`Staging::record`]s each once it is complete.
+    pub fn create(&self, name: &str) -> Result<File> {
         self.check_name(name)?;
         let p = self.path(name);
         // Created in a critical section, as `write`'s file is (a signal's cleanup lists the
@@ -472,14 +485,9 @@ impl Staging {
         // what is written after a cleanup goes to a file already unlinked.
         let created = {
             let _critical = interrupt::critical();
-            File::create(&p)
+            File::options().read(true).write(true).create(true).truncate(true).open(&p)
         };
-        let fail = |e: std::io::Error| Error::io(self.final_path(name), &e, "write an output file");
-        let mut w = std::io::BufWriter::new(created.map_err(fail)?);
-        fill(&mut w).and_then(|_| w.flush()).map_err(fail)?;
-        drop(w);
-        self.record(name);
-        Ok(())
+        created.map_err(|e| Error::io(self.final_path(name), &e, "write an output file"))
     }
 
     /// Record a file that an external tool wrote at [`Staging::path`].

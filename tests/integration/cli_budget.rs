@@ -15,7 +15,7 @@ fn demo_scene() -> PathBuf {
 }
 
 /// The demo with 2 samples per interval, copied into `dir`: its spacetime samples (1.8 MB
-/// estimated) and frames (1.5 MB) fit in a 3 MB budget that its factor does not, so
+/// estimated) and frames (0.4 MB) fit in a 3 MB budget that its factor does not, so
 /// `--max-memory 3M` exercises the fallback. (`--max-memory` is the one budget of every
 /// estimate, so the demo itself, at 5.4 MB of samples, is refused below that.) `global_step`:
 /// the scene's `[solver] global_step`.

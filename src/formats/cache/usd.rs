@@ -212,8 +212,8 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
     }
     // The binary crate is written natively from the layer the `.usda` text holds, with the
     // points streamed: read once for the extents (which come first), then again frame by
-    // frame into one buffer as the writer stores them, so the frames are held once, as the
-    // file's bytes (usd-core's writer held its layer too).
+    // frame into one buffer as the writer writes them to the file, so the frames are never
+    // held (usd-core's writer held its layer too).
     let mut points = vec![[0.0; 3]; n];
     let mut extents = Vec::with_capacity(codes.len());
     let mut f32s: Vec<[f32; 3]> = Vec::with_capacity(n);
@@ -237,9 +237,11 @@ pub fn write(path: &Path, mesh: &TriMesh, frames: &mut dyn FrameSource, fps: f64
         times: &codes,
         read: &mut read,
     };
-    let bytes = crate::formats::export::usdc::bytes_streamed(&layer, path, streamed)?;
-    drop(layer);
-    crate::support::output::write_atomic(path, &bytes)
+    crate::support::output::write_atomic_with(path, |tmp| {
+        let file =
+            File::options().read(true).write(true).create(true).truncate(true).open(tmp).map_err(|e| Error::io(tmp, &e, "create the usdc file"))?;
+        crate::formats::export::usdc::write_streamed(&layer, path, streamed, file)
+    })
 }
 
 fn write_usda(

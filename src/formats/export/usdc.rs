@@ -24,6 +24,9 @@
 mod compression;
 
 use std::collections::{HashMap, HashSet};
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 use self::compression::{compressed_ints, fast_compression};
@@ -92,7 +95,10 @@ pub fn bytes(layer: &Layer, path: &Path) -> Result<Vec<u8>> {
     let mut w = Writer::default();
     w.out.extend_from_slice(&[0; 88]);
     w.layer(layer);
-    Ok(w.finish())
+    match w.finish() {
+        Out::Memory(bytes) => Ok(bytes),
+        Out::File { .. } => unreachable!("written to memory"),
+    }
 }
 
 /// One attribute's time samples produced one at a time while the file is written, instead of
@@ -113,6 +119,30 @@ pub(crate) type SampleReader<'a> = dyn FnMut(usize, &mut Vec<[f32; 3]>) -> Resul
 /// [`bytes`] with the samples of `streamed.attribute` read from `streamed` as they are written:
 /// the same bytes as [`bytes`] of the layer holding them.
 pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>) -> Result<Vec<u8>> {
+    match written(layer, path, streamed, Out::Memory(Vec::new()))? {
+        Out::Memory(bytes) => Ok(bytes),
+        Out::File { .. } => unreachable!("written to memory"),
+    }
+}
+
+/// [`bytes_streamed`] written into `file` (opened for reading too: equal values are compared by reading back) as the bytes
+/// are produced, through a buffer: the file is never held whole, however many samples it has.
+/// `path` names the file in errors.
+pub fn write_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>, file: File) -> Result<()> {
+    flushed(written(layer, path, streamed, Out::File { w: BufWriter::new(file), len: 0, error: None })?, path)
+}
+
+/// The end of a file written through [`Out::File`]: its buffer flushed, or its first error.
+fn flushed(out: Out, path: &Path) -> Result<()> {
+    match out {
+        Out::File { mut w, error: None, .. } => w.flush().map_err(|e| Error::io(path, &e, "write the usdc file")),
+        Out::File { error: Some(e), .. } => Err(Error::io(path, &e, "write the usdc file")),
+        Out::Memory(_) => unreachable!("written to a file"),
+    }
+}
+
+/// The file of `layer` with `streamed`'s samples, into `out`.
+fn written(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>, out: Out) -> Result<Out> {
     let unwritable = |problem: String| {
         Error::in_file(path, format!("cannot write the usdc file: {problem}"), "re-run the bake; if it persists, report the scene that makes it")
     };
@@ -120,7 +150,7 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
     if streamed.times.iter().any(|t| !t.is_finite()) {
         return Err(unwritable(format!("{} has a non-finite sample time", streamed.attribute)));
     }
-    let mut w = Writer { streamed: Some(streamed), ..Writer::default() };
+    let mut w = Writer { streamed: Some(streamed), out, ..Writer::default() };
     w.out.extend_from_slice(&[0; 88]);
     w.layer(layer);
     match w.failed.take() {
@@ -131,9 +161,7 @@ pub fn bytes_streamed(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>)
 }
 
 /// The `.usdc` bytes of the full-frame layer (`usd::full_frame`), the same bytes as [`bytes`]
-/// of it, with the points streamed from `frames` instead of copied into the layer: a large
-/// animation's frames (40k vertices x 151 frames is 72 MB) are held by `frames` and once more
-/// as the file's bytes, not a third time in the layer. `weld_map`: as
+/// of it, with the points streamed from `frames` instead of copied into the layer. `weld_map`: as
 /// [`usd::full_frame_unsampled`].
 pub fn full_frame(
     frames: &FullFrame,
@@ -143,6 +171,39 @@ pub fn full_frame(
     weld_map: Option<&[u32]>,
     path: &Path,
 ) -> Result<Vec<u8>> {
+    full_frame_into(frames, triangles, attributes, settings, weld_map, path, Out::Memory(Vec::new())).map(|out| match out {
+        Out::Memory(bytes) => bytes,
+        Out::File { .. } => unreachable!("written to memory"),
+    })
+}
+
+/// [`full_frame`] written into `file` (opened for reading too) as it is produced: a large
+/// animation's frames are held by `frames` only, never a second time as the file's bytes.
+pub fn write_full_frame(
+    frames: &FullFrame,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    weld_map: Option<&[u32]>,
+    path: &Path,
+    file: File,
+) -> Result<()> {
+    flushed(
+        full_frame_into(frames, triangles, attributes, settings, weld_map, path, Out::File { w: BufWriter::new(file), len: 0, error: None })?,
+        path,
+    )
+}
+
+/// The full-frame file into `out`.
+fn full_frame_into(
+    frames: &FullFrame,
+    triangles: &[[u32; 3]],
+    attributes: Option<&CornerAttributes>,
+    settings: &UsdSettings,
+    weld_map: Option<&[u32]>,
+    path: &Path,
+    out: Out,
+) -> Result<Out> {
     let layer = usd::full_frame_unsampled(frames, triangles, attributes, settings, weld_map);
     let times: Vec<f64> = frames.frames.iter().map(|&f| f as f64).collect();
     let mut read = |i: usize, out: &mut Vec<[f32; 3]>| -> Result<()> {
@@ -150,7 +211,96 @@ pub fn full_frame(
         out.extend_from_slice(&frames.points[i]);
         Ok(())
     };
-    bytes_streamed(&layer, path, StreamedSamples { attribute: usd::points_path(settings), times: &times, read: &mut read })
+    written(&layer, path, StreamedSamples { attribute: usd::points_path(settings), times: &times, read: &mut read }, out)
+}
+
+/// Where a file's bytes go as they are produced: memory, or a file through a buffer (a
+/// full-frame file of gigabytes is then never held). Besides appending, the writer needs the
+/// length so far (the offsets), to patch an 8-byte jump once its target is written (a seek
+/// back in a file: two per time-sampled attribute, and the bootstrap), and to compare a value
+/// with one written before whose hash it shares (a read back from the file: equal frames are
+/// stored once).
+enum Out {
+    Memory(Vec<u8>),
+    /// The file, the bytes written so far, and the first write error (nothing is written
+    /// after it; the caller reports it).
+    File {
+        w: BufWriter<File>,
+        len: u64,
+        error: Option<std::io::Error>,
+    },
+}
+
+impl Default for Out {
+    fn default() -> Out {
+        Out::Memory(Vec::new())
+    }
+}
+
+impl Out {
+    fn extend_from_slice(&mut self, bytes: &[u8]) {
+        match self {
+            Out::Memory(v) => v.extend_from_slice(bytes),
+            Out::File { w, len, error } => {
+                if error.is_none() {
+                    if let Err(e) = w.write_all(bytes) {
+                        *error = Some(e);
+                    }
+                }
+                *len += bytes.len() as u64;
+            }
+        }
+    }
+
+    fn push(&mut self, byte: u8) {
+        self.extend_from_slice(&[byte]);
+    }
+
+    fn len(&self) -> u64 {
+        match self {
+            Out::Memory(v) => v.len() as u64,
+            Out::File { len, .. } => *len,
+        }
+    }
+
+    /// Overwrite the bytes at `at` (already written) with `bytes`.
+    fn patch(&mut self, at: u64, bytes: &[u8]) {
+        match self {
+            Out::Memory(v) => v[at as usize..at as usize + bytes.len()].copy_from_slice(bytes),
+            Out::File { w, len, error } => {
+                if error.is_none() {
+                    let patched = w.seek(SeekFrom::Start(at)).and_then(|_| w.write_all(bytes)).and_then(|_| w.seek(SeekFrom::Start(*len)));
+                    if let Err(e) = patched {
+                        *error = Some(e);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Whether the bytes at `at` begin with `body`.
+    fn holds(&mut self, at: u64, body: &[u8]) -> bool {
+        match self {
+            Out::Memory(v) => v[at as usize..].starts_with(body),
+            Out::File { w, len, error } => {
+                if error.is_some() || at + body.len() as u64 > *len {
+                    return false;
+                }
+                if let Err(e) = w.flush() {
+                    *error = Some(e);
+                    return false;
+                }
+                let mut there = vec![0; body.len()];
+                match w.get_ref().read_exact_at(&mut there, at) {
+                    Ok(()) => there == body,
+                    Err(e) => {
+                        *error = Some(e);
+                        false
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Why a streamed sample was not written.
@@ -239,7 +389,7 @@ struct PathEntry {
 
 #[derive(Default)]
 struct Writer<'a> {
-    out: Vec<u8>,
+    out: Out,
     /// The attribute whose samples are read while written, until written.
     streamed: Option<StreamedSamples<'a>>,
     /// The first streamed sample that could not be written (nothing after it is).
@@ -459,7 +609,7 @@ impl Writer<'_> {
     }
 
     fn here(&self) -> u64 {
-        self.out.len() as u64
+        self.out.len()
     }
 
     fn token_vector(&mut self, names: &[&str]) -> u64 {
@@ -542,7 +692,7 @@ impl Writer<'_> {
     /// Write at `at` the distance from `at` to the end of the output.
     fn patch_jump(&mut self, at: u64) {
         let jump = (self.here() - at).to_le_bytes();
-        self.out[at as usize..at as usize + 8].copy_from_slice(&jump);
+        self.out.patch(at, &jump);
     }
 
     /// A value's representation, writing what does not fit in the payload.
@@ -602,8 +752,12 @@ impl Writer<'_> {
         let mut hasher = std::hash::DefaultHasher::new();
         std::hash::Hash::hash(&body, &mut hasher);
         let key = (rep, std::hash::Hasher::finish(&hasher));
-        if let Some(&at) = self.stored.get(&key).and_then(|at| at.iter().find(|&&at| self.out[at as usize..].starts_with(&body))) {
-            return rep | at;
+        if let Some(offsets) = self.stored.get(&key) {
+            for &at in offsets {
+                if self.out.holds(at, &body) {
+                    return rep | at;
+                }
+            }
         }
         if aligned {
             self.align8();
@@ -615,7 +769,7 @@ impl Writer<'_> {
     }
 
     /// The structural sections, the table of contents and the bootstrap.
-    fn finish(mut self) -> Vec<u8> {
+    fn finish(mut self) -> Out {
         let mut sections: Vec<(&str, u64, u64)> = Vec::new();
         let mut section = |w: &mut Writer, name: &'static str, write: &dyn Fn(&mut Writer)| {
             w.align8();
@@ -684,7 +838,7 @@ impl Writer<'_> {
         boot[..8].copy_from_slice(b"PXR-USDC");
         boot[8..11].copy_from_slice(&VERSION);
         boot[16..24].copy_from_slice(&toc.to_le_bytes());
-        self.out[..88].copy_from_slice(&boot);
+        self.out.patch(0, &boot);
         self.out
     }
 

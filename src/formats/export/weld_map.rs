@@ -29,16 +29,7 @@ pub fn usd(layer: &mut Layer, map: &[u32]) {
 pub fn gltf(glb: &[u8], map: &[u32]) -> Vec<u8> {
     let word = |at: usize| u32::from_le_bytes(glb[at..at + 4].try_into().expect("4 bytes")) as usize;
     let json_len = word(12);
-    let mut root: Json = serde_json::from_slice(&glb[20..20 + json_len]).expect("our own GLB's JSON");
-    if let Some(meshes) = root.get_mut("meshes").and_then(Json::as_array_mut) {
-        for mesh in meshes {
-            let extras = mesh.as_object_mut().expect("a mesh is an object").entry("extras").or_insert_with(|| Json::Object(Default::default()));
-            if let Some(extras) = extras.as_object_mut() {
-                extras.insert(GLTF_KEY.into(), Json::from(map.to_vec()));
-            }
-        }
-    }
-    let mut json = serde_json::to_vec(&root).expect("JSON serializes");
+    let mut json = gltf_json(&glb[20..20 + json_len], map);
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
@@ -51,6 +42,21 @@ pub fn gltf(glb: &[u8], map: &[u32]) -> Vec<u8> {
     out.extend_from_slice(&json);
     out.extend_from_slice(rest);
     out
+}
+
+/// A glTF JSON chunk (this crate's) with the map in every mesh's `extras`, unpadded: what
+/// [`fn@gltf`] puts in the GLB, for a GLB still in parts (`glb::Glb::with_json`).
+pub fn gltf_json(json: &[u8], map: &[u32]) -> Vec<u8> {
+    let mut root: Json = serde_json::from_slice(json).expect("our own GLB's JSON");
+    if let Some(meshes) = root.get_mut("meshes").and_then(Json::as_array_mut) {
+        for mesh in meshes {
+            let extras = mesh.as_object_mut().expect("a mesh is an object").entry("extras").or_insert_with(|| Json::Object(Default::default()));
+            if let Some(extras) = extras.as_object_mut() {
+                extras.insert(GLTF_KEY.into(), Json::from(map.to_vec()));
+            }
+        }
+    }
+    serde_json::to_vec(&root).expect("JSON serializes")
 }
 
 #[cfg(test)]

@@ -40,13 +40,17 @@ pub(crate) fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &
     let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
     let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
     let (mut per_frame, mut per_frame_rms) = (Vec::with_capacity(frames.len()), Vec::with_capacity(frames.len()));
-    let poses: Vec<(Vec<Point>, Vec<Point>)> = frames.iter().map(|&(_, t)| (stored(t), tr.evaluate(t))).collect();
-    for (a, b) in &poses {
-        let d: Vec<f64> = a.iter().zip(b).map(|(p, q)| norm(sub(*p, *q))).collect();
+    // One frame's two poses at a time (all of them held at once were 48 bytes per frame and
+    // vertex: most of a long bake's peak memory).
+    let poses = frames.iter().map(|&(_, t)| {
+        let (a, b) = (stored(t), tr.evaluate(t));
+        let d: Vec<f64> = a.iter().zip(&b).map(|(p, q)| norm(sub(*p, *q))).collect();
         per_frame.push(d.iter().copied().fold(0.0, f64::max) / scale);
         per_frame_rms.push(if d.is_empty() { 0.0 } else { (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt() / scale });
-    }
-    (deviation(poses.into_iter(), diagonal), per_frame, per_frame_rms)
+        (a, b)
+    });
+    let deviation = deviation(poses, diagonal);
+    (deviation, per_frame, per_frame_rms)
 }
 
 /// Enclosed volume of the surface `triangles` moving on `tr` at each of `frames`.

@@ -25,9 +25,10 @@ use crate::support::budget::Budget;
 use crate::support::error::{quoted, Error, Result};
 use crate::support::output::Staging;
 use crate::support::progress::Progress;
+use rayon::prelude::*;
 
-/// Stage every requested file; `Outputs` lists them blendshapes first, then full-frame, each
-/// in the order usda, usdc, glb, whatever order the scene file gives.
+/// Stage every requested file (written in parallel); `Outputs` lists them blendshapes first,
+/// then full-frame, each in the order usda, usdc, glb, whatever order the scene file gives.
 pub fn export(animation: &Animation, budget: &Budget, staging: &mut Staging) -> Result<Outputs> {
     let clip = blendshape_clip(animation, None, budget)?;
     export_with(animation, &clip, staging, budget, &Progress::hidden())
@@ -109,70 +110,95 @@ pub fn export_with(
     let weld = animation.cache.as_ref().and_then(|c| c.weld.as_deref());
     let forms = forms(scene);
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
-    let mut files = Vec::new();
-    for kind in forms {
-        // The full-frame USD files are written from `full` itself, its points streamed
-        // (`usda::write_full_frame`, `usdc::full_frame`), never copied into a layer or held as
-        // text: only the blendshape form builds its layer.
-        let streamed = kind == OutputKind::FullFrame;
-        let layer = (!streamed && formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc))).then(|| {
-            let mut layer = usd::blendshapes(clip, triangles, attributes, &settings);
-            if let Some(map) = weld {
-                weld_map::usd(&mut layer, map);
-            }
-            layer
-        });
-        for &format in &formats {
+    // Only the blendshape form builds its layer: the full-frame USD files are written from
+    // `full` itself, its points streamed (`usda::write_full_frame`, `usdc::write_full_frame`),
+    // never copied into a layer or held as text or bytes.
+    let layer = formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)).then(|| {
+        let mut layer = usd::blendshapes(clip, triangles, attributes, &settings);
+        if let Some(map) = weld {
+            weld_map::usd(&mut layer, map);
+        }
+        layer
+    });
+    let layer = layer.as_ref();
+    // Every file at once: each writer makes its own file from shared inputs, so the files are
+    // the bytes the writers make one after another (the order of `Outputs` is the jobs'). One
+    // job per file, so a thread that finishes the small blendshape files takes a full-frame one.
+    let jobs: Vec<(OutputKind, Format)> = forms.iter().flat_map(|&kind| formats.iter().map(move |&format| (kind, format))).collect();
+    let shared: &Staging = staging;
+    let written: Vec<Result<Option<f64>>> = jobs
+        .par_iter()
+        .with_max_len(1)
+        .map(|&(kind, format)| {
             let name = file_name(&scene.name, kind, format);
-            bar.set_message(format!("export: {name}"));
+            let streamed = kind == OutputKind::FullFrame;
+            let io = |e: std::io::Error| Error::io(shared.final_path(&name), &e, "write an output file");
+            let put = |bytes: &[u8]| -> Result<()> {
+                let mut file = shared.create(&name)?;
+                std::io::Write::write_all(&mut file, bytes).map_err(io)
+            };
             let mut quantization_error = None;
             match format {
                 Format::Usda => match &full {
                     Some(full) if streamed => {
-                        staging.write_with(&name, |file| usda::write_full_frame(full, triangles, attributes, &settings, weld, file))?
+                        let mut w = std::io::BufWriter::new(shared.create(&name)?);
+                        usda::write_full_frame(full, triangles, attributes, &settings, weld, &mut w)
+                            .and_then(|_| std::io::Write::flush(&mut w))
+                            .map_err(io)?;
                     }
-                    _ => staging.write(&name, usda::text(layer.as_ref().expect("built for USD")).as_bytes())?,
+                    _ => put(usda::text(layer.expect("built for USD")).as_bytes())?,
                 },
                 Format::Usdc => {
                     // The interruption tests stop here: in the export, before the usdc is staged.
                     crate::support::interrupt::pause_point("usdc", "");
-                    let bytes = match &full {
-                        Some(full) if streamed => usdc::full_frame(full, triangles, attributes, &settings, weld, &staging.final_path(&name))?,
-                        _ => usdc::bytes(layer.as_ref().expect("built for USD"), &staging.final_path(&name))?,
-                    };
-                    staging.write(&name, &bytes)?;
+                    match &full {
+                        Some(full) if streamed => {
+                            usdc::write_full_frame(full, triangles, attributes, &settings, weld, &shared.final_path(&name), shared.create(&name)?)?
+                        }
+                        _ => put(&usdc::bytes(layer.expect("built for USD"), &shared.final_path(&name))?)?,
+                    }
                 }
                 Format::Glb => {
-                    let bytes = match (&kind, &full) {
+                    let file = match (&kind, &full) {
                         (OutputKind::FullFrame, Some(full)) => glb::full_frame(full, surface, &scene.name, placement, encoding),
                         _ if scene.export.gltf_interpolation == GltfInterpolation::Linear => {
                             glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement, encoding)
                         }
                         _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement, encoding),
                     };
-                    let bytes = match weld {
-                        Some(map) => weld_map::gltf(&bytes, map),
-                        None => bytes,
+                    let file = match weld {
+                        Some(map) => file.with_json(|json| weld_map::gltf_json(json, map)),
+                        None => file,
                     };
-                    staging.write(&name, &bytes)?;
+                    let mut w = std::io::BufWriter::new(shared.create(&name)?);
+                    file.write_to(&mut w).and_then(|_| std::io::Write::flush(&mut w)).map_err(io)?;
+                    drop((w, file));
                     // What the file plays at every frame against what it was given, read back:
                     // a full-frame file holds `full` (a cache bake's is the cache, not the
                     // trajectory), at its own times.
+                    let written = shared.path(&name);
                     quantization_error = match (&kind, &full) {
                         (OutputKind::FullFrame, Some(full)) => {
                             let held = |t: f64| {
                                 let frame = full.times.partition_point(|&x| x < t).min(full.times.len() - 1);
                                 full.points[frame].iter().map(|p| p.map(f64::from)).collect()
                             };
-                            glb::readback::played_error(&bytes, (&full.times, scene.fps), &held, placement, diagonal)?
+                            glb::readback::played_error_of_file(&written, (&full.times, scene.fps), &held, placement, diagonal)?
                         }
-                        _ => glb::readback::played_error(&bytes, (&frame_times, scene.fps), &|t| clip.points_at(t), placement, diagonal)?,
+                        _ => glb::readback::played_error_of_file(&written, (&frame_times, scene.fps), &|t| clip.points_at(t), placement, diagonal)?,
                     };
                 }
             }
-            files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format, quantization_error });
             bar.inc(1);
-        }
+            Ok(quantization_error)
+        })
+        .collect();
+    let mut files = Vec::new();
+    for ((kind, format), quantization_error) in jobs.into_iter().zip(written) {
+        let quantization_error = quantization_error?;
+        let name = file_name(&scene.name, kind, format);
+        staging.record(&name);
+        files.push(OutputFile { bytes: staging.size(&name)?, path: name, kind, format, quantization_error });
     }
     bar.finish_and_clear();
     Ok(Outputs { files, rank })

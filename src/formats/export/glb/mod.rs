@@ -87,7 +87,7 @@ impl Placement {
 /// at UV and normal seams, see `File::new`); without them the file is as before. `textures`
 /// (per material group, `texture::load`; may be empty) are embedded and become the groups'
 /// `baseColorTexture` when the surface has UVs.
-pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Vec<u8> {
+pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Glb {
     let times: Vec<f32> = clip.times.iter().map(|&t| t as f32).collect();
     let curves = &clip.curves;
     let mut output = Vec::with_capacity(3 * times.len() * curves.len());
@@ -112,7 +112,7 @@ pub(crate) fn blendshapes_sampled(
     name: &str,
     placement: Placement,
     encoding: Encoding,
-) -> Vec<u8> {
+) -> Glb {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
     let weight_sum = output.chunks(clip.targets.len().max(1)).map(|w| w.iter().map(|x| x.abs() as f64).sum::<f64>()).fold(0.0, f64::max);
@@ -130,7 +130,7 @@ fn with_weights(
     (times, output, interpolation): Sampler,
     weight_sum: f64,
     encoding: Encoding,
-) -> Vec<u8> {
+) -> Glb {
     let largest = clip.targets.iter().flat_map(|t| t.offsets.iter().flatten()).fold(0.0f32, |m, x| m.max(x.abs()));
     // A static clip (no animation) stays f32: there is no played error to read back and state.
     let grid = grid(encoding, &clip.base, largest, weight_sum).filter(|_| !clip.targets.is_empty());
@@ -157,7 +157,7 @@ fn with_weights(
 
 /// One morph target per frame (the offset of that frame from frame 0) with one-hot LINEAR
 /// weights: what a vertex cache looks like in glTF.
-pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Vec<u8> {
+pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: Placement, encoding: Encoding) -> Glb {
     let base = &frames.points[0];
     let largest =
         frames.points.iter().flat_map(|f| f.iter().zip(base).flat_map(|(p, b)| (0..3).map(move |a| (p[a] - b[a]).abs()))).fold(0.0f32, f32::max);
@@ -703,7 +703,7 @@ impl File {
 
     /// Lay the non-empty blocks out as buffer views of one buffer, point the accessors (which
     /// hold block numbers until now) at them, and wrap JSON and binary into a GLB.
-    fn finish(mut self) -> Vec<u8> {
+    fn finish(mut self) -> Glb {
         let mut extras = serde_json::Map::new();
         if let Some(sources) = &self.sources {
             // Points keep their index (`split_at_seams`); the copies follow them.
@@ -717,14 +717,16 @@ impl File {
             let text = serde_json::to_string(&Value::Object(extras)).expect("extras serialize");
             self.root.meshes[0].extras = Some(json::extras::RawValue::from_string(text).expect("valid JSON"));
         }
-        let mut bin = Vec::new();
+        // The BIN chunk as its pieces (the blocks, then the images), laid out by their lengths
+        // alone and never concatenated (see `Glb`); `bin_len` is the bytes laid out so far.
+        let (mut pieces, mut bin_len) = (Vec::new(), 0u64);
         let mut view_of = [None; BLOCKS];
         // Per view, its meshopt encoding (meshopt files), else `None`: stored as is.
         let mut encoded: Vec<Option<meshopt::Encoded>> = Vec::new();
         let meshopt = matches!(self.grid, Some((_, Compression::Meshopt)));
         let index_size = index_type(self.vertex_count, false).1;
         let primitives = self.root.meshes.first().map_or(0, |m| m.primitives.len());
-        for (block, data) in KINDS.into_iter().zip(&self.blocks) {
+        for (block, data) in KINDS.into_iter().zip(std::mem::take(&mut self.blocks)) {
             if data.is_empty() {
                 continue;
             }
@@ -738,39 +740,41 @@ impl File {
             encoded.push(
                 meshopt
                     .then(|| match block {
-                        Block::Indices => Some(meshopt::indices(data, index_size, self.vertex_count, primitives == 1)),
-                        Block::Animation => Some(meshopt::attributes(data, 4)),
-                        _ => stride.map(|s| meshopt::attributes(data, s.0)),
+                        Block::Indices => Some(meshopt::indices(&data, index_size, self.vertex_count, primitives == 1)),
+                        Block::Animation => Some(meshopt::attributes(&data, 4)),
+                        _ => stride.map(|s| meshopt::attributes(&data, s.0)),
                     })
                     .flatten(),
             );
             view_of[block as usize] = Some(self.root.push(json::buffer::View {
                 buffer: Index::new(0),
                 byte_length: USize64(data.len() as u64),
-                byte_offset: (!bin.is_empty()).then_some(USize64(bin.len() as u64)),
+                byte_offset: (bin_len > 0).then_some(USize64(bin_len)),
                 byte_stride: stride,
                 name: None,
                 target: target.map(Valid),
                 extensions: None,
                 extras: None,
             }));
-            bin.extend_from_slice(data);
+            bin_len += data.len() as u64;
+            pieces.push(data);
         }
         // Images after the blocks, one view each (a view holding an image holds nothing else).
         let mut image_views = Vec::with_capacity(self.images.len());
-        for data in &self.images {
+        for mut data in std::mem::take(&mut self.images) {
             image_views.push(self.root.push(json::buffer::View {
                 buffer: Index::new(0),
                 byte_length: USize64(data.len() as u64),
-                byte_offset: (!bin.is_empty()).then_some(USize64(bin.len() as u64)),
+                byte_offset: (bin_len > 0).then_some(USize64(bin_len)),
                 byte_stride: None,
                 name: None,
                 target: None,
                 extensions: None,
                 extras: None,
             }));
-            bin.extend_from_slice(data);
-            bin.resize(bin.len().next_multiple_of(4), 0);
+            data.resize(data.len().next_multiple_of(4), 0);
+            bin_len += data.len() as u64;
+            pieces.push(data);
         }
         for image in &mut self.root.images {
             image.buffer_view = image.buffer_view.map(|i| image_views[i.value()]);
@@ -784,10 +788,10 @@ impl File {
             }
         }
         if !meshopt {
-            self.root.push(json::Buffer { byte_length: USize64(bin.len() as u64), name: None, uri: None, extensions: None, extras: None });
-            return glb(&self.root.to_vec().expect("glTF JSON serializes"), &bin);
+            self.root.push(json::Buffer { byte_length: USize64(bin_len), name: None, uri: None, extensions: None, extras: None });
+            return Glb { json: self.root.to_vec().expect("glTF JSON serializes"), bin: pieces };
         }
-        compress_views(self.root, &bin, encoded)
+        compress_views(self.root, &pieces.concat(), encoded)
     }
 }
 
@@ -795,7 +799,7 @@ impl File {
 /// bytes (or, for a view the codecs do not take, its bytes as they are); buffer 1 is the
 /// extension's fallback buffer, with no data: the decoded views live there, at the offsets
 /// they had in `bin`. `encoded` lists the views in order (images excluded: stored as they are).
-fn compress_views(mut root: json::Root, bin: &[u8], encoded: Vec<Option<meshopt::Encoded>>) -> Vec<u8> {
+fn compress_views(mut root: json::Root, bin: &[u8], encoded: Vec<Option<meshopt::Encoded>>) -> Glb {
     const EXT: &str = "EXT_meshopt_compression";
     root.extensions_used.push(EXT.into());
     root.extensions_required.push(EXT.into());
@@ -827,29 +831,79 @@ fn compress_views(mut root: json::Root, bin: &[u8], encoded: Vec<Option<meshopt:
         }
     }
     tree["buffers"][1]["extensions"] = value!({ EXT: { "fallback": true } });
-    glb(&serde_json::to_vec(&tree).expect("glTF JSON serializes"), &out)
+    Glb { json: serde_json::to_vec(&tree).expect("glTF JSON serializes"), bin: vec![out] }
 }
 
 /// The GLB container: header, JSON chunk (space padded), BIN chunk (zero padded).
 fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
-    let json_len = json.len().next_multiple_of(4);
-    let bin_len = bin.len().next_multiple_of(4);
-    let total = 12 + 8 + json_len + if bin.is_empty() { 0 } else { 8 + bin_len };
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json_len as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(json);
-    out.resize(20 + json_len, b' ');
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin_len as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(bin);
-        out.resize(total, 0);
+    Glb { json: json.to_vec(), bin: vec![bin.to_vec()] }.to_vec()
+}
+
+/// A GLB as its parts: the JSON chunk, then the BIN chunk's pieces, written out in order
+/// without being concatenated.
+///
+/// The JSON chunk comes first in the file and holds the BIN chunk's byte lengths and the
+/// accessors' bounds, so the JSON is made once every block is laid out; the blocks are then
+/// written from where they are (`write_to`, through the caller's buffer). A full-frame file is
+/// so held once, as its blocks, instead of three times (blocks, a BIN buffer, the file's bytes),
+/// and nothing is reserved and patched afterwards. (Holding even the blocks would need the
+/// targets made twice, once for the bounds and once for the bytes.)
+pub struct Glb {
+    json: Vec<u8>,
+    bin: Vec<Vec<u8>>,
+}
+
+impl Glb {
+    fn bin_len(&self) -> usize {
+        self.bin.iter().map(Vec::len).sum::<usize>().next_multiple_of(4)
     }
-    out
+
+    /// The file's length in bytes.
+    pub fn len(&self) -> usize {
+        let bin = self.bin_len();
+        12 + 8 + self.json.len().next_multiple_of(4) + if bin == 0 { 0 } else { 8 + bin }
+    }
+
+    /// Never: a GLB has at least its header.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The same file with its JSON chunk replaced by `edit` of it (the weld map's `extras`).
+    pub fn with_json(self, edit: impl FnOnce(&[u8]) -> Vec<u8>) -> Glb {
+        Glb { json: edit(&self.json), ..self }
+    }
+
+    /// Write the file: header, JSON chunk (space padded), BIN chunk (zero padded).
+    pub fn write_to(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let json_len = self.json.len().next_multiple_of(4);
+        let bin_len = self.bin_len();
+        w.write_all(b"glTF")?;
+        w.write_all(&2u32.to_le_bytes())?;
+        w.write_all(&(self.len() as u32).to_le_bytes())?;
+        w.write_all(&(json_len as u32).to_le_bytes())?;
+        w.write_all(b"JSON")?;
+        w.write_all(&self.json)?;
+        w.write_all(&b"   "[..json_len - self.json.len()])?;
+        if bin_len > 0 {
+            w.write_all(&(bin_len as u32).to_le_bytes())?;
+            w.write_all(b"BIN\0")?;
+            let mut written = 0;
+            for piece in &self.bin {
+                w.write_all(piece)?;
+                written += piece.len();
+            }
+            w.write_all(&[0; 3][..bin_len - written])?;
+        }
+        Ok(())
+    }
+
+    /// The file's bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.len());
+        self.write_to(&mut out).expect("writing to memory");
+        out
+    }
 }
 
 #[cfg(test)]
@@ -909,7 +963,7 @@ mod tests {
     #[test]
     fn glb_chunks_and_accessors_are_aligned() {
         // 3 triangles = 9 u16 indices = 18 bytes: the next block must still start aligned.
-        let glb = blendshapes(&clip(), Surface::plain(&[[0, 1, 2], [2, 1, 3], [3, 4, 5]]), "box", Y_UP, Encoding::FLOAT);
+        let glb = blendshapes(&clip(), Surface::plain(&[[0, 1, 2], [2, 1, 3], [3, 4, 5]]), "box", Y_UP, Encoding::FLOAT).to_vec();
         let (root, _) = chunks(&glb);
         assert!(matches!(root.accessors[1].component_type, Valid(GenericComponentType(ComponentType::U16))));
         for v in &root.buffer_views {
@@ -931,7 +985,7 @@ mod tests {
 
     #[test]
     fn cubicspline_output_groups_in_tangents_values_out_tangents_per_key() {
-        let (root, bin) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
+        let (root, bin) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT).to_vec());
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::CubicSpline));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.5, 1.25]);
@@ -950,7 +1004,7 @@ mod tests {
     fn linear_output_is_the_weights_at_every_frame() {
         let c = clip();
         let frames = [0.0, 0.25, 0.5, 1.0];
-        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
+        let (root, bin) = chunks(&blendshapes_sampled(&c, &frames, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT).to_vec());
         let sampler = &root.animations[0].samplers[0];
         assert_eq!(sampler.interpolation, Valid(Interpolation::Linear));
         assert_eq!(read_f32s(&root, &bin, sampler.input), vec![0.0, 0.25, 0.5, 1.0]);
@@ -967,7 +1021,7 @@ mod tests {
         assert!(!sparse_is_smaller(75, 100, 4));
         assert!(sparse_is_smaller(85, 100, 2));
         assert!(!sparse_is_smaller(86, 100, 2));
-        let (root, _) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
+        let (root, _) = chunks(&blendshapes(&clip(), Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT).to_vec());
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         let one = &root.accessors[targets[0].positions.unwrap().value()];
         let s = one.sparse.as_ref().expect("a target moving 1 of 100 vertices is sparse");
@@ -988,7 +1042,7 @@ mod tests {
             points: vec![vec![[0.0; 3], [1.0; 3]], vec![[0.0; 3], [2.0; 3]], vec![[1.0; 3], [1.0; 3]]],
         };
         let (root, bin) =
-            chunks(&full_frame(&ff, Surface::plain(&[[0, 1, 1]]), "ff", Placement { z_up: true, meters_per_unit: 0.01 }, Encoding::FLOAT));
+            chunks(&full_frame(&ff, Surface::plain(&[[0, 1, 1]]), "ff", Placement { z_up: true, meters_per_unit: 0.01 }, Encoding::FLOAT).to_vec());
         let targets = root.meshes[0].primitives[0].targets.as_ref().unwrap();
         assert_eq!(targets.len(), 3);
         let frame0 = &root.accessors[targets[0].positions.unwrap().value()];
@@ -1006,7 +1060,7 @@ mod tests {
         let mut c = clip();
         c.targets.clear();
         c.curves.clear();
-        let (root, _) = chunks(&blendshapes(&c, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT));
+        let (root, _) = chunks(&blendshapes(&c, Surface::plain(&[[0, 1, 2]]), "box", Y_UP, Encoding::FLOAT).to_vec());
         assert!(root.animations.is_empty());
         assert!(root.meshes[0].weights.is_none() && root.meshes[0].primitives[0].targets.is_none());
     }

@@ -90,22 +90,61 @@ pub(crate) fn played_error(
     let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!("blendsim-readback-{}-{serial}.glb", std::process::id()));
     std::fs::write(&path, bytes).map_err(|e| fail(format!("{}: {e}", path.display())))?;
-    let result = (|| {
-        // The rate given: CUBICSPLINE keys need not be evenly spaced.
-        let mut clip = gltf_clip::open(&path, None, Some(fps))?;
-        let mut got = clip.mesh.positions.clone();
-        let m = placement.meters_per_unit;
-        let mut worst = 0.0f64;
-        for &t in times {
-            clip.frames.pose(t, &mut got)?;
-            for (g, p) in got.iter().zip(expected(t)) {
-                let want = placement.place(p).map(|x| m * x);
-                let d = ((g[0] - want[0]).powi(2) + (g[1] - want[1]).powi(2) + (g[2] - want[2]).powi(2)).sqrt();
-                worst = worst.max(d / m);
-            }
-        }
-        Ok(Some(worst / diagonal))
-    })();
+    let result = played_error_at(&path, (times, fps), expected, placement, diagonal);
     let _ = std::fs::remove_file(&path);
     result
+}
+
+/// [`played_error`] of the glb file at `path` (the staged file, written as it was made): read in
+/// place, as the clip reader streams it, unless its views are meshopt compressed (then read
+/// and decoded in memory, as [`played_error`] does).
+pub fn played_error_of_file(
+    path: &std::path::Path,
+    (times, fps): (&[f64], f64),
+    expected: &dyn Fn(f64) -> Vec<Point>,
+    placement: Placement,
+    diagonal: f64,
+) -> Result<Option<f64>> {
+    use std::io::Read;
+    let fail =
+        |problem: String| Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer");
+    let io = |e: std::io::Error| fail(format!("{}: {e}", path.display()));
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut header = [0u8; 20];
+    file.read_exact(&mut header).map_err(io)?;
+    let mut json = vec![0u8; u32::from_le_bytes(header[12..16].try_into().expect("4 bytes")) as usize];
+    file.read_exact(&mut json).map_err(io)?;
+    drop(file);
+    let json: Value = serde_json::from_slice(&json).map_err(|e| fail(format!("not a GLB: {e}")))?;
+    if json["animations"].as_array().is_none_or(Vec::is_empty) {
+        return Ok(None);
+    }
+    if json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == EXT)) {
+        return played_error(&std::fs::read(path).map_err(io)?, (times, fps), expected, placement, diagonal);
+    }
+    played_error_at(path, (times, fps), expected, placement, diagonal)
+}
+
+/// The played error of the uncompressed glb file at `path`.
+fn played_error_at(
+    path: &std::path::Path,
+    (times, fps): (&[f64], f64),
+    expected: &dyn Fn(f64) -> Vec<Point>,
+    placement: Placement,
+    diagonal: f64,
+) -> Result<Option<f64>> {
+    // The rate given: CUBICSPLINE keys need not be evenly spaced.
+    let mut clip = gltf_clip::open(path, None, Some(fps))?;
+    let mut got = clip.mesh.positions.clone();
+    let m = placement.meters_per_unit;
+    let mut worst = 0.0f64;
+    for &t in times {
+        clip.frames.pose(t, &mut got)?;
+        for (g, p) in got.iter().zip(expected(t)) {
+            let want = placement.place(p).map(|x| m * x);
+            let d = ((g[0] - want[0]).powi(2) + (g[1] - want[1]).powi(2) + (g[2] - want[2]).powi(2)).sqrt();
+            worst = worst.max(d / m);
+        }
+    }
+    Ok(Some(worst / diagonal))
 }
