@@ -725,7 +725,7 @@ impl Scene {
         budget.check_samples(self.solver.samples, times.len().saturating_sub(1), tets)
     }
 
-    /// The bytes [`Scene::check_resources`] estimates: the frames' and the samples' terms.
+    /// The bytes `Scene::check_resources` estimates: the frames' and the samples' terms.
     pub fn memory_estimate(&self, times: &[f64], vertices: usize, tets: usize) -> f64 {
         let frames = match (times.first(), times.last()) {
             (Some(start), Some(end)) => {

@@ -182,12 +182,12 @@ pub(crate) fn available_memory() -> Option<f64> {
     Some(kb * 1024.0)
 }
 
-/// The bytes [`Budget::check_frames`] estimates for `frames` frames of `vertices` vertices.
+/// The bytes `Budget::check_frames` estimates for `frames` frames of `vertices` vertices.
 pub fn frames_bytes(frames: f64, vertices: usize, full_frame: bool) -> f64 {
     frames * (BYTES_PER_FRAME + if full_frame { BYTES_PER_FULL_FRAME_VERTEX * vertices as f64 } else { 0.0 })
 }
 
-/// The bytes [`Budget::check_samples`] estimates.
+/// The bytes `Budget::check_samples` estimates.
 pub fn samples_bytes(samples: usize, intervals: usize, tets: usize) -> f64 {
     samples as f64 * intervals as f64 * tets as f64 * BYTES_PER_SAMPLE_TET
 }

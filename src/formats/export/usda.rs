@@ -36,7 +36,7 @@ pub fn text(layer: &Layer) -> String {
 /// `text(&usd::full_frame(frames, ..))` written to `file` as it is made: the points are
 /// formatted from `frames` one sample at a time and the text passed on in pieces of about
 /// 1 MB, so neither the text (230 MB at 40k vertices x 151 frames) nor a copy of
-/// the points is held. The same bytes. `weld_map`: as [`super::usd::full_frame_unsampled`].
+/// the points is held. The same bytes. `weld_map`: as `usd::full_frame_unsampled`.
 pub fn write_full_frame(
     frames: &FullFrame,
     triangles: &[[u32; 3]],

@@ -162,7 +162,7 @@ fn written(layer: &Layer, path: &Path, streamed: StreamedSamples<'_>, out: Out) 
 
 /// The `.usdc` bytes of the full-frame layer (`usd::full_frame`), the same bytes as [`bytes`]
 /// of it, with the points streamed from `frames` instead of copied into the layer. `weld_map`: as
-/// [`usd::full_frame_unsampled`].
+/// `usd::full_frame_unsampled`.
 pub fn full_frame(
     frames: &FullFrame,
     triangles: &[[u32; 3]],

@@ -95,9 +95,9 @@ pub(crate) fn played_error(
     result
 }
 
-/// [`played_error`] of the glb file at `path` (the staged file, written as it was made): read in
+/// `played_error` of the glb file at `path` (the staged file, written as it was made): read in
 /// place, as the clip reader streams it, unless its views are meshopt compressed (then read
-/// and decoded in memory, as [`played_error`] does).
+/// and decoded in memory, as `played_error` does).
 pub fn played_error_of_file(
     path: &std::path::Path,
     (times, fps): (&[f64], f64),
