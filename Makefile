@@ -175,8 +175,9 @@ deps-rust-tools:
 lint: deps-rust-tools
 	@echo "==> checking the formatting (cargo fmt --check)"
 	$(CARGO) fmt --check
-	@echo "==> linting (cargo clippy --all-targets, warnings are errors)"
+	@echo "==> linting (cargo clippy --all-targets, warnings are errors; without and with the test hooks)"
 	$(CARGO) clippy --release --locked --all-targets -- -D warnings
+	$(CARGO) clippy --release --locked --all-targets --features test-hooks -- -D warnings
 
 # The property tests draw their cases from a fixed seed here, so that a run of the suite is
 # repeatable and CI cannot turn red on a case no earlier run drew; `make fuzz` (and a plain

@@ -61,26 +61,11 @@ fn with_loose_vertices(stretch: f64) -> (String, Vec<[f64; 3]>) {
     (out, vertices)
 }
 
-const SCENE: &str = r#"name = "loose"
-fps = 24
-
-[keyframes]
-meshes = ["rest.obj", "long.obj", "rest.obj"]
-times = [0.0, 0.5, 1.0]
-
-[tet]
-quality = 1.414
-max_volume = 0.05
-
-[solver]
-method = "hermite"
-
-[export]
-formats = ["usda", "usdc", "glb"]
-full_frame = true
-# Positions are read from the glb's f32 accessors by hand (`Glb::floats`).
-gltf_compression = "none"
-"#;
+/// The UV prism's scene (`attributes::SCENE`: three keys, hermite, usda/usdc/glb, f32 glb read
+/// by hand) with its full-frame files too.
+fn scene() -> String {
+    crate::attributes::SCENE.replace("name = \"uvprism\"", "name = \"loose\"").replace("[export]\n", "[export]\nfull_frame = true\n")
+}
 
 /// usd-core's points of a file's mesh at its first time code (the rest pose: the first key is
 /// the rest mesh), and the points its faces use.
@@ -100,7 +85,7 @@ fn unused_obj_vertices_keep_their_numbers_in_every_file() {
     let (rest, input) = with_loose_vertices(1.0);
     std::fs::write(dir.join("rest.obj"), &rest).unwrap();
     std::fs::write(dir.join("long.obj"), with_loose_vertices(1.3).0).unwrap();
-    std::fs::write(dir.join("scene.toml"), SCENE).unwrap();
+    std::fs::write(dir.join("scene.toml"), scene()).unwrap();
     run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
     let out = dir.join("out");
     let report = read_json(&out.join("report.json"));

@@ -62,6 +62,11 @@ pub(crate) fn decode_meshopt(bytes: &[u8]) -> std::result::Result<Vec<u8>, Strin
     Ok(glb(&serde_json::to_vec(&json).expect("JSON serializes"), &data))
 }
 
+/// A glb that was just written cannot be read back: the writer's fault, not the user's.
+fn readback_failed(problem: String) -> Error {
+    Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer")
+}
+
 /// The largest distance, over `times` (frames at `fps`), between the points the glb `bytes` plays (read back by
 /// the clip reader, in glTF's y-up meters) and `expected(t)` placed the same way, relative to
 /// `diagonal` (scene units). Only the first `expected(t).len()` vertices are compared (seam
@@ -73,8 +78,7 @@ pub(crate) fn played_error(
     placement: Placement,
     diagonal: f64,
 ) -> Result<Option<f64>> {
-    let fail =
-        |problem: String| Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer");
+    let fail = readback_failed;
     let (json, _) = chunks(bytes).ok_or_else(|| fail("not a GLB".into()))?;
     if json["animations"].as_array().is_none_or(Vec::is_empty) {
         return Ok(None);
@@ -106,8 +110,7 @@ pub fn played_error_of_file(
     diagonal: f64,
 ) -> Result<Option<f64>> {
     use std::io::Read;
-    let fail =
-        |problem: String| Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer");
+    let fail = readback_failed;
     let io = |e: std::io::Error| fail(format!("{}: {e}", path.display()));
     let mut file = std::fs::File::open(path).map_err(io)?;
     let mut header = [0u8; 20];
