@@ -35,8 +35,9 @@ BATCH_OUT ?= build/batch
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
-	@echo "make test     run the whole test suite (installs tetgen, usd-core, chromium, npm checkers, Blender's bpy)"
-	@echo "make lint     cargo fmt --check and cargo clippy -D warnings (part of make test)"
+	@echo "make readme-image  the README's picture (the demo report's volume plot) into docs/images/demo-volume.svg"
+	@echo "make test     run the whole test suite (installs tetgen, Assimp's FBX test files, usd-core, chromium, npm checkers, Blender's bpy, Ray)"
+	@echo "make lint     cargo fmt --check and cargo clippy -D warnings, without and with the test hooks (part of make test)"
 	@echo "make tables   print the reliability tables: the bad-input corpus (input, exit 1, message) and the kill tests (signal x phase -> folder)"
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
