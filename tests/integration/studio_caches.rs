@@ -19,18 +19,13 @@ use blendsim::pipeline::stage_file::{self, Keyframes, OutputKind};
 use blendsim::support::budget::Budget;
 use serde_json::Value;
 
-use crate::common::checkers::{blender_python, check_blender, Expected};
+use crate::common::checkers::{check_blender, required_blender_python, Expected};
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{library_animation, output_files};
 
 /// Run the Blender script into `dir`: the exports and Blender's evaluated frames.
 fn blender_exports(dir: &Path, frames: usize) -> Value {
-    let python = blender_python();
-    assert!(
-        python.exists(),
-        "{} is missing: run `make deps-blender` (or `make test-deps`), or set BLENDSIM_BLENDER_PYTHON to a Python 3.11 with bpy==4.2.0",
-        python.display()
-    );
+    let python = required_blender_python();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/blender_studio_export.py");
     let out = std::process::Command::new(&python).arg(script).arg(dir).arg(frames.to_string()).output().unwrap();
     assert!(out.status.success(), "Blender failed: {}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
@@ -67,6 +62,19 @@ fn signed_volume(positions: &[Point], triangles: &[[u32; 3]]) -> f64 {
             (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0
         })
         .sum()
+}
+
+/// `import --cache-out` of the cache at `path` (with `extra` keys in `[cache]`) exits 1 with one
+/// line that says `says` and its fix, and writes nothing; the line.
+fn refused(dir: &Path, path: &str, extra: &str, says: &str) -> String {
+    std::fs::write(dir.join("bad.toml"), scene(path, extra)).unwrap();
+    let r = run(dir, &["import", "bad.toml", "--cache-out", "bad.glb"]);
+    assert_eq!(r.code, Some(1), "{path} {extra}: {r}");
+    let line = r.stderr.trim().to_string();
+    assert!(line.contains(says) && line.contains(" (fix: ") && !line.contains('\n'), "{path} {extra}: {line}");
+    assert!(!dir.join("bad.glb").exists(), "{path} {extra}: nothing written");
+    println!("{path} {}: {line}", extra.trim());
+    line
 }
 
 fn scene(path: &str, extra: &str) -> String {
@@ -138,13 +146,7 @@ fn takes_and_objects_are_chosen_by_name() {
     let dir = TempDir::new("studio-choice");
     blender_exports(&dir.path, 12);
     let fails = |path: &str, extra: &str, says: &str| {
-        std::fs::write(dir.join("bad.toml"), scene(path, extra)).unwrap();
-        let r = run(&dir.path, &["import", "bad.toml", "--cache-out", "bad.glb"]);
-        assert_eq!(r.code, Some(1), "{path} {extra}: {r}");
-        let line = r.stderr.trim();
-        assert!(line.contains(says) && line.contains(" (fix: ") && !line.contains('\n'), "{path} {extra}: {line}");
-        assert!(!dir.join("bad.glb").exists());
-        println!("{path} {}: {line}", extra.trim());
+        refused(&dir.path, path, extra, says);
     };
     fails("choice.fbx", "", "has several takes (");
     fails("choice.fbx", "take = \"Nope\"\n", "has no take \"Nope\" (its takes: ");
@@ -222,8 +224,7 @@ fn fbx_from_other_writers_reads_as_blender_imports_them() {
     let samples = Path::new(ASSIMP_FBX);
     assert!(samples.is_dir(), "{ASSIMP_FBX} is missing: run `make deps-fbx-samples` (or `make test-deps`): Debian's assimp-testmodels");
     let dir = TempDir::new("studio-fbx-others");
-    let python = blender_python();
-    assert!(python.exists(), "{} is missing: run `make deps-blender` (or `make test-deps`)", python.display());
+    let python = required_blender_python();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/blender_fbx_import.py");
     // (file, its writer, vertices, frames)
     for (file, writer, vertices, frames) in [("animation_with_skeleton.fbx", "Blender 2.90", 1058, 21), ("huesitos.fbx", "Blender 2.79", 62, 40)] {
@@ -241,10 +242,9 @@ fn fbx_from_other_writers_reads_as_blender_imports_them() {
         let expected = blender_frames(&blender.join("frames.f32"), vertices as usize, 1.0);
         let diagonal = bbox_diagonal(&expected.concat());
 
-        let toml = format!("name = \"{stem}\"\n[cache]\npath = \"{}\"\n", path.display());
-        std::fs::write(dir.join(format!("{stem}.toml")), toml).unwrap();
+        std::fs::write(dir.join(format!("{stem}.toml")), scene(&path.display().to_string(), "")).unwrap();
         let glb = format!("{stem}.glb");
-        run(&dir.path, &["import", &format!("{stem}.toml"), "--cache-out", &glb, "-o", &format!("{stem}.json")]).success();
+        run(&dir.path, &["import", &format!("{stem}.toml"), "--cache-out", &glb]).success();
         let mut cache = VertexCache::open(&dir.join(&glb), &CacheOptions::default()).unwrap();
         assert_eq!(Some(cache.fps), info["fps"].as_f64(), "{file}: the file's frame rate");
         let d = farthest(&mut cache, &expected) / diagonal;
@@ -262,14 +262,8 @@ fn fbx_from_other_writers_reads_as_blender_imports_them() {
     // The FBX SDK's ASCII file (Blender cannot import ASCII FBX): its take animates only a
     // renderer's settings, so the box does not move.
     let fails = |file: &str, message: &str| {
-        let toml = format!("name = \"x\"\n[cache]\npath = \"{}\"\n", samples.join(file).display());
-        std::fs::write(dir.join("x.toml"), toml).unwrap();
-        let r = run(&dir.path, &["import", "x.toml", "--cache-out", "x.glb"]);
-        assert_eq!(r.code, Some(1), "{file}: {r}");
-        let line = r.stderr.trim();
-        assert!(line.contains(file) && line.contains(message) && line.contains(" (fix: ") && !line.contains('\n'), "{file}: {line}");
-        assert!(!dir.join("x.glb").exists(), "{file}: nothing written");
-        println!("{line}");
+        let line = refused(&dir.path, &samples.join(file).display().to_string(), "", message);
+        assert!(line.contains(file), "{file}: {line}");
     };
     fails("box_orphant_embedded_texture.fbx", "mesh \"Box\" does not move in take \"Take 001\"");
     fails("transparentTest.fbx", "ufbx cannot read the FBX file: Not an FBX file");

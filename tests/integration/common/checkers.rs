@@ -233,10 +233,21 @@ pub fn check_texture(files: &[&Path], texture: &Path, out_dir: &Path, poses: &[(
 
 /// The Python that has Blender's `bpy`: `$BLENDSIM_BLENDER_PYTHON`, or the venv `make
 /// deps-blender` creates in build/blender-venv.
-pub fn blender_python() -> PathBuf {
+fn blender_python() -> PathBuf {
     std::env::var_os("BLENDSIM_BLENDER_PYTHON")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("build/blender-venv/bin/python"))
+}
+
+/// [`blender_python`], which must exist: a Blender test fails (never skips) without it.
+pub fn required_blender_python() -> PathBuf {
+    let python = blender_python();
+    assert!(
+        python.exists(),
+        "{} is missing: run `make deps-blender` (or `make test-deps`), or set BLENDSIM_BLENDER_PYTHON to a Python 3.11 with bpy==4.2.0",
+        python.display()
+    );
+    python
 }
 
 /// `blender_check.py`: each file imported into Blender (bpy 4.2.0) with its own importer at
@@ -249,12 +260,7 @@ pub fn blender_python() -> PathBuf {
 /// leaves with `os._exit` once its summary is printed, and a crash after a complete summary is
 /// judged by the summary (and noted in it as `exit`).
 pub fn check_blender(files: &[(&Path, &Expected)]) -> Value {
-    let python = blender_python();
-    assert!(
-        python.exists(),
-        "{} is missing: run `make deps-blender` (or `make test-deps`), or set BLENDSIM_BLENDER_PYTHON to a Python 3.11 with bpy==4.2.0",
-        python.display()
-    );
+    let python = required_blender_python();
     let mut cmd = Command::new(&python);
     cmd.arg(checkers_dir().join("blender_check.py"));
     for (file, expected) in files {

@@ -67,6 +67,15 @@ fn readback_failed(problem: String) -> Error {
     Error::general(format!("cannot read back the glb just written: {problem}"), "report it as a bug of blendsim's glTF writer")
 }
 
+/// Whether a glb's JSON has an animation to play back (`None`: nothing to measure), and if so
+/// whether its views are meshopt compressed (decoded in memory before the clip reader reads).
+fn animated_and_compressed(json: &Value) -> Option<bool> {
+    if json["animations"].as_array().is_none_or(Vec::is_empty) {
+        return None;
+    }
+    Some(json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == EXT)))
+}
+
 /// The largest distance, over `times` (frames at `fps`), between the points the glb `bytes` plays (read back by
 /// the clip reader, in glTF's y-up meters) and `expected(t)` placed the same way, relative to
 /// `diagonal` (scene units). Only the first `expected(t).len()` vertices are compared (seam
@@ -78,14 +87,11 @@ pub(crate) fn played_error(
     placement: Placement,
     diagonal: f64,
 ) -> Result<Option<f64>> {
-    let fail = readback_failed;
-    let (json, _) = chunks(bytes).ok_or_else(|| fail("not a GLB".into()))?;
-    if json["animations"].as_array().is_none_or(Vec::is_empty) {
-        return Ok(None);
-    }
+    let (json, _) = chunks(bytes).ok_or_else(|| readback_failed("not a GLB".into()))?;
+    let Some(compressed) = animated_and_compressed(&json) else { return Ok(None) };
     let decoded;
-    let bytes = if json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == EXT)) {
-        decoded = decode_meshopt(bytes).map_err(fail)?;
+    let bytes = if compressed {
+        decoded = decode_meshopt(bytes).map_err(readback_failed)?;
         &decoded[..]
     } else {
         bytes
@@ -93,7 +99,7 @@ pub(crate) fn played_error(
     static SERIAL: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!("blendsim-readback-{}-{serial}.glb", std::process::id()));
-    std::fs::write(&path, bytes).map_err(|e| fail(format!("{}: {e}", path.display())))?;
+    std::fs::write(&path, bytes).map_err(|e| readback_failed(format!("{}: {e}", path.display())))?;
     let result = played_error_at(&path, (times, fps), expected, placement, diagonal);
     let _ = std::fs::remove_file(&path);
     result
@@ -110,22 +116,19 @@ pub fn played_error_of_file(
     diagonal: f64,
 ) -> Result<Option<f64>> {
     use std::io::Read;
-    let fail = readback_failed;
-    let io = |e: std::io::Error| fail(format!("{}: {e}", path.display()));
+    let io = |e: std::io::Error| readback_failed(format!("{}: {e}", path.display()));
     let mut file = std::fs::File::open(path).map_err(io)?;
     let mut header = [0u8; 20];
     file.read_exact(&mut header).map_err(io)?;
     let mut json = vec![0u8; u32::from_le_bytes(header[12..16].try_into().expect("4 bytes")) as usize];
     file.read_exact(&mut json).map_err(io)?;
     drop(file);
-    let json: Value = serde_json::from_slice(&json).map_err(|e| fail(format!("not a GLB: {e}")))?;
-    if json["animations"].as_array().is_none_or(Vec::is_empty) {
-        return Ok(None);
+    let json: Value = serde_json::from_slice(&json).map_err(|e| readback_failed(format!("not a GLB: {e}")))?;
+    match animated_and_compressed(&json) {
+        None => Ok(None),
+        Some(true) => played_error(&std::fs::read(path).map_err(io)?, (times, fps), expected, placement, diagonal),
+        Some(false) => played_error_at(path, (times, fps), expected, placement, diagonal),
     }
-    if json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == EXT)) {
-        return played_error(&std::fs::read(path).map_err(io)?, (times, fps), expected, placement, diagonal);
-    }
-    played_error_at(path, (times, fps), expected, placement, diagonal)
 }
 
 /// The played error of the uncompressed glb file at `path`.
