@@ -63,7 +63,7 @@ pub fn armadillo_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 5],
         cyclic: false,
     };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new(), input_bytes: 0 }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new(), input_bytes: 0, weld: None }
 }
 
 /// CHEB-size: the paper's CHEB jump (922 nodes, 3125 tets, 10 keys of 0.3 s, 10 samples per
@@ -107,7 +107,7 @@ pub fn cheb_size() -> Body {
         fixed_velocity: vec![VertexSet::default(); 10],
         cyclic: false,
     };
-    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new(), input_bytes: 0 }
+    Body { scene, mesh: Some(mesh), keys, surface, cache: None, cage: None, warnings: Vec::new(), input_bytes: 0, weld: None }
 }
 
 /// The scale benchmark's 20-key body (`benches/scale.rs`, "2.6k-nodes-20-keys": a 1.2 x 3.6 x

@@ -191,6 +191,10 @@ pub struct KeyframeSpec {
     /// the two sharing their pose but not their velocities, so the velocity can jump there.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub contact: Vec<usize>,
+    /// Merge the surface vertices that coincide in every key (default true); `false` keeps the
+    /// input's vertices. Selections (`fixed`, index files) keep the input's vertex numbers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<bool>,
 }
 
 /// The `[tet]` table (defaults: [`Tet::default`]).

@@ -121,6 +121,10 @@ pub struct Keyframes {
     /// report's ratios; 0 in stage files written before it was recorded.
     #[serde(default)]
     pub input_bytes: u64,
+    /// When the keyframe surface's vertices were welded (`[keyframes] weld`): per input vertex,
+    /// its vertex here and in the files. A cache's weld is its record's (`CacheRecord::weld`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<Vec<u32>>,
 }
 
 /// Keyframe data per tet node: what the solver constrains and starts from.
@@ -175,8 +179,8 @@ pub struct Body {
     pub keys: KeyPoses,
     /// The surface that is exported, in the rest pose, outward oriented. Keyframe and `[embed]`
     /// surfaces keep every vertex of their file, unused ones included, so point `i` of the
-    /// files is the input's vertex `i`; a tet mesh's is its boundary (interior nodes left
-    /// out). It is embedded in `mesh`.
+    /// files is the input's vertex `i` (a welded keyframe surface's: point `weld[i]`); a tet
+    /// mesh's is its boundary (interior nodes left out). It is embedded in `mesh`.
     pub surface: TriMesh,
     /// The cache the keys were taken from (`[cache]` scenes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -193,6 +197,10 @@ pub struct Body {
     /// report's ratios; 0 in stage files written before it was recorded.
     #[serde(default)]
     pub input_bytes: u64,
+    /// When the keyframe surface's vertices were welded (`[keyframes] weld`): per input vertex,
+    /// its vertex here and in the files. A cache's weld is its record's (`CacheRecord::weld`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<Vec<u32>>,
 }
 
 impl Body {
@@ -454,6 +462,18 @@ pub struct Animation {
     /// report's ratios; 0 in stage files written before it was recorded.
     #[serde(default)]
     pub input_bytes: u64,
+    /// When the keyframe surface's vertices were welded (`[keyframes] weld`): per input vertex,
+    /// its vertex here and in the files. A cache's weld is its record's (`CacheRecord::weld`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weld: Option<Vec<u32>>,
+}
+
+impl Animation {
+    /// Per input vertex, its vertex in the files, when the input was welded (a keyframe
+    /// surface's or a cache's weld); none when the files number the input's vertices.
+    pub fn weld_map(&self) -> Option<&[u32]> {
+        self.weld.as_deref().or_else(|| self.cache.as_ref().and_then(|c| c.weld.as_deref()))
+    }
 }
 
 /// The two forms of the animation in the files.

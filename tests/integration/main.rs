@@ -41,3 +41,4 @@ mod studio_caches;
 mod texture;
 mod vertex_numbers;
 mod warm_rebake;
+mod weld_keys;

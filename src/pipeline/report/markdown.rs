@@ -14,7 +14,8 @@ pub fn render(report: &Report) -> String {
     push(&mut s, format!("# blendsim report: {}\n", report.scene));
     push(&mut s, "| | |".into());
     push(&mut s, "|---|---|".into());
-    push(&mut s, format!("| surface | {} vertices, {} triangles |", report.vertices, report.faces));
+    let welded = report.input_vertices.map_or(String::new(), |n| format!(" (welded from {n})"));
+    push(&mut s, format!("| surface | {} vertices{welded}, {} triangles |", report.vertices, report.faces));
     push(&mut s, format!("| body | {} tet nodes, {} tets |", report.tet_nodes, report.tets));
     if let Some(c) = &report.cage {
         push(

@@ -76,6 +76,10 @@ pub struct Report {
     pub scene: String,
     /// Vertices of the exported surface.
     pub vertices: usize,
+    /// Vertices of the input when welding merged some (`[keyframes] weld`, `[cache] weld`):
+    /// `vertices` counts the welded ones, the files' points.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_vertices: Option<usize>,
     /// Triangles of the exported surface.
     pub faces: usize,
     /// Nodes of the simulated body.

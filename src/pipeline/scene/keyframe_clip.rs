@@ -5,6 +5,11 @@ use super::{invalid, KeyframeSpec};
 use crate::support::error::{number, Result};
 
 impl KeyframeSpec {
+    /// Whether to weld the surface vertices that coincide in every key (`weld`, default true).
+    pub fn weld(&self) -> bool {
+        self.weld.unwrap_or(true)
+    }
+
     /// The number of keys the table gives (before contacts are duplicated): one per mesh, or
     /// per listed frame or time of the clip.
     pub fn key_count(&self) -> usize {

@@ -33,6 +33,7 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
             cage: None,
             warnings: body.warnings.clone(),
             input_bytes: body.input_bytes,
+            weld: body.weld.clone(),
         });
     };
     let binding = Binding::compute(tets, &body.surface.positions);
@@ -55,5 +56,6 @@ pub fn embed(solution: &Solution) -> Result<Animation> {
         cage: body.cage.clone(),
         warnings: body.warnings.clone(),
         input_bytes: body.input_bytes,
+        weld: body.weld.clone(),
     })
 }

@@ -106,8 +106,9 @@ pub fn export_with(
             }
         }
     }
-    // A welded cache: every file says which of its vertices each input vertex is.
-    let weld = animation.cache.as_ref().and_then(|c| c.weld.as_deref());
+    // A welded input (keyframe surface or cache): every file says which of its vertices each
+    // input vertex is.
+    let weld = animation.weld_map();
     let forms = forms(scene);
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     // Only the blendshape form builds its layer: the full-frame USD files are written from

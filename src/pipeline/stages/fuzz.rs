@@ -44,6 +44,7 @@ fn seeds() -> (Value, Value, Value, Value) {
         display: None,
         cache: None,
         input_bytes: 0,
+        weld: None,
     };
     let progress = Progress::hidden();
     let body = crate::pipeline::stages::tetrahedralize(&keys, &Budget::default(), &progress).unwrap();

@@ -4,6 +4,7 @@
 //! (`contact = [k]`) is duplicated here, so every later stage sees the contact as what it is:
 //! two keys at the same time.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use super::key_meshes::{resolve_selection, KeyMeshes};
@@ -28,8 +29,22 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
     };
     // A clip's keys are at its frames' own times.
     let key_times = meshes.times.take().unwrap_or_else(|| keys.times.clone());
-    let (rest, rest_source) = meshes.rest_shape(scene_file)?;
+    let weld = if keys.weld() { meshes.weld(scene_file)? } else { None };
+    let (rest, rest_source) = meshes.rest_shape(scene_file, weld.as_ref())?;
     let rest_points = rest.positions();
+    // Selections number the input's vertices (index files): resolved on the input's rest
+    // points (a welded vertex stands at each of its input vertices' places), then welded.
+    let input_rest: Cow<[Point]> = match &weld {
+        Some(w) => w.map.iter().map(|&v| rest_points[v as usize]).collect(),
+        None => Cow::Borrowed(rest_points),
+    };
+    let resolve = |sel: &Selection| -> Result<Vec<bool>> {
+        let mask = resolve_selection(sel, scene_file, &input_rest)?;
+        Ok(match &weld {
+            Some(w) => w.mask(&mask),
+            None => mask,
+        })
+    };
     // One selection per key, usually the same one at every key: each distinct one is resolved
     // (its file read) once.
     let masks = |list: &Option<Vec<Selection>>, default: Selection| -> Result<Vec<VertexSet>> {
@@ -40,7 +55,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
                 if let Some((_, set)) = resolved.iter().find(|(s, _)| *s == sel) {
                     return Ok(set.clone());
                 }
-                let set = VertexSet::from_mask(&resolve_selection(sel, scene_file, rest_points)?);
+                let set = VertexSet::from_mask(&resolve(sel)?);
                 resolved.push((sel, set.clone()));
                 Ok(set)
             })
@@ -91,6 +106,7 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         display,
         cache: None,
         input_bytes,
+        weld: weld.map(|w| w.map),
     })
 }
 

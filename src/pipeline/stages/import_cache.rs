@@ -314,6 +314,7 @@ pub fn import(scene_file: &SceneFile, spec: &CacheSpec, budget: &Budget) -> Resu
         cyclic: false,
         display: None,
         input_bytes: record.bytes,
+        weld: None,
         cache: Some(record),
     })
 }

@@ -8,7 +8,8 @@
 //! - the key times are the clip's times of those frames;
 //! - the clip's mesh (its triangles, and UVs where the format has them) is the keys' topology;
 //!   PC2 and MDD take it from `rest = "mesh.obj"`, which is then also the elastic rest shape.
-//!   Vertices are the file's, not welded (selections number them as the clip does).
+//!   Vertices that coincide in every key are welded as for `meshes` keys (`[keyframes] weld`);
+//!   selections number the clip's own vertices.
 //!
 //! The rest of the import (selections, rest shape, checks) is the keyframe import's.
 

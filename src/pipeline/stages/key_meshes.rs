@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
+use crate::algorithms::frames::weld::Weld;
+use crate::algorithms::frames::MemoryFrames;
 use crate::algorithms::geometry::{self, surface, Point, TetMesh, TriMesh};
 use crate::formats::mesh::{self, MeshFile};
 use crate::pipeline::scene::{Rest, SceneFile, Selection};
@@ -191,16 +193,42 @@ impl KeyMeshes {
         paths.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum()
     }
 
+    /// Weld the keys' surface (`[keyframes] weld`): the vertices at one position in every key
+    /// (and in a rest mesh) become one, and `poses` hold the welded vertices. Returns the weld,
+    /// none when no two vertices merge or the keys are tet meshes (whose nodes are not copies
+    /// of each other). [`KeyMeshes::rest_shape`] then takes it.
+    pub(super) fn weld(&mut self, scene_file: &SceneFile) -> Result<Option<Weld>> {
+        if !matches!(self.first, MeshFile::Surface(_)) {
+            return Ok(None);
+        }
+        let mut frames = self.poses.clone();
+        if let Rest::Mesh(p) = &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
+            // The rest mesh's positions must coincide too (a different vertex count is
+            // `rest_shape`'s error).
+            let positions = self.cache.get(&scene_file.resolve(p))?.positions();
+            if positions.len() == self.poses[0].len() {
+                frames.push(positions.to_vec());
+            }
+        }
+        let mut source = MemoryFrames { times: (0..frames.len()).map(|k| k as f64).collect(), frames };
+        let weld = Weld::find(&mut source)?;
+        if weld.is_identity() {
+            return Ok(None);
+        }
+        self.poses.iter_mut().for_each(|p| *p = weld.pick(p));
+        Ok(Some(weld))
+    }
+
     /// The elastic rest shape (a key's pose or its own mesh), oriented, and the file it came
-    /// from.
-    pub(super) fn rest_shape(&mut self, scene_file: &SceneFile) -> Result<(Shape, PathBuf)> {
+    /// from; on the welded vertices of `weld` ([`KeyMeshes::weld`], which welded the poses).
+    pub(super) fn rest_shape(&mut self, scene_file: &SceneFile, weld: Option<&Weld>) -> Result<(Shape, PathBuf)> {
         let (rest_positions, rest_source) = match &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
             Rest::Key(r) => (self.poses[*r].clone(), self.paths[*r].clone()),
             Rest::Mesh(p) => {
                 let path = scene_file.resolve(p);
                 let m = self.cache.get(&path)?;
                 check_same_topology((&self.paths[0], &self.first, &self.first_topology), (&path, m, &Topology::of(m)))?;
-                (m.positions().to_vec(), path)
+                (weld.map_or_else(|| m.positions().to_vec(), |w| w.pick(m.positions())), path)
             }
         };
         debug_assert!(self.poses.iter().all(|p| p.len() == rest_positions.len()));
@@ -212,7 +240,9 @@ impl KeyMeshes {
         };
         let rest = match &self.first {
             MeshFile::Surface(s) => {
-                let mut rest = TriMesh { positions: rest_positions, triangles: s.triangles.clone(), attributes };
+                // Welding keeps the triangles and their corners' attributes, on the welded vertices.
+                let triangles = weld.map_or_else(|| s.triangles.clone(), |w| w.triangles(&s.triangles));
+                let mut rest = TriMesh { positions: rest_positions, triangles, attributes };
                 surface::orient_outward(&mut rest);
                 Shape::Surface(rest)
             }

@@ -110,6 +110,7 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     Ok(Report {
         scene: scene.name.clone(),
         vertices: animation.counts.vertices,
+        input_vertices: animation.weld_map().map(<[u32]>::len),
         faces: animation.counts.faces,
         tet_nodes: animation.counts.tet_nodes,
         tets: animation.counts.tets,

@@ -38,6 +38,12 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
     keys.display.clone().unwrap_or(rest_surface)
 }
 
+/// The keys' weld, when the exported surface is theirs (an `[embed] surface` is its own file,
+/// never welded, whose vertices the files number).
+fn export_weld(keys: &Keyframes) -> Option<Vec<u32>> {
+    keys.weld.clone().filter(|_| keys.display.is_none())
+}
+
 /// The simulation body of `keys`: its tet mesh, every node's keyframe poses, and the surface
 /// to export; a body whose size is far from the material's (`implausible_size`) and an
 /// `[embed] surface` far outside the body (`embedded_far_outside`) are warned of.
@@ -155,6 +161,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
             cage: None,
             warnings: Vec::new(),
             input_bytes: keys.input_bytes,
+            weld: export_weld(keys),
         }),
         Shape::Volume(mesh) => {
             // A tet mesh's surface is its boundary: interior nodes are not points of it.
@@ -170,6 +177,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
                 cage: None,
                 warnings,
                 input_bytes: keys.input_bytes,
+                weld: export_weld(keys),
             })
         }
         Shape::Surface(rest) => {
@@ -214,6 +222,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
                 cage: None,
                 warnings,
                 input_bytes: keys.input_bytes,
+                weld: export_weld(keys),
             })
         }
     }
@@ -361,5 +370,6 @@ fn caged(keys: &Keyframes, rest: &TriMesh, reason: String, progress: &Progress) 
         cage: Some(info),
         warnings: Vec::new(),
         input_bytes: keys.input_bytes,
+        weld: export_weld(keys),
     })
 }

@@ -67,5 +67,6 @@ pub fn animation(name: &str, fps: f64, mesh: TriMesh, trajectory: Trajectory, cy
         cage: None,
         warnings: Vec::new(),
         input_bytes: 0,
+        weld: None,
     }
 }
