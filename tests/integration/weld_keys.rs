@@ -188,6 +188,25 @@ fn weld_false_keeps_the_input_vertices() {
     assert!(glb_weld_map(&dir.join("caged/welded.glb")).is_none(), "no weld map without welding");
 }
 
+/// A surface error on welded keys says its vertex numbers are the welded ones: the prism
+/// without its last face has a hole (`[tet] cage = false`, so the surface goes to TetGen's
+/// checks).
+#[test]
+fn surface_errors_say_the_numbers_are_welded() {
+    let dir = TempDir::new("weld-keys-hole");
+    for (name, stretch) in [("rest.obj", 1.0), ("long.obj", 1.3)] {
+        let text = prism_obj(stretch);
+        let without_last_face = &text[..text.trim_end().rfind('\n').unwrap() + 1];
+        std::fs::write(dir.join(name), per_corner(without_last_face).0).unwrap();
+    }
+    std::fs::write(dir.join("scene.toml"), scene("").replace("[tet]\n", "[tet]\ncage = false\n")).unwrap();
+    let r = run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]);
+    assert_ne!(r.code, Some(0), "{r}");
+    assert!(r.stderr.contains("rest.obj: the surface has a hole: the edge from vertex "), "{}", r.stderr);
+    assert!(r.stderr.contains("(vertex numbers after welding, [keyframes] weld: "), "{}", r.stderr);
+    assert!(!dir.join("out").exists(), "no partial output");
+}
+
 /// A `fixed` index file numbers the input's vertices: the last corner copy of the top cap's
 /// centre selects its welded vertex (selected when any of its input vertices is).
 #[test]

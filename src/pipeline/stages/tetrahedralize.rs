@@ -38,6 +38,15 @@ fn export_surface(keys: &Keyframes, rest_surface: TriMesh) -> TriMesh {
     keys.display.clone().unwrap_or(rest_surface)
 }
 
+/// A surface error on welded keys names welded vertices, which the file does not number: say
+/// how they are numbered.
+fn welded_numbers(mut e: Error, keys: &Keyframes) -> Error {
+    if keys.weld.is_some() && e.problem.contains("vert") {
+        e.problem.push_str(" (vertex numbers after welding, [keyframes] weld: the merged vertices in the order of their first vertex in the file)");
+    }
+    e
+}
+
 /// The keys' weld, when the exported surface is theirs (an `[embed] surface` is its own file,
 /// never welded, whose vertices the files number).
 fn export_weld(keys: &Keyframes) -> Option<Vec<u32>> {
@@ -186,7 +195,7 @@ fn simulation_body(keys: &Keyframes, budget: &Budget, progress: &Progress, tetge
             }
             let options = TetgenOptions { quality: scene.tet.quality, max_volume: scene.tet.max_volume, timeout: scene.tet.timeout };
             let bar = progress.predicted("tetrahedralize: TetGen", tetgen::predicted_seconds(rest, &options));
-            let mesh: TetMesh = tetgen(rest, &options, Path::new(&keys.rest_source), budget)?;
+            let mesh: TetMesh = tetgen(rest, &options, Path::new(&keys.rest_source), budget).map_err(|e| welded_numbers(e, keys))?;
             bar.finish_and_clear();
             let n_surface = rest.positions.len();
             let pinned: Vec<bool> = (0..mesh.positions.len()).map(|a| a < n_surface).collect();
