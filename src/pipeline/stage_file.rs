@@ -16,7 +16,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
-use crate::algorithms::spacetime::solver;
+use crate::algorithms::spacetime::solver::{self, IterationSplit};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::scene::{Format, Method, Scene};
 use crate::support::budget::Budget;
@@ -319,7 +319,7 @@ impl SolverLog {
     /// The log of a spacetime solve: the solver's own `log`, the key times given to it and
     /// those of its solution, and the force scale S at each iterate (the progress callback's).
     pub fn spacetime(log: solver::Log, input_times: Vec<f64>, times: Vec<f64>, force_scales: Vec<f64>) -> SolverLog {
-        let split = &log.split;
+        let split = log.split;
         SolverLog {
             method: Method::Spacetime,
             iterations: log.iterations,
@@ -350,33 +350,11 @@ impl SolverLog {
             }),
             coarse_iterations: log.coarse_iterations,
             coarse_samples: log.coarse_samples,
-            iteration_split: Some(IterationSplit {
-                evaluations: split.evaluations,
-                exact_evaluations: split.exact_evaluations,
-                evaluation_seconds: split.evaluation_seconds,
-                solves: split.solves,
-                solve_seconds: split.solve_seconds,
-            }),
+            iteration_split: Some(split),
             stop_reason: log.stop_reason,
             energy: log.energy,
         }
     }
-}
-
-/// Where a spacetime solve's iterations spent their time (wall seconds summed over the solve;
-/// the rest of the iterations' time is the quasi-Newton bookkeeping).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct IterationSplit {
-    /// Evaluations of W (first guess and every line-search trial).
-    pub evaluations: usize,
-    /// Of them, with the projections' Jacobians (the exact gradient).
-    pub exact_evaluations: usize,
-    /// Seconds in the evaluations.
-    pub evaluation_seconds: f64,
-    /// Solves with the global step's matrix (or the quasi-Newton model).
-    pub solves: usize,
-    /// Seconds in the solves.
-    pub solve_seconds: f64,
 }
 
 /// The conjugate-gradient solves of an iterative global step.
