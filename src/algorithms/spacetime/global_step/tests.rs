@@ -3,7 +3,8 @@ use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::pcg::SymmetricOperator;
 use crate::algorithms::spacetime::solver::objective;
 use crate::algorithms::spacetime::tests::{keys, material, settings};
-use crate::support::testing::{cube_mesh, Rng};
+use crate::algorithms::testing::cube_mesh;
+use crate::support::testing::Rng;
 
 /// Ten keys of a bent cube, the bottom held at the first: enough keys for the
 /// key-separator candidate.
