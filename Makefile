@@ -31,7 +31,7 @@ RAY_VENV := build/ray-venv
 SCENES ?= fixtures/paper
 BATCH_OUT ?= build/batch
 
-.PHONY: deps-ray batch-ray test-ray bench-ray help build demo readme-image test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-fbx-samples deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale batch batch-caches clean
+.PHONY: deps-ray batch-ray test-ray bench-ray help build demo readme-image test lint completions install deps-rust-tools fuzz tables test-deps deps-tetgen deps-usd deps-fbx-samples deps-alembic deps-npm deps-chromium deps-blender bench bench-demo bench-warm bench-writers bench-cache bench-scale bench-global-step batch batch-caches clean
 
 help:
 	@echo "make demo     bake the bundled twisting-prism scene into build/demo and print its report"
@@ -45,6 +45,7 @@ help:
 	@echo "make bench-warm   print cold against warm re-bakes (bake --from): unchanged inputs and one edited key, the demo and DINO"
 	@echo "make bench-writers print the full-frame writers' MB/s (usda, usdc, glb) beside the disk's"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
+	@echo "make bench-global-step print the global step's direct (one thread and all), iterative and modal set-up and solve on many-keys bodies"
 	@echo "make bench-cache  print vertex-cache sizes, times and peak memory per format (100k vertices x 300 frames)"
 	@echo "make batch    bake every scene in SCENES=$(SCENES) into $(BATCH_OUT)/NAME (use -j), then summary.html/.md/.csv"
 	@echo "make batch-ray  the same scenes as make batch, one bake per Ray task on the cluster at RAY_ADDRESS (or a local one): docs/cluster.md"
@@ -245,6 +246,11 @@ bench-scale: build deps-tetgen
 	@command -v /usr/bin/time >/dev/null 2>&1 || { echo "==> installing GNU time (apt-get)"; $(SUDO) apt-get update -qq && $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq time; }
 	@echo "==> scale benchmark: whole bakes of production-size surfaces (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench scale
+
+# The global step's three methods on many-keys bodies (TetGen makes the prisms).
+bench-global-step: build deps-tetgen
+	@echo "==> global step benchmark: direct, iterative and modal (mind the load average printed with it)"
+	$(CARGO) bench --locked --bench global_step
 
 # Peak memory is measured with GNU time (Debian package `time`).
 bench-cache: deps-usd

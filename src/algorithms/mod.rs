@@ -13,3 +13,5 @@ pub mod massspring;
 pub mod physics;
 pub mod procedural;
 pub mod spacetime;
+#[cfg(test)]
+pub(crate) mod testing;

@@ -328,7 +328,7 @@ fn scene_reader() {
 /// multiple of the file's size, far inside the bound the fuzzing checks.
 #[test]
 fn allocation_is_proportional_to_the_input() {
-    let cube = crate::support::testing::cube_mesh(30);
+    let cube = crate::algorithms::testing::cube_mesh(30);
     let (points, tets) = (&cube.positions, &cube.tets);
     let mut medit_text = format!("MeshVersionFormatted 1\nDimension 3\nVertices {}\n", points.len());
     points.iter().for_each(|p| medit_text += &format!("{} {} {} 0\n", p[0], p[1], p[2]));

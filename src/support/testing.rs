@@ -1,20 +1,8 @@
-//! Helpers shared by the unit tests of several modules: small meshes, a deterministic random
-//! generator, the paper's assets, and the test binary's measuring allocator ([`alloc`]).
+//! Helpers shared by the unit tests of several modules: a deterministic random generator, the
+//! paper's assets, and the test binary's measuring allocator ([`alloc`]). The small meshes are
+//! the algorithms layer's (`algorithms::testing`): this layer knows no mesh type.
 
 use std::path::{Path, PathBuf};
-
-use crate::algorithms::geometry::TetMesh;
-use crate::algorithms::physics::mat3::Mat3;
-
-/// A cube [0,1]³ split into `n³` cells of 6 tets each (Kuhn triangulation, positive).
-pub fn cube_mesh(n: usize) -> TetMesh {
-    box_mesh([1.0; 3], [n; 3])
-}
-
-/// A box [0, size] split into `divisions` cells of 6 tets each ([`crate::algorithms::procedural::box_tets`]).
-pub fn box_mesh(size: [f64; 3], divisions: [usize; 3]) -> TetMesh {
-    crate::algorithms::procedural::box_tets(size, divisions)
-}
 
 /// A small deterministic generator of test data (xorshift).
 pub struct Rng(pub u64);
@@ -27,8 +15,8 @@ impl Rng {
         self.0 ^= self.0 << 17;
         (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
     }
-    /// A matrix of [`Rng::next`] entries.
-    pub fn mat(&mut self) -> Mat3 {
+    /// A 3x3 matrix of [`Rng::next`] entries.
+    pub fn mat(&mut self) -> [[f64; 3]; 3] {
         [[self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()]]
     }
 }

@@ -197,7 +197,7 @@ pub(crate) fn carry_mask(cage: &TetMesh, binding: &Binding, fine_mask: &[bool]) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::support::testing::cube_mesh;
+    use crate::algorithms::testing::cube_mesh;
 
     fn fine_points() -> Vec<Point> {
         let mut points = Vec::new();

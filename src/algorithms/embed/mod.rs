@@ -887,34 +887,4 @@ mod tests {
         assert!(outside > 3000, "{outside} outside points");
         assert!(outside_ties > 100, "{outside_ties} outside points with tied tets");
     }
-
-    /// Timing at the paper's scale: `cargo test --release --lib embed -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn paper_scale_timing() {
-        let mesh = jittered_grid([5, 6, 7], 14);
-        let points = mixed_points(&mesh, 28_098, &mut Rng(15));
-        let mut times: Vec<f64> = (0..10)
-            .map(|_| {
-                let start = std::time::Instant::now();
-                std::hint::black_box(Binding::compute(&mesh, &points));
-                start.elapsed().as_secs_f64() * 1e3
-            })
-            .collect();
-        times.sort_by(f64::total_cmp);
-        let binding = Binding::compute(&mesh, &points);
-        let start = std::time::Instant::now();
-        std::hint::black_box(binding.apply(&mesh, &mesh.positions));
-        let apply = start.elapsed().as_secs_f64() * 1e3;
-        let outside = binding.distances.iter().filter(|&&d| d > 0.0).count();
-        println!(
-            "compute: {} points ({outside} outside), {} tets, {} threads: min {:.2} ms, median {:.2} ms; apply {:.3} ms",
-            points.len(),
-            mesh.tets.len(),
-            rayon::current_num_threads(),
-            times[0],
-            times[times.len() / 2],
-            apply
-        );
-    }
 }

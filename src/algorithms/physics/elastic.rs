@@ -538,7 +538,7 @@ impl Elastic {
 mod tests {
     use super::*;
     use crate::algorithms::physics::projection::project_with_jacobian;
-    use crate::support::testing::cube_mesh;
+    use crate::algorithms::testing::cube_mesh;
 
     fn material() -> Material {
         Material { stiffness: 70.0, volume: 30.0, density: 2.0 }

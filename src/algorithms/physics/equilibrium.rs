@@ -219,7 +219,7 @@ pub fn loaded_equilibrium(
 mod tests {
     use super::*;
     use crate::algorithms::physics::elastic::Material;
-    use crate::support::testing::cube_mesh;
+    use crate::algorithms::testing::cube_mesh;
 
     fn material() -> Material {
         Material { stiffness: 70.0, volume: 70.0, density: 1.0 }

@@ -233,7 +233,7 @@ mod tests {
     use super::*;
     use crate::algorithms::geometry::TetMesh;
     use crate::algorithms::physics::elastic::Material;
-    use crate::support::testing::cube_mesh;
+    use crate::algorithms::testing::cube_mesh;
 
     fn material(stiffness: f64, volume: f64, density: f64) -> Material {
         Material { stiffness, volume, density }

@@ -26,7 +26,7 @@ const SAMPLES: usize = 10;
 
 /// A Kuhn grid of `SIZE` in `DIVISIONS` cells (six tets per cell, positive).
 fn bar_mesh() -> TetMesh {
-    crate::support::testing::box_mesh(SIZE, DIVISIONS)
+    crate::algorithms::testing::box_mesh(SIZE, DIVISIONS)
 }
 
 /// The clamped bar, its first bending mode in y (unit tip displacement) and its period.

@@ -290,7 +290,8 @@ mod tests {
     use super::super::tests::{bottom, keys, material, settings, wobbly, Nodes};
     use super::super::trajectory::Trajectory;
     use crate::algorithms::physics::elastic::Elastic;
-    use crate::support::testing::{cube_mesh, Rng};
+    use crate::algorithms::testing::cube_mesh;
+    use crate::support::testing::Rng;
 
     /// `f_s` at `tr` with fresh projections, written out from its definition (the objective's
     /// own is private): `M (ẍ + α ẋ - g) + L x - J p(x)`, zero at supports.

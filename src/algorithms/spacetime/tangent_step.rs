@@ -168,7 +168,8 @@ mod tests {
     use crate::algorithms::spacetime::solver::{apply_step, objective};
     use crate::algorithms::spacetime::trajectory::Trajectory;
     use crate::algorithms::spacetime::unknowns::KeyConstraints;
-    use crate::support::testing::{cube_mesh, Rng};
+    use crate::algorithms::testing::cube_mesh;
+    use crate::support::testing::Rng;
 
     /// The exact gradient of W on the free unknowns.
     fn gradient(obj: &Objective, unknowns: &Unknowns, tr: &Trajectory) -> Vec<Point> {

@@ -8,7 +8,8 @@ use super::trajectory::Trajectory;
 use super::unknowns::{KeyConstraints, Unknowns};
 use crate::algorithms::geometry::{add, norm, sub, Point};
 use crate::algorithms::physics::elastic::{Elastic, Material};
-use crate::support::testing::{cube_mesh, Rng};
+use crate::algorithms::testing::cube_mesh;
+use crate::support::testing::Rng;
 
 pub(super) fn material() -> Material {
     Material { stiffness: 70.0, volume: 70.0, density: 1.0 }

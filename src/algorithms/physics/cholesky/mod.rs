@@ -9,8 +9,6 @@
 //! (portable code, compiled for AVX2 when the CPU has it; same bytes either way).
 
 mod numeric;
-#[cfg(test)]
-pub(crate) use numeric::phases;
 mod split;
 mod sweeps;
 
@@ -169,21 +167,6 @@ impl Cholesky {
                 }
             }
         }
-    }
-
-    /// The supernodal factor's shape (see [`numeric::shape_report`]), for measurements.
-    #[cfg(test)]
-    pub(crate) fn shape_report(&self) -> String {
-        match (self.symbolic.raw(), &self.numeric) {
-            (SymbolicCholeskyRaw::Supernodal(sym), Some((updates, plan))) => numeric::shape_report(sym, updates, plan.as_ref()),
-            _ => "simplicial".into(),
-        }
-    }
-
-    /// The factor's stored values (for comparisons in tests and measurements).
-    #[cfg(test)]
-    pub(crate) fn values_for_tests(&self) -> &[f64] {
-        &self.values
     }
 
     /// Rows (and columns) of the factorized matrix.

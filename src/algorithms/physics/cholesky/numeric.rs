@@ -157,12 +157,10 @@ pub(super) fn factorize(
             b.push(block_b);
             t.push(block_t);
         }
-        let group = |blocks: &mut Vec<&mut [f64]>, g: u8| {
-            phases::timed(g as usize, || front.group(blocks, |s| plan.owner[s] == g, &mut Scratch::new(sym, Par::Seq)))
-        };
+        let group = |blocks: &mut Vec<&mut [f64]>, g: u8| front.group(blocks, |s| plan.owner[s] == g, &mut Scratch::new(sym, Par::Seq));
         let (ra, rb) = join(par, || group(&mut a, 0), || group(&mut b, 1));
-        ra.0?;
-        rb.0?;
+        ra?;
+        rb?;
         blocks = a.into_iter().zip(b).zip(t).enumerate().map(|(s, ((a, b), t))| [a, b, t].into_iter().nth(plan.owner[s] as usize).unwrap()).collect();
     }
     // The top: a large supernode's columns in two halves of about equal update work, each
@@ -179,30 +177,11 @@ pub(super) fn factorize(
         let half = if ls.len() >= SPLIT_ENTRIES { front.half(s) } else { w };
         let (left, right) = ls.split_at_mut(half * rows);
         let (local, product, done) = (&scratch.local, &mut scratch.product, &*done);
-        let (l, r) = join(
-            par,
-            || phases::timed(2, || front.update(s, left, 0..half, done, local, product)),
-            || phases::timed(3, || front.update(s, right, half..w, done, local, &mut other)),
-        );
-        phases::path(l.1.max(r.1));
-        phases::timed(4, || front.finish(s, ls, &mut scratch, par)).0?;
+        join(par, || front.update(s, left, 0..half, done, local, product), || front.update(s, right, half..w, done, local, &mut other));
+        front.finish(s, ls, &mut scratch, par)?;
         front.clear_pattern(s, &mut scratch.local);
     }
     Ok(())
-}
-
-/// Thread CPU seconds of the factorization's phases, collected in tests to predict the
-/// two-core time on a loaded machine (a no-op otherwise): 0, 1 the groups, 2, 3 the top's
-/// halves, 4 the top's dense blocks, 5 the top's longer half summed over supernodes.
-#[cfg(not(test))]
-mod phases {
-    #[inline(always)]
-    pub(super) fn timed<T>(_: usize, f: impl FnOnce() -> T) -> (T, f64) {
-        (f(), 0.0)
-    }
-
-    #[inline(always)]
-    pub(super) fn path(_: f64) {}
 }
 
 /// Entries of a top supernode from which its updates are gathered in two halves concurrently
@@ -369,78 +348,5 @@ impl Front<'_> {
             .map_err(|_| NotPositiveDefinite)?;
         faer::linalg::triangular_solve::solve_lower_triangular_in_place(diag.rb(), below.rb_mut().transpose_mut(), par);
         Ok(())
-    }
-}
-
-/// The factorization's shape, for the measurement tests: supernode widths and the update
-/// products' inner dimensions (the descendant's width) and column counts, each bucket with
-/// its count and share of the predicted flops; and the plan's flops per group and in the top.
-#[cfg(test)]
-pub(super) fn shape_report(sym: &SymbolicSupernodalCholesky<usize>, updates: &Updates, plan: Option<&GroupPlan>) -> String {
-    const EDGES: [usize; 8] = [1, 10, 20, 50, 100, 200, 500, 2000];
-    let bucket = |v: usize| EDGES.iter().rposition(|&e| v >= e).unwrap_or(0);
-    let width = |s: usize| sym.supernode_end()[s] - sym.supernode_begin()[s];
-    let own = supernode_flops(sym);
-    let (mut by_width, mut by_depth, mut by_cols) = ([(0usize, 0f64); 8], [(0usize, 0f64); 8], [(0usize, 0f64); 8]);
-    let mut by_owner = [0f64; 3];
-    for s in 0..sym.n_supernodes() {
-        let b = bucket(width(s));
-        by_width[b].0 += 1;
-        by_width[b].1 += own[s] as f64;
-        by_owner[plan.map_or(2, |p| p.owner[s] as usize)] += own[s] as f64;
-        let (begin, end) = (sym.supernode_begin()[s], sym.supernode_end()[s]);
-        for &d in updates.of(s) {
-            let pattern = sym.supernode(d).pattern();
-            let below = &pattern[pattern.partition_point(|&r| r < begin)..];
-            let k = below.partition_point(|&r| r < end);
-            let m = below.len();
-            let flops = (2 * m - k) as f64 * k as f64 * width(d) as f64;
-            let (bd, bc) = (bucket(width(d)), bucket(k));
-            by_depth[bd].0 += 1;
-            by_depth[bd].1 += flops;
-            by_cols[bc].0 += 1;
-            by_cols[bc].1 += flops;
-        }
-    }
-    let total: f64 = by_depth.iter().map(|b| b.1).sum();
-    let all: f64 = own.iter().map(|&f| f as f64).sum();
-    let row = |name: &str, v: &[(usize, f64); 8], of: f64| {
-        let cells: Vec<String> = (0..8).map(|i| format!("{}+: {} ({:.1}%)", EDGES[i], v[i].0, 100.0 * v[i].1 / of)).collect();
-        format!("{name}: {}\n", cells.join(", "))
-    };
-    let mut out = format!("{} supernodes, {:.3e} own flops (update products {:.3e})\n", sym.n_supernodes(), all, total);
-    out += &row("supernode widths (count, share of own flops)", &by_width, all);
-    out += &row("update products by descendant width (count, share of product flops)", &by_depth, total);
-    out += &row("update products by target columns", &by_cols, total);
-    out += &format!(
-        "own flops by owner: group 0 {:.1}%, group 1 {:.1}%, top {:.1}%\n",
-        100.0 * by_owner[0] / all,
-        100.0 * by_owner[1] / all,
-        100.0 * by_owner[2] / all
-    );
-    out
-}
-
-/// The phases' thread CPU seconds, summed for the measurement test (see the no-op version).
-#[cfg(test)]
-pub(crate) mod phases {
-    pub(crate) static CPU: std::sync::Mutex<[f64; 6]> = std::sync::Mutex::new([0.0; 6]);
-
-    fn thread_cpu() -> f64 {
-        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
-        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
-    }
-
-    pub(super) fn timed<T>(phase: usize, f: impl FnOnce() -> T) -> (T, f64) {
-        let t = thread_cpu();
-        let out = f();
-        let dt = thread_cpu() - t;
-        CPU.lock().unwrap()[phase] += dt;
-        (out, dt)
-    }
-
-    pub(super) fn path(dt: f64) {
-        CPU.lock().unwrap()[5] += dt;
     }
 }

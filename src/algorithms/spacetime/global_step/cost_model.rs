@@ -121,7 +121,7 @@ pub(super) fn modal_size(objective: &Objective, unknowns: &Unknowns) -> ModalSiz
 }
 
 /// Bytes a direct factorization needs per predicted factor entry, measured as the whole
-/// process's peak over the predicted entries (`factor_peak_memory`; cube-13, 5 keys, 6.86e7
+/// process's peak over the predicted entries (the numeric factorization alone, one per process; cube-13, 5 keys, 6.86e7
 /// entries predicted: 949 MB with our two-thread factorization, 915 MB with faer's: 13.8 and
 /// 13.3 bytes per entry; at 20 keys, 7.66e8 entries, ours: 8,660 MB, 11.3 bytes). What it
 /// holds: the factor's values, 8
@@ -141,7 +141,7 @@ pub fn predicted_peak_bytes(cost: &Cost) -> f64 {
 }
 
 /// Predicted flops per second of the numeric factorization ([`Cholesky::refactor`]), on one
-/// thread and on two. One: 3.28-3.36e10 per CPU second (`factor_on_two_cores`, cube-13 at 5
+/// thread and on two. One: 3.28-3.36e10 per CPU second (cube-13 at 5
 /// keys, 2.19e11 flops, `Par::Seq`; CPU time holds under load, measured at load average 6-9).
 /// Two: that times 1.58, the ratio of the phases' thread CPU seconds (both groups, both top
 /// halves, the dense blocks) to the critical path of the split (the longer group, the longer

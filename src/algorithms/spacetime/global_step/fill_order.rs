@@ -51,17 +51,6 @@ pub struct FillReducingOrder {
     pub cost: Cost,
 }
 
-/// [`fill_reducing_order_of`] with the node graph's orders computed here.
-#[cfg(test)]
-pub fn fill_reducing_order(
-    lower: &SparseColMat<usize, f64>,
-    unknowns: &Unknowns,
-    rest: &[Point],
-    weigh_keys: impl FnOnce(&Cost) -> bool,
-) -> FillReducingOrder {
-    fill_reducing_order_of(lower, unknowns, &NodeOrders::new(lower, unknowns, rest), weigh_keys)
-}
-
 /// Order the normal matrix by its node graph: every node's free slots are contiguous unknowns
 /// (node-major layout) and stay together, so ordering the 2-ring graph of the nodes (a few
 /// thousand vertices) orders the matrix (tens of thousands of rows).

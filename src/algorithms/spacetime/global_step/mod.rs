@@ -36,19 +36,13 @@
 
 mod assembly;
 mod cost_model;
-#[cfg(test)]
-mod experiment;
 mod fill_order;
 mod iterative;
-#[cfg(test)]
-mod modal_phases;
 #[cfg(test)]
 mod tests;
 
 pub use assembly::assemble;
 pub use cost_model::{choose, memory_bytes, predicted_peak_bytes, ModalSize, BYTES_PER_FACTOR_ENTRY};
-#[cfg(test)]
-pub use fill_order::fill_reducing_order;
 pub use fill_order::{fill_reducing_order_of, FillReducingOrder, NodeOrders, KEY_SEPARATOR_MAX_GAIN, KEY_SEPARATOR_MIN_KEYS};
 pub use iterative::CgLog;
 
@@ -77,7 +71,7 @@ pub struct GlobalStats {
     pub matrix_nnz: usize,
     /// Stored entries of the Cholesky factor.
     pub factor_nnz: usize,
-    /// The fill-reducing ordering that was used (see `fill_reducing_order`).
+    /// The fill-reducing ordering that was used (see `fill_reducing_order_of`).
     pub ordering: &'static str,
     /// Coefficients and assembly of the matrix.
     pub assemble_seconds: f64,

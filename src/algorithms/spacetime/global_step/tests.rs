@@ -1,10 +1,10 @@
 use super::*;
 use crate::algorithms::physics::elastic::Elastic;
-use crate::algorithms::physics::ordering::{nested_dissection, Graph};
 use crate::algorithms::physics::pcg::SymmetricOperator;
 use crate::algorithms::spacetime::solver::objective;
 use crate::algorithms::spacetime::tests::{keys, material, settings};
-use crate::support::testing::{cube_mesh, Rng};
+use crate::algorithms::testing::cube_mesh;
+use crate::support::testing::Rng;
 
 /// Ten keys of a bent cube, the bottom held at the first: enough keys for the
 /// key-separator candidate.
@@ -47,7 +47,7 @@ fn the_cost_model_prefers_the_faster_solver_within_the_budget() {
 
 /// The choice on problem sizes recorded from the project's bodies (the costs `build` weighs,
 /// with the measured outcome): the 2744-node cube with 20 keys and with 5 keys, the bottom
-/// held at every key (`modal_setup_phases`), and the small bodies of the demo and the paper.
+/// held at every key (set-up timed phase by phase), and the small bodies of the demo and the paper.
 #[test]
 fn the_cost_model_on_recorded_problem_sizes() {
     // 20 keys: the node order (the key separators are not weighed: even 4x fewer flops
@@ -211,40 +211,6 @@ fn the_modal_step_gives_the_direct_step() {
         modal.retime(&obj2, s.regularization).unwrap();
         let fresh = GlobalStep::build(&obj2, unknowns.clone(), s.regularization, &Budget::default(), Some(Method::Direct)).unwrap();
         close(&fresh.step(&g), &modal.step(&g));
-    }
-}
-
-/// The predicted flops of the node order and the key-separator order on a cube body with
-/// 5, 10 and 20 keys (`cargo test --release --lib key_separator_prediction -- --ignored
-/// --nocapture`): what `fill_reducing_order` weighs.
-#[test]
-#[ignore]
-fn key_separator_prediction() {
-    for n in [8, 12] {
-        let mesh = cube_mesh(n);
-        let el = Elastic::new(&mesh, &material()).unwrap();
-        for keys_count in [5, 10, 20] {
-            let times: Vec<f64> = (0..keys_count).map(|k| 0.2 * k as f64).collect();
-            let poses = vec![mesh.positions.clone(); keys_count];
-            let bottom: Vec<u32> = (0..mesh.positions.len() as u32).filter(|&i| mesh.positions[i as usize][1] == 0.0).collect();
-            let k = keys(times, poses, vec![bottom; keys_count], false);
-            let s = settings();
-            let obj = objective(&el, &k, &s);
-            let unknowns = Unknowns::new(&k, el.node_count());
-            let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 1.0 / s.regularization.powi(4)));
-            let graph = Graph::of_blocks(a.symbolic().col_ptr(), a.symbolic().row_idx(), &node_blocks(&unknowns), unknowns.nodes);
-            let nd = nested_dissection(&graph, &el.rest);
-            let by_keys = key_separator_order(&a, &unknowns, &nd).unwrap();
-            let chosen = fill_reducing_order(&a, &unknowns, &el.rest, |_| true);
-            println!(
-                "{} nodes, {keys_count} keys: node order {:.3e} flops, keys as separators {:.3e} ({:.2}x); chosen: {}",
-                unknowns.nodes,
-                by_keys.node_cost.flops,
-                by_keys.cost.flops,
-                by_keys.node_cost.flops / by_keys.cost.flops,
-                chosen.name
-            );
-        }
     }
 }
 

@@ -1,5 +1,7 @@
 //! What a solve did: the solver's log and where its iterations' time went.
 
+use serde::{Deserialize, Serialize};
+
 use super::super::global_step::CgLog;
 
 /// What the iteration did.
@@ -63,8 +65,9 @@ pub struct Log {
 /// guess's evaluation included, the precompute not): what an iteration costs, taken apart.
 /// The remainder of the iterations' time (the L-BFGS two-loop recursion, gathering and
 /// scattering the unknowns, Gauss-Newton products) is `iteration time - evaluation_seconds -
-/// solve_seconds`. Timing only: nothing here changes a result.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// solve_seconds`. Timing only: nothing here changes a result. The stage file and the report
+/// hold it as is (`solver.iteration_split`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct IterationSplit {
     /// Evaluations of W (the local step and the residuals): the first guess, every trial
     /// point of every line search.

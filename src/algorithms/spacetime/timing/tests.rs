@@ -5,7 +5,8 @@ use crate::algorithms::physics::elastic::Elastic;
 use crate::algorithms::physics::svd3::svd3;
 use crate::algorithms::spacetime::tests::{all, from_mask, keys, material, settings, wobbly};
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
-use crate::support::testing::{cube_mesh, Rng};
+use crate::algorithms::testing::cube_mesh;
+use crate::support::testing::Rng;
 
 /// `tr` with interval `i` set to length `len`, later keys shifted with it.
 fn with_length(tr: &Trajectory, i: usize, len: f64) -> Trajectory {
