@@ -14,7 +14,7 @@ pub struct Clip {
 
 /// A subdivided saddle of 39 x 39 = 1521 vertices (2 x 2 m) moved by 7 morph targets over
 /// 200 frames at 30 fps. Each target is a displacement of compact support (radius 0.55 m,
-/// so neighbours overlap and each moves about a fifth of the vertices) in its own direction;
+/// so neighbours overlap and each moves about a quarter of the vertices) in its own direction;
 /// each weight is its own raised cosine (periods 2.1 to 4.5 s, phases apart), as an artist's
 /// morph clip: frame = base + sum of weight x target.
 pub fn morph_clip() -> Clip {
