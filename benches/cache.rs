@@ -14,17 +14,30 @@
 //! "passes" is frames read by the selection over the frame count; "held frames" the most
 //! frames it held in memory at once.
 //!
-//! A second table compares what a user would do instead, per cache: bakes through the whole
-//! chain with `fit` in both `[export] basis` forms (principal, the default, and per-key) and
-//! `spacetime` (keys, rank, bytes, max error against the cache, bake time per cache frame), the full-frame cache as glb / usda (`cache::write`: the glb's one-hot weights
-//! are sparse, so it is smaller than our exporter's full-frame glb), gltfpack 1.3.0 on that glb
-//! (`make deps-npm` installs it; bytes with `-cc`, error measured without `-c`), and a PCA basis
-//! meeting the same tolerance (bytes computed).
+//! A second table compares what a user would do instead, per cache: the rapier3d bars (a
+//! soft-body cache) and two caches made by code (`benches/common/clips.rs`: a morph clip of 7
+//! overlapping targets on 1521 vertices, 200 frames; a skinned tube of 386 points and 3 bones
+//! written with a vertex per triangle corner, 80 frames). Rows: bakes through the whole chain
+//! with `fit` and the default `[export]` (the quantized glb, its max error read back from the
+//! file, and `gltf_compression = "meshopt"`); on the bars also `fit` in both `[export] basis`
+//! forms (principal and per-key) and `spacetime` (keys, rank, bytes, max error against the
+//! cache, bake time per cache frame); the full-frame cache as glb / usda / usdc
+//! (`cache::write`: the glb's one-hot weights are sparse, so it is smaller than our exporter's
+//! full-frame glb); gltfpack 1.3.0 on that glb (`make deps-npm` installs it; bytes with `-cc`,
+//! error measured without `-c`); PCA at the tolerance and at our default glb's max error,
+//! bytes as f32 (computed) and as those f32 compressed by zstd level 19 (on the distinct
+//! vertices: a per-corner cache's copies dropped, as our weld drops them). A third table gives
+//! the targets per cache: gltfpack `-cc` bytes over our default glb's (at least 2x, at equal or
+//! lower max error), our default glb over PCA+zstd at its error (at most 1.5x), and where our
+//! glb's bytes go (indices, base, targets, animation). `BLENDSIM_BENCH_CACHE=text` keeps the
+//! caches whose name contains it in the second and third tables.
 
 #[path = "../tests/integration/common/bar.rs"]
 mod bar;
+#[path = "common/clips.rs"]
+mod clips;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
@@ -35,6 +48,7 @@ use blendsim::algorithms::frames::deviation::cache_diagonal;
 use blendsim::algorithms::frames::fit::{fit, FitSettings};
 use blendsim::algorithms::frames::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
+use blendsim::algorithms::geometry::TriMesh;
 use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::formats::export::glb::{self, Placement};
 use blendsim::formats::export::usda::{self, UsdSettings};
@@ -58,9 +72,21 @@ fn kb(bytes: usize) -> String {
     format!("{:.1}", bytes as f64 / 1024.0)
 }
 
+/// A PCA basis of a cache: mean + rank-r basis + per-frame weights.
+struct Pca {
+    rank: usize,
+    /// The numbers as f32.
+    f32_bytes: usize,
+    /// Those f32 numbers, little-endian (mean, basis component by component, weights frame by
+    /// frame), compressed by zstd level 19: what a file a user would write compresses to.
+    zstd_bytes: usize,
+    /// Of the cache's bbox diagonal.
+    max: f64,
+}
+
 /// The smallest rank whose PCA reconstruction (mean + rank-r basis, f32 basis and weights)
-/// meets `tolerance * diagonal` at every vertex of every frame; its rank, f32 bytes, max error.
-fn pca_baseline(frames: &MemoryFrames, diagonal: f64) -> (usize, usize, f64) {
+/// meets `target * diagonal` at every vertex of every frame.
+fn pca_baseline(frames: &MemoryFrames, diagonal: f64, target: f64) -> Pca {
     let (f, n) = (frames.frames.len(), 3 * frames.frames[0].len());
     let mut mean = vec![0.0; n];
     for frame in &frames.frames {
@@ -72,6 +98,8 @@ fn pca_baseline(frames: &MemoryFrames, diagonal: f64) -> (usize, usize, f64) {
     let svd = x.thin_svd().expect("SVD converges");
     let (u, s, v) = (svd.U(), svd.S(), svd.V());
     let mut recon: Vec<Vec<f64>> = (0..f).map(|_| mean.clone()).collect();
+    let mut max = f64::INFINITY;
+    let mut rank = 0;
     for r in 0..f.min(n) {
         // Add component r with f32-rounded basis and weights, as a file would store them.
         let basis: Vec<f64> = (0..n).map(|c| v[(c, r)] as f32 as f64).collect();
@@ -81,7 +109,8 @@ fn pca_baseline(frames: &MemoryFrames, diagonal: f64) -> (usize, usize, f64) {
                 *x += w * b;
             }
         }
-        let max = recon
+        rank = r + 1;
+        max = recon
             .iter()
             .zip(&frames.frames)
             .flat_map(|(row, frame)| {
@@ -89,12 +118,31 @@ fn pca_baseline(frames: &MemoryFrames, diagonal: f64) -> (usize, usize, f64) {
             })
             .fold(0.0, f64::max)
             / diagonal;
-        if max <= TOLERANCE {
-            let rank = r + 1;
-            return (rank, 4 * (n + rank * n + f * rank), max);
+        if max <= target {
+            break;
         }
     }
-    (f.min(n), 4 * (n + f * n), 0.0)
+    let mut numbers: Vec<f32> = mean.iter().map(|&m| m as f32).collect();
+    for r in 0..rank {
+        numbers.extend((0..n).map(|c| v[(c, r)] as f32));
+    }
+    for i in 0..f {
+        numbers.extend((0..rank).map(|r| (u[(i, r)] * s[r]) as f32));
+    }
+    let bytes: Vec<u8> = numbers.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let zstd_bytes = zstd::bulk::compress(&bytes, 19).expect("zstd compresses").len();
+    Pca { rank, f32_bytes: bytes.len(), zstd_bytes, max }
+}
+
+/// The cache on its distinct vertices: a vertex whose every frame equals an earlier vertex's
+/// (a vertex per triangle corner) is dropped, as the bake's weld drops it, so PCA is not
+/// charged for copies our files do not hold either.
+fn distinct_vertices(frames: &MemoryFrames) -> MemoryFrames {
+    let mut seen = std::collections::HashSet::new();
+    let keep: Vec<usize> = (0..frames.frames[0].len())
+        .filter(|&v| seen.insert(frames.frames.iter().flat_map(|frame| frame[v].map(f64::to_bits)).collect::<Vec<u64>>()))
+        .collect();
+    MemoryFrames { times: frames.times.clone(), frames: frames.frames.iter().map(|frame| keep.iter().map(|&v| frame[v]).collect()).collect() }
 }
 
 fn clip_f32_bytes(clip: &BlendShapeClip) -> usize {
@@ -136,7 +184,7 @@ fn run(name: &str, cache: &BarCache) {
     let ff_glb = glb::full_frame(&full, glb::Surface::plain(triangles), name, placement, glb::Encoding::FLOAT).len();
     let ff_usda = usda::full_frame(&full, triangles, None, &usd).len();
     let ff_f32 = 12 * frames.frame_count() * frames.vertex_count();
-    let (rank, pca_bytes, pca_max) = pca_baseline(&frames, diagonal);
+    let Pca { rank, f32_bytes: pca_bytes, max: pca_max, .. } = pca_baseline(&frames, diagonal, TOLERANCE);
     let (keys, n) = (auto.keys.len(), frames.frame_count());
     println!(
         "| {name} | {} | {} | {n} | {keys} | {:.3} | {:.4} | {:.1} | {} | {:.2e} | {:.2e} | {} | {} | {} | {} | {} | {} | {:.1}x | {:.1}x | {rank} | {} | {:.2e} | {} |",
@@ -166,9 +214,8 @@ fn run(name: &str, cache: &BarCache) {
 /// full-frame glb: gltfpack 1.3.0 (npm, in tests/checkers), with `-af 0` (no resampling,
 /// keeps every frame) and at its defaults (30 Hz resampling); bytes with `-cc`, error measured
 /// on the same settings without `-c` (meshopt compression is lossless on the quantized data and
-/// our reader refuses it). gltfpack reorders vertices: they are matched to the cache's by
-/// nearest rest position. None when gltfpack is not installed.
-fn gltfpack(full_glb: &Path, cache: &BarCache, diagonal: f64) -> Option<Vec<(&'static str, u64, f64)>> {
+/// our reader refuses it). None when gltfpack is not installed.
+fn gltfpack(full_glb: &Path, frames: &MemoryFrames, fps: f64, diagonal: f64) -> Option<Vec<(&'static str, u64, f64)>> {
     let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/node_modules/.bin/gltfpack");
     if !bin.is_file() {
         return None;
@@ -193,46 +240,119 @@ fn gltfpack(full_glb: &Path, cache: &BarCache, diagonal: f64) -> Option<Vec<(&'s
             out
         };
         let bytes = std::fs::metadata(packed(&["-cc"], "packed_cc.glb")).unwrap().len();
-        let plain = packed(&[], "packed.glb");
-        let mut read =
-            VertexCache::open(&plain, &CacheOptions { fps: Some(cache.settings.fps), ..CacheOptions::default() }).expect("read gltfpack's output");
-        let rest = &cache.frames.frames[0];
-        let mut first = vec![[0.0; 3]; read.frames.vertex_count()];
-        read.frames.read_frame(0, &mut first).unwrap();
-        // Its vertex v is the cache's vertex map[v].
-        let map: Vec<usize> =
-            first.iter().map(|p| (0..rest.len()).min_by(|&a, &b| dist(*p, rest[a]).total_cmp(&dist(*p, rest[b]))).unwrap()).collect();
-        let mut got = vec![[0.0; 3]; first.len()];
-        let mut max = 0.0f64;
-        for (f, frame) in cache.frames.frames.iter().enumerate() {
-            // Resampled output: evaluate at the cache's frame times.
-            let t = cache.frames.times[f];
-            let g =
-                (0..read.frames.frame_count()).min_by(|&a, &b| (read.frames.time(a) - t).abs().total_cmp(&(read.frames.time(b) - t).abs())).unwrap();
-            read.frames.read_frame(g, &mut got).unwrap();
-            max = got.iter().zip(&map).map(|(p, &v)| dist(*p, frame[v])).fold(max, f64::max);
-        }
-        rows.push((label, bytes, max / diagonal));
+        rows.push((label, bytes, read_back_error(&packed(&[], "packed.glb"), frames, fps, diagonal)));
     }
     Some(rows)
+}
+
+/// Max error (of the cache's bbox diagonal) of a glb clip read back as a cache against the
+/// cache, at every cache frame (a resampled clip at its nearest frame). The file's vertices
+/// may be reordered (gltfpack) or welded (ours): its vertex is matched to the cache's nearest
+/// at the first frame; welded copies move alike, so any of them is the same.
+fn read_back_error(glb: &Path, frames: &MemoryFrames, fps: f64, diagonal: f64) -> f64 {
+    let mut read = VertexCache::open(glb, &CacheOptions { fps: Some(fps), ..CacheOptions::default() }).expect("read the glb back");
+    let start = &frames.frames[0];
+    let mut first = vec![[0.0; 3]; read.frames.vertex_count()];
+    read.frames.read_frame(0, &mut first).unwrap();
+    // Its vertex v is the cache's vertex map[v].
+    let map: Vec<usize> =
+        first.iter().map(|p| (0..start.len()).min_by(|&a, &b| dist(*p, start[a]).total_cmp(&dist(*p, start[b]))).unwrap()).collect();
+    let mut got = vec![[0.0; 3]; first.len()];
+    let mut max = 0.0f64;
+    for (f, frame) in frames.frames.iter().enumerate() {
+        let t = frames.times[f];
+        let g = (0..read.frames.frame_count()).min_by(|&a, &b| (read.frames.time(a) - t).abs().total_cmp(&(read.frames.time(b) - t).abs())).unwrap();
+        read.frames.read_frame(g, &mut got).unwrap();
+        max = got.iter().zip(&map).map(|(p, &v)| dist(*p, frame[v])).fold(max, f64::max);
+    }
+    max / diagonal
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-/// One bake of the cache through the library's chain (as `blendsim bake`) in `[export] basis`:
-/// seconds, keys, rank (principal), blendshape glb, usda and usdc bytes, max error against the
-/// cache.
-fn bake(dir: &Path, method: &str, weights: &str, basis: &str) -> (f64, usize, Option<usize>, u64, u64, u64, f64) {
-    let physics = if method == "fit" { "" } else { "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n[solver]\nmax_iterations = 15\n" };
+/// Where a glb's bytes go, from its JSON: the accessors of the indices, the base `POSITION`,
+/// the morph targets and the animation (key times and weights; each accessor's count times
+/// its stride, sparse ones their indices and values), the rest of the BIN chunk (padding),
+/// and the JSON chunk with, inside it, the weld map; in KB.
+fn glb_parts(path: &Path) -> String {
+    let bytes = std::fs::read(path).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let bin_len = bytes.get(20 + json_len..24 + json_len).map_or(0, |b| u32::from_le_bytes(b.try_into().unwrap()) as usize);
+    let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let component = |c: &serde_json::Value| match c.as_u64() {
+        Some(5120 | 5121) => 1,
+        Some(5122 | 5123) => 2,
+        _ => 4,
+    };
+    let accessor_bytes = |a: &serde_json::Value| -> usize {
+        let Some(a) = a.as_u64() else { return 0 };
+        let acc = &json["accessors"][a as usize];
+        let width = match acc["type"].as_str() {
+            Some("SCALAR") => 1,
+            Some("VEC2") => 2,
+            Some("VEC3") => 3,
+            Some("VEC4") => 4,
+            _ => 16,
+        } * component(&acc["componentType"]);
+        let stride = acc["bufferView"].as_u64().and_then(|v| json["bufferViews"][v as usize]["byteStride"].as_u64()).map_or(width, |s| s as usize);
+        let dense = if acc["bufferView"].is_u64() { acc["count"].as_u64().unwrap() as usize * stride } else { 0 };
+        let sparse = &acc["sparse"];
+        dense + sparse["count"].as_u64().map_or(0, |n| n as usize * (component(&sparse["indices"]["componentType"]) + width))
+    };
+    let (mut indices, mut base, mut targets, mut animation) = (0, 0, 0, 0);
+    let primitives = json["meshes"][0]["primitives"].as_array().cloned().unwrap_or_default();
+    for primitive in &primitives {
+        indices += accessor_bytes(&primitive["indices"]);
+        base += accessor_bytes(&primitive["attributes"]["POSITION"]);
+        targets += primitive["targets"].as_array().into_iter().flatten().map(|t| accessor_bytes(&t["POSITION"])).sum::<usize>();
+    }
+    // Samplers may share their key times: count each accessor once.
+    let mut seen = std::collections::HashSet::new();
+    for sampler in json["animations"].as_array().into_iter().flatten().flat_map(|a| a["samplers"].as_array().cloned().unwrap_or_default()) {
+        for a in [&sampler["input"], &sampler["output"]] {
+            if seen.insert(a.as_u64()) {
+                animation += accessor_bytes(a);
+            }
+        }
+    }
+    let target_count = primitives.first().and_then(|p| p["targets"].as_array()).map_or(0, Vec::len);
+    let weld_map = json["meshes"][0]["extras"]["weldMap"].as_array().map_or(0, |_| json["meshes"][0]["extras"]["weldMap"].to_string().len());
+    format!(
+        "indices {}, base {}, {target_count} targets {}, animation {}, other BIN {}, JSON {} (weld map {})",
+        kb(indices),
+        kb(base),
+        kb(targets),
+        kb(animation),
+        kb(bin_len.saturating_sub(indices + base + targets + animation)),
+        kb(json_len),
+        kb(weld_map)
+    )
+}
+
+/// One bake of the cache through the library's chain (as `blendsim bake`), `solver` and
+/// `export` being the scene's lines in those tables: seconds, keys, rank (principal), the glb
+/// and its bytes, usda and usdc bytes (when written), max error against the cache.
+struct Baked {
+    seconds: f64,
+    keys: usize,
+    rank: Option<usize>,
+    glb: PathBuf,
+    glb_bytes: u64,
+    usda: Option<u64>,
+    usdc: Option<u64>,
+    max: f64,
+}
+
+fn bake(dir: &Path, fps: f64, tag: &str, solver: &str, export: &str, usd: bool) -> Baked {
+    let formats = if usd { "[\"usda\", \"usdc\", \"glb\"]" } else { "[\"glb\"]" };
     let text = format!(
-        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = 60\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{}{physics}[export]\nformats = [\"usda\", \"usdc\", \"glb\"]\nfull_frame = false\nweights = \"{weights}\"\nbasis = \"{basis}\"\n",
-        if method == "fit" { "[solver]\nmethod = \"fit\"\n" } else { "" }
+        "name = \"bar\"\n[cache]\npath = \"bar.pc2\"\nfps = {fps}\nrest = \"rest.obj\"\nkeyframes = \"auto\"\ntolerance = {TOLERANCE}\n{solver}[export]\nformats = {formats}\nfull_frame = false\n{export}"
     );
-    let scene_path = dir.join(format!("{method}-{weights}-{basis}.toml"));
+    let scene_path = dir.join(format!("{tag}.toml"));
     std::fs::write(&scene_path, text).unwrap();
-    let out = dir.join(format!("out-{method}-{weights}-{basis}"));
+    let out = dir.join(format!("out-{tag}"));
     let _ = std::fs::remove_dir_all(&out);
     let t = Instant::now();
     let scene = SceneFile::load(&scene_path).unwrap_or_else(|e| panic!("{e}"));
@@ -242,26 +362,46 @@ fn bake(dir: &Path, method: &str, weights: &str, basis: &str) -> (f64, usize, Op
     let seconds = t.elapsed().as_secs_f64();
     let bytes = |ext: &str| std::fs::metadata(out.join(format!("bar.{ext}"))).unwrap().len();
     let c = report.cache.expect("a cache report");
-    (seconds, c.keys.len(), report.rank, bytes("glb"), bytes("usda"), bytes("usdc"), c.error.max)
+    Baked {
+        seconds,
+        keys: c.keys.len(),
+        rank: report.rank,
+        glb: out.join("bar.glb"),
+        glb_bytes: bytes("glb"),
+        usda: usd.then(|| bytes("usda")),
+        usdc: usd.then(|| bytes("usdc")),
+        max: c.error.max,
+    }
 }
 
-/// The comparison: per cache, fit and spacetime bakes (keys, bytes, max error, bake
-/// time per cache frame) against the full-frame files, gltfpack on the full-frame glb, and PCA.
-fn compare(name: &str, cache: &BarCache) {
+/// The targets for one cache: our default glb against gltfpack `-cc` and PCA+zstd at
+/// the same max error.
+struct Summary {
+    name: String,
+    ours: u64,
+    ours_max: f64,
+    meshopt: u64,
+    gltfpack: Option<(u64, f64)>,
+    pca: Pca,
+    parts: String,
+}
+
+/// The comparison: per cache, bakes with the default `[export]` (quantized glb, and
+/// meshopt) and, with `forms`, fit and spacetime bakes in each weights and basis form (keys,
+/// bytes, max error, bake time per cache frame) against the full-frame files, gltfpack on the
+/// full-frame glb, and PCA at the tolerance and at our default glb's max error.
+fn compare(name: &str, surface: &TriMesh, cache: &MemoryFrames, fps: f64, forms: bool) -> Summary {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/cache-compare").join(name.replace([' ', ','], "_"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("rest.obj"), obj::write(&cache.surface)).unwrap();
-    let fps = cache.settings.fps;
-    blendsim::formats::cache::write(&dir.join("bar.pc2"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    blendsim::formats::cache::write(&dir.join("full.glb"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    blendsim::formats::cache::write(&dir.join("full.usda"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    let frames = cache.frames.frame_count() as f64;
-    let diagonal = cache_diagonal(&mut cache.frames.clone()).unwrap();
+    std::fs::write(dir.join("rest.obj"), obj::write(surface)).unwrap();
+    for file in ["bar.pc2", "full.glb", "full.usda", "full.usdc"] {
+        blendsim::formats::cache::write(&dir.join(file), surface, &mut cache.clone(), fps).unwrap();
+    }
+    let frames = cache.frame_count() as f64;
+    let diagonal = cache_diagonal(&mut cache.clone()).unwrap();
     let size = |p: &str| std::fs::metadata(dir.join(p)).unwrap().len();
-    let (full_glb, full_usda) = (size("full.glb"), size("full.usda"));
-    blendsim::formats::cache::write(&dir.join("full.usdc"), &cache.surface, &mut cache.frames.clone(), fps).unwrap();
-    let full_usdc = size("full.usdc");
+    let (full_glb, full_usda, full_usdc) = (size("full.glb"), size("full.usda"), size("full.usdc"));
     let row = |what: &str, keys: String, glb: u64, usda: Option<u64>, usdc: Option<u64>, max: f64, ms: Option<f64>| {
         let smaller = |full: u64, x: Option<u64>| x.map_or("-".into(), |x| format!("{:.1}x", full as f64 / x as f64));
         println!(
@@ -277,26 +417,72 @@ fn compare(name: &str, cache: &BarCache) {
         )
     };
     row("full frame (the cache as glb / usda / usdc)", "-".into(), full_glb, Some(full_usda), Some(full_usdc), 0.0, None);
-    for (method, weights, basis) in [
-        ("fit", "bernstein", "principal"),
-        ("fit", "signed", "principal"),
-        ("fit", "bernstein", "keys"),
-        ("fit", "signed", "keys"),
-        ("spacetime", "bernstein", "keys"),
-    ] {
-        let (s, keys, rank, glb, usda, usdc, max) = bake(&dir, method, weights, basis);
-        let form = match rank {
-            Some(r) => format!("blendsim {method}, principal rank {r} ({weights} weights)"),
-            None => format!("blendsim {method}, per-key shapes ({weights} weights)"),
-        };
-        row(&form, keys.to_string(), glb, Some(usda), Some(usdc), max, Some(1e3 * s / frames));
+    let fit = "[solver]\nmethod = \"fit\"\n";
+    let ours = bake(&dir, fps, "default", fit, "", false);
+    // The report's max error is the fit's; the file's (quantized) is read back.
+    let ours_max = read_back_error(&ours.glb, cache, fps, diagonal);
+    let rank = ours.rank.map_or("per-key shapes".into(), |r| format!("principal rank {r}"));
+    row(
+        &format!("blendsim fit, default [export] (quantized glb, {rank}; error read back)"),
+        ours.keys.to_string(),
+        ours.glb_bytes,
+        None,
+        None,
+        ours_max,
+        Some(1e3 * ours.seconds / frames),
+    );
+    let meshopt = bake(&dir, fps, "meshopt", fit, "gltf_compression = \"meshopt\"\n", false);
+    row(
+        "blendsim fit, gltf_compression = \"meshopt\"",
+        meshopt.keys.to_string(),
+        meshopt.glb_bytes,
+        None,
+        None,
+        ours_max,
+        Some(1e3 * meshopt.seconds / frames),
+    );
+    if forms {
+        let physics = "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n[solver]\nmax_iterations = 15\n";
+        for (method, weights, basis) in [
+            ("fit", "bernstein", "principal"),
+            ("fit", "signed", "principal"),
+            ("fit", "bernstein", "keys"),
+            ("fit", "signed", "keys"),
+            ("spacetime", "bernstein", "keys"),
+        ] {
+            let solver = if method == "fit" { fit } else { physics };
+            let export = format!("weights = \"{weights}\"\nbasis = \"{basis}\"\n");
+            let b = bake(&dir, fps, &format!("{method}-{weights}-{basis}"), solver, &export, true);
+            let form = match b.rank {
+                Some(r) => format!("blendsim {method}, principal rank {r} ({weights} weights)"),
+                None => format!("blendsim {method}, per-key shapes ({weights} weights)"),
+            };
+            row(&form, b.keys.to_string(), b.glb_bytes, b.usda, b.usdc, b.max, Some(1e3 * b.seconds / frames));
+        }
     }
-    match gltfpack(&dir.join("full.glb"), cache, diagonal) {
-        Some(rows) => rows.into_iter().for_each(|(label, bytes, max)| row(label, "-".into(), bytes, None, None, max, None)),
+    let packed = gltfpack(&dir.join("full.glb"), cache, fps, diagonal);
+    match &packed {
+        Some(rows) => rows.iter().for_each(|(label, bytes, max)| row(label, "-".into(), *bytes, None, None, *max, None)),
         None => println!("| {name} | gltfpack not installed (make deps-npm) | | | | | | | | |"),
     }
-    let (rank, pca_bytes, pca_max) = pca_baseline(&cache.frames, diagonal);
-    row(&format!("PCA rank {rank}, f32 (bytes computed)"), "-".into(), pca_bytes as u64, None, None, pca_max, None);
+    let distinct = distinct_vertices(cache);
+    let on =
+        if distinct.vertex_count() < cache.vertex_count() { format!(" on the {} distinct vertices", distinct.vertex_count()) } else { String::new() };
+    let pca = pca_baseline(&distinct, diagonal, TOLERANCE);
+    row(&format!("PCA rank {}{on}, f32 (bytes computed)", pca.rank), "-".into(), pca.f32_bytes as u64, None, None, pca.max, None);
+    let pca = pca_baseline(&distinct, diagonal, ours_max);
+    row(&format!("PCA at our glb's error, rank {}{on}, f32 (bytes computed)", pca.rank), "-".into(), pca.f32_bytes as u64, None, None, pca.max, None);
+    row(&format!("PCA at our glb's error, rank {}{on}, f32 + zstd -19", pca.rank), "-".into(), pca.zstd_bytes as u64, None, None, pca.max, None);
+    Summary {
+        name: name.into(),
+        ours: ours.glb_bytes,
+        ours_max,
+        meshopt: meshopt.glb_bytes,
+        // gltfpack at its defaults, as a user runs it.
+        gltfpack: packed.and_then(|rows| rows.last().map(|&(_, bytes, max)| (bytes, max))),
+        pca,
+        parts: glb_parts(&ours.glb),
+    }
 }
 
 fn main() {
@@ -324,9 +510,52 @@ fn main() {
     println!();
     println!("| cache | form | keys | glb KB | usda KB | usdc KB | max error | glb smaller | usda smaller | usdc smaller | bake ms/frame |");
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for (name, settings) in cases.iter().take(2).filter(|(n, _)| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| n.contains(only.as_str())))
+    let only = |name: &str| std::env::var("BLENDSIM_BENCH_CACHE").map_or(true, |only| name.contains(only.as_str()));
+    let mut summaries = Vec::new();
+    for (name, settings) in cases.iter().take(2).filter(|(n, _)| only(n)) {
+        let cache = bar(settings);
+        summaries.push(compare(name, &cache.surface, &cache.frames, cache.settings.fps, true));
+    }
+    for (name, make) in
+        [("morph clip, 7 targets", clips::morph_clip as fn() -> clips::Clip), ("unwelded skinned clip, 3 bones", clips::unwelded_skinned_clip)]
     {
-        compare(name, &bar(settings));
+        if only(name) {
+            let clip = make();
+            summaries.push(compare(name, &clip.surface, &clip.frames, clip.fps, false));
+        }
+    }
+    println!();
+    println!("Targets per cache: gltfpack -cc (its defaults) on the full-frame glb over our default glb (at least 2x, at equal or lower max error), and our default glb over PCA+zstd at our glb's max error (at most 1.5x); load average {}:", load());
+    println!();
+    println!("| cache | default glb KB | meshopt glb KB | our max error | gltfpack -cc KB | its max error | gltfpack / ours | >= 2x at <= error | PCA+zstd KB (rank) | ours / PCA+zstd | <= 1.5x | meshopt / PCA+zstd | our default glb holds (KB) |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---|---:|---|");
+    for s in &summaries {
+        let yes = |ok: bool| if ok { "yes" } else { "**no**" };
+        let (packed, packed_max, packed_ratio, packed_ok) = match s.gltfpack {
+            Some((bytes, max)) => {
+                let ratio = bytes as f64 / s.ours as f64;
+                (
+                    kb(bytes as usize),
+                    format!("{max:.2e}"),
+                    format!("{ratio:.2}x"),
+                    format!("{} (error {})", yes(ratio >= 2.0 && s.ours_max <= max), if s.ours_max <= max { "lower" } else { "higher" }),
+                )
+            }
+            None => ("-".into(), "-".into(), "-".into(), "-".into()),
+        };
+        let pca_ratio = s.ours as f64 / s.pca.zstd_bytes as f64;
+        println!(
+            "| {} | {} | {} | {:.2e} | {packed} | {packed_max} | {packed_ratio} | {packed_ok} | {} ({}) | {pca_ratio:.2}x | {} | {:.2}x | {} |",
+            s.name,
+            kb(s.ours as usize),
+            kb(s.meshopt as usize),
+            s.ours_max,
+            kb(s.pca.zstd_bytes),
+            s.pca.rank,
+            yes(pca_ratio <= 1.5),
+            s.meshopt as f64 / s.pca.zstd_bytes as f64,
+            s.parts
+        );
     }
     println!();
     println!("load average after: {}", load());
