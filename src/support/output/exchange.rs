@@ -2,19 +2,12 @@
 
 use std::path::Path;
 
+/// Exchange `a` and `b` atomically (`renameat2` with `RENAME_EXCHANGE`, through rustix's
+/// system-call layer: no dependency on the C library's wrapper, glibc >= 2.28).
 #[cfg(target_os = "linux")]
 pub(super) fn exchange_dirs(a: &Path, b: &Path) -> std::io::Result<()> {
-    use std::os::unix::ffi::OsStrExt;
-    let c = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes()).map_err(|_| std::io::Error::from(std::io::ErrorKind::InvalidInput));
-    let (a, b) = (c(a)?, c(b)?);
-    // SAFETY: two valid NUL-terminated paths; the raw syscall avoids depending on the C
-    // library's wrapper (glibc >= 2.28).
-    let r = unsafe { libc::syscall(libc::SYS_renameat2, libc::AT_FDCWD, a.as_ptr(), libc::AT_FDCWD, b.as_ptr(), libc::RENAME_EXCHANGE) };
-    if r == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::last_os_error())
-    }
+    use rustix::fs::{renameat_with, RenameFlags, CWD};
+    renameat_with(CWD, a, CWD, b, RenameFlags::EXCHANGE).map_err(std::io::Error::from)
 }
 
 #[cfg(not(target_os = "linux"))]
