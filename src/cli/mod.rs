@@ -255,7 +255,7 @@ pub(crate) fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
 }
 
 pub(crate) fn main() -> ExitCode {
-    // Before any thread starts, so every thread inherits the blocked signals.
+    // First, so that a signal at any later moment runs the cleanup.
     blendsim::support::interrupt::install();
     let start = Instant::now();
     let cli = Cli::parse();
