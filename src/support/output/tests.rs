@@ -7,9 +7,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("blendsim-output-{name}-{}", unique_suffix()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    // Kept: the test removes it when it is done.
+    tempfile::Builder::new().prefix(&format!("blendsim-output-{name}-")).tempdir().unwrap().keep()
 }
 
 fn listing(d: &Path) -> Vec<String> {
