@@ -203,6 +203,7 @@ pub(crate) fn refuse_warnings(warnings: &[String]) -> blendsim::Result<()> {
 /// A byte count as `--max-memory` takes it: a number with an optional unit. `K`, `M`, `G`, `T`
 /// and `KiB`..`TiB` are powers of 1024 (`4G`, `2GiB`); `KB`..`TB` are powers of 1000 (`512MB`);
 /// no unit or `B` is bytes. More than 2^64 bytes is refused, not wrapped.
+/// Kept rather than `bytesize`: it reads `4G` as 10^9 bytes, not 2^30, and not `1e3M`.
 pub(crate) fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim();
     // The unit is the trailing run of letters (`1e3M` is a number with an exponent, then `M`).
@@ -237,6 +238,7 @@ pub(crate) fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
 pub(crate) const MAX_SECONDS: f64 = 1e9;
 
 /// `--max-time`: seconds, or a number with `s`, `m` or `h`.
+/// Kept rather than `humantime`: it refuses a bare `600`, fractions (`0.05`) and exponents.
 pub(crate) fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
     let t = text.trim();
     let (number, scale) = match t.chars().last() {
@@ -255,7 +257,7 @@ pub(crate) fn parse_seconds(text: &str) -> std::result::Result<f64, String> {
 }
 
 pub(crate) fn main() -> ExitCode {
-    // Before any thread starts, so every thread inherits the blocked signals.
+    // First, so that a signal at any later moment runs the cleanup.
     blendsim::support::interrupt::install();
     let start = Instant::now();
     let cli = Cli::parse();

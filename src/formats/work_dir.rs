@@ -1,7 +1,10 @@
-//! Private temporary folders for the external processes (TetGen, usd-core's reader): named
-//! `blendsim-WHAT-PID-N`, removed when dropped, when the run is interrupted, and (once their
-//! process is gone) by the next run that makes one, so a killed run leaves nothing behind for
-//! long.
+//! Private temporary folders for the external processes (TetGen, usd-core's and Alembic's
+//! readers) and the glb read-back: named `blendsim-WHAT-PID-N`, removed when dropped, when the
+//! run is interrupted, and (once their process is gone) by the next run that makes one, so a
+//! killed run leaves nothing behind for long.
+//!
+//! Kept rather than `tempfile::TempDir`: its random, unowned names cannot be told dead by the
+//! next run; the PID in ours and the flock are what make that cleanup safe.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -173,8 +173,8 @@ fn duration(seconds: f64) -> String {
     }
 }
 
-/// `MemAvailable` of `/proc/meminfo`, in bytes. (Four lines: a system-information crate would
-/// bring a dozen dependencies for this one number.)
+/// `MemAvailable` of `/proc/meminfo`, in bytes.
+/// Kept rather than `sysinfo`: four lines here, a dozen dependencies there, for one number.
 pub(crate) fn available_memory() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;

@@ -67,11 +67,11 @@ mod tests {
 
     #[test]
     fn only_regular_files_are_read() {
-        let d = std::env::temp_dir().join(format!("blendsim-input-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
         std::fs::write(d.join("a.obj"), "v 0 0 0\n").unwrap();
         assert_eq!(read_text(&d.join("a.obj"), "the OBJ surface").unwrap(), "v 0 0 0\n");
-        let e = read_text(&d, "the OBJ surface").unwrap_err().to_string();
+        let e = read_text(d, "the OBJ surface").unwrap_err().to_string();
         assert!(e.contains("is a folder, not a regular file, so it cannot be read as the OBJ surface"), "{e}");
         let fifo = d.join("pipe.obj");
         let _ = std::fs::remove_file(&fifo);
@@ -83,6 +83,5 @@ mod tests {
         std::fs::write(d.join("latin1.txt"), b"caf\xe9").unwrap();
         let e = read_text(&d.join("latin1.txt"), "the selection").unwrap_err().to_string();
         assert!(e.contains("is not UTF-8 text (invalid byte at offset 3)"), "{e}");
-        std::fs::remove_dir_all(&d).unwrap();
     }
 }

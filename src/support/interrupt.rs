@@ -3,8 +3,8 @@
 //!
 //! Files and folders a run creates before it has succeeded (staging folders, temporaries,
 //! TetGen's work folder, a lock file) are registered here while they exist, and so are child
-//! processes. [`install`] (called once by the CLI, before any thread starts) blocks SIGINT,
-//! SIGTERM and SIGHUP in every thread and waits for them in a thread of its own, where the
+//! processes. [`install`] (called once by the CLI, before any thread starts) has SIGINT,
+//! SIGTERM and SIGHUP delivered to a thread of its own (signal-hook's iterator), where the
 //! cleanup runs in ordinary code: it kills the registered children's process groups, removes
 //! the registered paths, and dies by the same signal (so a shell or `make` sees the usual
 //! status). The commit of an output folder is a critical section (`critical`): a signal
@@ -123,44 +123,28 @@ pub fn settle() {
     }
 }
 
-/// Block SIGINT, SIGTERM and SIGHUP in this thread (and so in every thread started after) and
-/// handle them in a thread of their own. Call once, first thing in `main`.
+/// Handle SIGINT, SIGTERM and SIGHUP in a thread of their own (signal-hook's handler only
+/// wakes it: the cleanup runs there, in ordinary code). Call once, first thing in `main`.
 #[cfg(unix)]
 pub fn install() {
-    let set = signal_set();
-    // SAFETY: plain libc calls on a local, initialised signal set.
-    if unsafe { libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) } != 0 {
-        return;
-    }
-    let spawned = std::thread::Builder::new().name("blendsim-signals".into()).spawn(move || loop {
-        let mut signal = 0;
-        // SAFETY: sigwait on a valid set, writing to a local.
-        if unsafe { libc::sigwait(&set, &mut signal) } == 0 {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    // Without a handler thread the default actions stay: the run dies uncleaned rather than
+    // ignoring the signal.
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else { return };
+    let handle = signals.handle();
+    let spawned = std::thread::Builder::new().name("blendsim-signals".into()).spawn(move || {
+        if let Some(signal) = signals.forever().next() {
             stop(signal);
         }
     });
     if spawned.is_err() {
-        // No handler thread: restore the default behaviour rather than ignore signals.
-        // SAFETY: as above.
-        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+        // Unregisters the handlers: the default actions again.
+        handle.close();
     }
 }
 
 #[cfg(not(unix))]
 pub fn install() {}
-
-#[cfg(unix)]
-fn signal_set() -> libc::sigset_t {
-    // SAFETY: sigemptyset initialises the set before sigaddset uses it.
-    unsafe {
-        let mut set: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut set);
-        for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
-            libc::sigaddset(&mut set, s);
-        }
-        set
-    }
-}
 
 #[cfg(unix)]
 fn signal_name(signal: i32) -> &'static str {
@@ -183,16 +167,9 @@ fn stop(signal: i32) -> ! {
     let mut s = state();
     undo_all(&mut s);
     eprintln!("blendsim: stopped by {}; unfinished files were removed", signal_name(signal));
-    // SAFETY: restore the default action and deliver the signal to this thread, where it is
-    // unblocked, so the process ends with the status a shell expects.
-    unsafe {
-        libc::signal(signal, libc::SIG_DFL);
-        let mut only: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut only);
-        libc::sigaddset(&mut only, signal);
-        libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
-        libc::raise(signal);
-    }
+    // The default action, unblocked and raised: the process ends with the status a shell
+    // expects (for these three signals signal-hook aborts rather than return).
+    let _ = signal_hook::low_level::emulate_default_handler(signal);
     std::process::exit(128 + signal)
 }
 

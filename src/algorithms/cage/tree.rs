@@ -11,6 +11,9 @@
 //!
 //! Built top down by median splits along the longest axis of the triangle centroids; leaves
 //! hold at most [`LEAF`] triangles. Deterministic: no hashing, ties by triangle index.
+//!
+//! Kept rather than parry3d's tree: no crate's tree carries the clusters' dipoles the winding
+//! number needs, and it is not [`crate::algorithms::embed`]'s box tree (triangles, not boxes).
 
 use crate::algorithms::geometry::{add, cross, dot, norm, scale, sub, Bounds, Point, TriMesh};
 

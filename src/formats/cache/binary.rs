@@ -120,17 +120,16 @@ mod tests {
 
     #[test]
     fn a_fifo_is_refused_without_opening_it() {
-        let dir = std::env::temp_dir().join(format!("blendsim-binary-fifo-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let fifo = dir.join("anim.pc2");
         let status = std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
         assert!(status.success());
         // Opening the FIFO for reading would block this test forever.
         let s = open_regular(&fifo, "PC2 cache").unwrap_err().to_string();
         assert!(s.starts_with(&format!("{}: the PC2 cache is not a regular file", fifo.display())) && s.contains("(fix: "), "{s}");
-        let s = open_regular(&dir, "PC2 cache").unwrap_err().to_string();
+        let s = open_regular(dir, "PC2 cache").unwrap_err().to_string();
         assert!(s.contains("the PC2 cache is a folder"), "{s}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -66,10 +66,8 @@ pub(crate) mod tests {
 
     /// A fresh scratch folder for one test.
     pub fn scratch(name: &str) -> std::path::PathBuf {
-        let d = std::env::temp_dir().join(format!("blendsim-cache-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+        // Kept: the test removes it when it is done.
+        tempfile::Builder::new().prefix(&format!("blendsim-cache-{name}-")).tempdir().unwrap().keep()
     }
 
     /// An `n` x `n` grid in the xy plane, two triangles per square.

@@ -216,8 +216,8 @@ mod tests {
         assert!(decoded_size(Cursor::new(&bad_crc), "image/png").is_err());
         assert!(decoded_size(Cursor::new([0xff, 0xd8, 0xff, 0xe0, 0, 16, b'J', b'F']), "image/jpeg").is_err());
 
-        let dir = std::env::temp_dir().join(format!("blendsim-texture-size-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let load_one = |name: &str, bytes: &[u8]| {
             let p = dir.join(name);
             std::fs::write(&p, bytes).unwrap();
@@ -230,7 +230,6 @@ mod tests {
         assert!(e.contains("16385 x 1 pixels"), "{e}");
         let e = load_one("bad.png", &garbage).unwrap_err().to_string();
         assert!(e.contains("bad.png: is not a readable png image: "), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -238,12 +237,11 @@ mod tests {
         assert_eq!(mime_of(b"\x89PNG\r\n\x1a\n...."), Some("image/png"));
         assert_eq!(mime_of(&[0xff, 0xd8, 0xff, 0xe0]), Some("image/jpeg"));
         assert_eq!(mime_of(b"GIF89a"), None);
-        let dir = std::env::temp_dir().join(format!("blendsim-texture-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let gif = dir.join("t.gif");
         std::fs::write(&gif, b"GIF89a").unwrap();
         let e = load(&[Some(gif.to_string_lossy().into_owned())], &Budget::default()).unwrap_err().to_string();
         assert!(e.contains("t.gif") && e.contains("not a PNG or JPEG"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

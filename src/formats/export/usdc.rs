@@ -925,9 +925,8 @@ mod tests {
     }
 
     fn scratch(name: &str) -> std::path::PathBuf {
-        let d = std::env::temp_dir().join(format!("blendsim-usdc-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        d
+        // Kept: the test removes it when it is done.
+        tempfile::Builder::new().prefix(&format!("blendsim-usdc-{name}-")).tempdir().unwrap().keep()
     }
 
     /// usd-core reads our bytes as the layer our usda text holds (the test suite's checker).

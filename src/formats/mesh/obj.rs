@@ -359,7 +359,8 @@ mod tests {
 
     #[test]
     fn map_kd_of_the_mtl_gives_each_group_its_texture() {
-        let dir = std::env::temp_dir().join(format!("blendsim-obj-mtl-{}", std::process::id()));
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         std::fs::create_dir_all(dir.join("tex")).unwrap();
         std::fs::write(dir.join("tex/wood.png"), crate::formats::export::texture::png_claiming(1, 1)).unwrap();
         let obj = "mtllib a.mtl\nmtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\n\
@@ -378,7 +379,6 @@ mod tests {
         // No textures at all: the field stays empty (the stage file is as before).
         std::fs::write(dir.join("a.mtl"), "newmtl wood\nKd 1 0 0\n").unwrap();
         assert!(read(&dir.join("m.obj")).unwrap().attributes.unwrap().textures.is_empty());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     fn parse_err(text: &str) -> String {
@@ -511,10 +511,10 @@ mod tests {
         let missing = Path::new("/nonexistent/blendsim/k0.obj");
         let s = read(missing).unwrap_err().to_string();
         assert!(s.starts_with("/nonexistent/blendsim/k0.obj: cannot read the OBJ surface") && s.contains("(fix: "), "{s}");
-        let path = std::env::temp_dir().join(format!("blendsim-obj-test-{}.obj", std::process::id()));
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("k1.obj");
         std::fs::write(&path, b"# mod\xe8le\ng caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n").unwrap();
         let s = read(&path).unwrap_err().to_string();
-        std::fs::remove_file(&path).unwrap();
         let expected = "line 7: face has 2 vertices, needs at least 3 (fix: remove the line, or export edges as `l` lines";
         assert_eq!(s.split_once(": ").map(|(file, rest)| (file, rest.starts_with(expected))), Some((path.to_str().unwrap(), true)), "{s}");
     }

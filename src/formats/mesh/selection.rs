@@ -116,33 +116,33 @@ mod tests {
         assert!(s.contains("(1000000 bytes) is not a vertex index") && s.len() < 300, "{}", s.len());
     }
 
-    fn file(name: &str, text: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("blendsim-selection-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(name);
+    fn file(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+        let path = dir.path().join(name);
         std::fs::write(&path, text).unwrap();
         path
     }
 
     #[test]
     fn index_files_list_vertices_with_comments() {
-        let path = file("ends.txt", "# the ends\n0\n3  # top\n\n2\n");
+        let dir = tempfile::tempdir().unwrap();
+        let path = file(&dir, "ends.txt", "# the ends\n0\n3  # top\n\n2\n");
         assert_eq!(read(&path, 5).unwrap(), [true, false, true, true, false]);
-        let e = read(&file("far.txt", "1\n5\n"), 5).unwrap_err().to_string();
+        let e = read(&file(&dir, "far.txt", "1\n5\n"), 5).unwrap_err().to_string();
         assert!(e.contains("line 2: vertex 5 does not exist (the mesh has 5 vertices, indexed from 0)"), "{e}");
-        let e = read(&file("word.txt", "one\n"), 5).unwrap_err().to_string();
+        let e = read(&file(&dir, "word.txt", "one\n"), 5).unwrap_err().to_string();
         assert!(e.contains("line 1: `one` is not a vertex index"), "{e}");
     }
 
     #[test]
     fn dmat_files_flag_every_vertex() {
-        let path = file("tail.dmat", "1 4\n0\n1\n0.0\n1.0\n");
+        let dir = tempfile::tempdir().unwrap();
+        let path = file(&dir, "tail.dmat", "1 4\n0\n1\n0.0\n1.0\n");
         assert_eq!(read(&path, 4).unwrap(), [false, true, false, true]);
-        let e = read(&file("short.dmat", "1 4\n0\n1\n"), 4).unwrap_err().to_string();
+        let e = read(&file(&dir, "short.dmat", "1 4\n0\n1\n"), 4).unwrap_err().to_string();
         assert!(e.contains("has 2 values for 4 vertices"), "{e}");
-        let e = read(&file("wide.dmat", "3 4\n"), 4).unwrap_err().to_string();
+        let e = read(&file(&dir, "wide.dmat", "3 4\n"), 4).unwrap_err().to_string();
         assert!(e.contains("is a 4x3 matrix but the mesh has 4 vertices"), "{e}");
-        let e = read(&file("bare.dmat", "0\n1\n"), 2).unwrap_err().to_string();
+        let e = read(&file(&dir, "bare.dmat", "0\n1\n"), 2).unwrap_err().to_string();
         assert!(e.contains("has no \"cols rows\" header"), "{e}");
     }
 }

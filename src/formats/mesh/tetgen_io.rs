@@ -252,8 +252,8 @@ mod tests {
 
     #[test]
     fn read_takes_either_file_orients_and_names_the_file() {
-        let dir = std::env::temp_dir().join(format!("blendsim-tetgen-io-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         std::fs::write(dir.join("body.1.node"), NODE).unwrap();
         std::fs::write(dir.join("body.1.ele"), ELE).unwrap();
         for name in ["body.1.node", "body.1.ele"] {
@@ -267,7 +267,6 @@ mod tests {
         std::fs::write(dir.join("alone.node"), NODE).unwrap();
         let missing = read(&dir.join("alone.node")).unwrap_err().to_string();
         assert!(missing.contains("alone.ele: cannot read the TetGen tetrahedra") && missing.contains("(fix: "), "{missing}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

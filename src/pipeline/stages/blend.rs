@@ -337,8 +337,8 @@ mod tests {
 
     #[test]
     fn weights_files_take_commas_blanks_and_comments() {
-        let dir = std::env::temp_dir().join(format!("blendsim-weights-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let path = dir.join("w.txt");
         std::fs::write(&path, "# header\n0.2, 0.8\n\n  1 0   # end\n0.5\t0.5\n").unwrap();
         let w = read_weights(&Weights::File(path.clone()), 2).unwrap();
@@ -347,6 +347,5 @@ mod tests {
         assert!(read_weights(&Weights::File(path.clone()), 2).unwrap_err().to_string().contains("has no weights"));
         let e = read_weights(&Weights::One(vec![0.5, 0.6]), 2).unwrap_err();
         assert!(e.to_string().starts_with("--weights: the weights 0.5,0.6 sum to 1.1"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -58,18 +58,18 @@ pub fn run<S: AsRef<OsStr>>(cwd: &Path, args: &[S]) -> Run {
     run_env(cwd, args, &[])
 }
 
-/// A fresh folder `$TMPDIR/blendsim-NAME-PID`, removed when the test succeeds and kept (with a
-/// note on stderr) when it fails, so its files can be inspected.
+/// A fresh folder `$TMPDIR/blendsim-NAME-XXXXXX`, removed when the test succeeds and kept (with
+/// a note on stderr) when it fails, so its files can be inspected.
 pub struct TempDir {
     pub path: PathBuf,
+    dir: Option<tempfile::TempDir>,
 }
 
 impl TempDir {
     pub fn new(name: &str) -> TempDir {
-        let path = std::env::temp_dir().join(format!("blendsim-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        TempDir { path }
+        let dir =
+            tempfile::Builder::new().prefix(&format!("blendsim-{name}-")).tempdir().unwrap_or_else(|e| panic!("a temporary folder for {name}: {e}"));
+        TempDir { path: dir.path().to_path_buf(), dir: Some(dir) }
     }
 
     pub fn join(&self, rel: impl AsRef<Path>) -> PathBuf {
@@ -80,9 +80,9 @@ impl TempDir {
 impl Drop for TempDir {
     fn drop(&mut self) {
         if std::thread::panicking() {
-            eprintln!("kept for inspection: {}", self.path.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.path);
+            if let Some(dir) = self.dir.take() {
+                eprintln!("kept for inspection: {}", dir.keep().display());
+            }
         }
     }
 }

@@ -92,17 +92,14 @@ pub fn same_layer_as_usda(usdc: &Path, anim: &Animation) -> Value {
     let summary = if beside.is_file() {
         check_same_layer(&beside, usdc)
     } else {
-        let scratch =
-            std::env::temp_dir().join(format!("blendsim-same-layer-{}-{}", std::process::id(), usdc.file_name().unwrap().to_string_lossy()));
-        let _ = std::fs::remove_dir_all(&scratch);
+        let folder = tempfile::Builder::new().prefix("blendsim-same-layer-").tempdir().unwrap();
+        let scratch = folder.path().join("usda");
         let mut usda_only = anim.clone();
         usda_only.scene.export.formats = vec![Format::Usda];
         let mut staging = blendsim::support::output::Staging::new(&scratch).unwrap();
         blendsim::pipeline::stages::export::export(&usda_only, &blendsim::support::budget::Budget::default(), &mut staging).unwrap();
         staging.commit().unwrap();
-        let summary = check_same_layer(&scratch.join(beside.file_name().unwrap()), usdc);
-        std::fs::remove_dir_all(&scratch).unwrap();
-        summary
+        check_same_layer(&scratch.join(beside.file_name().unwrap()), usdc)
     };
     eprintln!("{}: same layer as its usda: {summary}", usdc.display());
     assert_eq!(summary["ok"], true, "{}: {summary}", usdc.display());

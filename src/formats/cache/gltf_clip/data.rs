@@ -220,33 +220,32 @@ fn glb_chunks(path: &Path, file: &mut File, len: u64, header: &[u8]) -> Result<(
     Ok((json, Some((at + 8, bin_len))))
 }
 
-/// The bytes of a `data:[...];base64,` URI, if it is one.
+/// The bytes of a `data:[...];base64,` URI, if it is one. Lenient as glTF readers are: the
+/// URL-safe digits are read as the standard ones, padding is optional and stray low bits of
+/// the last digit are ignored.
 fn decode_data_uri(uri: &str) -> Option<Vec<u8>> {
+    use base64::engine::{general_purpose::GeneralPurpose, DecodePaddingMode, GeneralPurposeConfig};
+    use base64::Engine as _;
+    const LENIENT: GeneralPurpose = GeneralPurpose::new(
+        &base64::alphabet::STANDARD,
+        GeneralPurposeConfig::new().with_decode_padding_mode(DecodePaddingMode::Indifferent).with_decode_allow_trailing_bits(true),
+    );
     let (meta, data) = uri.strip_prefix("data:")?.split_once(',')?;
     if !meta.ends_with(";base64") {
         return None;
     }
-    let value = |c: u8| match c {
-        b'A'..=b'Z' => Some(c - b'A'),
-        b'a'..=b'z' => Some(c - b'a' + 26),
-        b'0'..=b'9' => Some(c - b'0' + 52),
-        b'+' | b'-' => Some(62),
-        b'/' | b'_' => Some(63),
-        _ => None,
-    };
-    let digits = data.trim_end_matches('=').as_bytes();
-    let mut out = Vec::with_capacity(digits.len() * 3 / 4);
-    let (mut acc, mut bits) = (0u32, 0u32);
-    for &c in digits {
-        acc = (acc << 6) | value(c)? as u32;
-        bits += 6;
-        if bits >= 8 {
-            bits -= 8;
-            out.push((acc >> bits) as u8);
-            acc &= (1 << bits) - 1;
-        }
+    if data.contains(['-', '_']) {
+        let standard: Vec<u8> = data
+            .bytes()
+            .map(|c| match c {
+                b'-' => b'+',
+                b'_' => b'/',
+                c => c,
+            })
+            .collect();
+        return LENIENT.decode(standard).ok();
     }
-    Some(out)
+    LENIENT.decode(data).ok()
 }
 
 /// A relative URI with `%XX` escapes decoded; `None` for absolute or non-file URIs.
@@ -535,6 +534,9 @@ mod tests {
         assert_eq!(decode_data_uri("data:application/gltf-buffer;base64,/w"), Some(vec![255]));
         assert_eq!(decode_data_uri("data:text/plain,hello"), None);
         assert_eq!(decode_data_uri("data:;base64,a*b"), None);
+        assert_eq!(decode_data_uri("data:;base64,-_8="), Some(vec![0xfb, 0xff]), "URL-safe digits");
+        assert_eq!(decode_data_uri("data:;base64,/x=="), Some(vec![255]), "stray low bits");
+        assert_eq!(decode_data_uri("data:;base64,AAECA"), None, "a lone last digit is no byte");
         assert_eq!(percent_decode("my%20clip.bin"), Some(PathBuf::from("my clip.bin")));
         assert_eq!(percent_decode("http://example.com/a.bin"), None);
         assert_eq!(percent_decode("bad%2"), None);

@@ -350,12 +350,10 @@ mod fuzz {
             if let Some(at) = truncate {
                 bytes.truncate(at.index(bytes.len()));
             }
-            let dir = std::env::temp_dir().join(format!("blendsim-gltf-fuzz-{}", std::process::id()));
-            std::fs::create_dir_all(&dir).unwrap();
-            let path = dir.join(format!("{:?}.glb", std::thread::current().id()).replace(['(', ')'], ""));
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("fuzz.glb");
             std::fs::write(&path, &bytes).unwrap();
             exercise_clip(&path);
-            std::fs::remove_dir_all(&dir).unwrap();
         }
     }
 }

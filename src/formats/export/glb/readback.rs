@@ -8,6 +8,7 @@ use serde_json::Value;
 use super::{glb, meshopt, Placement};
 use crate::algorithms::geometry::Point;
 use crate::formats::cache::gltf_clip;
+use crate::formats::work_dir::WorkDir;
 use crate::support::error::{Error, Result};
 
 const EXT: &str = "EXT_meshopt_compression";
@@ -96,13 +97,12 @@ pub(crate) fn played_error(
     } else {
         bytes
     };
-    static SERIAL: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let path = std::env::temp_dir().join(format!("blendsim-readback-{}-{serial}.glb", std::process::id()));
+    // A private folder like the external readers': removed on a signal too, and by the next
+    // run after a kill.
+    let dir = WorkDir::create("readback").map_err(|e| readback_failed(format!("a private folder for the read-back: {e}")))?;
+    let path = dir.path.join("readback.glb");
     std::fs::write(&path, bytes).map_err(|e| readback_failed(format!("{}: {e}", path.display())))?;
-    let result = played_error_at(&path, (times, fps), expected, placement, diagonal);
-    let _ = std::fs::remove_file(&path);
-    result
+    played_error_at(&path, (times, fps), expected, placement, diagonal)
 }
 
 /// `played_error` of the glb file at `path` (the staged file, written as it was made): read in

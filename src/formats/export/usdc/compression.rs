@@ -8,6 +8,11 @@
 //! - [`compressed_ints`]: 32-bit integers as differences to their predecessor, each tagged by a
 //!   2-bit code (the most common difference, or an 8-, 16- or 32-bit value), then
 //!   [`fast_compression`].
+//!
+//! Kept rather than `lz4_flex`: another matcher gives other bytes, and the usdc files of the
+//! demo and the paper scenes are pinned byte for byte, for little gain: on the demo's twist.usdc
+//! the reference LZ4 library's fast mode writes the structural sections in 1,498 bytes against
+//! our 1,512 (of a 30,344-byte file), its HC level 9 in 1,417.
 
 use std::collections::HashMap;
 
