@@ -41,7 +41,7 @@ use std::process::Command;
 use blendsim::algorithms::geometry::{Axis, Point, TriMesh};
 use blendsim::algorithms::procedural::{prism, twist, Twist};
 use blendsim::formats::mesh::obj;
-use blendsim::pipeline::scene::Scene;
+use blendsim::pipeline::scene::{BakeCounts, Scene, StepChoice};
 
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
@@ -177,6 +177,36 @@ fn bake_with(bin: &Path, scene: &Path, out: &Path, args: &[&str]) -> (f64, u64, 
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     let cpu = ["User time (seconds): ", "System time (seconds): "].iter().map(|f| field(f).parse::<f64>().unwrap_or(0.0)).sum();
     (seconds, peak, report, cpu)
+}
+
+/// The whole-bake model's counts of a bake, from its report: the body's nodes, tets and
+/// unknowns (the held positions are the rest of 2 slots x keys x nodes, the same set at every
+/// key), and the global step the cost model chose.
+fn counts(report: &serde_json::Value, keys: usize) -> BakeCounts {
+    let count = |v: &serde_json::Value| v.as_u64().unwrap_or(0) as usize;
+    let (vertices, nodes, tets, unknowns) =
+        (count(&report["vertices"]), count(&report["tet_nodes"]), count(&report["tets"]), count(&report["solver"]["unknowns"]));
+    let held = (2 * keys * nodes).saturating_sub(unknowns);
+    let step = match report["solver"]["linear_solver"].as_str() {
+        Some("direct") => StepChoice::Direct,
+        Some("modal") => StepChoice::Modal,
+        Some("iterative") => StepChoice::Iterative,
+        _ => StepChoice::None,
+    };
+    let caged = !report["cage"].is_null();
+    BakeCounts {
+        keys,
+        surface_vertices: vertices,
+        exported_vertices: vertices,
+        nodes,
+        tets,
+        unknowns,
+        held,
+        held_nodes: held / keys.max(1),
+        caged,
+        tetgen: !caged,
+        step,
+    }
 }
 
 /// The global step's solver, with the CG solves and their mean iterations when iterative.
@@ -348,11 +378,12 @@ fn main() {
         let nodes = if cage.is_null() { format!("{}", report["tet_nodes"]) } else { format!("{} (cage)", report["tet_nodes"]) };
         let iterations = format!("{}{}", solver["iterations"], if solver["converged"].as_bool() == Some(false) { " (cap)" } else { "" });
         let loss = report["volume"]["animation"]["in_between_loss"].as_f64().map_or("-".into(), |l| format!("{:.2}%", 100.0 * l));
-        // The bake's own estimate before it runs (`Scene::memory_estimate`: what
-        // `--max-memory` is checked against), of the scene as baked.
+        // The bake's own whole-bake estimate (`Scene::memory_estimate`, what `--max-memory`
+        // refuses a bake over), from the counts known before each phase: the body's and the
+        // global step the cost model chose, as the report gives them.
         let parsed = Scene::parse(&std::fs::read_to_string(&scene).unwrap()).unwrap();
         let times: Vec<f64> = (0..case.keys).map(|k| 0.5 * k as f64).collect();
-        let estimate = parsed.memory_estimate(&times, report["vertices"].as_u64().unwrap() as usize, report["tets"].as_u64().unwrap() as usize);
+        let estimate = parsed.memory_estimate(&times, &counts(report, case.keys));
         println!(
             "| {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {:.3} + {:.3} | {:.1} | {:.1} | {:.0} | {:.0} ({:.2}) | {} | {} | {} |",
             case.name,

@@ -7,17 +7,18 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::common::cli::{energies, read_json, run, TempDir};
+use crate::common::cli::{energies, read_json, run, run_env, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
 
 fn demo_scene() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/demo/twist.toml")
 }
 
-/// The demo with 2 samples per interval, copied into `dir`: its spacetime samples (1.8 MB
-/// estimated) and frames (0.4 MB) fit in a 3 MB budget that its factor does not, so
-/// `--max-memory 3M` exercises the fallback. (`--max-memory` is the one budget of every
-/// estimate, so the demo itself, at 5.4 MB of samples, is refused below that.) `global_step`:
+/// The demo with 2 samples per interval, copied into `dir`: its whole bake without the global
+/// step (about 6 MB estimated: the samples, the solver's state) fits in a 10 MiB budget, and
+/// what that leaves the global step (about 4 MB) holds its modes (1.1 MB predicted) but not
+/// its factor (6.3 MB), so `--max-memory 10M` exercises the fallback. (`--max-memory` is the
+/// one budget of every estimate, so the demo itself is refused below its own.) `global_step`:
 /// the scene's `[solver] global_step`.
 fn lean_demo(dir: &TempDir, global_step: &str) -> PathBuf {
     let from = demo_scene().parent().unwrap().to_path_buf();
@@ -49,8 +50,8 @@ fn over_the_memory_budget_a_step_that_fits_gives_the_direct_result() {
     let direct = bake(&dir, "direct", "direct", &[]);
     // The factor (6.3 MB predicted) is over the budget; the modes (1.1 MB) fit and are the
     // faster; the iterative step is asked for, under the same budget.
-    let fitting = bake(&dir, "fitting", "auto", &["--max-memory", "3M"]);
-    let iterative = bake(&dir, "iterative", "iterative", &["--max-memory", "3M"]);
+    let fitting = bake(&dir, "fitting", "auto", &["--max-memory", "10M"]);
+    let iterative = bake(&dir, "iterative", "iterative", &["--max-memory", "10M"]);
     assert_eq!(direct["solver"]["linear_solver"], "direct");
     assert_eq!(fitting["solver"]["linear_solver"], "modal");
     assert_eq!(iterative["solver"]["linear_solver"], "iterative");
@@ -74,7 +75,7 @@ fn over_the_memory_budget_a_step_that_fits_gives_the_direct_result() {
     let scene = lean_demo(&dir, "auto");
     run(&dir.path, &["import", scene.to_str().unwrap(), "-o", "keys.json"]).success();
     run(&dir.path, &["tetrahedralize", "keys.json", "-o", "body.json"]).success();
-    run(&dir.path, &["solve", "body.json", "-o", "solution.json", "--max-memory", "3M"]).success();
+    run(&dir.path, &["solve", "body.json", "-o", "solution.json", "--max-memory", "10M"]).success();
     assert_eq!(read_json(&dir.join("solution.json"))["data"]["log"]["linear_solver"], "modal");
     // A malformed amount is a usage error (exit 2) that says what to give.
     for bad in ["abc", "0", "4X"] {
@@ -82,6 +83,32 @@ fn over_the_memory_budget_a_step_that_fits_gives_the_direct_result() {
         assert_eq!(r.code, Some(2), "{bad}: {r}");
         assert!(r.stderr.contains("--max-memory") && r.stderr.contains("4G"), "{bad}: {r}");
     }
+    assert!(!dir.join("never").exists());
+}
+
+#[test]
+fn a_bake_whose_estimate_is_over_the_budget_is_refused_before_tetgen() {
+    // The demo's whole bake is estimated before TetGen at about 4 MB (its solve on the
+    // surface's 128 vertices, the least TetGen's body can be), over a 3 MiB budget that its
+    // frames and samples alone fit in. The refusal comes before TetGen starts (the program
+    // named here does not exist) and writes nothing.
+    let dir = TempDir::new("budget-whole-bake");
+    let scene = demo_scene();
+    let env = [("BLENDSIM_TETGEN", std::ffi::OsStr::new("/nonexistent/tetgen"))];
+    let r = run_env(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-memory", "3M"], &env);
+    assert_eq!(r.code, Some(1), "{r}");
+    assert_eq!(r.stderr.lines().count(), 1, "{r}");
+    assert!(
+        r.stderr.contains("twist.toml: the scene would need about ")
+            && r.stderr.contains(" MB of memory for the whole bake (its peak in the solve, on about 128 tet nodes and 5 keys)"),
+        "{r}"
+    );
+    assert!(r.stderr.contains("more than the --max-memory budget of 3.1 MB") && r.stderr.contains("raise [tet] max_volume"), "{r}");
+    assert!(!r.stderr.contains("tetgen"), "{r}");
+    assert!(!dir.join("never").exists());
+    // Within the budget, the same refusal does not come: TetGen is the next thing run.
+    let r = run_env(&dir.path, &["bake", scene.to_str().unwrap(), "--out", "never", "--max-memory", "1T"], &env);
+    assert!(r.code == Some(1) && r.stderr.contains("is not installed") && !r.stderr.contains("whole bake"), "{r}");
     assert!(!dir.join("never").exists());
 }
 

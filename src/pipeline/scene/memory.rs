@@ -17,14 +17,9 @@ impl Scene {
         budget.check_samples(self.solver.samples, times.len().saturating_sub(1), tets)
     }
 
-    /// The bytes `Scene::check_resources` estimates: the frames' and the samples' terms.
-    pub fn memory_estimate(&self, times: &[f64], vertices: usize, tets: usize) -> f64 {
-        let frames = match (times.first(), times.last()) {
-            (Some(start), Some(end)) => {
-                crate::support::budget::frames_bytes(crate::support::budget::frame_count(*start, *end, self.fps), vertices, self.export.full_frame)
-            }
-            _ => 0.0,
-        };
-        frames + crate::support::budget::samples_bytes(self.solver.samples, times.len().saturating_sub(1), tets)
+    /// The whole bake's estimated peak bytes with keys at `times` and these counts: the largest
+    /// phase of `memory_model::phase_bytes` (what `--max-memory` refuses a bake over).
+    pub fn memory_estimate(&self, times: &[f64], counts: &super::BakeCounts) -> f64 {
+        super::memory_model::phase_bytes(self, times, counts).peak().1
     }
 }

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 use super::key_meshes::{resolve_selection, KeyMeshes};
 use crate::algorithms::geometry::{self, surface, Point};
 use crate::formats::mesh;
+use crate::pipeline::scene::memory_model::{self, BakeCounts};
 use crate::pipeline::scene::{SceneFile, Selection};
 use crate::pipeline::stage_file::{Keyframes, Shape, VertexSet};
 use crate::support::budget::Budget;
@@ -94,6 +95,14 @@ pub fn import(scene_file: &SceneFile, budget: &Budget) -> Result<Keyframes> {
         fixed.insert(k + 1, fixed[k].clone());
         fixed_velocity.insert(k + 1, fixed_velocity[k].clone());
     }
+    // The whole bake's estimate, the body's counts predicted, before TetGen starts.
+    let mesh = match &rest {
+        Shape::Surface(_) => None,
+        Shape::Volume(v) => Some((v.positions.len(), v.tets.len())),
+    };
+    let held: Vec<usize> = fixed.iter().map(VertexSet::len).collect();
+    let counts = BakeCounts::before_tetgen(scene, rest_points.len(), mesh, &held, vertices);
+    memory_model::check(scene, &times, &counts, budget, false)?;
     Ok(Keyframes {
         scene: scene.clone(),
         rest_source: rest_source.display().to_string(),

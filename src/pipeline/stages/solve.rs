@@ -21,6 +21,7 @@ use crate::algorithms::spacetime::solver;
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::algorithms::spacetime::unknowns::KeyConstraints;
 use crate::pipeline::report::guard_rails::{code, coded};
+use crate::pipeline::scene::memory_model::{self, BakeCounts, StepChoice};
 use crate::pipeline::scene::{Method, ObstacleSpec, Scene};
 use crate::pipeline::stage_file::{Body, KeyPoses, Solution, SolverLog};
 use crate::support::budget::Budget;
@@ -37,6 +38,27 @@ pub fn solve(body: &Body, method: Option<Method>, progress: &Progress) -> Result
 /// global step is solved iteratively, to the same solution within the solver's tolerance.
 pub fn solve_within(body: &Body, method: Option<Method>, budget: &Budget, progress: &Progress) -> Result<Solution> {
     solve_starting(body, method, budget, progress, None)
+}
+
+/// The whole-bake model's counts of `body` before its solve: its own nodes, tets and held
+/// positions; the global step as forced (else the cost model's, within what the rest leaves).
+fn body_counts(body: &Body) -> BakeCounts {
+    let (nodes, tets) = body.mesh.as_ref().map_or((0, 0), |m| (m.positions.len(), m.tets.len()));
+    let keys = body.keys.times.len();
+    let held: usize = body.keys.fixed.iter().map(|f| f.len()).sum();
+    BakeCounts {
+        keys,
+        surface_vertices: body.surface.positions.len(),
+        exported_vertices: body.surface.positions.len(),
+        nodes,
+        tets,
+        unknowns: (2 * keys * nodes).saturating_sub(held),
+        held,
+        held_nodes: body.keys.fixed.iter().map(|f| f.len()).max().unwrap_or(0),
+        caged: body.cage.is_some(),
+        tetgen: false,
+        step: StepChoice::of(&body.scene.solver),
+    }
 }
 
 /// [`solve_within`], a spacetime solve starting from `start` when given (an earlier bake's
@@ -64,8 +86,11 @@ pub fn solve_starting(body: &Body, method: Option<Method>, budget: &Budget, prog
         }
     };
     scene.check_resources(&body.keys.times, body.surface.positions.len(), tets.tets.len(), budget)?;
+    let counts = body_counts(&body);
+    memory_model::check(scene, &body.keys.times, &counts, budget, true)?;
     let elastic = Elastic::new(tets, &super::elastic_material(scene))?;
-    let settings = Settings { budget: *budget, ..settings(scene) };
+    // The global step's cost model chooses within what the solve's other arrays leave.
+    let settings = Settings { budget: memory_model::step_budget(scene, &body.keys.times, &counts, budget), ..settings(scene) };
     let keys = key_constraints(&body.keys);
     let input_times = keys.times.clone();
     let (trajectory, log) = match scene.solver.method {
