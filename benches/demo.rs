@@ -145,8 +145,8 @@ fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let repeats: usize = std::env::var("REPEATS").ok().and_then(|r| r.parse().ok()).unwrap_or(5);
     let bin = root.join("target/release/blendsim");
-    let scratch = std::env::temp_dir().join(format!("blendsim-bench-demo-{}", std::process::id()));
-    let out = |name: &str| -> PathBuf { scratch.join(name) };
+    let scratch = tempfile::Builder::new().prefix("blendsim-bench-demo-").tempdir().expect("a scratch folder");
+    let out = |name: &str| -> PathBuf { scratch.path().join(name) };
     let python = std::env::var_os("BLENDSIM_PYTHON").unwrap_or_else(|| "python3".into());
     println!("demo bake ({SCENE}), medians of {repeats}; {} rayon threads; load average {}", rayon::current_num_threads(), load());
     println!();
@@ -335,5 +335,4 @@ fn main() {
     }
     println!();
     println!("load average after: {}", load());
-    let _ = std::fs::remove_dir_all(&scratch);
 }

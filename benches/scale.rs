@@ -328,16 +328,15 @@ fn main() {
     // A word picks the rows whose name contains it; an extra row only by its whole name.
     let chosen =
         |c: &&Case| if filters.is_empty() { !c.extra } else { filters.iter().any(|f| c.name == f || (!c.extra && c.name.contains(f.as_str()))) };
-    let scratch = std::env::temp_dir().join(format!("blendsim-bench-scale-{}", std::process::id()));
+    let folder = tempfile::Builder::new().prefix("blendsim-bench-scale-").disable_cleanup(keep).tempdir().expect("a scratch folder");
+    let scratch = folder.path();
     let iterations: Vec<usize> = std::env::var("SCALE_ITERATIONS").unwrap_or_default().split(',').filter_map(|v| v.trim().parse().ok()).collect();
     if !iterations.is_empty() {
         assert!(iterations.len() == 2 && iterations[0] < iterations[1], "SCALE_ITERATIONS=FEW,MANY (two increasing counts)");
         let other = std::env::var_os("SCALE_OTHER").map(PathBuf::from);
-        per_iteration(cases.iter().filter(chosen), [iterations[0], iterations[1]], other.as_deref(), repeats, &scratch);
+        per_iteration(cases.iter().filter(chosen), [iterations[0], iterations[1]], other.as_deref(), repeats, scratch);
         if keep {
             println!("\nscenes kept in {}", scratch.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&scratch);
         }
         return;
     }
@@ -411,8 +410,6 @@ fn main() {
     }
     if keep {
         println!("\nscenes kept in {}", scratch.display());
-    } else {
-        let _ = std::fs::remove_dir_all(&scratch);
     }
 }
 

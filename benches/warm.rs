@@ -125,7 +125,8 @@ fn main() {
     let repeats: usize = std::env::var("REPEATS").ok().and_then(|r| r.parse().ok()).unwrap_or(5);
     let bin = root.join("target/release/blendsim");
     assert!(bin.is_file(), "{} missing: `cargo build --release` first", bin.display());
-    let scratch = std::env::temp_dir().join(format!("blendsim-bench-warm-{}", std::process::id()));
+    let folder = tempfile::Builder::new().prefix("blendsim-bench-warm-").tempdir().expect("a scratch folder");
+    let scratch = folder.path();
     // A large edit (a sixth of the key's twist) and a touch-up.
     let mut cases = vec![
         demo(root, scratch.join("demo"), 100.0, "demo (left key 120 -> 100 degrees)"),
@@ -179,5 +180,4 @@ fn main() {
     }
     println!();
     println!("load average after: {}", load());
-    let _ = std::fs::remove_dir_all(&scratch);
 }

@@ -127,13 +127,8 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
     use blendsim::formats::mesh::obj;
     let held_surface = faces.is_none();
     let keys = 20;
-    let dir = std::env::temp_dir().join(format!(
-        "blendsim-twenty-keys-{}-{}-{held_surface}-{}",
-        std::process::id(),
-        divisions[0],
-        faces.map_or(0, <[f64]>::len)
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
+    let folder = tempfile::Builder::new().prefix("blendsim-twenty-keys-").tempdir().expect("a scratch folder");
+    let dir = folder.path();
     let rest = procedural::prism([1.2, 3.6, 1.2], divisions);
     let height = rest.positions.iter().map(|p| p[1]).fold(0.0, f64::max);
     let pose = |degrees: f64, bend: f64| -> Vec<Point> {
@@ -171,7 +166,5 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
     );
     std::fs::write(dir.join("scene.toml"), text).unwrap();
     let scene = SceneFile::load(&dir.join("scene.toml")).expect("scene loads");
-    let body = Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize");
-    std::fs::remove_dir_all(&dir).ok();
-    body
+    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
 }

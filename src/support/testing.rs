@@ -4,17 +4,33 @@
 
 use std::path::{Path, PathBuf};
 
-/// A small deterministic generator of test data (xorshift).
-pub struct Rng(pub u64);
+/// The one deterministic generator of the unit tests' random data: SplitMix64 (Steele, Lea and
+/// Flood, 2014), whose every seed, 0 included, starts a well-mixed sequence.
+pub struct Rng(u64);
 
 impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[lo, hi)`: the top 53 bits of [`Rng::next_u64`] as a fraction.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+
     /// Uniform in [-1, 1).
     pub fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        self.uniform(-1.0, 1.0)
     }
+
     /// A 3x3 matrix of [`Rng::next`] entries.
     pub fn mat(&mut self) -> [[f64; 3]; 3] {
         [[self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()], [self.next(), self.next(), self.next()]]

@@ -197,18 +197,15 @@ fn build_node(boxes: &[Bounds], centers: &[Point], items: &mut [u32], offset: us
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::support::testing::Rng;
 
     /// Deterministic pseudo-random boxes of assorted sizes.
     fn boxes(count: usize) -> Vec<Bounds> {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Rng::new(1);
         (0..count)
             .map(|_| {
-                let c: Point = [next() * 10.0, next() * 10.0, next() * 3.0];
-                let h: Point = [next(), next(), next()];
+                let c: Point = [rng.uniform(0.0, 10.0), rng.uniform(0.0, 10.0), rng.uniform(0.0, 3.0)];
+                let h: Point = [rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0)];
                 Bounds { lo: std::array::from_fn(|d| c[d] - h[d]), hi: std::array::from_fn(|d| c[d] + h[d]) }
             })
             .collect()

@@ -343,38 +343,27 @@ mod tests {
     use super::*;
     use crate::algorithms::geometry::{add, tet_signed_volume};
 
-    /// SplitMix64: a tiny deterministic generator for test data.
-    struct Rng(u64);
+    use crate::support::testing::Rng;
 
-    impl Rng {
-        fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            z ^ (z >> 31)
-        }
+    /// The draws these tests make beyond the shared generator's.
+    trait Draws {
+        fn index(&mut self, n: usize) -> usize;
+        fn point(&mut self, lo: Point, hi: Point) -> Point;
+        /// `N` non-negative weights summing to 1.
+        fn weights<const N: usize>(&mut self) -> [f64; N];
+    }
 
-        /// Uniform in [0, 1).
-        fn unit(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        fn range(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * self.unit()
-        }
-
+    impl Draws for Rng {
         fn index(&mut self, n: usize) -> usize {
             (self.next_u64() % n as u64) as usize
         }
 
         fn point(&mut self, lo: Point, hi: Point) -> Point {
-            std::array::from_fn(|d| self.range(lo[d], hi[d]))
+            std::array::from_fn(|d| self.uniform(lo[d], hi[d]))
         }
 
-        /// `N` non-negative weights summing to 1.
         fn weights<const N: usize>(&mut self) -> [f64; N] {
-            let w: [f64; N] = std::array::from_fn(|_| self.range(0.01, 1.0));
+            let w: [f64; N] = std::array::from_fn(|_| self.uniform(0.01, 1.0));
             let s: f64 = w.iter().sum();
             w.map(|x| x / s)
         }
@@ -391,7 +380,7 @@ mod tests {
             for j in 0..=ny {
                 for i in 0..=nx {
                     let x = [i, j, k].map(|c| c as f64 * h);
-                    positions.push(std::array::from_fn(|d| origin[d] + x[d] + jitter * h * rng.range(-1.0, 1.0)));
+                    positions.push(std::array::from_fn(|d| origin[d] + x[d] + jitter * h * rng.uniform(-1.0, 1.0)));
                 }
             }
         }
@@ -421,7 +410,7 @@ mod tests {
     }
 
     fn jittered_grid(cells: [usize; 3], seed: u64) -> TetMesh {
-        grid(cells, [-0.3, 0.2, 1.0], 0.25, 0.1, &mut Rng(seed))
+        grid(cells, [-0.3, 0.2, 1.0], 0.25, 0.1, &mut Rng::new(seed))
     }
 
     /// A fixed rotation, so that points built on rotated features are only on them up to
@@ -445,7 +434,7 @@ mod tests {
             let x = corners(mesh, rng.index(n) as u32);
             let (i, j) = (rng.index(4), rng.index(3));
             let j = if j >= i { j + 1 } else { j };
-            let t = rng.unit();
+            let t = rng.uniform(0.0, 1.0);
             points.push(std::array::from_fn(|d| (1.0 - t) * x[i][d] + t * x[j][d]));
         }
         for _ in 0..total / 7 {
@@ -539,7 +528,7 @@ mod tests {
 
     #[test]
     fn closest_on_triangle_edges_and_vertices_ignore_vertex_order() {
-        let mut rng = Rng(17);
+        let mut rng = Rng::new(17);
         let mut on_features = 0;
         for _ in 0..20_000 {
             let tri: [Point; 3] = std::array::from_fn(|_| rng.point([-1.0; 3], [1.0; 3]));
@@ -559,7 +548,7 @@ mod tests {
 
     #[test]
     fn closest_on_triangle_is_the_projection() {
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         for _ in 0..20_000 {
             let tri: [Point; 3] = std::array::from_fn(|_| rng.point([-1.0; 3], [1.0; 3]));
             if norm(cross(sub(tri[1], tri[0]), sub(tri[2], tri[0]))) < 1e-3 {
@@ -575,7 +564,7 @@ mod tests {
 
     #[test]
     fn closest_on_tet_is_the_projection() {
-        let mut rng = Rng(11);
+        let mut rng = Rng::new(11);
         let ids = [4, 9, 2, 7];
         let (mut inside, mut outside) = (0, 0);
         for _ in 0..20_000 {
@@ -612,7 +601,7 @@ mod tests {
         // Two tets sharing a face see it in opposite orientations, in any vertex order: their
         // sub-volumes for it must be exact negatives, or a point on the face could be outside
         // both.
-        let mut rng = Rng(3);
+        let mut rng = Rng::new(3);
         let ids = [17, 3, 42];
         let perms = [([0, 1, 2], 1.0), ([1, 2, 0], 1.0), ([2, 0, 1], 1.0), ([1, 0, 2], -1.0), ([0, 2, 1], -1.0), ([2, 1, 0], -1.0)];
         for _ in 0..1000 {
@@ -657,7 +646,7 @@ mod tests {
     #[test]
     fn inside_points_are_reproduced() {
         let mesh = jittered_grid([4, 3, 5], 3);
-        let mut rng = Rng(4);
+        let mut rng = Rng::new(4);
         let points: Vec<Point> = (0..5000).map(|_| combine(corners(&mesh, rng.index(mesh.tets.len()) as u32), rng.weights())).collect();
         let binding = Binding::compute(&mesh, &points);
         let carried = binding.apply(&mesh, &mesh.positions);
@@ -675,8 +664,8 @@ mod tests {
         // outside point is the box clamp, known independently of any tet.
         let (lo, h, cells) = ([1.0, -2.0, 0.5], 0.5, [3, 4, 5]);
         let hi: Point = std::array::from_fn(|d| lo[d] + h * cells[d] as f64);
-        let mesh = grid(cells, lo, h, 0.0, &mut Rng(0));
-        let mut rng = Rng(5);
+        let mesh = grid(cells, lo, h, 0.0, &mut Rng::new(0));
+        let mut rng = Rng::new(5);
         let points: Vec<Point> = std::iter::repeat_with(|| rng.point(lo.map(|c| c - 1.0), hi.map(|c| c + 1.0)))
             .filter(|p| !Bounds { lo, hi }.contains(*p))
             .take(5000)
@@ -701,8 +690,8 @@ mod tests {
         // are outside, at the push distance. The first also lie outside every unpadded tet box.
         let (lo, h, cells) = ([1.0, -2.0, 0.5], 0.5, [3, 2, 2]);
         let hi: Point = std::array::from_fn(|d| lo[d] + h * cells[d] as f64);
-        let mesh = grid(cells, lo, h, 0.0, &mut Rng(0));
-        let mut rng = Rng(18);
+        let mesh = grid(cells, lo, h, 0.0, &mut Rng::new(0));
+        let mut rng = Rng::new(18);
         for push in [0.1 * EPS * h, 10.0 * EPS * h] {
             let points: Vec<Point> = (0..600)
                 .map(|k| {
@@ -727,7 +716,7 @@ mod tests {
     #[test]
     fn affine_maps_are_reproduced() {
         let mesh = jittered_grid([3, 4, 3], 6);
-        let mut rng = Rng(8);
+        let mut rng = Rng::new(8);
         let points = mixed_points(&mesh, 3000, &mut rng);
         let binding = Binding::compute(&mesh, &points);
         let a = [[1.2, 0.3, -0.1], [0.05, 0.9, 0.4], [-0.2, 0.1, 1.1]];
@@ -750,7 +739,7 @@ mod tests {
     #[test]
     fn compute_is_deterministic_across_runs_and_thread_counts() {
         let mesh = jittered_grid([4, 4, 4], 9);
-        let points = mixed_points(&mesh, 6000, &mut Rng(10));
+        let points = mixed_points(&mesh, 6000, &mut Rng::new(10));
         let first = Binding::compute(&mesh, &points);
         assert_eq!(first, Binding::compute(&mesh, &points));
         for threads in [1, 3] {
@@ -781,7 +770,7 @@ mod tests {
         let positions: Vec<Point> = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.2, 0.3, 1.0], [0.3, 0.2, -1.0]].map(rotate).to_vec();
         let above = [0, 1, 2, 3];
         let below = [0, 2, 1, 4];
-        let mut rng = Rng(13);
+        let mut rng = Rng::new(13);
         let on_face: Vec<Point> = (0..200)
             .map(|_| {
                 let w: [f64; 3] = rng.weights();
@@ -811,11 +800,11 @@ mod tests {
     fn point_nearest_a_shared_boundary_edge_goes_to_lowest_index() {
         // A rotated box of Kuhn cubes: each segment of its edge along x through the origin is
         // shared by two tets of the same cube, which tie for the points nearest to it.
-        let mut mesh = grid([4, 3, 3], [0.0; 3], 0.5, 0.0, &mut Rng(0));
+        let mut mesh = grid([4, 3, 3], [0.0; 3], 0.5, 0.0, &mut Rng::new(0));
         mesh.positions = mesh.positions.iter().map(|&x| rotate(x)).collect();
         // Vary each tet's vertex order (by even permutations, keeping volumes positive), as a
         // mesher would: tets sharing an edge then list it in different orders.
-        let mut rng = Rng(16);
+        let mut rng = Rng::new(16);
         for tet in &mut mesh.tets {
             let [a, b, c, d] = *tet;
             *tet = [[a, b, c, d], [b, c, a, d], [c, a, b, d], [b, a, d, c], [d, c, b, a], [a, d, b, c]][rng.index(6)];
@@ -827,8 +816,8 @@ mod tests {
             assert!((0..2).all(|t| mesh.signed_volume_at(&mesh.positions, around[t] as usize) > 0.0));
             let points: Vec<Point> = (0..100)
                 .map(|_| {
-                    let x = 0.5 * (segment as f64 + rng.range(0.01, 0.99));
-                    rotate([x, -rng.range(0.01, 1.0), -rng.range(0.01, 1.0)])
+                    let x = 0.5 * (segment as f64 + rng.uniform(0.01, 0.99));
+                    rotate([x, -rng.uniform(0.01, 1.0), -rng.uniform(0.01, 1.0)])
                 })
                 .collect();
             let binding = Binding::compute(&mesh, &points);
@@ -850,7 +839,7 @@ mod tests {
     fn matches_brute_force_at_paper_scale() {
         let mesh = jittered_grid([5, 6, 7], 14);
         assert_eq!(mesh.tets.len(), 1260);
-        let points = mixed_points(&mesh, 28_098, &mut Rng(15));
+        let points = mixed_points(&mesh, 28_098, &mut Rng::new(15));
         assert_eq!(points.len(), 28_098);
         // Mesh vertices, edge, face and inside points come first, by construction of
         // `mixed_points`; all of them are in the mesh.

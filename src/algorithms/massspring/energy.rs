@@ -133,7 +133,8 @@ impl SpringSystem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::algorithms::massspring::testing::{hessian_columns, Rng};
+    use crate::algorithms::massspring::testing::hessian_columns;
+    use crate::support::testing::Rng;
 
     /// Central differences of `f` along coordinate `c` of vertex `v`.
     fn central(x: &[Point], v: usize, c: usize, h: f64, f: impl Fn(&[Point]) -> f64) -> f64 {

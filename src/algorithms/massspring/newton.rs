@@ -756,8 +756,9 @@ mod tests {
     use crate::algorithms::geometry::sub;
     use crate::algorithms::massspring::energy::Definiteness;
     use crate::algorithms::massspring::springs::{Bending, Springs};
-    use crate::algorithms::massspring::testing::{hessian_columns, Rng};
+    use crate::algorithms::massspring::testing::hessian_columns;
     use crate::algorithms::procedural::icosphere;
+    use crate::support::testing::Rng;
 
     #[test]
     fn assembled_matrix_is_the_hessian_with_identity_rows_for_fixed_vertices() {

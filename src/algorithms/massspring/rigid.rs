@@ -253,7 +253,7 @@ fn mat_vec(m: &Mat3, v: Point) -> Point {
 mod tests {
     use super::*;
     use crate::algorithms::geometry::norm;
-    use crate::algorithms::massspring::testing::Rng;
+    use crate::support::testing::Rng;
 
     fn rotation_about(axis: Point, angle: f64) -> Quaternion {
         let n = norm(axis);

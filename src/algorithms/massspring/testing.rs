@@ -3,28 +3,6 @@
 use super::energy::{Definiteness, SpringSystem};
 use crate::algorithms::geometry::Point;
 
-/// A small deterministic generator (SplitMix64).
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Bend a bar lying along +y from y = 0 to `length` into an arc of `angle` radians in the xy
 /// plane, turning towards +x about the line x = `axis_x` + length / angle: the centre line
 /// x = `axis_x` keeps its length, fibres at x > axis_x shorten, and the volume is kept (the

@@ -299,7 +299,7 @@ mod tests {
 
     #[test]
     fn the_projected_step_keeps_the_rows_and_solves_the_bordered_system() {
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         let nu = 5;
         let mut a = vec![vec![0.0; nu]; nu];
         for i in 0..nu {

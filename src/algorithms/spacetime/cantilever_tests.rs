@@ -98,7 +98,7 @@ fn exact_gradients_match_finite_differences_on_the_stiff_cantilever() {
     // (where the held key is far from linear), along random directions of every free unknown.
     let bar = cantilever();
     let settings = Settings::new(SAMPLES, 0.0, [0.0; 3]);
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     let mut worst: f64 = 0.0;
     for tip in [1.2e-5, 1.2e-3] {
         let keys = bar.keys(bar.period, tip);

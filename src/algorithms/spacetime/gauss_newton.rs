@@ -340,7 +340,7 @@ mod tests {
         let mesh = cube_mesh(2);
         let el = Elastic::new(&mesh, &material()).unwrap();
         let n = mesh.positions.len();
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         for (cyclic, supports) in [(false, false), (true, false), (false, true)] {
             let tr = wobbly(&mesh.positions, cyclic);
             let k = wobbly_keys(&mesh.positions, &tr, cyclic, supports);
@@ -412,7 +412,7 @@ mod tests {
                 assert!((dense[r * dim + c] - dense[c * dim + r]).abs() <= 1e-12 * big);
             }
         }
-        let mut rng = Rng(3);
+        let mut rng = Rng::new(3);
         let v = random_direction(&mut rng, slots, n);
         let hv = obj.gauss_newton_product(&p, &v);
         let flat: Vec<f64> = v.iter().flatten().flatten().copied().collect();
@@ -485,7 +485,7 @@ mod tests {
         let e = obj.evaluate(&tr, &p);
         assert!(e.value < 1e-20 * e.force_scale, "the residual vanishes: W {:e}, S {:e}", e.value, e.force_scale);
         let gradient = |t: &Trajectory| obj.evaluate(t, &obj.local_step(t, true)).exact_gradient.unwrap();
-        let mut rng = Rng(11);
+        let mut rng = Rng::new(11);
         for _ in 0..3 {
             let v = random_direction(&mut rng, obj.slots.count(), n);
             let hv = obj.gauss_newton_product(&p, &v);

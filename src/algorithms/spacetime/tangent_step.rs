@@ -205,7 +205,7 @@ mod tests {
             let unknowns = Unknowns::new(&keys, n);
             let step = TangentStep::new(&obj, &unknowns).unwrap();
             let rest = Trajectory::with_zero_velocities(times, vec![el.rest.clone(); 3]);
-            let mut rng = Rng(7);
+            let mut rng = Rng::new(7);
             for _ in 0..3 {
                 let v: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect();
                 let mut delta = vec![vec![[0.0; 3]; n]; obj.slots.count()];
@@ -258,7 +258,7 @@ mod tests {
         let mut step = TangentStep::new(&objective(&el, &a, &settings), &unknowns).unwrap();
         step.retime(&objective(&el, &b, &settings), &unknowns).unwrap();
         let fresh = TangentStep::new(&objective(&el, &b, &settings), &unknowns).unwrap();
-        let mut rng = Rng(3);
+        let mut rng = Rng::new(3);
         let v: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect();
         let (mut x, mut y) = (v.clone(), v.clone());
         step.apply_inverse(&mut x);

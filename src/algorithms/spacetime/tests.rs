@@ -42,7 +42,7 @@ fn rotate_y(p: Point, angle: f64) -> Point {
 
 /// A non-rigid, non-trivial trajectory on a cube: stretched, sheared and twisted keys.
 pub(super) fn wobbly(rest: &[Point], cyclic: bool) -> Trajectory {
-    let mut rng = Rng(42);
+    let mut rng = Rng::new(42);
     let shapes: Vec<Vec<Point>> = (0..4)
         .map(|k| {
             rest.iter()
@@ -269,7 +269,7 @@ fn normal_matrix_is_the_hessian_of_w() {
     let unknowns = Unknowns::new(&k, n);
     let a = assemble(&obj, &unknowns, &TimeCoefficients::new(&obj, 0.0));
     let p = obj.local_step(&tr, false);
-    let mut rng = Rng(5);
+    let mut rng = Rng::new(5);
     let slots = obj.slots.count();
     let mut dir = vec![vec![[0.0; 3]; n]; slots];
     let mut dvec = vec![[0.0; 3]; unknowns.count()];

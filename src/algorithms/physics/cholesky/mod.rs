@@ -392,7 +392,7 @@ mod tests {
 
     #[test]
     fn numeric_factorization_matches_faer_on_random_spd_matrices() {
-        let mut rng = crate::support::testing::Rng(3);
+        let mut rng = crate::support::testing::Rng::new(3);
         for (n, per_column) in [(400, 6), (900, 4)] {
             // A random symmetric pattern, made SPD by diagonal dominance.
             let mut t = Vec::new();

@@ -116,7 +116,7 @@ fn the_kronecker_sum_is_the_assembled_matrix() {
     let a = assemble(&obj, &unknowns, &c);
     let rows = SymmetricRows::from_lower(&a);
     let op = KroneckerSum::new(&obj, &unknowns, &c);
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     let x: Vec<Point> = (0..unknowns.count()).map(|_| [rng.next(), rng.next(), rng.next()]).collect();
     let (mut y0, mut y1) = (vec![[0.0; 3]; x.len()], vec![[1.0; 3]; x.len()]);
     rows.apply(&x, &mut y0);
@@ -132,7 +132,7 @@ fn the_kronecker_sum_is_the_assembled_matrix() {
 }
 
 fn gradient(unknowns: &Unknowns) -> Vec<Vec<Point>> {
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     (0..unknowns.slots.count()).map(|_| (0..unknowns.nodes).map(|_| [rng.next(), rng.next(), rng.next()]).collect()).collect()
 }
 

@@ -344,7 +344,7 @@ fn constrained_newton_step_satisfies_its_optimality_conditions() {
     let times = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
     let blocks = Blocks::new(&times, &TimingSettings { keep_duration: true, fixed_times: vec![4], ..TimingSettings::default() }).unwrap();
     assert_eq!(blocks.blocks, vec![(vec![0, 1, 2, 3], true), (vec![4, 5], true)]);
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     for _ in 0..200 {
         let g: Vec<f64> = (0..6).map(|_| 3.0 * rng.next()).collect();
         let h: Vec<f64> = (0..6).map(|_| 1.5 + rng.next()).collect();
