@@ -229,7 +229,8 @@ bench-demo: build deps-tetgen deps-usd
 	@echo "==> demo benchmark: where the bake's time goes (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench demo
 
-# Warm re-bakes (`bake --from`) against cold bakes: the demo and, with the paper's assets, DINO.
+# Warm re-bakes (`bake --from`) against cold bakes: the demo, the 20-key body and, with the paper's assets,
+# DINO (`WARM_CASES=20-key` runs only the rows whose names hold that word).
 bench-warm: build deps-tetgen
 	@echo "==> warm re-bake benchmark: cold against --from (mind the load average printed with it)"
 	$(CARGO) bench --locked --bench warm

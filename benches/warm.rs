@@ -1,12 +1,15 @@
 //! Warm re-bakes (`blendsim bake --from`) against cold bakes, as a user runs them: the
-//! `blendsim` process on the demo and, when the paper's assets are present, the DINO walk.
+//! `blendsim` process on the demo, the 20-key 2.6k-node body of the convergence bench (its key
+//! 10 twisted 5° more) and, when the paper's assets are present, the DINO walk.
 //! Per scene: a cold bake (the first of the loop, keeping its cache); the same inputs re-baked from it (TetGen and the solve reused);
 //! one key edited and baked cold; the same edit baked from the first bake (the solve starts
 //! from its solution). Wall and CPU seconds of the child, medians of `REPEATS` (default 5),
 //! with the solver's iterations and W from each report.
 //!
 //! `cargo bench --bench warm` (`make bench-warm`); `target/release/blendsim` must be built.
-//! Mind the load average printed with it: the machine is shared.
+//! `WARM_CASES=20-key` runs the cases whose names hold one of the comma-separated words (the
+//! 20-key body's cold bake takes about a minute a repeat). Mind the load average printed with
+//! it: the machine is shared.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -17,7 +20,7 @@ use blendsim::algorithms::procedural::{prism, twist, Twist};
 use blendsim::formats::mesh::obj;
 
 mod common;
-use common::{load, median};
+use common::{load, median, write_twenty_keys};
 
 /// CPU seconds (user + system) of the waited-for children.
 fn children_cpu() -> f64 {
@@ -77,6 +80,21 @@ fn demo(root: &Path, dir: PathBuf, degrees: f64, name: &'static str) -> Case {
     Case { name, dir, scene: "twist.toml", edit: Box::new(left(degrees)), restore: Box::new(left(120.0)) }
 }
 
+/// The convergence bench's "KEY20-2.6k" body (`common::twenty_keys_held`, bottom and top held),
+/// its key 10 twisted 5° more.
+fn twenty_keys(dir: PathBuf) -> Case {
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |edit: Option<(usize, f64)>| move |dir: &Path| drop(write_twenty_keys(dir, [12, 36, 12], 0.003, Some(&[0.0, 1.0]), edit));
+    write(None)(&dir);
+    Case {
+        name: "20-key body (key 10 twisted 5 degrees more)",
+        dir,
+        scene: "scene.toml",
+        edit: Box::new(write(Some((10, 5.0)))),
+        restore: Box::new(write(None)),
+    }
+}
+
 /// DINO's walk, its fifth key moved a tenth of the way towards the fourth (a Medit mesh:
 /// the vertex lines after `Vertices` and their count rewritten).
 fn dino(root: &Path, dir: PathBuf) -> Option<Case> {
@@ -132,9 +150,14 @@ fn main() {
         demo(root, scratch.join("demo"), 100.0, "demo (left key 120 -> 100 degrees)"),
         demo(root, scratch.join("demo-touch"), 115.0, "demo (left key 120 -> 115 degrees)"),
     ];
+    cases.push(twenty_keys(scratch.join("twenty-keys")));
     match dino(root, scratch.join("dino")) {
         Some(case) => cases.push(case),
         None => println!("(DINO skipped: the paper's assets are not in ../shared/assets)"),
+    }
+    if let Ok(only) = std::env::var("WARM_CASES") {
+        let words: Vec<&str> = only.split(',').map(str::trim).filter(|w| !w.is_empty()).collect();
+        cases.retain(|case| words.iter().any(|w| case.name.contains(w)));
     }
     println!("warm re-bakes (`blendsim bake --from`), medians of {repeats}; load average {}", load());
     println!();

@@ -124,11 +124,24 @@ pub fn twenty_keys(divisions: [usize; 3], max_volume: f64, held_surface: bool) -
 /// the whole surface): `Some(&[0.0, 1.0])` is the scale benchmark's "2.6k-nodes-20-keys"
 /// (bottom and top held) on `[12, 36, 12]` and 0.003.
 pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[f64]>) -> Body {
+    let folder = tempfile::Builder::new().prefix("blendsim-twenty-keys-").tempdir().expect("a scratch folder");
+    let scene = SceneFile::load(&write_twenty_keys(folder.path(), divisions, max_volume, faces, None)).expect("scene loads");
+    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
+}
+
+/// The scene file of [`twenty_keys_held`] and its key meshes, written into `dir`; with
+/// `edit = Some((k, degrees))` key `k` is twisted `degrees` more (the warm re-bake bench's
+/// one-key edit). Returns the scene file's path.
+pub fn write_twenty_keys(
+    dir: &Path,
+    divisions: [usize; 3],
+    max_volume: f64,
+    faces: Option<&[f64]>,
+    edit: Option<(usize, f64)>,
+) -> std::path::PathBuf {
     use blendsim::formats::mesh::obj;
     let held_surface = faces.is_none();
     let keys = 20;
-    let folder = tempfile::Builder::new().prefix("blendsim-twenty-keys-").tempdir().expect("a scratch folder");
-    let dir = folder.path();
     let rest = procedural::prism([1.2, 3.6, 1.2], divisions);
     let height = rest.positions.iter().map(|p| p[1]).fold(0.0, f64::max);
     let pose = |degrees: f64, bend: f64| -> Vec<Point> {
@@ -144,7 +157,8 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
     for k in 0..keys {
         let phase = 2.0 * std::f64::consts::PI * k as f64 / (keys - 1) as f64;
         let mut m = rest.clone();
-        m.positions = pose(90.0 * phase.sin(), 0.4 * (phase + 1.0).sin() - 0.4 * 1f64.sin());
+        let extra = edit.filter(|&(key, _)| key == k).map_or(0.0, |(_, degrees)| degrees);
+        m.positions = pose(90.0 * phase.sin() + extra, 0.4 * (phase + 1.0).sin() - 0.4 * 1f64.sin());
         std::fs::write(dir.join(format!("k{k}.obj")), obj::write(&m)).unwrap();
         names.push(format!("\"k{k}.obj\""));
     }
@@ -165,6 +179,5 @@ pub fn twenty_keys_held(divisions: [usize; 3], max_volume: f64, faces: Option<&[
         times.join(", ")
     );
     std::fs::write(dir.join("scene.toml"), text).unwrap();
-    let scene = SceneFile::load(&dir.join("scene.toml")).expect("scene loads");
-    Bake::new(&scene, &Progress::hidden()).body().expect("import and tetrahedralize")
+    dir.join("scene.toml")
 }
