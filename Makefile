@@ -42,7 +42,7 @@ help:
 	@echo "make fuzz     fuzz the input readers for longer (FUZZ_CASES=$(FUZZ_CASES) cases per property)"
 	@echo "make bench    print the solver benchmark (the paper's Table 1 on this machine)"
 	@echo "make bench-demo   print where the demo bake's time goes: the process, each phase, one solver iteration, Python's start-up"
-	@echo "make bench-warm   print cold against warm re-bakes (bake --from): unchanged inputs and one edited key, the demo and DINO"
+	@echo "make bench-warm   print cold against warm re-bakes (bake --from): unchanged inputs and one edited key, the demo, the 20-key body and DINO"
 	@echo "make bench-writers print the full-frame writers' MB/s (usda, usdc, glb) beside the disk's"
 	@echo "make bench-scale  print whole-bake time and peak memory of production-size surfaces (cage, 20 keys, 100k vertices)"
 	@echo "make bench-global-step print the global step's direct (one thread and all), iterative and modal set-up and solve on many-keys bodies"
