@@ -201,17 +201,23 @@ impl KeyMeshes {
         if !matches!(self.first, MeshFile::Surface(_)) {
             return Ok(None);
         }
-        let mut frames = self.poses.clone();
-        if let Rest::Mesh(p) = &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
-            // The rest mesh's positions must coincide too (a different vertex count is
-            // `rest_shape`'s error).
-            let positions = self.cache.get(&scene_file.resolve(p))?.positions();
-            if positions.len() == self.poses[0].len() {
-                frames.push(positions.to_vec());
-            }
-        }
+        // The rest mesh's positions must coincide too (a different vertex count is
+        // `rest_shape`'s error).
+        let rest = match &scene_file.scene.keyframes.as_ref().expect("a keyframe scene").rest {
+            Rest::Mesh(p) => Some(self.cache.get(&scene_file.resolve(p))?.positions().to_vec()).filter(|r| r.len() == self.poses[0].len()),
+            Rest::Key(_) => None,
+        };
+        // The poses are lent to the frame source and taken back, not copied.
+        let mut frames = std::mem::take(&mut self.poses);
+        let with_rest = rest.is_some();
+        frames.extend(rest);
         let mut source = MemoryFrames { times: (0..frames.len()).map(|k| k as f64).collect(), frames };
-        let weld = Weld::find(&mut source)?;
+        let weld = Weld::find(&mut source);
+        self.poses = source.frames;
+        if with_rest {
+            self.poses.pop();
+        }
+        let weld = weld?;
         if weld.is_identity() {
             return Ok(None);
         }
