@@ -109,6 +109,12 @@ const fn twenty_keys(name: &'static str, solver: &'static str, args: &'static [&
     Case { name, size: BODY, divisions: [12, 36, 12], keys: 20, tet: "max_volume = 0.003", solver, hold: ENDS, args, extra, full_frame: false }
 }
 
+/// A row on the slim prism (`SLIM`) with `keys` keys and `tet`'s `[tet]` lines (a cage unless
+/// they say otherwise); `full_frame` writes the full-frame files too.
+const fn slim(name: &'static str, divisions: [usize; 3], keys: usize, tet: &'static str, hold: Option<&'static [f64]>, full_frame: bool) -> Case {
+    Case { name, size: SLIM, divisions, keys, tet, solver: "", hold, args: &[], extra: false, full_frame }
+}
+
 /// Write the scene of `case` into `dir`, its solver capped at `iterations` when given; returns
 /// the scene file.
 fn write_scene(case: &Case, dir: &Path, iterations: Option<usize>) -> PathBuf {
@@ -250,80 +256,14 @@ fn main() {
         twenty_keys("2.6k-20-keys-iterative-2G", "global_step = \"iterative\"", &["--max-memory", "2G"], true),
         twenty_keys("2.6k-20-keys-coarse", "coarse_samples = 5", &[], true),
         // CHEB-style: 6.8k surface vertices, on a ~1k-node cage and on the full surface.
-        Case {
-            name: "6.8k-cage",
-            size: SLIM,
-            divisions: [22, 66, 22],
-            keys: 5,
-            tet: "max_nodes = 3000",
-            solver: "",
-            hold: ENDS,
-            args: &[],
-            extra: false,
-            full_frame: false,
-        },
-        Case {
-            name: "6.8k-full",
-            size: SLIM,
-            divisions: [22, 66, 22],
-            keys: 5,
-            tet: "cage = false",
-            solver: "",
-            hold: ENDS,
-            args: &[],
-            extra: false,
-            full_frame: false,
-        },
-        Case {
-            name: "25k-cage",
-            size: SLIM,
-            divisions: [42, 130, 42],
-            keys: 10,
-            tet: "",
-            solver: "",
-            hold: None,
-            args: &[],
-            extra: false,
-            full_frame: false,
-        },
-        Case {
-            name: "100k-cage",
-            size: SLIM,
-            divisions: [85, 260, 85],
-            keys: 10,
-            tet: "",
-            solver: "",
-            hold: None,
-            args: &[],
-            extra: false,
-            full_frame: false,
-        },
+        slim("6.8k-cage", [22, 66, 22], 5, "max_nodes = 3000", ENDS, false),
+        slim("6.8k-full", [22, 66, 22], 5, "cage = false", ENDS, false),
+        slim("25k-cage", [42, 130, 42], 10, "", None, false),
+        slim("100k-cage", [85, 260, 85], 10, "", None, false),
         // The frames' memory: the cage surfaces with full-frame files in every format (136
         // frames), where the frames are most of the peak.
-        Case {
-            name: "25k-cage-full-frame",
-            size: SLIM,
-            divisions: [42, 130, 42],
-            keys: 10,
-            tet: "",
-            solver: "",
-            hold: None,
-            args: &[],
-            extra: false,
-            full_frame: true,
-        },
-        Case {
-            name: "100k-cage-full-frame",
-            size: SLIM,
-            divisions: [85, 260, 85],
-            keys: 10,
-            tet: "",
-            solver: "",
-            hold: None,
-            args: &[],
-            extra: false,
-            full_frame: true,
-        },
+        slim("25k-cage-full-frame", [42, 130, 42], 10, "", None, true),
+        slim("100k-cage-full-frame", [85, 260, 85], 10, "", None, true),
     ];
     // A word picks the rows whose name contains it; an extra row only by its whole name.
     let chosen =
