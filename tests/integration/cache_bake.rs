@@ -195,6 +195,53 @@ fn spacetime_on_a_cache_reports_its_error_beside_the_fit() {
     assert!(std::fs::read_to_string(dir.join("out/report.md")).unwrap().contains("least-squares fit, same keys"));
 }
 
+/// The warning codes of a run's stderr.
+fn warned(stderr: &str) -> Vec<&str> {
+    stderr.lines().filter_map(|l| l.strip_prefix("blendsim: warning: ")).collect()
+}
+
+/// A spacetime bake of the bar's cache whose in-betweens end far from the cache (its physics is
+/// not rapier's) is not silent: `cache-drift` on stderr (even with `--quiet`), in report.json
+/// and report.md, naming the figure, the tolerance and the fix; `--strict` refuses it (exit 3,
+/// no folder made). Keys a few frames apart keep the physics near the cache: no warning, and
+/// `--strict` bakes it.
+#[test]
+fn spacetime_far_from_the_cache_warns_cache_drift() {
+    let cache = bar(&BarSettings::default());
+    let dir = TempDir::new("cache-drift");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let material = "[material]\ngravity = [0.0, -9.81, 0.0]\ndamping = 0.5\n";
+    // Converged (no other warning): 6.7e-2 from the cache, 13x the tolerance.
+    let far = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "spacetime", "keyframes = \"auto\"\ntolerance = 0.005") + material;
+    std::fs::write(dir.join("far.toml"), &far).unwrap();
+    let r = run(&dir.path, &["bake", "far.toml", "--out", "far", "--quiet"]).success();
+    let far_report = report(&dir.join("far"));
+    let (error, fit) = (far_report["cache"]["error"]["max"].as_f64().unwrap(), far_report["cache"]["fit_error"]["max"].as_f64().unwrap());
+    println!("spacetime on the bar's auto keys: {error:.3e} from the cache, the fit {fit:.3e}, the tolerance 0.005");
+    assert!(error > 10.0 * fit.max(0.005), "{error} {fit}");
+    let lines = warned(&r.stderr);
+    assert_eq!(lines.len(), 1, "{r}");
+    assert!(lines[0].starts_with("cache-drift: the spacetime animation is up to "), "{r}");
+    for part in [&format!("{:.1}% of the bounding-box diagonal", 100.0 * error), "the tolerance 0.005", "method = \"fit\"", "more keys"] {
+        assert!(lines[0].contains(part), "{part}: {r}");
+    }
+    assert_eq!(far_report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect::<Vec<_>>(), lines, "{far_report}");
+    assert!(std::fs::read_to_string(dir.join("far/report.md")).unwrap().contains(lines[0]));
+    let r = run(&dir.path, &["bake", "far.toml", "--out", "strict", "--quiet", "--strict"]);
+    assert_eq!(r.code, Some(3), "{r}");
+    assert!(r.stderr.starts_with("error: cache-drift: the spacetime animation is up to "), "{r}");
+    assert!(!dir.join("strict").exists(), "--strict wrote nothing");
+    // Keys five frames apart on the first 20 frames: the in-betweens stay near the cache.
+    let near = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\nstart = 0\nend = 20\n", "spacetime", "keyframes = [0, 5, 10, 15, 20]") + material;
+    std::fs::write(dir.join("near.toml"), near).unwrap();
+    let r = run(&dir.path, &["bake", "near.toml", "--out", "near", "--quiet", "--strict"]).success();
+    let near_report = report(&dir.join("near"));
+    let (error, fit) = (near_report["cache"]["error"]["max"].as_f64().unwrap(), near_report["cache"]["fit_error"]["max"].as_f64().unwrap());
+    println!("spacetime on keys 5 frames apart: {error:.3e} from the cache, the fit {fit:.3e}");
+    assert!(error > fit && error < 10.0 * fit.max(0.005), "{error} {fit}");
+    assert!(warned(&r.stderr).is_empty() && near_report["warnings"].is_null(), "{r}");
+}
+
 /// Listed keys: exactly those frames become the keys.
 #[test]
 fn listed_keys_are_the_keys() {
