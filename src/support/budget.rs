@@ -35,6 +35,18 @@ pub const DEFAULT_MEMORY_FRACTION: f64 = 0.6;
 /// What to do when the time budget runs out (the same advice wherever it runs out).
 const TIME_FIX: &str = "raise --max-time, or make the problem smaller: raise [tet] max_volume, lower [solver] samples or max_iterations, or let [tet] cage simulate a coarser body";
 
+/// Where a memory budget came from, so that a message names the budget that applied.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+enum MemorySource {
+    /// `--max-memory`.
+    Flag,
+    /// No `--max-memory`: [`DEFAULT_MEMORY_FRACTION`] of the available memory.
+    #[default]
+    Default,
+    /// No `--max-memory` and the available memory unknown: a figure a step assumed.
+    Assumed,
+}
+
 /// The memory and time one bake may use.
 ///
 /// Invariant: the time budget's clock started when the budget was made ([`Budget::new`]), so
@@ -43,7 +55,13 @@ const TIME_FIX: &str = "raise --max-time, or make the problem smaller: raise [te
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Budget {
     /// `--max-memory` in bytes; `None`: [`DEFAULT_MEMORY_FRACTION`] of the available memory.
+    /// Once a step has resolved or narrowed it ([`Budget::with_max_memory`]), those bytes.
     max_memory: Option<u64>,
+    /// Where `max_memory` came from: `--max-memory` or the default budget.
+    source: MemorySource,
+    /// Whether `max_memory` is the part of the budget left for one step (the rest held by
+    /// the step's caller), not the whole budget.
+    part: bool,
     /// `--max-time`: when the clock started, and the seconds allowed from then.
     max_time: Option<(Instant, f64)>,
 }
@@ -52,15 +70,22 @@ impl Budget {
     /// A budget of `max_memory` bytes and `max_time` seconds counted from now (`None`: the
     /// default memory budget, no time limit).
     pub fn new(max_memory: Option<u64>, max_time: Option<f64>) -> Budget {
-        Budget { max_memory, max_time: max_time.map(|seconds| (Instant::now(), seconds)) }
+        let source = if max_memory.is_some() { MemorySource::Flag } else { MemorySource::Default };
+        Budget { max_memory, source, part: false, max_time: max_time.map(|seconds| (Instant::now(), seconds)) }
     }
 
-    /// The same budget with its memory set to `bytes`.
-    pub(crate) fn with_max_memory(self, bytes: u64) -> Budget {
-        Budget { max_memory: Some(bytes), ..self }
+    /// The same budget with its memory set to `bytes` (resolved once by a step, or narrowed to
+    /// the part left for it: `part`), its origin kept for messages: `--max-memory`, the default
+    /// budget, or a figure assumed where the available memory is unknown.
+    pub(crate) fn with_max_memory(self, bytes: u64, part: bool) -> Budget {
+        let source = match (self.max_memory, self.source) {
+            (None, MemorySource::Default) if available_memory().is_none() => MemorySource::Assumed,
+            _ => self.source,
+        };
+        Budget { max_memory: Some(bytes), source, part: self.part || part, ..self }
     }
 
-    /// `--max-memory` as given, in bytes.
+    /// `--max-memory` as given (or as a step resolved it), in bytes.
     pub fn max_memory(&self) -> Option<u64> {
         self.max_memory
     }
@@ -76,12 +101,19 @@ impl Budget {
         }
     }
 
-    /// Where the memory budget came from, for messages.
-    fn memory_source(&self) -> &'static str {
-        if self.max_memory.is_some() {
-            "the --max-memory budget"
+    /// The memory budget of `bytes` named by where it came from, for messages.
+    fn described(&self, bytes: f64) -> String {
+        let origin = match self.source {
+            MemorySource::Flag => "the --max-memory budget".to_string(),
+            MemorySource::Default => {
+                format!("the memory budget ({:.0}% of the available memory; --max-memory sets it)", 100.0 * DEFAULT_MEMORY_FRACTION)
+            }
+            MemorySource::Assumed => "the memory budget assumed where the available memory cannot be read (--max-memory sets it)".to_string(),
+        };
+        if self.part {
+            format!("the {} left for it of {origin}", gb(bytes))
         } else {
-            "the memory budget (60% of the available memory; --max-memory sets it)"
+            format!("{origin} of {}", gb(bytes))
         }
     }
 
@@ -90,7 +122,7 @@ impl Budget {
     pub fn check(&self, bytes: f64, what: &str, fix: &str) -> Result<()> {
         match self.memory() {
             Some(budget) if bytes.is_nan() || bytes > budget => Err(Error::general(
-                format!("the scene would need about {} of memory for {what}, more than {} of {}", gb(bytes), self.memory_source(), gb(budget)),
+                format!("the scene would need about {} of memory for {what}, more than {}", gb(bytes), self.described(budget)),
                 format!("{fix}; or raise --max-memory"),
             )),
             _ => Ok(()),
@@ -239,6 +271,29 @@ mod tests {
         assert!(open.check_predicted_time(7200.0, "the direct solve").is_err());
         assert!(open.check_predicted_time(1.0, "the direct solve").is_ok());
         assert!(Budget::default().time_left().is_none() && Budget::default().check_predicted_time(1e300, "x").is_ok());
+    }
+
+    #[test]
+    fn messages_name_the_budget_that_applied() {
+        let problem = |b: Budget| b.check(3.0e10, "x", "y").unwrap_err().problem;
+        let flag = Budget::new(Some(20_000_000_000), None);
+        assert!(problem(flag.with_max_memory(2_000_000_000, false)).ends_with("more than the --max-memory budget of 2.0 GB"));
+        assert!(problem(flag.with_max_memory(2_000_000_000, true)).ends_with("more than the 2.0 GB left for it of the --max-memory budget"));
+        // No --max-memory: a budget resolved or narrowed from the default one still says so.
+        let default = Budget::new(None, None);
+        let (resolved, part) = (default.with_max_memory(2_000_000_000, false), default.with_max_memory(1_000_000_000, true));
+        if available_memory().is_some() {
+            let origin = "the memory budget (60% of the available memory; --max-memory sets it)";
+            assert_eq!(problem(resolved), format!("the scene would need about 30.0 GB of memory for x, more than {origin} of 2.0 GB"));
+            assert!(problem(part).ends_with(&format!("more than the 1.0 GB left for it of {origin}")), "{}", problem(part));
+            // Narrowed twice, still a part of the default budget.
+            assert!(problem(part.with_max_memory(500_000_000, false)).ends_with(&format!("the 0.5 GB left for it of {origin}")));
+        } else {
+            assert!(problem(resolved).contains("the memory budget assumed where the available memory cannot be read"));
+        }
+        for b in [resolved, part] {
+            assert!(!problem(b).contains("the --max-memory budget"), "{}", problem(b));
+        }
     }
 
     #[test]
