@@ -154,12 +154,9 @@ fn iterative_bytes(keys: f64, nodes: f64) -> f64 {
 }
 
 /// The modal step's bytes: the cost model's prediction ([`ModalSize::predicted`]; every node
-/// in the basis, a node is left out only when its velocities are held too) with the
-/// capacitance matrix counted once, as it is factored in place (the 20-key 2.6k-node body:
-/// 6,760 held entries, 366 MB less, as measured).
+/// in the basis, a node is left out only when its velocities are held too).
 fn modal_bytes(c: &BakeCounts) -> f64 {
-    let held = c.held as f64;
-    ModalSize { nodes: c.nodes, slots: 2 * c.keys, held: c.held, held_nodes: c.held_nodes }.predicted().1 - 8.0 * held * held
+    ModalSize { nodes: c.nodes, slots: 2 * c.keys, held: c.held, held_nodes: c.held_nodes }.predicted().1
 }
 
 /// The global step's bytes.
