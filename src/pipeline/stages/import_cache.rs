@@ -121,6 +121,51 @@ pub fn convert(scene_file: &SceneFile, spec: &CacheSpec, out: &Path) -> Result<(
     crate::formats::cache::write(out, &cache.mesh, cache.frames.as_mut(), cache.fps)
 }
 
+/// The scene table that names an animated file: `[cache]`, or `[keyframes]` with a `clip`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Table {
+    Cache,
+    Clip,
+}
+
+/// The checks shared by `[cache]` and `[keyframes] clip` before the file is opened: a PC2 or
+/// MDD (positions only) needs `rest = "mesh.obj"` for its triangles (`rest_mesh`), and a file
+/// with its own frame times (USD, Alembic, FBX) takes no `fps` (`fps_given`).
+pub(super) fn check_rate_and_topology(path: &Path, format: Option<CacheFormat>, table: Table, fps_given: bool, rest_mesh: bool) -> Result<()> {
+    if matches!(format, Some(CacheFormat::Pc2 | CacheFormat::Mdd)) && !rest_mesh {
+        let (problem, fix) = match table {
+            Table::Cache => (
+                "holds positions only, so its triangles and rest shape must come from the mesh it animates",
+                "give rest = \"mesh.obj\" in [cache], the mesh the cache was baked from",
+            ),
+            Table::Clip => (
+                "holds positions only, so the keys' triangles must come from the mesh it animates",
+                "give rest = \"mesh.obj\" in [keyframes], the mesh the clip was baked from",
+            ),
+        };
+        return Err(Error::in_file(path, problem, fix));
+    }
+    let own_rate = format.filter(|f| matches!(f, CacheFormat::Usd | CacheFormat::Alembic | CacheFormat::Fbx));
+    if let (Some(f), true) = (own_rate, fps_given) {
+        let (problem, fix) = match (table, f) {
+            (Table::Cache, CacheFormat::Usd) => (
+                "fps is given, but a USD stage carries its own rate (timeCodesPerSecond)".to_string(),
+                "remove fps from [cache]: the stage's rate is used",
+            ),
+            (Table::Cache, _) => (
+                "fps is given, but Alembic and FBX files carry their own frame times".to_string(),
+                "remove fps from [cache]: the file's rate is used",
+            ),
+            (Table::Clip, _) => (
+                format!("fps is given in [keyframes], but {} carries its own frame times", f.described()),
+                "remove fps from [keyframes]: the file's rate is used",
+            ),
+        };
+        return Err(Error::in_file(path, problem, fix));
+    }
+    Ok(())
+}
+
 /// The resolved cache path and the reader's options of a `[cache]` table.
 fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, CacheRecordOptions)> {
     let path = scene_file.resolve(&spec.path);
@@ -130,27 +175,7 @@ fn open_options(scene_file: &SceneFile, spec: &CacheSpec) -> Result<(PathBuf, Ca
         Some(Rest::Mesh(m)) => Some(scene_file.resolve(m)),
         _ => None,
     };
-    if topology_mesh && rest_mesh_path.is_none() {
-        return Err(Error::in_file(
-            &path,
-            "holds positions only, so its triangles and rest shape must come from the mesh it animates",
-            "give rest = \"mesh.obj\" in [cache], the mesh the cache was baked from",
-        ));
-    }
-    if format == Some(CacheFormat::Usd) && spec.fps.is_some() {
-        return Err(Error::in_file(
-            &path,
-            "fps is given, but a USD stage carries its own rate (timeCodesPerSecond)",
-            "remove fps from [cache]: the stage's rate is used",
-        ));
-    }
-    if matches!(format, Some(CacheFormat::Alembic | CacheFormat::Fbx)) && spec.fps.is_some() {
-        return Err(Error::in_file(
-            &path,
-            "fps is given, but Alembic and FBX files carry their own frame times",
-            "remove fps from [cache]: the file's rate is used",
-        ));
-    }
+    check_rate_and_topology(&path, format, Table::Cache, spec.fps.is_some(), rest_mesh_path.is_some())?;
     let options = CacheRecordOptions {
         fps: spec.fps,
         rest: if topology_mesh { rest_mesh_path.as_ref().map(|p| p.display().to_string()) } else { None },

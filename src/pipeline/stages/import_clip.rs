@@ -15,6 +15,7 @@
 
 use std::path::Path;
 
+use super::import_cache::{check_rate_and_topology, Table};
 use super::key_meshes::{KeyMeshes, MeshCache, Topology};
 use crate::algorithms::frames::FrameRange;
 use crate::algorithms::geometry::Point;
@@ -37,22 +38,7 @@ pub(super) fn read(scene_file: &SceneFile, keys: &KeyframeSpec, budget: &Budget)
         Rest::Mesh(m) => Some(scene_file.resolve(m)),
         Rest::Key(_) => None,
     };
-    if topology_mesh && rest_mesh.is_none() {
-        return Err(Error::in_file(
-            &path,
-            "holds positions only, so the keys' triangles must come from the mesh it animates",
-            "give rest = \"mesh.obj\" in [keyframes], the mesh the clip was baked from",
-        ));
-    }
-    if let Some(f) = format.filter(|f| matches!(f, CacheFormat::Usd | CacheFormat::Alembic | CacheFormat::Fbx)) {
-        if keys.fps.is_some() {
-            return Err(Error::in_file(
-                &path,
-                format!("fps is given in [keyframes], but {} carries its own frame times", f.described()),
-                "remove fps from [keyframes]: the file's rate is used",
-            ));
-        }
-    }
+    check_rate_and_topology(&path, format, Table::Clip, keys.fps.is_some(), rest_mesh.is_some())?;
     let options = CacheOptions {
         fps: keys.fps,
         rest: if topology_mesh { rest_mesh } else { None },
