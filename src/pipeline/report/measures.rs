@@ -10,56 +10,92 @@ use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::scene::Format;
 use crate::pipeline::stage_file::{OutputFile, OutputKind};
 
+/// Point distances summed up pose by pose: the largest, the sum of squares and the counts.
+#[derive(Debug, Default)]
+struct Distances {
+    max: f64,
+    sum2: f64,
+    count: usize,
+    samples: usize,
+}
+
+impl Distances {
+    /// One pose's point distances.
+    fn add(&mut self, distances: &[f64]) {
+        for &d in distances {
+            self.max = self.max.max(d);
+            self.sum2 += d * d;
+            self.count += 1;
+        }
+        self.samples += 1;
+    }
+
+    /// The deviation relative to `diagonal` (1 when it is zero).
+    fn deviation(&self, diagonal: f64) -> Deviation {
+        let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
+        Deviation {
+            max: self.max / scale,
+            rms: if self.count > 0 { (self.sum2 / self.count as f64).sqrt() / scale } else { 0.0 },
+            relative_to: "bbox_diagonal".into(),
+            samples: self.samples,
+        }
+    }
+}
+
+/// The point distances between two poses.
+fn distances(a: &[Point], b: &[Point]) -> Vec<f64> {
+    a.iter().zip(b).map(|(p, q)| norm(sub(*p, *q))).collect()
+}
+
 /// Distances between the poses of `pairs`, relative to `diagonal` (the rest bounding-box
 /// diagonal; 1 when it is zero).
 pub fn deviation(pairs: impl Iterator<Item = (Vec<Point>, Vec<Point>)>, diagonal: f64) -> Deviation {
-    let (mut max, mut sum2, mut count, mut samples) = (0.0f64, 0.0f64, 0usize, 0usize);
+    let mut sum = Distances::default();
     for (a, b) in pairs {
-        for (p, q) in a.iter().zip(&b) {
-            let d = norm(sub(*p, *q));
-            max = max.max(d);
-            sum2 += d * d;
-            count += 1;
-        }
-        samples += 1;
+        sum.add(&distances(&a, &b));
     }
-    let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
-    Deviation {
-        max: max / scale,
-        rms: if count > 0 { (sum2 / count as f64).sqrt() / scale } else { 0.0 },
-        relative_to: "bbox_diagonal".into(),
-        samples,
-    }
+    sum.deviation(diagonal)
 }
 
-/// The blendshape `clip` of `tr` as the files store it (f32 shapes, f32 weights sampled at
-/// `frames`) against the trajectory itself at those frames, and per frame the largest and the
-/// rms distance (relative to `diagonal`, as the deviation).
-pub(crate) fn blendshape_error(clip: &BlendShapeClip, tr: &Trajectory, frames: &[(i64, f64)], diagonal: f64) -> (Deviation, Vec<f64>, Vec<f64>) {
-    // As USD stores it: f32 weights sampled at frames.
-    let stored = |t: f64| clip.points_with_weights(&clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect::<Vec<_>>());
-    let scale = if diagonal > 0.0 { diagonal } else { 1.0 };
-    let (mut per_frame, mut per_frame_rms) = (Vec::with_capacity(frames.len()), Vec::with_capacity(frames.len()));
-    // One frame's two poses at a time (all of them held at once were 48 bytes per frame and
-    // vertex: most of a long bake's peak memory).
-    let poses = frames.iter().map(|&(_, t)| {
-        let (a, b) = (stored(t), tr.evaluate(t));
-        let d: Vec<f64> = a.iter().zip(&b).map(|(p, q)| norm(sub(*p, *q))).collect();
-        per_frame.push(d.iter().copied().fold(0.0, f64::max) / scale);
-        per_frame_rms.push(if d.is_empty() { 0.0 } else { (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt() / scale });
-        (a, b)
-    });
-    let deviation = deviation(poses, diagonal);
-    (deviation, per_frame, per_frame_rms)
+/// The blendshape `clip` of a trajectory as the files store it (f32 shapes, f32 weights sampled
+/// at the frames) against the trajectory itself, one frame at a time ([`StorageError::add`]):
+/// over all frames and per frame the largest and the rms distance (relative to `diagonal`, as
+/// the deviation). One frame's poses at a time: all of them held at once were 48 bytes per
+/// frame and vertex, most of a long bake's peak memory.
+pub(crate) struct StorageError<'a> {
+    clip: &'a BlendShapeClip,
+    diagonal: f64,
+    sum: Distances,
+    per_frame: Vec<f64>,
+    per_frame_rms: Vec<f64>,
 }
 
-/// Enclosed volume of the surface `triangles` moving on `tr` at each of `frames`.
-pub fn volume_series(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]]) -> Vec<f64> {
-    frames.iter().map(|&(_, t)| surface::enclosed_volume(&tr.evaluate(t), triangles)).collect()
+impl<'a> StorageError<'a> {
+    /// The error of `clip` over `frames` frames, relative to `diagonal`.
+    pub(crate) fn new(clip: &'a BlendShapeClip, frames: usize, diagonal: f64) -> StorageError<'a> {
+        StorageError { clip, diagonal, sum: Distances::default(), per_frame: Vec::with_capacity(frames), per_frame_rms: Vec::with_capacity(frames) }
+    }
+
+    /// The frame at `t`, where the trajectory's pose is `pose`.
+    pub(crate) fn add(&mut self, t: f64, pose: &[Point]) {
+        // As USD stores it: f32 weights sampled at frames.
+        let weights: Vec<f64> = self.clip.weights_at(t).iter().map(|&w| w as f32 as f64).collect();
+        let d = distances(&self.clip.points_with_weights(&weights), pose);
+        let scale = if self.diagonal > 0.0 { self.diagonal } else { 1.0 };
+        self.per_frame.push(d.iter().copied().fold(0.0, f64::max) / scale);
+        self.per_frame_rms.push(if d.is_empty() { 0.0 } else { (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt() / scale });
+        self.sum.add(&d);
+    }
+
+    /// The deviation over every frame added, and per frame the largest and the rms distance.
+    pub(crate) fn finish(self) -> (Deviation, Vec<f64>, Vec<f64>) {
+        (self.sum.deviation(self.diagonal), self.per_frame, self.per_frame_rms)
+    }
 }
 
 /// Enclosed volume of the surface `triangles` moving on `tr`, over `frames`, relative to
-/// `rest` (see [`VolumeRange`]); `series` is [`volume_series`] of the same (in volume units).
+/// `rest` (see [`VolumeRange`]); `series` is its enclosed volume at each of `frames` (in volume
+/// units).
 pub(crate) fn volume_range(tr: &Trajectory, frames: &[(i64, f64)], triangles: &[[u32; 3]], rest: f64, series: &[f64]) -> VolumeRange {
     let key_volumes: Vec<f64> = tr.positions.iter().map(|k| surface::enclosed_volume(k, triangles)).collect();
     let blend = |t: f64| {

@@ -81,41 +81,87 @@ pub fn build(
     key_times: &[f64],
     diagonal: f64,
 ) -> Result<Player> {
-    let vertices = clip.base.len();
-    let entries: usize = clip.targets.iter().map(|t| t.indices.len()).sum();
-    let (vs, fs) = strides(vertices, triangles.len(), entries, clip.targets.len(), times.len());
-    let keep = |points: &[Point]| points.iter().step_by(vs).map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect::<Vec<_>>();
-    let shown: Vec<usize> = (0..times.len()).step_by(fs).collect();
-    let mut frames = Vec::with_capacity(shown.len());
-    let mut hermite_distance = Vec::with_capacity(shown.len());
-    for &f in &shown {
-        frames.push(keep(&reference(f)?));
-        let (a, b) = (played.evaluate(times[f]), hermite.evaluate(times[f]));
-        hermite_distance.push(a.iter().zip(&b).step_by(vs).map(|(p, q)| norm(sub(*p, *q)) as f32).collect());
+    let mut shown = ShownFrames::new(clip, triangles.len(), times.len());
+    for f in 0..times.len() {
+        if !shown.shows(f) {
+            continue;
+        }
+        shown.add(&reference(f)?, &played.evaluate(times[f]), &hermite.evaluate(times[f]));
     }
-    Ok(Player {
-        reference: reference_name.into(),
-        times: shown.iter().map(|&f| times[f]).collect(),
-        frame_stride: fs,
-        total_frames: times.len(),
-        vertex_stride: vs,
-        total_vertices: vertices,
-        triangles: if vs == 1 { triangles.to_vec() } else { Vec::new() },
-        base: clip.base.iter().step_by(vs).copied().collect(),
-        shapes: clip
-            .targets
-            .iter()
-            .map(|t| {
-                let kept = t.indices.iter().zip(&t.offsets).filter(|(i, _)| (**i as usize).is_multiple_of(vs));
-                kept.map(|(i, o)| (*i / vs as u32, *o)).unzip()
-            })
-            .collect(),
-        weights: shown.iter().map(|&f| clip.weights_at(times[f]).iter().map(|&w| w as f32).collect()).collect(),
-        frames,
-        hermite_distance,
-        key_times: key_times.to_vec(),
-        diagonal,
-    })
+    Ok(shown.player(reference_name, clip, triangles, times, key_times, diagonal))
+}
+
+/// The player's frames gathered one shown frame at a time, in order, so that a caller that
+/// walks every frame for its own measures hands the player the poses it already evaluated.
+pub struct ShownFrames {
+    /// Every `vertex_stride`-th vertex is kept.
+    vertex_stride: usize,
+    /// Every `frame_stride`-th frame is shown.
+    frame_stride: usize,
+    /// Per shown frame: the reference's kept positions.
+    frames: Vec<Vec<[f32; 3]>>,
+    /// Per shown frame: the played animation's distance from hermite at the kept vertices.
+    hermite_distance: Vec<Vec<f32>>,
+}
+
+impl ShownFrames {
+    /// The strides of `clip` on a surface of `triangles` triangles over `frames` frames
+    /// ([`strides`]), and no frame yet.
+    pub fn new(clip: &BlendShapeClip, triangles: usize, frames: usize) -> ShownFrames {
+        let entries: usize = clip.targets.iter().map(|t| t.indices.len()).sum();
+        let (vertex_stride, frame_stride) = strides(clip.base.len(), triangles, entries, clip.targets.len(), frames);
+        let shown = frames.div_ceil(frame_stride);
+        ShownFrames { vertex_stride, frame_stride, frames: Vec::with_capacity(shown), hermite_distance: Vec::with_capacity(shown) }
+    }
+
+    /// Whether frame `f` is shown (the next [`ShownFrames::add`] must be the next shown one).
+    pub fn shows(&self, f: usize) -> bool {
+        f.is_multiple_of(self.frame_stride)
+    }
+
+    /// The next shown frame: the reference's pose, and the played animation's and hermite's.
+    pub fn add(&mut self, reference: &[Point], played: &[Point], hermite: &[Point]) {
+        let vs = self.vertex_stride;
+        self.frames.push(reference.iter().step_by(vs).map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect());
+        self.hermite_distance.push(played.iter().zip(hermite).step_by(vs).map(|(p, q)| norm(sub(*p, *q)) as f32).collect());
+    }
+
+    /// The player of these frames (see [`build`]).
+    pub fn player(
+        self,
+        reference_name: &str,
+        clip: &BlendShapeClip,
+        triangles: &[[u32; 3]],
+        times: &[f64],
+        key_times: &[f64],
+        diagonal: f64,
+    ) -> Player {
+        let (vs, fs) = (self.vertex_stride, self.frame_stride);
+        let shown: Vec<usize> = (0..times.len()).step_by(fs).collect();
+        Player {
+            reference: reference_name.into(),
+            times: shown.iter().map(|&f| times[f]).collect(),
+            frame_stride: fs,
+            total_frames: times.len(),
+            vertex_stride: vs,
+            total_vertices: clip.base.len(),
+            triangles: if vs == 1 { triangles.to_vec() } else { Vec::new() },
+            base: clip.base.iter().step_by(vs).copied().collect(),
+            shapes: clip
+                .targets
+                .iter()
+                .map(|t| {
+                    let kept = t.indices.iter().zip(&t.offsets).filter(|(i, _)| (**i as usize).is_multiple_of(vs));
+                    kept.map(|(i, o)| (*i / vs as u32, *o)).unzip()
+                })
+                .collect(),
+            weights: shown.iter().map(|&f| clip.weights_at(times[f]).iter().map(|&w| w as f32).collect()).collect(),
+            frames: self.frames,
+            hermite_distance: self.hermite_distance,
+            key_times: key_times.to_vec(),
+            diagonal,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -5,9 +5,10 @@ use crate::algorithms::geometry::{bbox_diagonal, surface};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::pipeline::report::cache_fit::{cache_ratios, CacheReport};
 use crate::pipeline::report::guard_rails::guard_rails;
-use crate::pipeline::report::measures::{blendshape_error, deviation, ratios_to, size_ratios, volume_range, volume_series};
+use crate::pipeline::report::measures::{deviation, ratios_to, size_ratios, volume_range, StorageError};
+use crate::pipeline::report::player::{self, ShownFrames};
 use crate::pipeline::report::series::{energy_phases, ErrorSeries, KeyVolume, Series, VolumeSeries};
-use crate::pipeline::report::{player, Report, Volume};
+use crate::pipeline::report::{Report, Volume};
 use crate::pipeline::scene::{Basis, Method};
 use crate::pipeline::stage_file::CacheRecord;
 use crate::pipeline::stage_file::{Animation, Outputs};
@@ -32,7 +33,6 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     let diagonal = bbox_diagonal(&animation.mesh.positions);
     // The clip the blendshape files hold (a principal one at the rank export chose).
     let (clip, rank) = (&clip.0, clip.1);
-    let (error, per_frame, per_frame_rms) = blendshape_error(clip, tr, &frames, diagonal);
     // The input keys: every key of the trajectory, or every `stride`-th when it also holds
     // in-betweens (mass-spring: `inbetweens + 1`).
     let stride = ((tr.key_count() - 1) / animation.input_keys.len().saturating_sub(1).max(1)).max(1);
@@ -42,8 +42,33 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
     let closed = !triangles.is_empty() && surface::open_edges(&animation.mesh).is_empty();
     let rest_volume = surface::enclosed_volume(&animation.mesh.positions, triangles);
     let hermite = Trajectory::with_zero_velocities(key_times.clone(), animation.input_keys.clone());
-    let volumes = (closed && rest_volume > 0.0).then(|| {
-        let (a, h) = (volume_series(tr, &frames, triangles), volume_series(&hermite, &frames, triangles));
+    let measure_volume = closed && rest_volume > 0.0;
+    // A principal clip plays its own trajectory: that is what the files hold.
+    let played = rank.map(|_| clip.played(&tr.times));
+    let played_tr = played.as_ref().unwrap_or(tr);
+    // Every measure over the frames from one evaluation of each frame: the storage error, the
+    // volumes, and the player's frames when the reference is the full-frame evaluation (a
+    // cache bake's player shows the cache's frames, below).
+    let mut storage = StorageError::new(clip, frames.len(), diagonal);
+    let mut shown = animation.cache.is_none().then(|| ShownFrames::new(clip, triangles.len(), frames.len()));
+    let (mut volume_a, mut volume_h) = (Vec::new(), Vec::new());
+    for (f, &(_, t)) in frames.iter().enumerate() {
+        let pose = tr.evaluate(t);
+        storage.add(t, &pose);
+        let show = shown.as_ref().is_some_and(|s| s.shows(f));
+        let hermite_pose = if measure_volume || show { hermite.evaluate(t) } else { Vec::new() };
+        if measure_volume {
+            volume_a.push(surface::enclosed_volume(&pose, triangles));
+            volume_h.push(surface::enclosed_volume(&hermite_pose, triangles));
+        }
+        if let Some(shown) = shown.as_mut().filter(|_| show) {
+            let played_pose = played.as_ref().map(|p| p.evaluate(t));
+            shown.add(&pose, played_pose.as_deref().unwrap_or(&pose), &hermite_pose);
+        }
+    }
+    let (error, per_frame, per_frame_rms) = storage.finish();
+    let volumes = measure_volume.then(|| {
+        let (a, h) = (volume_a, volume_h);
         let volume = Volume {
             rest: rest_volume,
             animation: volume_range(tr, &frames, triangles, rest_volume, &a),
@@ -62,9 +87,6 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
         (volume, VolumeSeries { animation: ratio(a), hermite: ratio(h), keys })
     });
     let (volume, volume_series) = volumes.unzip();
-    // A principal clip plays its own trajectory: that is what the files hold.
-    let played = rank.map(|_| clip.played(&tr.times));
-    let played_tr = played.as_ref().unwrap_or(tr);
     let cache = animation.cache.as_ref().map(|record| cache_report(animation, played_tr, record, budget)).transpose()?;
     let frame_times: Vec<f64> = frames.iter().map(|f| f.1).collect();
     // The player and the error series against the reference: the cache's frames for a cache
@@ -92,17 +114,8 @@ pub fn measure(animation: &Animation, clip: &(BlendShapeClip, Option<usize>), bu
             (series, player)
         }
         _ => {
-            let player = player::build(
-                "full-frame",
-                clip,
-                triangles,
-                &frame_times,
-                |f| Ok(tr.evaluate(frame_times[f])),
-                played_tr,
-                &hermite,
-                &key_times,
-                if diagonal > 0.0 { diagonal } else { 1.0 },
-            )?;
+            let shown = shown.expect("the player's frames of a bake without a cache");
+            let player = shown.player("full-frame", clip, triangles, &frame_times, &key_times, if diagonal > 0.0 { diagonal } else { 1.0 });
             (ErrorSeries { reference: "full-frame".into(), times: frame_times.clone(), max: per_frame, rms: per_frame_rms }, player)
         }
     };
