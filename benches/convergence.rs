@@ -10,7 +10,9 @@
 //! the tolerance rows (default `1e-2,1e-4`; empty: none), `MODELS=1` the model-Hessian rows,
 //! `QUICK=1` leaves out the relative-rule row, `STEPS=1` adds the rows of each quasi-Newton-phase step, `REF=W` (or per scene `REF=TWIST=W,DINO=W`) a
 //! known reference W (skips the 1e-8 solve), `TRACE=1` prints W / S and the key times
-//! per iteration, `NEG=1e-4` runs only the default rule with that `negligible`.
+//! per iteration, `NEG=1e-4` runs only the default rule with that `negligible`, `PERTURB=1e-7,-1e-7`
+//! runs only the default rule from the first guess and from first guesses moved by these fractions
+//! of the body's size (how stable the stop is under a tiny change of path).
 
 use std::time::Instant;
 
@@ -46,7 +48,27 @@ struct Run {
 }
 
 fn run(body: &Body, change: impl Fn(&mut Settings)) -> Run {
-    let (elastic, keys, mut settings) = solver_inputs(body).unwrap();
+    run_perturbed(body, change, 0.0)
+}
+
+/// [`run`] with the first guess moved by `perturbation` of the body's bounding-box diagonal: every
+/// key position the keys do not hold (the first guess's alone, not the problem's) shifted by a
+/// fixed pattern of that size (`PERTURB`: how far a tiny change of path moves the stop).
+fn run_perturbed(body: &Body, change: impl Fn(&mut Settings), perturbation: f64) -> Run {
+    let (elastic, mut keys, mut settings) = solver_inputs(body).unwrap();
+    if perturbation != 0.0 {
+        let size = perturbation * blendsim::algorithms::geometry::bbox_diagonal(&elastic.rest);
+        for (positions, fixed) in keys.positions.iter_mut().zip(&keys.fixed) {
+            let mut held = vec![false; positions.len()];
+            fixed.iter().for_each(|&a| held[a as usize] = true);
+            for (i, p) in positions.iter_mut().enumerate().filter(|(i, _)| !held[*i]) {
+                let x = i as f64;
+                p[0] += size * x.sin();
+                p[1] += size * (1.3 * x).cos();
+                p[2] += size * (0.7 * x + 1.0).sin();
+            }
+        }
+    }
     settings.max_iterations = 20000;
     change(&mut settings);
     let (t, cpu) = (Instant::now(), cpu_seconds());
@@ -111,6 +133,16 @@ fn main() {
             // One row: the default rule with this floor (a measurement aid, with TRACE).
             let negligible: f64 = v.parse().unwrap();
             row(name, &format!("negligible {negligible:e}"), &run(&body, |s| s.negligible = negligible), None);
+            continue;
+        }
+        // `PERTURB=1e-7,-1e-7`: the default rule from first guesses moved by these fractions of
+        // the bounding-box diagonal (`run_perturbed`), beside the default from the first guess.
+        if let Ok(v) = std::env::var("PERTURB") {
+            row(name, "default", &run(&body, |_| {}), None);
+            for p in v.split(',').filter(|x| !x.is_empty()) {
+                let r = run_perturbed(&body, |_| {}, p.parse().unwrap());
+                row(name, &format!("default, first guess moved by {p}"), &r, None);
+            }
             continue;
         }
         let bounce = matches!(*name, "BALL" | "SPOT");
