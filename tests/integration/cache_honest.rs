@@ -205,11 +205,7 @@ fn a_vertex_per_corner_clip_is_welded_and_maps_back() {
         check_ratios(&report, cache_bytes, &format!("weld {weld}"));
         // The blendshape glb read back, expanded through its weld map, against every input
         // vertex at every frame.
-        let glb = std::fs::read(out.join("clip.glb")).unwrap();
-        let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
-        let root: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
-        let map: Option<Vec<usize>> =
-            root["meshes"][0]["extras"]["weldMap"].as_array().map(|m| m.iter().map(|v| v.as_u64().unwrap() as usize).collect());
+        let map = crate::weld_keys::glb_weld_map(&out.join("clip.glb"));
         assert_eq!(map.is_some(), weld, "a weld map only when welded");
         let map = map.unwrap_or_else(|| (0..corners.positions.len()).collect());
         assert_eq!(map.len(), corners.positions.len());

@@ -276,6 +276,7 @@ fn morph_normals_in_the_glb_are_the_measured_deltas() {
                 attributes: anim.mesh.attributes.as_ref(),
                 textures: &[],
                 morph_normals,
+                weld_map: None,
             };
             blendsim::formats::export::glb::blendshapes(
                 &clip,

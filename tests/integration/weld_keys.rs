@@ -14,7 +14,7 @@ use blendsim::algorithms::frames::MemoryFrames;
 use blendsim::algorithms::geometry::{Point, TriMesh};
 use serde_json::Value;
 
-use crate::attributes::prism_obj;
+use crate::attributes::{prism_obj, Glb};
 use crate::common::checkers::usd_probe;
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs, library_animation, output_files};
@@ -96,12 +96,13 @@ fn usd_frames(file: &Path) -> (Vec<Vec<Point>>, Option<Vec<usize>>) {
     (serde_json::from_value(v["frames"].clone()).unwrap(), serde_json::from_value(v["weldMap"].clone()).unwrap())
 }
 
-/// The weld map of a glb's first mesh, if any.
-fn glb_weld_map(file: &Path) -> Option<Vec<usize>> {
-    let glb = std::fs::read(file).unwrap();
-    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
-    let root: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
-    root["meshes"][0]["extras"]["weldMap"].as_array().map(|m| m.iter().map(|v| v.as_u64().unwrap() as usize).collect())
+/// The weld map of a glb's first mesh, if any: `extras.weldMap` names a SCALAR accessor of
+/// unsigned shorts or ints in the BIN chunk (`formats/caches.md`, "Welding").
+pub(crate) fn glb_weld_map(file: &Path) -> Option<Vec<usize>> {
+    let glb = Glb::parse(&std::fs::read(file).unwrap());
+    let a = glb.json["meshes"][0]["extras"].get("weldMap")?.as_u64().expect("extras.weldMap is an accessor index");
+    assert_eq!(glb.json["accessors"][a as usize]["type"], "SCALAR", "{}", file.display());
+    Some(glb.indices(a))
 }
 
 fn bytes_of(report: &Value, name: &str) -> u64 {

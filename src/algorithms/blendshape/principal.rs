@@ -1,10 +1,14 @@
 //! The principal-component blendshape form of a Hermite trajectory (`[export] basis =
 //! "principal"`): a few dense shapes instead of two or three sparse shapes per key.
 //!
-//! The key data of the trajectory, K poses minus their mean `m` and K velocities scaled by the
-//! key's mean interval `h_k` (so both rows are lengths), form a 2K x 3V matrix `A`. Its thin
-//! SVD `A = U S Vᵀ` gives orthonormal directions `B_j` (columns of `V`) and per key a value
-//! `c_jk = U[k, j] S_j` and a slope `c'_jk = U[K+k, j] S_j / h_k`. Truncated to rank `r`,
+//! The key data of the trajectory, K poses minus their mean and K velocities scaled by the
+//! key's mean interval `h_k` (so both rows are lengths), span every pose it plays: a pose at
+//! time `t` is a combination of the key rows with the Hermite weights at `t`. The directions
+//! `B_j` are the principal directions of the poses played at the scene's frames (their mean
+//! `m` removed), computed in that span (an SVD of the key rows, then one of the frames'
+//! coordinates in it), so truncating to rank `r` leaves the least squared error summed over
+//! the frames, the error the files are measured with. Per key, `c_jk` is the key pose's
+//! coordinate along `B_j` (about `m`) and `c'_jk` its velocity's. Truncated to rank `r`,
 //!
 //! ```text
 //! x(t) = m + Σ_{j<r} c_j(t) B_j,     c_j the cubic Hermite curve through (c_jk, c'_jk)
@@ -12,7 +16,8 @@
 //!
 //! is again exactly a Hermite trajectory (the projection of every key pose and velocity onto
 //! the first `r` directions), so glTF CUBICSPLINE weights hold it at any instant and per-frame
-//! samples (USD, LINEAR glTF) at every frame. Rank `2K` reproduces the trajectory.
+//! samples (USD, LINEAR glTF) at every frame. Full rank (at most `2K`) reproduces the
+//! trajectory, between frames too.
 //!
 //! Weights in [0, 1] (`weights = "bernstein"`, the default; Blender clamps shape-key values and
 //! UsdSkel importers expect non-negative ones): per component, `lo_j` and `hi_j` are the exact
@@ -31,7 +36,7 @@ use faer::Mat;
 
 use super::clip::{clip_keys, f32x3, BlendShapeClip, Target, WeightCurve, Weights};
 use crate::algorithms::geometry::Point;
-use crate::algorithms::spacetime::trajectory::Trajectory;
+use crate::algorithms::spacetime::trajectory::{hermite_weights, Trajectory};
 
 /// Relative widening of each weight range, so the f32 values and slopes a file stores keep
 /// every weight inside [0, 1] (f32 rounds at 6e-8 relative).
@@ -40,7 +45,7 @@ pub const MARGIN: f64 = 1e-6;
 /// The principal components of a trajectory's keys, largest first.
 #[derive(Debug, Clone)]
 pub struct Components {
-    /// The mean key pose `m`.
+    /// The mean pose `m` over the frames.
     pub mean: Vec<Point>,
     /// Unit directions `B_j` (3V entries as V points), in decreasing singular value.
     pub directions: Vec<Vec<Point>>,
@@ -48,16 +53,18 @@ pub struct Components {
     pub values: Vec<Vec<f64>>,
     /// `slopes[j][k]`: `c_j'` at trajectory key `k` (per second).
     pub slopes: Vec<Vec<f64>>,
-    /// Singular values `S_j`, decreasing.
+    /// Singular values of the centered frames along `B_j`, decreasing (zero for directions
+    /// no frame shows): the rank-`r` clip's squared error summed over the frames is the sum
+    /// of the squares of those past `r`.
     pub singular: Vec<f64>,
     /// The trajectory's key times (a contact's two keys share one time).
     pub times: Vec<f64>,
 }
 
 impl Components {
-    /// The SVD of the trajectory's keys (see the module docs). Components with a zero singular
-    /// value are dropped.
-    pub fn new(tr: &Trajectory) -> Self {
+    /// The components of the trajectory played at `frames` (seconds; see the module docs).
+    /// Directions with no key data (a zero singular value of the keys) are dropped.
+    pub fn new(tr: &Trajectory, frames: &[f64]) -> Self {
         let k = tr.key_count();
         let v = tr.positions[0].len();
         let mut mean = vec![[0.0; 3]; v];
@@ -69,7 +76,7 @@ impl Components {
             }
         }
         // Key k's velocity row is scaled by its mean adjacent interval (positive intervals
-        // only: a contact's zero-length interval carries no time).
+        // only: a contact's zero-length interval carries no time), so both rows are lengths.
         let h: Vec<f64> = (0..k)
             .map(|key| {
                 let sides: Vec<f64> =
@@ -93,20 +100,48 @@ impl Components {
                 h[r - k] * tr.velocities[r - k][p][d]
             }
         });
+        // The key data's span: A = U S Vᵀ, numerically zero directions (noise) left out.
         let svd = a.thin_svd().expect("the SVD of a finite matrix converges");
         let (u, s, vt) = (svd.U(), svd.S(), svd.V());
         let top = if s.dim() > 0 { s[0] } else { 0.0 };
+        let r0 = (0..s.dim()).take_while(|&j| s[j] > top * 1e-13 && s[j] > 0.0).count();
         let mut out =
             Components { mean, directions: Vec::new(), values: Vec::new(), slopes: Vec::new(), singular: Vec::new(), times: tr.times.clone() };
-        for j in 0..s.dim() {
-            // Numerically zero directions carry nothing but noise.
-            if !(s[j] > top * 1e-13 && s[j] > 0.0) {
-                break;
+        if r0 == 0 {
+            return out;
+        }
+        // Every played frame is a row of H A (H: the Hermite weights of the key rows at that
+        // instant), so in the span's coordinates it is the row of Q = H U S. The principal
+        // directions of the frames (their mean removed) are V W, W from the SVD of Q's
+        // centered rows: what minimizes the squared error summed over the frames the files
+        // play, where the keys' own SVD would weigh key poses and interval-scaled velocities.
+        let g = Mat::<f64>::from_fn(2 * k, r0, |r, j| u[(r, j)] * s[j]);
+        let at: Vec<f64> = if frames.is_empty() { tr.times.clone() } else { frames.to_vec() };
+        let q = Mat::<f64>::from_fn(at.len(), r0, |f, j| {
+            let (i, theta) = tr.locate(at[f]);
+            let w = hermite_weights(theta, tr.times[i + 1] - tr.times[i]);
+            w.pos[0] * g[(i, j)] + w.pos[2] * g[(i + 1, j)] + w.pos[1] / h[i] * g[(k + i, j)] + w.pos[3] / h[i + 1] * g[(k + i + 1, j)]
+        });
+        let q_mean: Vec<f64> = (0..r0).map(|j| (0..at.len()).map(|f| q[(f, j)]).sum::<f64>() / at.len() as f64).collect();
+        let centered = Mat::<f64>::from_fn(at.len(), r0, |f, j| q[(f, j)] - q_mean[j]);
+        // The full SVD: W is square, so directions no frame shows (fewer frames than key
+        // rows) are kept, last, and full rank still reproduces the trajectory between frames.
+        let frame_svd = centered.svd().expect("the SVD of a finite matrix converges");
+        let (w, s2) = (frame_svd.V(), frame_svd.S());
+        // The frames' mean: m + Σ q̄_j V_j.
+        for (p, m) in out.mean.iter_mut().enumerate() {
+            for d in 0..3 {
+                m[d] += (0..r0).map(|j| q_mean[j] * vt[(3 * p + d, j)]).sum::<f64>();
             }
-            out.directions.push((0..v).map(|p| [vt[(3 * p, j)], vt[(3 * p + 1, j)], vt[(3 * p + 2, j)]]).collect());
-            out.values.push((0..k).map(|key| u[(key, j)] * s[j]).collect());
-            out.slopes.push((0..k).map(|key| u[(k + key, j)] * s[j] / h[key]).collect());
-            out.singular.push(s[j]);
+        }
+        let directions = vt.subcols(0, r0) * w;
+        let gw = &g * w;
+        let shift: Vec<f64> = (0..r0).map(|i| (0..r0).map(|j| q_mean[j] * w[(j, i)]).sum()).collect();
+        for i in 0..r0 {
+            out.directions.push((0..v).map(|p| [directions[(3 * p, i)], directions[(3 * p + 1, i)], directions[(3 * p + 2, i)]]).collect());
+            out.values.push((0..k).map(|key| gw[(key, i)] - shift[i]).collect());
+            out.slopes.push((0..k).map(|key| gw[(k + key, i)] / h[key]).collect());
+            out.singular.push(if i < s2.dim() { s2[i] } else { 0.0 });
         }
         out
     }
@@ -297,6 +332,11 @@ mod tests {
         Trajectory { times, positions: (0..5).map(pose).collect(), velocities: (0..5).map(vel).collect() }
     }
 
+    /// The frames the clips are measured at: 30 fps over the wave's 1.5 s.
+    fn frames() -> Vec<f64> {
+        (0..=45).map(|f| f as f64 / 30.0).collect()
+    }
+
     fn max_distance(tr: &Trajectory, clip: &BlendShapeClip) -> f64 {
         (0..=300)
             .map(|i| tr.start() + (tr.end() - tr.start()) * i as f64 / 300.0)
@@ -307,18 +347,23 @@ mod tests {
     #[test]
     fn full_rank_reproduces_the_trajectory_at_any_time() {
         let tr = wave();
-        let c = Components::new(&tr);
+        let c = Components::new(&tr, &frames());
         assert!(c.len() <= 10);
         for weights in [Weights::Bernstein, Weights::Signed] {
             let clip = c.clip(c.len(), weights);
             assert!(max_distance(&tr, &clip) < 1e-6, "{weights:?}: {}", max_distance(&tr, &clip));
         }
+        // Fewer frames than key rows: the directions no frame shows are kept, last.
+        let few = Components::new(&tr, &[0.0, 0.75, 1.5]);
+        assert_eq!(few.len(), c.len());
+        assert!(few.singular[2..].iter().all(|&s| s < 1e-9 * few.singular[0]), "{:?}", few.singular);
+        assert!(max_distance(&tr, &few.clip(few.len(), Weights::Signed)) < 1e-6);
     }
 
     #[test]
     fn a_truncated_clip_plays_the_projected_trajectory_and_its_error_falls_with_rank() {
         let tr = wave();
-        let c = Components::new(&tr);
+        let c = Components::new(&tr, &frames());
         let mut previous = f64::INFINITY;
         for rank in 1..=c.len() {
             let clip = c.clip(rank, Weights::Bernstein);
@@ -326,11 +371,14 @@ mod tests {
             // The clip is exactly the Hermite trajectory of its key data.
             let played = clip.played(&tr.times);
             assert!(max_distance(&played, &clip) < 1e-6, "rank {rank}");
-            // Its key data is the rank-r projection: the residual is the dropped singular values.
-            let residual: f64 = (0..tr.key_count())
-                .map(|k| tr.positions[k].iter().zip(&played.positions[k]).map(|(p, q)| norm(sub(*p, *q)).powi(2)).sum::<f64>())
+            // Its frames are the rank-r projection of the trajectory's: the residual summed
+            // over the frames is the dropped singular values.
+            let residual: f64 = frames()
+                .iter()
+                .map(|&t| tr.evaluate(t).iter().zip(&clip.points_at(t)).map(|(p, q)| norm(sub(*p, *q)).powi(2)).sum::<f64>())
                 .sum::<f64>();
-            assert!(residual.sqrt() <= c.singular[rank..].iter().map(|s| s * s).sum::<f64>().sqrt() + 1e-5, "rank {rank}");
+            let dropped = c.singular[rank..].iter().map(|s| s * s).sum::<f64>().sqrt();
+            assert!((residual.sqrt() - dropped).abs() <= 1e-5, "rank {rank}: {} against {dropped}", residual.sqrt());
             let e = max_distance(&tr, &clip);
             assert!(e <= previous + 1e-6, "rank {rank}: {e} > {previous}");
             previous = e;
@@ -340,7 +388,7 @@ mod tests {
     #[test]
     fn every_weight_stays_in_zero_one_at_any_time_and_touches_both_ends() {
         let tr = wave();
-        let c = Components::new(&tr);
+        let c = Components::new(&tr, &frames());
         let clip = c.clip(4, Weights::Bernstein);
         let (mut lo, mut hi) = (vec![f64::INFINITY; 4], vec![f64::NEG_INFINITY; 4]);
         for i in 0..=20000 {
@@ -387,7 +435,7 @@ mod tests {
         let mut tr = wave();
         tr.times = vec![0.0, 0.3, 0.3, 1.2, 1.5];
         tr.positions[2] = tr.positions[1].clone();
-        let c = Components::new(&tr);
+        let c = Components::new(&tr, &frames());
         let clip = c.clip(c.len(), Weights::Bernstein);
         assert_eq!(clip.times, vec![0.0, 0.3, 1.2, 1.5]);
         let played = clip.played(&tr.times);
@@ -402,7 +450,7 @@ mod tests {
     #[test]
     fn the_smallest_rank_is_the_first_that_meets() {
         let tr = wave();
-        let c = Components::new(&tr);
+        let c = Components::new(&tr, &frames());
         let errors: Vec<f64> = (1..=c.len()).map(|r| max_distance(&tr, &c.clip(r, Weights::Bernstein))).collect();
         let goal = errors[2] * 1.0001;
         let rank = smallest_rank::<()>(&c, Weights::Bernstein, |clip| Ok(max_distance(&tr, clip) <= goal)).unwrap();

@@ -77,7 +77,10 @@ pub fn export_with(
     };
     // The groups' diffuse textures (OBJ map_Kd): embedded in glb, copied beside USD files.
     let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures), budget)?;
-    let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false };
+    // A welded input (keyframe surface or cache): every file says which of its vertices each
+    // input vertex is.
+    let weld = animation.weld_map();
+    let surface = glb::Surface { triangles, attributes, textures: &textures, morph_normals: false, weld_map: weld };
     let blendshape_surface = glb::Surface { morph_normals: scene.export.gltf_morph_normals, ..surface };
     if formats.iter().any(|f| matches!(f, Format::Usda | Format::Usdc)) {
         // Beside the USD files a texture named like a file the run writes would be overwritten.
@@ -106,9 +109,6 @@ pub fn export_with(
             }
         }
     }
-    // A welded input (keyframe surface or cache): every file says which of its vertices each
-    // input vertex is.
-    let weld = animation.weld_map();
     let forms = forms(scene);
     let bar = progress.bar((forms.len() * formats.len()) as u64, "export");
     // Only the blendshape form builds its layer: the full-frame USD files are written from
@@ -166,10 +166,6 @@ pub fn export_with(
                             glb::blendshapes_sampled(clip, &frame_times, blendshape_surface, &scene.name, placement, encoding)
                         }
                         _ => glb::blendshapes(clip, blendshape_surface, &scene.name, placement, encoding),
-                    };
-                    let file = match weld {
-                        Some(map) => file.with_json(|json| weld_map::gltf_json(json, map)),
-                        None => file,
                     };
                     let mut w = std::io::BufWriter::new(shared.create(&name)?);
                     file.write_to(&mut w).and_then(|_| std::io::Write::flush(&mut w)).map_err(io)?;
@@ -252,11 +248,11 @@ pub fn blendshape_clip(animation: &Animation, rank: Option<usize>, budget: &Budg
     if export.basis_for(animation.cache.is_some() && animation.log.method == Method::Fit) == Basis::Keys {
         return Ok((BlendShapeClip::new(tr, export.weights), None));
     }
-    let components = Components::new(tr);
+    let frames = tr.frames(animation.scene.fps);
+    let components = Components::new(tr, &frames.iter().map(|&(_, t)| t).collect::<Vec<_>>());
     let rank = match rank.or(export.rank) {
         Some(r) => r.min(components.len().max(1)),
         None => {
-            let frames = tr.frames(animation.scene.fps);
             let diagonal = bbox_diagonal(&animation.mesh.positions);
             let from_animation = |clip: &BlendShapeClip| deviation(frames.iter().map(|&(_, t)| (clip.points_at(t), tr.evaluate(t))), diagonal).max;
             match &animation.cache {

@@ -261,10 +261,13 @@ enum Block {
     Stride8,
     /// Elements of 4 bytes: quantized normals and byte targets (vec3 i8 + padding), UVs (vec2 u16).
     Stride4,
+    /// The weld map (`extras.weldMap`) when it is not the index list: last, so files without
+    /// one keep their layout.
+    WeldMap,
 }
-const BLOCKS: usize = 7;
+const BLOCKS: usize = 8;
 const KINDS: [Block; BLOCKS] =
-    [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation, Block::Stride8, Block::Stride4];
+    [Block::Indices, Block::Vertices, Block::SparseIndices, Block::SparseValues, Block::Animation, Block::Stride8, Block::Stride4, Block::WeldMap];
 
 /// A material group's primitive: its name, triangles (over glTF vertices) and texture.
 type Group<'t> = (String, Vec<[u32; 3]>, Option<&'t Texture>);
@@ -282,12 +285,15 @@ pub struct Surface<'a> {
     /// Morph targets carry NORMAL deltas (and the base gets recomputed `NORMAL`s if the
     /// surface has none): see [`morph_normal_deltas`].
     pub morph_normals: bool,
+    /// A welded input: per input vertex, its point here (`extras.weldMap`, see
+    /// [`weld_map`](super::weld_map)).
+    pub weld_map: Option<&'a [u32]>,
 }
 
 impl<'a> Surface<'a> {
     /// Triangles only: no UVs, normals, groups or textures.
     pub fn plain(triangles: &'a [[u32; 3]]) -> Surface<'a> {
-        Surface { triangles, attributes: None, textures: &[], morph_normals: false }
+        Surface { triangles, attributes: None, textures: &[], morph_normals: false, weld_map: None }
     }
 }
 
@@ -308,6 +314,8 @@ struct File {
     grid: Option<(Grid, Compression)>,
     /// glTF vertices and primitives, for the index codec.
     vertex_count: usize,
+    /// The accessor holding the weld map, for the mesh's `extras.weldMap`.
+    weld_map: Option<Index<json::Accessor>>,
 }
 
 fn f32x3_value(v: [f32; 3]) -> Value {
@@ -378,7 +386,7 @@ impl File {
     /// `base.len()` glTF vertices are the points in order, the seam copies follow, and
     /// `extras.seamSources` lists the point each copy shows.
     fn new(name: &str, surface: Surface, base: &[[f32; 3]], placement: Placement, grid: Option<(Grid, Compression)>) -> File {
-        let Surface { triangles, attributes, textures, morph_normals } = surface;
+        let Surface { triangles, attributes, textures, morph_normals, weld_map } = surface;
         let mut f = File {
             root: json::Root::default(),
             blocks: Default::default(),
@@ -388,6 +396,7 @@ impl File {
             normal_triangles: None,
             grid,
             vertex_count: 0,
+            weld_map: None,
         };
         f.root.asset = json::Asset {
             copyright: None,
@@ -467,12 +476,19 @@ impl File {
                 .collect(),
             None => vec![(name.to_string(), triangles.to_vec(), None)],
         };
+        // A single index list equal to the weld map (an input with a vertex per triangle
+        // corner, welded: input vertex `3t + c` is corner `c` of triangle `t`) is the map.
+        let single = groups.len() == 1;
+        let map_is_indices = |tris: &[[u32; 3]]| single && weld_map.is_some_and(|m| m.iter().copied().eq(tris.iter().flatten().copied()));
         let mut primitives = Vec::with_capacity(groups.len());
         // Texture index per image file name: groups sharing an image share its texture.
         let mut texture_of: Vec<(String, Index<json::Texture>)> = Vec::new();
         for (material_name, tris, texture) in groups {
             let offset = f.push(Block::Indices, &index_bytes(tris.iter().flatten().copied(), size));
             let indices = f.root.push(accessor(Some((Block::Indices, offset)), tris.len() * 3, component, Type::Scalar));
+            if map_is_indices(&tris) {
+                f.weld_map = Some(indices);
+            }
             // glTF's default material is fully metallic, which renders black without an
             // environment map; a plain dielectric reads in every viewer.
             let mut material = json::Material { name: Some(material_name), ..Default::default() };
@@ -499,6 +515,13 @@ impl File {
                 mode: Valid(json::mesh::Mode::Triangles),
                 targets: None,
             });
+        }
+        if let (Some(map), None) = (weld_map, f.weld_map) {
+            // Its own view (no target: neither vertex nor index data), u16 unless a point
+            // number needs more.
+            let (component, size) = index_type(base.len(), false);
+            let offset = f.push(Block::WeldMap, &index_bytes(map.iter().copied(), size));
+            f.weld_map = Some(f.root.push(accessor(Some((Block::WeldMap, offset)), map.len(), component, Type::Scalar)));
         }
         let mesh = f.root.push(json::Mesh { extensions: None, extras: None, name: Some(name.into()), primitives, weights: None });
         // The placement, after the grid's dequantization: `m R (step q + center)`.
@@ -713,6 +736,9 @@ impl File {
         if !self.target_names.is_empty() {
             extras.insert("targetNames".into(), value!(self.target_names));
         }
+        if let Some(map) = self.weld_map {
+            extras.insert(super::weld_map::GLTF_KEY.into(), value!(map.value()));
+        }
         if !extras.is_empty() {
             let text = serde_json::to_string(&Value::Object(extras)).expect("extras serialize");
             self.root.meshes[0].extras = Some(json::extras::RawValue::from_string(text).expect("valid JSON"));
@@ -867,11 +893,6 @@ impl Glb {
     /// Never: a GLB has at least its header.
     pub fn is_empty(&self) -> bool {
         false
-    }
-
-    /// The same file with its JSON chunk replaced by `edit` of it (the weld map's `extras`).
-    pub fn with_json(self, edit: impl FnOnce(&[u8]) -> Vec<u8>) -> Glb {
-        Glb { json: edit(&self.json), ..self }
     }
 
     /// Write the file: header, JSON chunk (space padded), BIN chunk (zero padded).

@@ -14,7 +14,7 @@ use crate::support::error::{Error, Result};
 const EXT: &str = "EXT_meshopt_compression";
 
 /// The JSON and BIN chunks of a GLB (the writer's own layout: JSON first, then BIN).
-fn chunks(bytes: &[u8]) -> Option<(Value, &[u8])> {
+pub(crate) fn chunks(bytes: &[u8]) -> Option<(Value, &[u8])> {
     let u32_at = |i: usize| bytes.get(i..i + 4).map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")) as usize);
     let json_len = u32_at(12)?;
     let json = serde_json::from_slice(bytes.get(20..20 + json_len)?).ok()?;
