@@ -23,8 +23,9 @@
 //! `cargo bench --bench scale` (or `make bench-scale`). `SCALE_CASES=10k,100k` (or arguments
 //! after `--`) runs only the rows whose name contains one of the words; a few extra rows (the
 //! 20-key body with each global step forced, `2.6k-20-keys-direct` and
-//! `2.6k-20-keys-iterative-2G`, and with the coarse-to-fine schedule, `2.6k-20-keys-coarse`)
-//! run only when named in full. `SCALE_KEEP=1` keeps the generated scenes and outputs (their folder is printed)
+//! `2.6k-20-keys-iterative-2G`, and with the coarse-to-fine schedule, `2.6k-20-keys-coarse`;
+//! the 1.1M-triangle surface with full-frame files, `1.1m-cage-full-frame`) run only when
+//! named in full. `SCALE_KEEP=1` keeps the generated scenes and outputs (their folder is printed)
 //! for profiling a bake by hand.
 //!
 //! The cost of one iteration, side by side with another build (a loaded machine: CPU seconds,
@@ -264,6 +265,9 @@ fn main() {
         // frames), where the frames are most of the peak.
         slim("25k-cage-full-frame", [42, 130, 42], 10, "", None, true),
         slim("100k-cage-full-frame", [85, 260, 85], 10, "", None, true),
+        // The export at size (named only): 1,075,648 triangles on the cage with full-frame
+        // files in every format (the full-frame usda 2.7 GB).
+        Case { extra: true, ..slim("1.1m-cage-full-frame", [196, 588, 196], 10, "", None, true) },
     ];
     // A word picks the rows whose name contains it; an extra row only by its whole name.
     let chosen =

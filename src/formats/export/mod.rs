@@ -8,6 +8,7 @@
 //! The layouts are specified in `formats/usd.md` and `formats/gltf.md`; which files a scene
 //! gets is decided by the export stage (`crate::pipeline::stages::export`).
 
+mod float_text;
 pub mod glb;
 pub mod layer;
 pub mod texture;
