@@ -5,7 +5,8 @@
 //! welded vertices, the weld map in every file (glTF `meshes[0].extras.weldMap`, USD
 //! `blendsim:weldMap`), to the same positions per input vertex as the prism welded by hand;
 //! `weld = false` keeps today's behaviour; a selection numbered in input vertices selects their
-//! welded vertex; and a clip's keys (a per-corner glTF clip) weld the same way.
+//! welded vertex; a map that is not the index list (every vertex written twice) has an accessor
+//! of its own; and a clip's keys (a per-corner glTF clip) weld the same way.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -165,6 +166,51 @@ fn per_corner_keys_are_welded_and_map_back() {
     for name in ["welded.glb", "welded.usdc", "welded.full.glb"] {
         println!("{name}: welded {} B, welded by hand {} B", bytes_of(&report, name), bytes_of(&by_hand, name));
     }
+}
+
+/// Every vertex written twice, odd faces on the copies (a map that is not the index list): the
+/// glb's map has an accessor of its own, which the validator (one information, `UNUSED_OBJECT`,
+/// no warning), three.js and usd-core accept, and both copies of a vertex map to one point.
+#[test]
+fn doubled_keys_carry_a_map_of_their_own() {
+    let dir = TempDir::new("weld-keys-doubled");
+    for (name, stretch) in [("rest.obj", 1.0), ("long.obj", 1.3)] {
+        let text = prism_obj(stretch);
+        let vertices: Vec<&str> = text.lines().filter(|l| l.starts_with("v ")).collect();
+        let mut doubled: String = vertices.iter().chain(&vertices).map(|v| format!("{v}\n")).collect();
+        for (f, line) in text.lines().filter(|l| !l.starts_with("v ")).enumerate() {
+            match line.strip_prefix("f ") {
+                Some(corners) if f % 2 == 1 => {
+                    let shifted: Vec<String> = corners
+                        .split_whitespace()
+                        .map(|c| {
+                            let (v, attributes) = c.split_once('/').unwrap();
+                            format!("{}/{attributes}", v.parse::<usize>().unwrap() + vertices.len())
+                        })
+                        .collect();
+                    let _ = writeln!(doubled, "f {}", shifted.join(" "));
+                }
+                _ => {
+                    let _ = writeln!(doubled, "{line}");
+                }
+            }
+        }
+        std::fs::write(dir.join(name), doubled).unwrap();
+    }
+    std::fs::write(dir.join("scene.toml"), scene("")).unwrap();
+    run(&dir.path, &["bake", "-q", "scene.toml", "--out", "out"]).success();
+    let out = dir.join("out");
+    let report = read_json(&out.join("report.json"));
+    let n = POINTS;
+    assert_eq!((report["vertices"].as_u64(), report["input_vertices"].as_u64()), (Some(n as u64), Some(2 * n as u64)));
+    check_outputs(&out, &library_animation(&dir.join("scene.toml")), &output_files(&report["outputs"]));
+    let glb = Glb::parse(&std::fs::read(out.join("welded.glb")).unwrap());
+    let own = glb.json["meshes"][0]["extras"]["weldMap"].as_u64().expect("a weld map");
+    assert_ne!(Some(own), glb.json["meshes"][0]["primitives"][0]["indices"].as_u64(), "not the index list");
+    let map = glb_weld_map(&out.join("welded.glb")).unwrap();
+    assert_eq!(map.len(), 2 * n);
+    assert!((0..n).all(|i| map[i] == map[i + n]), "both copies of a vertex are one point: {map:?}");
+    assert_eq!(usd_frames(&out.join("welded.usda")).1.as_ref(), Some(&map), "USD's map is the glb's");
 }
 
 /// `weld = false` keeps the input's vertices as before: a surface of unconnected triangles is
