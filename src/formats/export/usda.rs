@@ -308,13 +308,9 @@ pub(crate) fn push_vec3s<'a>(out: &mut String, items: impl Iterator<Item = &'a [
 }
 
 fn push_vec3(out: &mut String, p: &[f32; 3]) {
-    out.push('(');
-    push_f32(out, p[0]);
-    out.push_str(", ");
-    push_f32(out, p[1]);
-    out.push_str(", ");
-    push_f32(out, p[2]);
-    out.push(')');
+    let mut text = [0; VEC3_ROOM];
+    let n = vec3_text(p, &mut text);
+    out.push_str(std::str::from_utf8(&text[..n]).expect("ASCII"));
 }
 
 /// The shorter of `{}` and `{:e}` (`float_text`): both are the shortest round-trip digits of
@@ -326,22 +322,32 @@ pub(super) fn push_f32(out: &mut String, x: f32) {
     out.push_str(std::str::from_utf8(&buffer[..n]).expect("ASCII"));
 }
 
-/// `push_vec3` into bytes, one append per point (at most 54 bytes: three floats of at most
-/// 16, the parentheses and separators).
+/// `push_vec3` into bytes, one append per point.
 fn push_vec3_bytes(out: &mut Vec<u8>, p: &[f32; 3]) {
-    let mut text = [0; 38 + ROOM];
-    text[0] = b'(';
+    let mut text = [0; VEC3_ROOM];
+    let n = vec3_text(p, &mut text);
+    out.extend_from_slice(&text[..n]);
+}
+
+/// The room [`vec3_text`] needs: the third float starts at most 37 bytes in (a parenthesis,
+/// two floats of at most 16 bytes, two separators) and needs [`ROOM`] from there.
+const VEC3_ROOM: usize = 37 + ROOM;
+
+/// `(x, y, z)` at the start of `out` (at least [`VEC3_ROOM`] bytes, at most 54 of them
+/// written); its length.
+fn vec3_text(p: &[f32; 3], out: &mut [u8]) -> usize {
+    out[0] = b'(';
     let mut at = 1;
     for (i, &x) in p.iter().enumerate() {
         if i > 0 {
-            text[at] = b',';
-            text[at + 1] = b' ';
+            out[at] = b',';
+            out[at + 1] = b' ';
             at += 2;
         }
-        at += f32_text(x, &mut text[at..]);
+        at += f32_text(x, &mut out[at..]);
     }
-    text[at] = b')';
-    out.extend_from_slice(&text[..at + 1]);
+    out[at] = b')';
+    at + 1
 }
 
 #[cfg(test)]
