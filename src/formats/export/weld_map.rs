@@ -10,9 +10,6 @@
 //!   of its own;
 //! - USD: `uniform int[] blendsim:weldMap` on the `Mesh` prim.
 
-use serde_json::Value as Json;
-
-use super::glb::readback::{chunks, decode_meshopt};
 use super::layer::{Attribute, Layer, Value};
 
 /// The extras key (glTF) and attribute name (USD).
@@ -29,54 +26,13 @@ pub fn usd(layer: &mut Layer, map: &[u32]) {
     }
 }
 
-/// The weld map of a GLB this crate wrote (meshopt views decoded first), `None` when its mesh
-/// has none; `Err` names what is malformed.
-pub fn from_glb(glb: &[u8]) -> Result<Option<Vec<u32>>, String> {
-    let (json, _) = chunks(glb).ok_or("not a GLB")?;
-    let Some(index) = json["meshes"][0]["extras"].get(GLTF_KEY) else { return Ok(None) };
-    let index = index.as_u64().ok_or("extras.weldMap is not an accessor index")? as usize;
-    let compressed = json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == "EXT_meshopt_compression"));
-    let decoded;
-    let glb = if compressed {
-        decoded = decode_meshopt(glb)?;
-        &decoded[..]
-    } else {
-        glb
-    };
-    let (json, bin) = chunks(glb).ok_or("not a GLB")?;
-    let accessor = &json["accessors"][index];
-    let size = match accessor["componentType"].as_u64() {
-        Some(5121) => 1,
-        Some(5123) => 2,
-        Some(5125) => 4,
-        _ => return Err(format!("the weld map's accessor {index} is not of unsigned integers")),
-    };
-    if accessor["type"] != "SCALAR" {
-        return Err(format!("the weld map's accessor {index} is not SCALAR"));
-    }
-    let count = accessor["count"].as_u64().ok_or("the weld map's accessor has no count")? as usize;
-    let view: &Json = &json["bufferViews"][accessor["bufferView"].as_u64().ok_or("the weld map's accessor has no buffer view")? as usize];
-    let start = view["byteOffset"].as_u64().unwrap_or(0) as usize + accessor["byteOffset"].as_u64().unwrap_or(0) as usize;
-    let stride = view["byteStride"].as_u64().map_or(size, |s| s as usize);
-    (0..count)
-        .map(|i| {
-            let at = start + i * stride;
-            let b = bin.get(at..at + size).ok_or("the weld map runs past the BIN chunk")?;
-            Ok(match size {
-                1 => b[0] as u32,
-                2 => u16::from_le_bytes([b[0], b[1]]) as u32,
-                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-            })
-        })
-        .collect::<Result<Vec<u32>, String>>()
-        .map(Some)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::algorithms::blendshape::clip::{BlendShapeClip, Target, WeightCurve};
+    use crate::formats::export::glb::readback::{chunks, decode_meshopt};
     use crate::formats::export::glb::{self, Compression, Encoding, Placement, Surface};
+    use serde_json::Value as Json;
 
     fn clip() -> BlendShapeClip {
         BlendShapeClip {
@@ -85,6 +41,50 @@ mod tests {
             times: vec![0.0, 1.0],
             curves: vec![WeightCurve { values: vec![0.0, 1.0], in_tangents: vec![1.0, 1.0], out_tangents: vec![1.0, 1.0] }],
         }
+    }
+
+    /// The weld map of a GLB this crate wrote (meshopt views decoded first), `None` when its
+    /// mesh has none; `Err` names what is malformed. (The pipeline never reads a map back; the
+    /// integration tests read it with their own glTF reader.)
+    fn from_glb(glb: &[u8]) -> Result<Option<Vec<u32>>, String> {
+        let (json, _) = chunks(glb).ok_or("not a GLB")?;
+        let Some(index) = json["meshes"][0]["extras"].get(GLTF_KEY) else { return Ok(None) };
+        let index = index.as_u64().ok_or("extras.weldMap is not an accessor index")? as usize;
+        let compressed = json["extensionsRequired"].as_array().is_some_and(|a| a.iter().any(|e| e == "EXT_meshopt_compression"));
+        let decoded;
+        let glb = if compressed {
+            decoded = decode_meshopt(glb)?;
+            &decoded[..]
+        } else {
+            glb
+        };
+        let (json, bin) = chunks(glb).ok_or("not a GLB")?;
+        let accessor = &json["accessors"][index];
+        let size = match accessor["componentType"].as_u64() {
+            Some(5121) => 1,
+            Some(5123) => 2,
+            Some(5125) => 4,
+            _ => return Err(format!("the weld map's accessor {index} is not of unsigned integers")),
+        };
+        if accessor["type"] != "SCALAR" {
+            return Err(format!("the weld map's accessor {index} is not SCALAR"));
+        }
+        let count = accessor["count"].as_u64().ok_or("the weld map's accessor has no count")? as usize;
+        let view: &Json = &json["bufferViews"][accessor["bufferView"].as_u64().ok_or("the weld map's accessor has no buffer view")? as usize];
+        let start = view["byteOffset"].as_u64().unwrap_or(0) as usize + accessor["byteOffset"].as_u64().unwrap_or(0) as usize;
+        let stride = view["byteStride"].as_u64().map_or(size, |s| s as usize);
+        (0..count)
+            .map(|i| {
+                let at = start + i * stride;
+                let b = bin.get(at..at + size).ok_or("the weld map runs past the BIN chunk")?;
+                Ok(match size {
+                    1 => b[0] as u32,
+                    2 => u16::from_le_bytes([b[0], b[1]]) as u32,
+                    _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                })
+            })
+            .collect::<Result<Vec<u32>, String>>()
+            .map(Some)
     }
 
     /// The map is read back from the BIN chunk in every compression; a per-corner map is the
