@@ -5,9 +5,11 @@
 //! - [`interrupt`]: clean interruption (signals, and the child processes to stop);
 //! - [`progress`]: the progress bar and its quiet modes;
 //! - [`budget`]: the memory and time a bake may use, a value passed down (no globals);
-//! - [`input`]: bounded reading of input files.
+//! - [`input`]: bounded reading of input files;
+//! - [`build_id`]: the build ID of an executable (what identifies the running blendsim).
 
 pub mod budget;
+pub mod build_id;
 pub mod error;
 pub mod input;
 pub mod interrupt;

@@ -13,9 +13,11 @@
 //!
 //! Import always runs (it reads the inputs that are hashed); the cage, the fit of the interior
 //! nodes, embed, export and report run again from the reused data, so the files are the cold
-//! bake's bytes when nothing changed. The binary is hashed whole: a rebuilt blendsim reuses
-//! nothing. The file is JSON in shortest round-trip numbers (values read back are the values
-//! written) and is written with the bake's other files, in its one commit.
+//! bake's bytes when nothing changed. The binary is identified by its build ID (the linker's
+//! hash of the linked file, read from its ELF note) or, without one, by the hash of its bytes:
+//! a rebuilt blendsim reuses nothing. The file is JSON in shortest round-trip numbers (values
+//! read back are the values written) and is written with the bake's other files, in its one
+//! commit.
 
 use std::hash::{DefaultHasher, Hasher};
 use std::io::Write;
@@ -28,6 +30,7 @@ use crate::algorithms::geometry::{Point, TetMesh, TriMesh};
 use crate::algorithms::spacetime::trajectory::Trajectory;
 use crate::formats::tetgen::{self, TetgenOptions};
 use crate::pipeline::stage_file::{Body, KeyPoses, Solution, SolverLog};
+use crate::support::build_id::gnu_build_id;
 use crate::support::error::{Error, Result};
 
 /// The file's name in a bake's folder.
@@ -40,7 +43,7 @@ const FORMAT: u32 = 1;
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct BakeCache {
     blendsim_bake_cache: u32,
-    /// The hash of the blendsim binary that wrote it.
+    /// The identity of the blendsim binary that wrote it (its build ID, or its bytes' hash).
     binary: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     tetgen: Option<TetgenEntry>,
@@ -257,11 +260,15 @@ fn tetgen_program() -> String {
     found.as_deref().and_then(stamp).unwrap_or_else(|| program.display().to_string())
 }
 
-/// The hash of the running blendsim's executable, computed once.
+/// The identity of the running blendsim's executable, computed once: its build ID (the
+/// linker's hash of it, [`gnu_build_id`]) where it has one, else the hash of its bytes.
 fn binary() -> Result<&'static String> {
     static BINARY: OnceLock<std::result::Result<String, String>> = OnceLock::new();
     let hashed = BINARY.get_or_init(|| {
         let exe = std::env::current_exe().map_err(|e| format!("cannot find the running blendsim ({e})"))?;
+        if let Some(id) = gnu_build_id(&exe) {
+            return Ok(format!("build-id {}", id.iter().map(|b| format!("{b:02x}")).collect::<String>()));
+        }
         let mut d = Digest::default();
         std::fs::File::open(&exe)
             .and_then(|mut file| std::io::copy(&mut file, &mut d))
