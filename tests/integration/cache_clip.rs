@@ -84,6 +84,62 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
     }
 }
 
+/// A tolerance tight enough that one grid's shorts cannot hold the bar at the step the budget
+/// allows: the default glb keeps `KHR_mesh_quantization` with the base in f32 and each target on
+/// a step of its own, in shorts or bytes where the budget allows (its weights scaled by the
+/// step's ratio to the node's, so every weight stays in [0, 1]). The Khronos validator and
+/// three.js (`check_outputs_ranked`) and Blender 4.2 at default settings play it within the
+/// clip plus the quantization error the report states, and that error is within a tenth of the
+/// tolerance.
+#[test]
+fn a_tight_tolerance_stores_targets_on_steps_of_their_own_that_play_everywhere() {
+    let cache = bar(&BarSettings::default());
+    let dir = TempDir::new("cache-per-target-steps");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let tolerance = 2e-4;
+    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", &format!("keyframes = \"auto\"\ntolerance = {tolerance}"));
+    std::fs::write(dir.join("scene.toml"), text.replace("full_frame = true", "full_frame = false")).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let rank = report["rank"].as_u64().expect("a rank") as usize;
+    let bytes = std::fs::read(dir.join("out/bar.glb")).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    assert_eq!(json["extensionsRequired"], json!(["KHR_mesh_quantization"]));
+    let primitive = &json["meshes"][0]["primitives"][0];
+    let component = |a: &Value| json["accessors"][a.as_u64().unwrap() as usize]["componentType"].as_u64().unwrap();
+    assert_eq!(component(&primitive["attributes"]["POSITION"]), 5126, "the base in f32");
+    let targets: Vec<u64> = primitive["targets"].as_array().unwrap().iter().map(|t| component(&t["POSITION"])).collect();
+    assert_eq!(targets.len(), rank);
+    assert!(targets.iter().any(|&c| c == 5120 || c == 5122), "integer targets: {targets:?}");
+    // The weights as stored: every one in [0, 1] (Blender clamps to the shape key's range).
+    let output = &json["accessors"][json["animations"][0]["samplers"][0]["output"].as_u64().unwrap() as usize];
+    let view = &json["bufferViews"][output["bufferView"].as_u64().unwrap() as usize];
+    let at = 28 + json_len + view["byteOffset"].as_u64().unwrap_or(0) as usize + output["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let weights: Vec<f32> =
+        bytes[at..at + 4 * output["count"].as_u64().unwrap() as usize].chunks(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+    assert!(weights.iter().all(|w| (0.0..=1.0).contains(w)), "weights outside [0, 1]");
+    let outputs: Vec<OutputFile> = output_files(&report["outputs"]).into_iter().filter(|f| f.kind == OutputKind::Blendshape).collect();
+    let glb = outputs.iter().find(|f| f.path == "bar.glb").expect("the glb is listed");
+    let stated = glb.quantization_error.expect("a quantized glb states its error");
+    println!("rank {rank}, targets {targets:?}, glb {} bytes, quantization error {stated:.2e}", glb.bytes);
+    assert!(stated <= 0.1 * tolerance * 1.001, "quantization error {stated:e} within a tenth of the tolerance");
+    let anim = library_animation(&dir.join("scene.toml"));
+    check_outputs_ranked(&dir.join("out"), &anim, &outputs, Some(rank));
+    let (clip, _) = blendsim::pipeline::stages::export::blendshape_clip(&anim, None, &blendsim::support::budget::Budget::default()).unwrap();
+    let fps = anim.scene.fps;
+    let frames: Vec<f64> = anim.trajectory.frames(fps).iter().map(|f| f.1).collect();
+    let mut expected = Expected::at(&frames, fps, |t| clip.points_at(t));
+    (expected.fps, expected.up_axis, expected.meters_per_unit) = (Some(fps), Some("y".into()), Some(1.0));
+    expected.tolerance += stated * 1.001;
+    let summary = check_blender(&[(dir.join("out/bar.glb").as_path(), &expected)]);
+    for f in summary["files"].as_array().unwrap() {
+        println!("blender {}: max error {} of the bbox diagonal, {} shape keys", f["file"], f["max_error"], f["shape_keys"]);
+        assert_eq!(f["ok"], true, "Blender must play {}: {f}", f["file"]);
+        assert!(f["max_error"].as_f64().unwrap() < expected.tolerance, "{f}");
+    }
+}
+
 /// three.js (GLTFLoader + AnimationMixer, after the Khronos validator) plays `file` at `times`
 /// within `tolerance` of `points` (of their bbox diagonal). Returns its summary.
 fn three_js_plays(file: &Path, times: &[f64], points: &[Vec<Point>], tolerance: f64) -> Value {

@@ -22,7 +22,7 @@ use crate::algorithms::blendshape::clip::BlendShapeClip;
 use crate::algorithms::blendshape::fullframe::FullFrame;
 use crate::algorithms::geometry::attributes::{split_at_seams, CornerAttributes};
 use crate::algorithms::geometry::Bounds;
-use quantize::Grid;
+use quantize::{Grid, Storage, Stored};
 
 pub mod meshopt;
 pub mod quantize;
@@ -98,8 +98,8 @@ pub fn blendshapes(clip: &BlendShapeClip, surface: Surface, name: &str, placemen
     }
     // The weights between keys too: 8 samples per interval bound what is played.
     let sums = clip.times.windows(2).flat_map(|w| (0..8).map(move |i| w[0] + (w[1] - w[0]) * i as f64 / 8.0)).chain(clip.times.last().copied());
-    let weight_sum = sums.map(|t| clip.weights_at(t).iter().map(|w| w.abs()).sum::<f64>()).fold(0.0, f64::max);
-    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::CubicSpline), weight_sum, encoding)
+    let played: Vec<Vec<f64>> = sums.map(|t| clip.weights_at(t)).collect();
+    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::CubicSpline), &played, encoding)
 }
 
 /// Morph targets + LINEAR weights sampled at `frame_times` (seconds, every frame): exact at
@@ -115,8 +115,8 @@ pub(crate) fn blendshapes_sampled(
 ) -> Glb {
     let times: Vec<f32> = frame_times.iter().map(|&t| t as f32).collect();
     let output: Vec<f32> = frame_times.iter().flat_map(|&t| clip.weights_at(t)).map(|w| w as f32).collect();
-    let weight_sum = output.chunks(clip.targets.len().max(1)).map(|w| w.iter().map(|x| x.abs() as f64).sum::<f64>()).fold(0.0, f64::max);
-    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::Linear), weight_sum, encoding)
+    let played: Vec<Vec<f64>> = output.chunks(clip.targets.len().max(1)).map(|w| w.iter().map(|&x| x as f64).collect()).collect();
+    with_weights(clip, surface, name, placement, (&times, &output, Interpolation::Linear), &played, encoding)
 }
 
 /// The weights animation: input times, output values, interpolation.
@@ -128,16 +128,37 @@ fn with_weights(
     name: &str,
     placement: Placement,
     (times, output, interpolation): Sampler,
-    weight_sum: f64,
+    played: &[Vec<f64>],
     encoding: Encoding,
 ) -> Glb {
-    let largest = clip.targets.iter().flat_map(|t| t.offsets.iter().flatten()).fold(0.0f32, |m, x| m.max(x.abs()));
+    let ranges: Vec<f32> = clip.targets.iter().map(|t| t.offsets.iter().flatten().fold(0.0f32, |m, x| m.max(x.abs()))).collect();
+    let largest = ranges.iter().copied().fold(0.0f32, f32::max);
+    let weight_sum = played.iter().map(|w| w.iter().map(|x| x.abs()).sum::<f64>()).fold(0.0, f64::max);
     // A static clip (no animation) stays f32: there is no played error to read back and state.
-    let grid = grid(encoding, &clip.base, largest, weight_sum).filter(|_| !clip.targets.is_empty());
+    let mut storage = vec![Storage::Grid; clip.targets.len()];
+    let grid = grid(encoding, &clip.base, largest, weight_sum).or_else(|| {
+        // One grid would overflow shorts: a step per target instead of an f32 file.
+        let weight_max: Vec<f64> = (0..ranges.len()).map(|j| played.iter().map(|w| w[j].abs()).fold(0.0, f64::max)).collect();
+        let (g, s) =
+            quantize::per_target(&clip.base, &ranges, &weight_max, encoding.max_error).filter(|_| encoding.compression != Compression::None)?;
+        storage = s;
+        Some((g, encoding.compression))
+    });
+    let grid = grid.filter(|_| !clip.targets.is_empty());
+    // Targets on steps of their own: their weights carry the factor the node's scale undoes.
+    let scaled: Vec<f32>;
+    let output = match grid {
+        Some((g, _)) if storage.iter().any(|s| matches!(s, Storage::Step(_))) => {
+            let n = clip.targets.len();
+            scaled = output.iter().enumerate().map(|(i, &w)| (w as f64 * storage[i % n].weight_scale(&g)) as f32).collect();
+            &scaled[..]
+        }
+        _ => output,
+    };
     let mut file = File::new(name, surface, &clip.base, placement, grid);
     let n = clip.vertex_count();
     let mut targets: Vec<(String, Index<json::Accessor>, Option<Index<json::Accessor>>)> =
-        clip.targets.iter().map(|t| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets), None)).collect();
+        clip.targets.iter().zip(&storage).map(|(t, &s)| (t.name.clone(), file.morph_target(n, &t.indices, &t.offsets, s), None)).collect();
     if let Some(triangles) = file.normal_triangles.clone() {
         let deltas = morph_normal_deltas(clip, &triangles, file.sources.as_deref());
         let vertices = file.sources.as_ref().map_or(n, Vec::len);
@@ -145,7 +166,7 @@ fn with_weights(
         // NORMAL target only as normalized integers.
         let grid = file.grid.take();
         for (target, (indices, offsets)) in targets.iter_mut().zip(deltas) {
-            target.2 = Some(file.morph_target(vertices, &indices, &offsets));
+            target.2 = Some(file.morph_target(vertices, &indices, &offsets, Storage::Float));
         }
         file.grid = grid;
     }
@@ -173,7 +194,7 @@ pub fn full_frame(frames: &FullFrame, surface: Surface, name: &str, placement: P
                 offsets.push(d);
             }
         }
-        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets), None));
+        targets.push((format!("frame_{frame}"), file.morph_target(base.len(), &indices, &offsets, Storage::Grid), None));
     }
     let times: Vec<f32> = frames.times.iter().map(|&t| t as f32).collect();
     let count = times.len();
@@ -411,7 +432,7 @@ impl File {
         if let Some(s) = &split {
             f.sources = Some(s.sources.clone());
         }
-        let position = f.positions(base, false);
+        let position = f.positions(base, None);
         let mut attributes_json = vec![(Valid(json::mesh::Semantic::Positions), position)];
         if morph_normals {
             f.normal_triangles = Some(triangles.to_vec());
@@ -572,8 +593,8 @@ impl File {
     }
 
     /// A dense vec3 accessor with the min/max that POSITION accessors require: points (the base),
-    /// or with `offsets` a dense target; on the grid when quantized.
-    fn positions(&mut self, points: &[[f32; 3]], offsets: bool) -> Index<json::Accessor> {
+    /// or with `offsets` a dense target stored that way; on the grid when quantized.
+    fn positions(&mut self, points: &[[f32; 3]], offsets: Option<Storage>) -> Index<json::Accessor> {
         let expanded: Vec<[f32; 3]>;
         let points = match &self.sources {
             Some(sources) if sources.len() != points.len() => {
@@ -582,16 +603,24 @@ impl File {
             }
             _ => points,
         };
-        if let Some((grid, _)) = self.grid {
-            let q: Vec<[i32; 3]> = points.iter().map(|&p| if offsets { grid.offset(p) } else { grid.point(p) }).collect();
-            let (component, size) = quantize::component(&q);
-            let block = if size == 1 { Block::Stride4 } else { Block::Stride8 };
-            let offset = self.push(block, &quantize::vec3_bytes(&q, size, true));
-            let (lo, hi) = quantize::int_bounds(&q);
-            let mut a = accessor(Some((block, offset)), q.len(), component, Type::Vec3);
-            (a.min, a.max) = (Some(value!(lo)), Some(value!(hi)));
-            return self.root.push(a);
-        }
+        let units: Vec<[f32; 3]>;
+        let points = match self.grid.map(|(grid, _)| grid.store(points, offsets.is_some(), offsets.unwrap_or(Storage::Grid))) {
+            Some(Stored::Ints(q)) => {
+                let (component, size) = quantize::component(&q);
+                let block = if size == 1 { Block::Stride4 } else { Block::Stride8 };
+                let offset = self.push(block, &quantize::vec3_bytes(&q, size, true));
+                let (lo, hi) = quantize::int_bounds(&q);
+                let mut a = accessor(Some((block, offset)), q.len(), component, Type::Vec3);
+                (a.min, a.max) = (Some(value!(lo)), Some(value!(hi)));
+                return self.root.push(a);
+            }
+            // f32 in grid units (a file with per-target steps).
+            Some(Stored::Floats(f)) => {
+                units = f;
+                &units[..]
+            }
+            None => points,
+        };
         let offset = self.push(Block::Vertices, &vec3_bytes(points.iter().copied()));
         let (lo, hi) = bounds(points);
         let mut a = accessor(Some((Block::Vertices, offset)), points.len(), ComponentType::F32, Type::Vec3);
@@ -601,7 +630,7 @@ impl File {
 
     /// A POSITION morph target: no data at all when nothing moves (glTF reads an accessor
     /// without a buffer view as zeros), sparse when that is smaller, dense otherwise.
-    fn morph_target(&mut self, vertices: usize, indices: &[u32], offsets: &[[f32; 3]]) -> Index<json::Accessor> {
+    fn morph_target(&mut self, vertices: usize, indices: &[u32], offsets: &[[f32; 3]], storage: Storage) -> Index<json::Accessor> {
         // Seam copies move with their point: the target's entries in glTF vertex order.
         let remapped: (Vec<u32>, Vec<[f32; 3]>);
         let (vertices, indices, offsets) = match &self.sources {
@@ -619,7 +648,16 @@ impl File {
             _ => (vertices, indices, offsets),
         };
         let (component, size) = index_type(vertices, true);
-        let quantized: Option<Vec<[i32; 3]>> = self.grid.map(|(g, _)| offsets.iter().map(|&d| g.offset(d)).collect());
+        let units: Vec<[f32; 3]>;
+        let raw = offsets;
+        let (offsets, quantized) = match self.grid.map(|(g, _)| g.store(offsets, true, storage)) {
+            Some(Stored::Ints(q)) => (offsets, Some(q)),
+            Some(Stored::Floats(f)) => {
+                units = f;
+                (&units[..], None)
+            }
+            None => (offsets, None),
+        };
         // Quantized, a target's offsets take 3 or 6 bytes instead of 12; meshopt compresses
         // dense zeros to almost nothing (and cannot encode sparse views).
         // Sparse: an index and a packed value per moved vertex; dense: a padded value per vertex.
@@ -632,10 +670,10 @@ impl File {
         let sparse_smaller = indices.len() * (size + value_size) < vertices * dense_size;
         if !indices.is_empty() && (meshopt || !sparse_smaller) {
             let mut dense = vec![[0.0f32; 3]; vertices];
-            for (&i, o) in indices.iter().zip(offsets) {
+            for (&i, o) in indices.iter().zip(raw) {
                 dense[i as usize] = *o;
             }
-            return self.positions(&dense, true);
+            return self.positions(&dense, Some(storage));
         }
         let (value_component, value_bytes, (mut lo, mut hi)) = match &quantized {
             Some(q) => {
