@@ -239,8 +239,38 @@ fn push_value(out: &mut String, value: &Value) {
             push_f32(o, *v);
             o.push(')');
         }),
-        Value::Vec3fs(items) => push_vec3s(out, items.iter()),
+        Value::Vec3fs(items) => push_vec3_array(out, items),
     }
+}
+
+/// `[(x, y, z), ...]`; a long array (a dense blendshape target's offsets, hundreds of MB of
+/// text at a million vertices) is formatted in pieces of [`POINTS_PER_PIECE`] on the pool and
+/// joined in order, as the full-frame samples are: the same bytes on any number of threads.
+fn push_vec3_array(out: &mut String, items: &[[f32; 3]]) {
+    use rayon::prelude::*;
+    if items.len() <= POINTS_PER_PIECE {
+        return push_vec3s(out, items.iter());
+    }
+    let pieces: Vec<Vec<u8>> = items
+        .par_chunks(POINTS_PER_PIECE)
+        .enumerate()
+        .map(|(i, chunk)| {
+            let mut text = Vec::with_capacity(chunk.len() * 54);
+            for (j, p) in chunk.iter().enumerate() {
+                if i + j > 0 {
+                    text.extend_from_slice(b", ");
+                }
+                push_vec3_bytes(&mut text, p);
+            }
+            text
+        })
+        .collect();
+    out.reserve(pieces.iter().map(Vec::len).sum::<usize>() + 2);
+    out.push('[');
+    for piece in &pieces {
+        out.push_str(std::str::from_utf8(piece).expect("ASCII"));
+    }
+    out.push(']');
 }
 
 /// A quoted string, with the escapes USD's text format reads (`\\`, `\"`, `\n`).
@@ -373,6 +403,22 @@ mod tests {
             push_f32(&mut s, x);
             assert_eq!(s.parse::<f32>().unwrap(), x, "{s}");
         }
+    }
+
+    /// A long array formatted in pieces on the pool is the text of one pass over it, on the
+    /// pool and on one thread.
+    #[test]
+    fn long_arrays_in_pieces_are_one_pass() {
+        let items: Vec<[f32; 3]> = (0..2 * POINTS_PER_PIECE + 7).map(|i| [i as f32 * 0.001, -(i as f32).sqrt(), 1.0 / (1 + i) as f32]).collect();
+        let mut want = String::new();
+        push_vec3s(&mut want, items.iter());
+        let mut got = String::new();
+        push_vec3_array(&mut got, &items);
+        assert!(got == want);
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        got.clear();
+        one.install(|| push_vec3_array(&mut got, &items));
+        assert!(got == want, "on one thread");
     }
 
     #[test]

@@ -740,7 +740,15 @@ impl Writer<'_> {
         if len == 0 {
             return rep(ty, 0) | ARRAY_BIT;
         }
-        let mut body = (len as u64).to_le_bytes().to_vec();
+        // Sized at once: a dense target's offsets are megabytes, grown from 8 bytes they were
+        // copied about 20 times.
+        let element = match ty {
+            ty::VEC3F => 12,
+            ty::VEC2F => 8,
+            _ => 4,
+        };
+        let mut body = Vec::with_capacity(8 + len * element);
+        body.extend_from_slice(&(len as u64).to_le_bytes());
         elements(&mut body);
         self.stored(rep(ty, 0) | ARRAY_BIT, body, true)
     }
