@@ -14,7 +14,7 @@ use serde_json::{json, Value};
 
 use crate::cache_bake::{scene, write_cache};
 use crate::common::bar::{bar, BarSettings};
-use crate::common::checkers::{check_blender, Expected};
+use crate::common::checkers::{check_babylon, check_blender, Expected};
 use crate::common::cli::{read_json, run, TempDir};
 use crate::common::verify::{check_outputs_ranked, library_animation, output_files};
 
@@ -88,7 +88,7 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
 /// allows: the default glb keeps `KHR_mesh_quantization` with the base in f32 and each target on
 /// a step of its own, in shorts or bytes where the budget allows (its weights scaled by the
 /// step's ratio to the node's, so every weight stays in [0, 1]). The Khronos validator and
-/// three.js (`check_outputs_ranked`) and Blender 4.2 at default settings play it within the
+/// three.js (`check_outputs_ranked`), Blender 4.2 at default settings and Babylon.js play it within the
 /// clip plus the quantization error the report states, and that error is within a tenth of the
 /// tolerance.
 #[test]
@@ -138,6 +138,9 @@ fn a_tight_tolerance_stores_targets_on_steps_of_their_own_that_play_everywhere()
         assert_eq!(f["ok"], true, "Blender must play {}: {f}", f["file"]);
         assert!(f["max_error"].as_f64().unwrap() < expected.tolerance, "{f}");
     }
+    let babylon = check_babylon(&dir.join("out/bar.glb"), &expected);
+    println!("Babylon.js: {babylon}");
+    assert_eq!(babylon["ok"], true, "Babylon.js must play bar.glb: {babylon}");
 }
 
 /// three.js (GLTFLoader + AnimationMixer, after the Khronos validator) plays `file` at `times`
