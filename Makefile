@@ -221,7 +221,7 @@ fuzz:
 bench: build deps-tetgen
 	@echo "==> solver benchmark (medians; mind the load average printed with it)"
 	$(CARGO) bench --locked --bench solver
-	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame and PCA"
+	@echo "==> cache benchmark: automatic keys, fit, bytes against full frame, PCA and gltfpack (caches, the demo and paper scenes)"
 	$(CARGO) bench --locked --bench cache
 
 # The demo bake taken apart (issue 11: under 0.25 s), medians of REPEATS (5).

@@ -32,6 +32,16 @@
 //! lower max error: at the tolerance, and at gltfpack's error), our default glb over PCA+zstd at its error (at most 1.5x), and where our
 //! glb's bytes go (indices, base, targets, animation, weld map). `BLENDSIM_BENCH_CACHE=text`
 //! keeps the caches whose name contains it, in every table.
+//!
+//! A fourth table does the same for the keyframe scenes (the demo and the paper's, solved
+//! once each): our default glb and its max error read back from the file against the f32
+//! full-frame glb (`gltf_compression = "none"`: the solved trajectory at every frame, to 1e-7),
+//! the meshopt glb, and gltfpack `-cc` on that f32 full-frame glb (error without `-c`). A
+//! keyframe scene has no tolerance: its quantization budget is fixed (a tenth of the default
+//! 0.005 of the diagonal) and no `[export]` setting changes it, so "ours at gltfpack's error"
+//! is an estimate: the CUBICSPLINE writer's bytes at that error minus its bytes at the scene's
+//! budget, added to our default (LINEAR) glb; the error is read back from that CUBICSPLINE file.
+//! `BLENDSIM_BENCH_CACHE` picks these by name too ("demo twist", "paper spot", ...).
 
 #[path = "../tests/integration/common/bar.rs"]
 mod bar;
@@ -49,12 +59,16 @@ use blendsim::algorithms::frames::deviation::cache_diagonal;
 use blendsim::algorithms::frames::fit::{fit, FitSettings};
 use blendsim::algorithms::frames::keyframes::{select, AutoKeys, AutoSettings};
 use blendsim::algorithms::frames::{FrameSource, MemoryFrames};
+use blendsim::algorithms::geometry::Axis;
 use blendsim::algorithms::geometry::TriMesh;
 use blendsim::formats::cache::{CacheOptions, VertexCache};
 use blendsim::formats::export::glb::{self, Placement};
+use blendsim::formats::export::texture;
 use blendsim::formats::export::usda::{self, UsdSettings};
 use blendsim::formats::mesh::obj;
-use blendsim::pipeline::scene::SceneFile;
+use blendsim::pipeline::scene::{Format, GltfInterpolation, SceneFile};
+use blendsim::pipeline::stages::Bake;
+use blendsim::support::budget::Budget;
 use blendsim::support::output::Staging;
 use blendsim::support::progress::Progress;
 
@@ -215,8 +229,9 @@ fn run(name: &str, cache: &BarCache) {
 /// full-frame glb: gltfpack 1.3.0 (npm, in tests/checkers), with `-af 0` (no resampling,
 /// keeps every frame) and at its defaults (30 Hz resampling); bytes with `-cc`, error measured
 /// on the same settings without `-c` (meshopt compression is lossless on the quantized data and
-/// our reader refuses it). None when gltfpack is not installed.
-fn gltfpack(full_glb: &Path, frames: &MemoryFrames, fps: f64, diagonal: f64) -> Option<Vec<(&'static str, u64, f64)>> {
+/// our reader refuses it); last, the bytes of that run without `-c` (quantized only, as our
+/// default glb). None when gltfpack is not installed.
+fn gltfpack(full_glb: &Path, frames: &MemoryFrames, fps: f64, diagonal: f64) -> Option<Vec<(&'static str, u64, f64, u64)>> {
     let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/checkers/node_modules/.bin/gltfpack");
     if !bin.is_file() {
         return None;
@@ -241,7 +256,8 @@ fn gltfpack(full_glb: &Path, frames: &MemoryFrames, fps: f64, diagonal: f64) -> 
             out
         };
         let bytes = std::fs::metadata(packed(&["-cc"], "packed_cc.glb")).unwrap().len();
-        rows.push((label, bytes, read_back_error(&packed(&[], "packed.glb"), frames, fps, diagonal)));
+        let plain = packed(&[], "packed.glb");
+        rows.push((label, bytes, read_back_error(&plain, frames, fps, diagonal), std::fs::metadata(&plain).unwrap().len()));
     }
     Some(rows)
 }
@@ -471,12 +487,12 @@ fn compare(name: &str, surface: &TriMesh, cache: &MemoryFrames, fps: f64, forms:
     }
     let packed = gltfpack(&dir.join("full.glb"), cache, fps, diagonal);
     match &packed {
-        Some(rows) => rows.iter().for_each(|(label, bytes, max)| row(label, "-".into(), *bytes, None, None, *max, None)),
+        Some(rows) => rows.iter().for_each(|(label, bytes, max, _)| row(label, "-".into(), *bytes, None, None, *max, None)),
         None => println!("| {name} | gltfpack not installed (make deps-npm) | | | | | | | | |"),
     }
     // Equal error: our default glb baked with gltfpack's (defaults) max error as the tolerance,
     // its error read back from the file.
-    let at_gltfpack = packed.as_ref().and_then(|rows| rows.last()).map(|&(_, _, max)| {
+    let at_gltfpack = packed.as_ref().and_then(|rows| rows.last()).map(|&(_, _, max, _)| {
         let b = bake(&dir, fps, "at-gltfpack-error", fit, "", false, max);
         let b_max = read_back_error(&b.glb, cache, fps, diagonal);
         let rank = b.rank.map_or("per-key shapes".into(), |r| format!("principal rank {r}"));
@@ -505,10 +521,162 @@ fn compare(name: &str, surface: &TriMesh, cache: &MemoryFrames, fps: f64, forms:
         ours_max,
         meshopt: meshopt.glb_bytes,
         // gltfpack at its defaults, as a user runs it.
-        gltfpack: packed.and_then(|rows| rows.last().map(|&(_, bytes, max)| (bytes, max))),
+        gltfpack: packed.and_then(|rows| rows.last().map(|&(_, bytes, max, _)| (bytes, max))),
         at_gltfpack,
         pca,
         parts: glb_parts(&ours.glb),
+    }
+}
+
+/// One keyframe scene against gltfpack: the bytes of our default and meshopt glb and of the
+/// f32 full-frame glb, our default glb's max error, gltfpack's rows (as [`gltfpack`]), and
+/// where our glb's bytes go.
+struct SceneSummary {
+    name: String,
+    frames: usize,
+    vertices: usize,
+    ours: u64,
+    ours_max: f64,
+    meshopt: u64,
+    full_f32: u64,
+    packed: Option<Vec<(&'static str, u64, f64, u64)>>,
+    /// Estimated bytes of our default glb at gltfpack `-af 0`'s max error, and the error read
+    /// back from the CUBICSPLINE file the estimate writes.
+    at_packed: Option<(u64, f64)>,
+    parts: String,
+    solve_s: f64,
+}
+
+/// Solve `toml` once (as `blendsim bake`), then export its glb three ways: the default,
+/// meshopt, and f32 with the full-frame glb (the reference the errors are measured against,
+/// and gltfpack's input).
+fn keyframe_scene(name: &str, toml: &Path) -> SceneSummary {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/cache-compare/scenes").join(name.replace(' ', "_"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = SceneFile::load(toml).unwrap_or_else(|e| panic!("{e}"));
+    let t = Instant::now();
+    let animation = Bake::new(&scene, &Progress::new(true)).animation().unwrap_or_else(|e| panic!("{e}"));
+    let solve_s = t.elapsed().as_secs_f64();
+    let budget = Budget::new(None, None);
+    let export = |tag: &str, compression: glb::Compression, full_frame: bool, interpolation: GltfInterpolation| -> PathBuf {
+        let mut a = animation.clone();
+        a.scene.export.gltf_interpolation = interpolation;
+        a.scene.export.formats = vec![Format::Glb];
+        a.scene.export.full_frame = full_frame;
+        a.scene.export.gltf_compression = compression;
+        let out = dir.join(tag);
+        let mut staging = Staging::new(&out).unwrap();
+        blendsim::pipeline::stages::export(&a, &budget, &mut staging).unwrap_or_else(|e| panic!("{e}"));
+        staging.commit().unwrap();
+        out
+    };
+    let file = |out: &Path, suffix: &str| out.join(format!("{}{suffix}.glb", animation.scene.name));
+    let bytes = |p: &Path| std::fs::metadata(p).unwrap().len();
+    let linear = GltfInterpolation::Linear;
+    let ours = file(&export("default", glb::Compression::default(), false, linear), "");
+    let meshopt = file(&export("meshopt", glb::Compression::Meshopt, false, linear), "");
+    let full = file(&export("f32", glb::Compression::None, true, linear), ".full");
+    let fps = animation.scene.fps;
+    let mut read = VertexCache::open(&full, &CacheOptions { fps: Some(fps), ..CacheOptions::default() }).expect("read the f32 full-frame glb");
+    let mut truth = MemoryFrames { times: Vec::new(), frames: Vec::new() };
+    for f in 0..read.frames.frame_count() {
+        let mut points = vec![[0.0; 3]; read.frames.vertex_count()];
+        read.frames.read_frame(f, &mut points).unwrap();
+        truth.times.push(read.frames.time(f));
+        truth.frames.push(points);
+    }
+    let diagonal = cache_diagonal(&mut truth.clone()).unwrap();
+    let packed = gltfpack(&full, &truth, fps, diagonal);
+    // Ours at gltfpack `-af 0`'s error: no `[export]` setting sets a keyframe scene's
+    // quantization budget, and the LINEAR writer is the crate's own; the CUBICSPLINE writer
+    // (public, same grid rules for the base and the targets) is run at the scene's budget (the
+    // export stage) and at gltfpack's error, and the difference is added to our default glb.
+    let at_packed = packed.as_ref().map(|rows| {
+        let cubic_default = bytes(&file(&export("cubic", glb::Compression::default(), false, GltfInterpolation::Cubicspline), ""));
+        let (clip, _) = blendsim::pipeline::stages::blendshape_clip(&animation, None, &budget).unwrap_or_else(|e| panic!("{e}"));
+        let attributes = animation.mesh.attributes.as_ref();
+        let textures = texture::load(attributes.map_or(&[][..], |a| &a.textures), &budget).unwrap_or_else(|e| panic!("{e}"));
+        let surface = glb::Surface {
+            triangles: &animation.mesh.triangles,
+            attributes,
+            textures: &textures,
+            morph_normals: false,
+            weld_map: animation.weld_map(),
+        };
+        let meters = animation.scene.meters_per_unit();
+        let placement = Placement { z_up: animation.scene.export.up_axis == Axis::Z, meters_per_unit: meters };
+        // The read-back error is of the diagonal in the file's meters; the budget is in scene units.
+        let encoding = glb::Encoding { compression: glb::Compression::Quantize, max_error: rows[0].2 * diagonal / meters };
+        let path = dir.join("cubic-at-gltfpack.glb");
+        std::fs::write(&path, glb::blendshapes(&clip, surface, &animation.scene.name, placement, encoding).to_vec()).unwrap();
+        ((bytes(&ours) + bytes(&path)).saturating_sub(cubic_default), read_back_error(&path, &truth, fps, diagonal))
+    });
+    SceneSummary {
+        name: name.into(),
+        frames: truth.frame_count(),
+        vertices: truth.vertex_count(),
+        ours: bytes(&ours),
+        ours_max: read_back_error(&ours, &truth, fps, diagonal),
+        meshopt: bytes(&meshopt),
+        full_f32: bytes(&full),
+        packed,
+        at_packed,
+        parts: glb_parts(&ours),
+        solve_s,
+    }
+}
+
+/// The demo and the paper scenes against gltfpack `-cc` (the targets, as the last
+/// table's for caches).
+fn keyframe_scenes(only: &dyn Fn(&str) -> bool) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let scenes: Vec<(String, PathBuf)> = std::iter::once(("demo twist".to_string(), root.join("demo/twist.toml")))
+        .chain(["ball", "dino", "spot", "stretch", "twist"].map(|s| (format!("paper {s}"), root.join(format!("paper/{s}.toml")))))
+        .filter(|(name, _)| only(name))
+        .collect();
+    if scenes.is_empty() {
+        return;
+    }
+    let summaries: Vec<SceneSummary> = scenes.iter().map(|(name, toml)| keyframe_scene(name, toml)).collect();
+    println!();
+    println!("Keyframe scenes: gltfpack -cc on the f32 full-frame glb over our default glb (at least 2x, at equal or lower max error), gltfpack at its defaults (30 Hz resampling) and with -af 0 (every frame); max error of the bbox diagonal over every frame, against the f32 full-frame glb; KB; load average {}:", load());
+    println!();
+    println!("| scene | frames x vertices | solve s (one run) | full-frame f32 glb | default glb | its max error | meshopt glb | gltfpack -cc (error) | / ours | >= 2x at <= error | gltfpack -af 0 -cc (error) | / ours | >= 2x at <= error | gltfpack -af 0 without -c | ours at gltfpack -af 0's error (estimate; error read back) | gltfpack -af 0 -cc / that | >= 2x at <= error | our default glb holds |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---|---:|---:|---:|---|---|");
+    for s in &summaries {
+        let yes = |ok: bool| if ok { "yes" } else { "**no**" };
+        let against = |bytes: u64, max: f64| {
+            let ratio = bytes as f64 / s.ours as f64;
+            let ok = format!("{} (error {})", yes(ratio >= 2.0 && s.ours_max <= max), if s.ours_max <= max { "lower" } else { "higher" });
+            format!("{} ({max:.2e}) | {ratio:.2}x | {ok}", kb(bytes as usize))
+        };
+        let packed = match &s.packed {
+            Some(rows) => {
+                let (af0, defaults) = (rows[0], rows[rows.len() - 1]);
+                let (at, at_ratio, at_ok) = match s.at_packed {
+                    Some((bytes, max)) => {
+                        let ratio = af0.1 as f64 / bytes as f64;
+                        (format!("{} ({max:.2e})", kb(bytes as usize)), format!("{ratio:.2}x"), yes(ratio >= 2.0 && max <= af0.2))
+                    }
+                    None => ("-".into(), "-".into(), "-"),
+                };
+                format!("{} | {} | {} | {at} | {at_ratio} | {at_ok}", against(defaults.1, defaults.2), against(af0.1, af0.2), kb(af0.3 as usize))
+            }
+            None => "gltfpack not installed (make deps-npm) | | | | | | | | | |".into(),
+        };
+        println!(
+            "| {} | {} x {} | {:.1} | {} | {} | {:.2e} | {} | {packed} | {} |",
+            s.name,
+            s.frames,
+            s.vertices,
+            s.solve_s,
+            kb(s.full_f32 as usize),
+            kb(s.ours as usize),
+            s.ours_max,
+            kb(s.meshopt as usize),
+            s.parts
+        );
     }
 }
 
@@ -591,6 +759,7 @@ fn main() {
             s.parts
         );
     }
+    keyframe_scenes(&only);
     println!();
     println!("load average after: {}", load());
 }
