@@ -290,7 +290,7 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// Where a glb's bytes go, from its JSON: the accessors of the indices, the base `POSITION`,
-/// the morph targets and the animation (key times and weights; each accessor's count times
+/// the other vertex attributes (UVs and normals, when there are any), the morph targets and the animation (key times and weights; each accessor's count times
 /// its stride, sparse ones their indices and values), the rest of the BIN chunk (padding),
 /// and the JSON chunk with, inside it, the weld map; in KB.
 fn glb_parts(path: &Path) -> String {
@@ -334,6 +334,17 @@ fn glb_parts(path: &Path) -> String {
             }
         }
     }
+    // The other vertex attributes (UVs, normals), shared by the primitives: each accessor once.
+    let mut attributes = 0;
+    let mut seen = std::collections::HashSet::new();
+    for primitive in &primitives {
+        for (name, a) in primitive["attributes"].as_object().into_iter().flatten() {
+            if name != "POSITION" && seen.insert(a.as_u64()) {
+                attributes += accessor_bytes(a);
+            }
+        }
+    }
+    let attributes_text = if attributes > 0 { format!("UVs and normals {}, ", kb(attributes)) } else { String::new() };
     let target_count = primitives.first().and_then(|p| p["targets"].as_array()).map_or(0, Vec::len);
     // The weld map: an accessor of its own in the BIN chunk, or the index list itself.
     let map = &json["meshes"][0]["extras"]["weldMap"];
@@ -344,12 +355,12 @@ fn glb_parts(path: &Path) -> String {
         Some(_) => (accessor_bytes(map), kb(accessor_bytes(map))),
     };
     format!(
-        "indices {}, base {}, {target_count} targets {}, animation {}, weld map {weld_text}, other BIN {}, JSON {}",
+        "indices {}, base {}, {attributes_text}{target_count} targets {}, animation {}, weld map {weld_text}, other BIN {}, JSON {}",
         kb(indices),
         kb(base),
         kb(targets),
         kb(animation),
-        kb(bin_len.saturating_sub(indices + base + targets + animation + weld_map)),
+        kb(bin_len.saturating_sub(indices + base + attributes + targets + animation + weld_map)),
         kb(json_len),
     )
 }
