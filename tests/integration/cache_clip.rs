@@ -143,6 +143,38 @@ fn a_tight_tolerance_stores_targets_on_steps_of_their_own_that_play_everywhere()
     assert_eq!(babylon["ok"], true, "Babylon.js must play bar.glb: {babylon}");
 }
 
+/// The same tolerance with `gltf_compression = "meshopt"`: the per-target steps under
+/// `EXT_meshopt_compression` (the JSON still names each accessor's type: an f32 base, integer
+/// targets), passed by the Khronos validator and played by three.js with its meshopt decoder
+/// within the clip plus the stated quantization error (`check_outputs_ranked`).
+#[test]
+fn a_tight_tolerance_meshopt_glb_keeps_its_steps_and_plays_in_three_js() {
+    let cache = bar(&BarSettings::default());
+    let dir = TempDir::new("cache-per-target-steps-meshopt");
+    write_cache(&dir.path, &cache, "bar.pc2");
+    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 2e-4");
+    let text = text.replace("full_frame = true", "full_frame = false\ngltf_compression = \"meshopt\"");
+    std::fs::write(dir.join("scene.toml"), text).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let rank = report["rank"].as_u64().expect("a rank") as usize;
+    let bytes = std::fs::read(dir.join("out/bar.glb")).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    assert_eq!(json["extensionsRequired"], json!(["KHR_mesh_quantization", "EXT_meshopt_compression"]));
+    let primitive = &json["meshes"][0]["primitives"][0];
+    let component = |a: &Value| json["accessors"][a.as_u64().unwrap() as usize]["componentType"].as_u64().unwrap();
+    assert_eq!(component(&primitive["attributes"]["POSITION"]), 5126, "the base in f32");
+    let targets: Vec<u64> = primitive["targets"].as_array().unwrap().iter().map(|t| component(&t["POSITION"])).collect();
+    assert!(targets.iter().any(|&c| c == 5120 || c == 5122), "integer targets: {targets:?}");
+    let outputs: Vec<OutputFile> = output_files(&report["outputs"]).into_iter().filter(|f| f.kind == OutputKind::Blendshape).collect();
+    let glb = outputs.iter().find(|f| f.path == "bar.glb").expect("the glb is listed");
+    let stated = glb.quantization_error.expect("a quantized glb states its error");
+    assert!(stated <= 0.1 * 2e-4 * 1.001, "quantization error {stated:e} within a tenth of the tolerance");
+    println!("rank {rank}, targets {targets:?}, meshopt glb {} bytes, quantization error {stated:.2e}", glb.bytes);
+    check_outputs_ranked(&dir.join("out"), &library_animation(&dir.join("scene.toml")), &outputs, Some(rank));
+}
+
 /// three.js (GLTFLoader + AnimationMixer, after the Khronos validator) plays `file` at `times`
 /// within `tolerance` of `points` (of their bbox diagonal). Returns its summary.
 fn three_js_plays(file: &Path, times: &[f64], points: &[Vec<Point>], tolerance: f64) -> Value {
