@@ -84,6 +84,42 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
     }
 }
 
+/// A tolerance at which one grid's shorts cannot hold the rapier bar's principal clip.
+const TIGHT: f64 = 2e-4;
+
+/// The rapier bar's cache baked through the CLI by `fit` at [`TIGHT`] with automatic keys, no
+/// full-frame files and `export` added to `[export]`, and what the tests read of its glb.
+struct TightBar {
+    dir: TempDir,
+    report: Value,
+    rank: usize,
+    bytes: Vec<u8>,
+    json: Value,
+    json_len: usize,
+    /// The component type of each morph target's POSITION accessor.
+    targets: Vec<u64>,
+}
+
+fn tight_bar(name: &str, export: &str) -> TightBar {
+    let dir = TempDir::new(name);
+    write_cache(&dir.path, &bar(&BarSettings::default()), "bar.pc2");
+    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", &format!("keyframes = \"auto\"\ntolerance = {TIGHT}"));
+    std::fs::write(dir.join("scene.toml"), text.replace("full_frame = true", &format!("full_frame = false\n{export}"))).unwrap();
+    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
+    let report = read_json(&dir.join("out/report.json"));
+    let rank = report["rank"].as_u64().expect("a rank") as usize;
+    let bytes = std::fs::read(dir.join("out/bar.glb")).unwrap();
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let primitive = &json["meshes"][0]["primitives"][0];
+    let component = |a: &Value| json["accessors"][a.as_u64().unwrap() as usize]["componentType"].as_u64().unwrap();
+    assert_eq!(component(&primitive["attributes"]["POSITION"]), 5126, "the base in f32");
+    let targets: Vec<u64> = primitive["targets"].as_array().unwrap().iter().map(|t| component(&t["POSITION"])).collect();
+    assert_eq!(targets.len(), rank);
+    assert!(targets.iter().any(|&c| c == 5120 || c == 5122), "integer targets: {targets:?}");
+    TightBar { dir, report, rank, bytes, json, json_len, targets }
+}
+
 /// A tolerance tight enough that one grid's shorts cannot hold the bar at the step the budget
 /// allows: the default glb keeps `KHR_mesh_quantization` with the base in f32 and each target on
 /// a step of its own, in shorts or bytes where the budget allows (its weights scaled by the
@@ -93,25 +129,9 @@ fn a_principal_clip_plays_in_usd_gltf_three_and_blender() {
 /// tolerance.
 #[test]
 fn a_tight_tolerance_stores_targets_on_steps_of_their_own_that_play_everywhere() {
-    let cache = bar(&BarSettings::default());
-    let dir = TempDir::new("cache-per-target-steps");
-    write_cache(&dir.path, &cache, "bar.pc2");
-    let tolerance = 2e-4;
-    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", &format!("keyframes = \"auto\"\ntolerance = {tolerance}"));
-    std::fs::write(dir.join("scene.toml"), text.replace("full_frame = true", "full_frame = false")).unwrap();
-    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
-    let report = read_json(&dir.join("out/report.json"));
-    let rank = report["rank"].as_u64().expect("a rank") as usize;
-    let bytes = std::fs::read(dir.join("out/bar.glb")).unwrap();
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let tolerance = TIGHT;
+    let TightBar { dir, report, rank, bytes, json, json_len, targets } = tight_bar("cache-per-target-steps", "");
     assert_eq!(json["extensionsRequired"], json!(["KHR_mesh_quantization"]));
-    let primitive = &json["meshes"][0]["primitives"][0];
-    let component = |a: &Value| json["accessors"][a.as_u64().unwrap() as usize]["componentType"].as_u64().unwrap();
-    assert_eq!(component(&primitive["attributes"]["POSITION"]), 5126, "the base in f32");
-    let targets: Vec<u64> = primitive["targets"].as_array().unwrap().iter().map(|t| component(&t["POSITION"])).collect();
-    assert_eq!(targets.len(), rank);
-    assert!(targets.iter().any(|&c| c == 5120 || c == 5122), "integer targets: {targets:?}");
     // The weights as stored: every one in [0, 1] (Blender clamps to the shape key's range).
     let output = &json["accessors"][json["animations"][0]["samplers"][0]["output"].as_u64().unwrap() as usize];
     let view = &json["bufferViews"][output["bufferView"].as_u64().unwrap() as usize];
@@ -149,28 +169,12 @@ fn a_tight_tolerance_stores_targets_on_steps_of_their_own_that_play_everywhere()
 /// within the clip plus the stated quantization error (`check_outputs_ranked`).
 #[test]
 fn a_tight_tolerance_meshopt_glb_keeps_its_steps_and_plays_in_three_js() {
-    let cache = bar(&BarSettings::default());
-    let dir = TempDir::new("cache-per-target-steps-meshopt");
-    write_cache(&dir.path, &cache, "bar.pc2");
-    let text = scene("bar.pc2", "fps = 60\nrest = \"rest.obj\"\n", "fit", "keyframes = \"auto\"\ntolerance = 2e-4");
-    let text = text.replace("full_frame = true", "full_frame = false\ngltf_compression = \"meshopt\"");
-    std::fs::write(dir.join("scene.toml"), text).unwrap();
-    run(&dir.path, &["bake", "scene.toml", "--out", "out", "--quiet"]).success();
-    let report = read_json(&dir.join("out/report.json"));
-    let rank = report["rank"].as_u64().expect("a rank") as usize;
-    let bytes = std::fs::read(dir.join("out/bar.glb")).unwrap();
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let TightBar { dir, report, rank, json, targets, .. } = tight_bar("cache-per-target-steps-meshopt", "gltf_compression = \"meshopt\"");
     assert_eq!(json["extensionsRequired"], json!(["KHR_mesh_quantization", "EXT_meshopt_compression"]));
-    let primitive = &json["meshes"][0]["primitives"][0];
-    let component = |a: &Value| json["accessors"][a.as_u64().unwrap() as usize]["componentType"].as_u64().unwrap();
-    assert_eq!(component(&primitive["attributes"]["POSITION"]), 5126, "the base in f32");
-    let targets: Vec<u64> = primitive["targets"].as_array().unwrap().iter().map(|t| component(&t["POSITION"])).collect();
-    assert!(targets.iter().any(|&c| c == 5120 || c == 5122), "integer targets: {targets:?}");
     let outputs: Vec<OutputFile> = output_files(&report["outputs"]).into_iter().filter(|f| f.kind == OutputKind::Blendshape).collect();
     let glb = outputs.iter().find(|f| f.path == "bar.glb").expect("the glb is listed");
     let stated = glb.quantization_error.expect("a quantized glb states its error");
-    assert!(stated <= 0.1 * 2e-4 * 1.001, "quantization error {stated:e} within a tenth of the tolerance");
+    assert!(stated <= 0.1 * TIGHT * 1.001, "quantization error {stated:e} within a tenth of the tolerance");
     println!("rank {rank}, targets {targets:?}, meshopt glb {} bytes, quantization error {stated:.2e}", glb.bytes);
     check_outputs_ranked(&dir.join("out"), &library_animation(&dir.join("scene.toml")), &outputs, Some(rank));
 }
