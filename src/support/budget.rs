@@ -55,7 +55,7 @@ enum MemorySource {
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Budget {
     /// `--max-memory` in bytes; `None`: [`DEFAULT_MEMORY_FRACTION`] of the available memory.
-    /// Once a step has resolved or narrowed it ([`Budget::with_max_memory`]), those bytes.
+    /// Once a step has resolved or narrowed it ([`Budget::with_max_memory`], [`Budget::narrowed_to`]), those bytes.
     max_memory: Option<u64>,
     /// Where `max_memory` came from: `--max-memory` or the default budget.
     source: MemorySource,
@@ -74,15 +74,22 @@ impl Budget {
         Budget { max_memory, source, part: false, max_time: max_time.map(|seconds| (Instant::now(), seconds)) }
     }
 
-    /// The same budget with its memory set to `bytes` (resolved once by a step, or narrowed to
-    /// the part left for it: `part`), its origin kept for messages: `--max-memory`, the default
-    /// budget, or a figure assumed where the available memory is unknown.
-    pub(crate) fn with_max_memory(self, bytes: u64, part: bool) -> Budget {
+    /// The same budget with its memory resolved to `bytes` (a step reads the default budget
+    /// once, so that a rebuild chooses under the same bytes), its origin kept for messages:
+    /// `--max-memory`, the default budget, or a figure assumed where the available memory is
+    /// unknown. A part stays a part ([`Budget::narrowed_to`]).
+    pub(crate) fn with_max_memory(self, bytes: u64) -> Budget {
         let source = match (self.max_memory, self.source) {
             (None, MemorySource::Default) if available_memory().is_none() => MemorySource::Assumed,
             _ => self.source,
         };
-        Budget { max_memory: Some(bytes), source, part: self.part || part, ..self }
+        Budget { max_memory: Some(bytes), source, ..self }
+    }
+
+    /// The part of this budget left for one step, `bytes` (the rest held by the step's
+    /// caller): messages then say "left for it of" the budget it came from.
+    pub(crate) fn narrowed_to(self, bytes: u64) -> Budget {
+        Budget { part: true, ..self.with_max_memory(bytes) }
     }
 
     /// `--max-memory` as given (or as a step resolved it), in bytes.
@@ -277,17 +284,17 @@ mod tests {
     fn messages_name_the_budget_that_applied() {
         let problem = |b: Budget| b.check(3.0e10, "x", "y").unwrap_err().problem;
         let flag = Budget::new(Some(20_000_000_000), None);
-        assert!(problem(flag.with_max_memory(2_000_000_000, false)).ends_with("more than the --max-memory budget of 2.0 GB"));
-        assert!(problem(flag.with_max_memory(2_000_000_000, true)).ends_with("more than the 2.0 GB left for it of the --max-memory budget"));
+        assert!(problem(flag.with_max_memory(2_000_000_000)).ends_with("more than the --max-memory budget of 2.0 GB"));
+        assert!(problem(flag.narrowed_to(2_000_000_000)).ends_with("more than the 2.0 GB left for it of the --max-memory budget"));
         // No --max-memory: a budget resolved or narrowed from the default one still says so.
         let default = Budget::new(None, None);
-        let (resolved, part) = (default.with_max_memory(2_000_000_000, false), default.with_max_memory(1_000_000_000, true));
+        let (resolved, part) = (default.with_max_memory(2_000_000_000), default.narrowed_to(1_000_000_000));
         if available_memory().is_some() {
             let origin = "the memory budget (60% of the available memory; --max-memory sets it)";
             assert_eq!(problem(resolved), format!("the scene would need about 30.0 GB of memory for x, more than {origin} of 2.0 GB"));
             assert!(problem(part).ends_with(&format!("more than the 1.0 GB left for it of {origin}")), "{}", problem(part));
             // Narrowed twice, still a part of the default budget.
-            assert!(problem(part.with_max_memory(500_000_000, false)).ends_with(&format!("the 0.5 GB left for it of {origin}")));
+            assert!(problem(part.with_max_memory(500_000_000)).ends_with(&format!("the 0.5 GB left for it of {origin}")));
         } else {
             assert!(problem(resolved).contains("the memory budget assumed where the available memory cannot be read"));
         }

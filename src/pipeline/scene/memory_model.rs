@@ -252,7 +252,7 @@ impl BakeCounts {
 pub(crate) fn step_budget(scene: &Scene, times: &[f64], counts: &BakeCounts, budget: &Budget) -> Budget {
     let others = phase_bytes(scene, times, &BakeCounts { step: StepChoice::None, ..*counts }).solve;
     match budget.memory() {
-        Some(bytes) => budget.with_max_memory((bytes - others).max(1.0) as u64, true),
+        Some(bytes) => budget.narrowed_to((bytes - others).max(1.0) as u64),
         None => *budget,
     }
 }

@@ -158,7 +158,7 @@ impl GlobalStep {
         let forced = method;
         // Resolved once: a rebuild for new key times chooses under the same bytes.
         let bytes = memory_bytes(budget);
-        let budget = budget.with_max_memory(bytes, false);
+        let budget = budget.with_max_memory(bytes);
         let proximal = proximal_weight(objective, regularization);
         if proximal == 0.0 && unknowns.count() > 0 && !unknowns.any_position_fixed() {
             // Singular by construction; a factorization may still pass on roundoff pivots.
