@@ -103,12 +103,7 @@ impl Streamed<'_> {
                 let _ = write!(label, "{:indent$}{}: [", "", frames.frames[f] as f64);
                 text.extend_from_slice(label.as_bytes());
             }
-            for (i, p) in points[start..end].iter().enumerate() {
-                if start + i > 0 {
-                    text.extend_from_slice(b", ");
-                }
-                push_vec3_bytes(text, p);
-            }
+            push_piece_bytes(text, &points[start..end], start);
             if end == points.len() {
                 text.extend_from_slice(b"],\n");
             }
@@ -256,12 +251,7 @@ fn push_vec3_array(out: &mut String, items: &[[f32; 3]]) {
         .enumerate()
         .map(|(i, chunk)| {
             let mut text = Vec::with_capacity(chunk.len() * 54);
-            for (j, p) in chunk.iter().enumerate() {
-                if i + j > 0 {
-                    text.extend_from_slice(b", ");
-                }
-                push_vec3_bytes(&mut text, p);
-            }
+            push_piece_bytes(&mut text, chunk, i * POINTS_PER_PIECE);
             text
         })
         .collect();
@@ -350,6 +340,17 @@ pub(super) fn push_f32(out: &mut String, x: f32) {
     let mut buffer = [0; ROOM];
     let n = f32_text(x, &mut buffer);
     out.push_str(std::str::from_utf8(&buffer[..n]).expect("ASCII"));
+}
+
+/// `points`, the piece of an array's text that starts at its point `start`: each point after
+/// `, ` but the array's first. The pieces of an array, joined in order, are its text.
+fn push_piece_bytes(out: &mut Vec<u8>, points: &[[f32; 3]], start: usize) {
+    for (i, p) in points.iter().enumerate() {
+        if start + i > 0 {
+            out.extend_from_slice(b", ");
+        }
+        push_vec3_bytes(out, p);
+    }
 }
 
 /// `push_vec3` into bytes, one append per point.
